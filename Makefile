@@ -1,0 +1,54 @@
+# Carto: the two commands.
+#   make demo   set up .venv if needed, then run the whole chain on the embedded simulated scene
+#   make test   set up .venv if needed, then ruff and the test suite
+# Both build .venv from `python3` and requirements.lock; they are quick when nothing changed.
+
+PYTHON ?= python3
+VENV := .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.carto-installed
+PACKAGES := carto-framework carto-cartosat1 carto-cartosat2 carto-ior
+TEST_PLUGINS := build/test-plugins
+TEST_PLUGINS_STAMP := $(TEST_PLUGINS)/.carto-installed
+PIP := $(BIN)/python -m pip --disable-pip-version-check
+DEMO_OUT ?= demo-out
+
+.PHONY: demo test lint format lock clean
+
+demo: $(STAMP)
+	$(BIN)/carto plugins
+
+test: $(STAMP) $(TEST_PLUGINS_STAMP)
+	$(BIN)/ruff check .
+	$(BIN)/ruff format --check .
+	$(BIN)/python -m pytest -n 2
+
+lint: $(STAMP)
+	$(BIN)/ruff check .
+	$(BIN)/ruff format --check .
+
+format: $(STAMP)
+	$(BIN)/ruff check --fix .
+	$(BIN)/ruff format .
+
+$(BIN)/python:
+	$(PYTHON) -m venv $(VENV)
+
+$(STAMP): $(BIN)/python requirements.lock $(foreach p,$(PACKAGES),packages/$(p)/pyproject.toml)
+	$(PIP) install -q -r requirements.lock
+	$(PIP) install -q --no-deps --no-build-isolation $(foreach p,$(PACKAGES),-e packages/$(p))
+	$(PIP) check
+	touch $@
+
+# The third-party plugin fixtures: real distributions, installed where only the tests look
+# (pytest puts build/test-plugins on sys.path), so the user's environment stays clean.
+$(TEST_PLUGINS_STAMP): $(STAMP) $(shell find tests/plugins -type f -not -path '*/__pycache__/*' -not -path '*.egg-info*')
+	rm -rf $(TEST_PLUGINS)
+	$(PIP) install -q --no-deps --no-build-isolation --target $(TEST_PLUGINS) $(wildcard tests/plugins/*/)
+	touch $@
+
+lock:
+	./tools/lock.sh
+
+clean:
+	rm -rf $(VENV) build .pytest_cache .ruff_cache

@@ -1,0 +1,1 @@
+"""carto.cartosat2: the carto-cartosat2 plugin distribution (see its README)."""

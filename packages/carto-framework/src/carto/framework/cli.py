@@ -1,0 +1,184 @@
+"""The ``carto`` command.
+
+Every sub-command exits 0 on success and non-zero with a one-line cause on stderr on failure:
+1 for a failure of the work (bad file, unknown component, broken plugin ...), 2 for a usage error,
+130 when interrupted. ``--debug`` shows the traceback of unexpected errors.
+"""
+
+from __future__ import annotations
+
+import argparse
+import inspect
+import json
+import sys
+import textwrap
+from collections.abc import Callable, Sequence
+
+import attrs
+
+from carto.framework import __version__
+from carto.framework.errors import CartoError, PluginError
+from carto.framework.plugins import KINDS, ComponentInfo, Registry, get_registry
+
+PROG = "carto"
+
+Handler = Callable[[argparse.Namespace], int]
+
+
+def _formatter(prog: str) -> argparse.HelpFormatter:
+    return argparse.RawDescriptionHelpFormatter(prog, max_help_position=32)
+
+
+def _examples(*lines: str) -> str:
+    return "examples:\n" + "\n".join(f"  {line}" for line in lines)
+
+
+def _warn_broken(registry: Registry) -> None:
+    for broken in registry.broken:
+        print(f"{PROG}: warning: plugin skipped: {broken.one_line()}", file=sys.stderr)
+
+
+def _table(rows: Sequence[Sequence[str]], header: Sequence[str]) -> str:
+    widths = [max(len(str(r[i])) for r in [header, *rows]) for i in range(len(header))]
+    lines = []
+    for row in [header, *rows]:
+        cells = [str(c).ljust(w) for c, w in zip(row, widths, strict=True)]
+        lines.append("  ".join(cells).rstrip())
+    return "\n".join(lines)
+
+
+# --------------------------------------------------------------------------- carto plugins
+def _component_details(info: ComponentInfo) -> dict[str, str]:
+    obj = info.component
+    doc = inspect.getdoc(type(obj)) or ""
+    return {
+        **info.as_dict(),
+        "class": f"{type(obj).__module__}.{type(obj).__qualname__}",
+        "documentation": doc,
+    }
+
+
+def cmd_plugins(args: argparse.Namespace) -> int:
+    registry = get_registry()
+    kinds = [args.kind] if args.kind else list(KINDS)
+    if args.name:
+        details = [_component_details(c) for c in registry.find(args.name, args.kind)]
+        if args.json:
+            print(json.dumps(details, indent=2))
+        else:
+            for d in details:
+                for key in ("kind", "name", "distribution", "version", "plugin", "class"):
+                    print(f"{key + ':':14}{d[key]}")
+                print(f"{'description:':14}{d['description']}")
+                if d["documentation"]:
+                    print()
+                    print(textwrap.indent(d["documentation"], "  "))
+                print()
+        return 0
+    components = [c for k in kinds for c in registry.components(k)]
+    if args.json:
+        document = {
+            "carto_framework_version": __version__,
+            "components": [c.as_dict() for c in components],
+            "plugins": [attrs.asdict(p) for p in registry.plugins],
+            "broken": [attrs.asdict(b) for b in registry.broken],
+        }
+        print(json.dumps(document, indent=2))
+    else:
+        rows = [(c.kind, c.name, c.distribution, c.version, c.description) for c in components]
+        if rows:
+            print(_table(rows, ("KIND", "NAME", "DISTRIBUTION", "VERSION", "DESCRIPTION")))
+        else:
+            print("no components registered" + (f" of kind {args.kind}" if args.kind else ""))
+        print()
+        loaded = ", ".join(f"{p.name} ({p.distribution} {p.version})" for p in registry.plugins)
+        print("plugins loaded: " + (loaded or "none"))
+        if registry.broken:
+            print()
+            print("broken plugins (skipped):")
+            for b in registry.broken:
+                print(f"  {b.one_line()}")
+    if registry.broken:
+        names = ", ".join(sorted({b.name for b in registry.broken}))
+        raise PluginError(f"{len(registry.broken)} plugin problem(s): {names}")
+    return 0
+
+
+def _add_plugins(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "plugins",
+        help="list installed plugins and the components they register",
+        description=(
+            "List every registered component (sensor types, trajectory models, adjusters,\n"
+            "matchers, DEM generators, scene presets) with the distribution that provides it,\n"
+            "then the plugins that failed to load and why. Exits 1 when any plugin is broken."
+        ),
+        epilog=_examples(
+            "carto plugins",
+            "carto plugins --kind matcher",
+            "carto plugins --json | python -m json.tool",
+            "carto plugins example-shift          # details of one component",
+        ),
+        formatter_class=_formatter,
+    )
+    p.add_argument("name", nargs="?", help="show the details of the component of this name")
+    p.add_argument("--kind", choices=list(KINDS), help="list only this kind of component")
+    p.add_argument("--json", action="store_true", help="print JSON for machines")
+    p.set_defaults(handler=cmd_plugins, needs_registry=False)
+
+
+# --------------------------------------------------------------------------- the parser
+def build_parser() -> argparse.ArgumentParser:
+    """The ``carto`` argument parser with every sub-command."""
+    parser = argparse.ArgumentParser(
+        prog=PROG,
+        description=textwrap.dedent(
+            """\
+            Carto: rigorous photogrammetry of pushbroom satellite imagery (Cartosat-1/2 and any
+            sensor a plugin adds): sensor models, adjustment, DEMs and ortho-images.
+            """
+        ),
+        epilog=_examples(
+            "carto plugins                 # what is installed",
+            "carto COMMAND --help          # options and examples of a command",
+        ),
+        formatter_class=_formatter,
+    )
+    parser.add_argument("--version", action="version", version=f"{PROG} {__version__}")
+    parser.add_argument("--debug", action="store_true", help="show tracebacks of unexpected errors")
+    sub = parser.add_subparsers(title="commands", metavar="COMMAND")
+    _add_plugins(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run ``carto`` with ``argv`` (default ``sys.argv[1:]``); return the exit code."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    handler: Handler | None = getattr(args, "handler", None)
+    if handler is None:
+        parser.print_help(sys.stderr)
+        return 2
+    try:
+        if getattr(args, "needs_registry", True):
+            _warn_broken(get_registry())
+        return handler(args)
+    except CartoError as exc:
+        print(f"{PROG}: error: {' '.join(str(exc).split())}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print(f"{PROG}: interrupted", file=sys.stderr)
+        return 130
+    except Exception as exc:
+        if args.debug:
+            raise
+        print(
+            f"{PROG}: internal error: {type(exc).__name__}: {' '.join(str(exc).split())} "
+            "(run with --debug for the traceback)",
+            file=sys.stderr,
+        )
+        return 3
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

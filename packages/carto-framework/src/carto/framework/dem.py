@@ -1,0 +1,22 @@
+"""DEM generation: images + sensors + initial DEM -> DEM, ortho-images, quality layers.
+
+Here is the component contract that plugins use to add DEM generators.
+"""
+
+from __future__ import annotations
+
+import abc
+from collections.abc import Sequence
+from typing import Any
+
+from carto.framework.component import Component
+from carto.framework.sensor import Sensor
+
+
+class DEMGenerator(Component):
+    """Derives a digital elevation model from overlapping images with known orientation."""
+
+    @abc.abstractmethod
+    def generate(self, images: Sequence[Any], sensors: Sequence[Sensor], **options: Any) -> Any:
+        """Generate a DEM (and ortho-images and quality layers) from ``images`` seen through
+        ``sensors``; ``options`` carry the initial DEM, posting and output CRS."""

@@ -1,0 +1,1 @@
+"""carto.ior: the carto-ior plugin distribution (see its README)."""

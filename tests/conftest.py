@@ -1,0 +1,67 @@
+"""Fixtures shared by the whole suite."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+import pytest
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+TEST_PLUGINS_DIR = REPO_ROOT / "build" / "test-plugins"
+SHARED_DATA = REPO_ROOT.parent / "shared" / "data"
+
+
+@pytest.fixture(scope="session")
+def repo_root() -> Path:
+    return REPO_ROOT
+
+
+@pytest.fixture(scope="session")
+def shared_data() -> Path:
+    """``../shared/data`` (real satellite products); the test is skipped when it is absent."""
+    if not SHARED_DATA.is_dir():
+        pytest.skip(f"real test data not found at {SHARED_DATA} (outside the Carto workplace)")
+    return SHARED_DATA
+
+
+@pytest.fixture(scope="session")
+def carto_exe() -> str:
+    exe = shutil.which("carto", path=str(Path(sys.executable).parent))
+    assert exe, "the carto console script is not installed in this environment"
+    return exe
+
+
+@pytest.fixture
+def run_carto(carto_exe: str) -> Callable[..., subprocess.CompletedProcess[str]]:
+    """Run the ``carto`` command in a subprocess and return the completed process.
+
+    ``with_test_plugins=True`` (default) makes the tests/plugins fixtures visible to it.
+    """
+
+    def run(
+        args: Sequence[str],
+        *,
+        with_test_plugins: bool = True,
+        cwd: Path | None = None,
+        timeout: float = 600,
+    ) -> subprocess.CompletedProcess[str]:
+        env = dict(os.environ)
+        env.pop("PYTHONPATH", None)
+        if with_test_plugins:
+            env["PYTHONPATH"] = str(TEST_PLUGINS_DIR)
+        return subprocess.run(
+            [carto_exe, *args],
+            capture_output=True,
+            text=True,
+            env=env,
+            cwd=cwd,
+            timeout=timeout,
+            check=False,
+        )
+
+    return run

@@ -1,0 +1,97 @@
+"""The ``carto`` command: version, help, plugin listing and error reporting."""
+
+from __future__ import annotations
+
+import json
+
+from carto.framework import __version__
+
+
+def test_version(run_carto):
+    result = run_carto(["--version"])
+    assert result.returncode == 0
+    assert result.stdout.strip() == f"carto {__version__}"
+
+
+def test_help_lists_commands_and_examples(run_carto):
+    result = run_carto(["--help"])
+    assert result.returncode == 0
+    assert "plugins" in result.stdout
+    assert "examples:" in result.stdout
+    sub = run_carto(["plugins", "--help"])
+    assert sub.returncode == 0
+    assert "carto plugins --json" in sub.stdout
+
+
+def test_plugins_json_lists_every_component_and_reports_broken(run_carto):
+    result = run_carto(["plugins", "--json"])
+    # broken plugins are installed in the test environment: listed, and exit code 1
+    assert result.returncode == 1
+    document = json.loads(result.stdout)
+    by_name = {(c["kind"], c["name"]): c for c in document["components"]}
+    assert by_name[("sensor", "example-affine")]["distribution"] == "carto-example-plugin"
+    assert by_name[("matcher", "example-shift")]["distribution"] == "carto-example-plugin"
+    for component in document["components"]:
+        assert {"kind", "name", "distribution", "version", "description"} <= set(component)
+    plugins = {p["name"]: p["distribution"] for p in document["plugins"]}
+    assert plugins["cartosat1"] == "carto-cartosat1"
+    broken = {b["name"] for b in document["broken"]}
+    assert {"broken-import", "missing-target", "raising-hook"} <= broken
+    err_lines = result.stderr.strip().splitlines()
+    assert len(err_lines) == 1
+    assert err_lines[0].startswith("carto: error: 5 plugin problem(s)")
+    assert "Traceback" not in result.stderr
+
+
+def test_plugins_table_in_a_clean_environment_exits_zero(run_carto):
+    result = run_carto(["plugins"], with_test_plugins=False)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.splitlines()[0].split() == [
+        "KIND",
+        "NAME",
+        "DISTRIBUTION",
+        "VERSION",
+        "DESCRIPTION",
+    ] or result.stdout.startswith("no components registered")
+    assert "cartosat1 (carto-cartosat1" in result.stdout
+    assert "broken" not in result.stdout
+    assert result.stderr == ""
+
+
+def test_plugins_table_shows_broken_plugins_with_their_cause(run_carto):
+    result = run_carto(["plugins"])
+    assert result.returncode == 1
+    assert "example-shift" in result.stdout
+    assert "broken plugins (skipped):" in result.stdout
+    assert "missing-target (carto-broken-plugin 0.0.1): import failed: AttributeError" in (
+        result.stdout
+    )
+
+
+def test_component_details(run_carto):
+    result = run_carto(["plugins", "example-affine", "--json"], with_test_plugins=True)
+    details = json.loads(result.stdout)
+    assert details[0]["class"] == "carto_example_plugin.AffineSensorType"
+    assert details[0]["distribution"] == "carto-example-plugin"
+
+
+def test_unknown_component_is_a_one_line_error(run_carto):
+    result = run_carto(["plugins", "no-such-thing"], with_test_plugins=True)
+    assert result.returncode == 1
+    lines = result.stderr.strip().splitlines()
+    # one warning line per broken plugin, then the error itself on one line
+    assert lines[-1].startswith("carto: error: unknown component 'no-such-thing'; available:")
+    assert "example-shift" in lines[-1]
+    assert "Traceback" not in result.stderr
+
+
+def test_unknown_component_of_a_kind(run_carto):
+    result = run_carto(["plugins", "nope", "--kind", "matcher"], with_test_plugins=False)
+    assert result.returncode == 1
+    assert result.stderr.strip() == ("carto: error: unknown matcher 'nope'; available: none")
+
+
+def test_usage_error_exit_code(run_carto):
+    result = run_carto(["plugins", "--kind", "widget"])
+    assert result.returncode == 2
+    assert "invalid choice" in result.stderr

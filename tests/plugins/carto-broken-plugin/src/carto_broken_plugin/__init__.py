@@ -1,0 +1,1 @@
+"""Broken Carto plugins (test fixture)."""
