@@ -14,14 +14,74 @@ Conventions (see ``docs/conventions.md``):
 from __future__ import annotations
 
 import abc
+import math
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
+import attrs
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from carto.framework.component import Component
+from carto.framework.errors import InputError
 
 FloatArray = NDArray[np.float64]
+
+
+@attrs.frozen
+class Parameter:
+    """One adjustable parameter of a sensor model (after CSM's ``RasterGM`` parameters).
+
+    Attributes:
+        name: unique within the sensor, dotted, e.g. ``"attitude.roll.c1"``.
+        value: current value, in ``units``. Zero is the a-priori value of every correction.
+        sigma: a-priori standard deviation of the value, in ``units``; ``math.inf`` when the
+            parameter has no prior (only observations determine it).
+        units: ``"rad"``, ``"rad/s"``, ``"m"``, ``"px"`` ... (for polynomial coefficients of
+            normalised time the units are those of the quantity: the time is dimensionless).
+        free: True when adjusters estimate it; False to hold it at ``value``.
+        description: one line for reports.
+    """
+
+    name: str
+    value: float = attrs.field(converter=float)
+    sigma: float = attrs.field(converter=float)
+    units: str
+    free: bool = True
+    description: str = ""
+
+    @sigma.validator
+    def _check_sigma(self, _attribute: attrs.Attribute, sigma: float) -> None:
+        if not sigma > 0:
+            raise InputError(f"parameter {self.name}: sigma must be > 0, got {sigma}")
+
+
+def replace_parameters(
+    parameters: Sequence[Parameter],
+    values: Mapping[str, float] | None = None,
+    free: Mapping[str, bool] | None = None,
+    sigmas: Mapping[str, float] | None = None,
+) -> tuple[Parameter, ...]:
+    """``parameters`` with some values, free flags or sigmas replaced (unknown names raise)."""
+    by_name = {p.name: p for p in parameters}
+    for mapping in (values, free, sigmas):
+        unknown = sorted(set(mapping or {}) - set(by_name))
+        if unknown:
+            raise InputError(
+                f"unknown sensor parameter(s) {', '.join(unknown)}; "
+                f"the model has: {', '.join(by_name) or 'none'}"
+            )
+    out = []
+    for p in parameters:
+        changes: dict[str, object] = {}
+        if values and p.name in values:
+            changes["value"] = float(values[p.name])
+        if free and p.name in free:
+            changes["free"] = bool(free[p.name])
+        if sigmas and p.name in sigmas:
+            changes["sigma"] = float(sigmas[p.name])
+        out.append(attrs.evolve(p, **changes) if changes else p)
+    return tuple(out)
 
 
 class Sensor(abc.ABC):
@@ -60,6 +120,82 @@ class Sensor(abc.ABC):
         Returns:
             ``(lon_deg, lat_deg)``; NaN where the location cannot be computed.
         """
+
+    # ------------------------------------------------------------------ adjustable parameters
+    @property
+    def parameters(self) -> tuple[Parameter, ...]:
+        """The adjustable parameters, in a fixed order (none by default)."""
+        return ()
+
+    def with_parameters(
+        self,
+        values: Mapping[str, float] | None = None,
+        free: Mapping[str, bool] | None = None,
+        sigmas: Mapping[str, float] | None = None,
+    ) -> Sensor:
+        """A new sensor with some parameter values, free flags or sigmas replaced.
+
+        Sensors are immutable: this never changes ``self``. Unknown names raise
+        :class:`~carto.framework.errors.InputError`. The base implementation supports models
+        without parameters only.
+        """
+        replace_parameters(self.parameters, values, free, sigmas)  # validates names
+        if self.parameters:  # pragma: no cover - subclasses with parameters override this
+            raise NotImplementedError(f"{type(self).__name__} must implement with_parameters")
+        return self
+
+    def parameter_partials(
+        self,
+        lon_deg: ArrayLike,
+        lat_deg: ArrayLike,
+        h_m: ArrayLike,
+        names: Sequence[str] | None = None,
+    ) -> FloatArray:
+        """Partial derivatives of ``(line, sample)`` w.r.t. parameters, shape ``(N, 2, P)``.
+
+        ``names`` defaults to the free parameters. The base implementation takes central
+        differences with a step of ``1e-3`` sigma (or of ``1e-6`` for parameters without a
+        prior); models override it with analytic derivatives where they are cheap.
+        """
+        lon, lat, h = (a.ravel() for a in as_float_arrays(lon_deg, lat_deg, h_m))
+        params = {p.name: p for p in self.parameters}
+        if names is None:
+            names = [p.name for p in self.parameters if p.free]
+        out = np.empty((lon.size, 2, len(names)))
+        for k, name in enumerate(names):
+            p = params[name]
+            step = 1e-3 * p.sigma if math.isfinite(p.sigma) else 1e-6
+            plus = self.with_parameters({name: p.value + step}).ground_to_image(lon, lat, h)
+            minus = self.with_parameters({name: p.value - step}).ground_to_image(lon, lat, h)
+            out[:, 0, k] = (plus[0] - minus[0]) / (2 * step)
+            out[:, 1, k] = (plus[1] - minus[1]) / (2 * step)
+        return out
+
+    def ground_partials(self, lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike) -> FloatArray:
+        """Partials of ``(line, sample)`` w.r.t. local ground displacements, ``(N, 2, 3)``.
+
+        The ground displacements are east, north and up in metres at each point (a local
+        tangent frame, well scaled for adjustment). Central differences of 1 m by default.
+        """
+        lon, lat, h = (a.ravel() for a in as_float_arrays(lon_deg, lat_deg, h_m))
+        from carto.framework.frames import WGS84_A_M, WGS84_E2
+
+        phi = np.radians(lat)
+        w = np.sqrt(1.0 - WGS84_E2 * np.sin(phi) ** 2)
+        m_per_rad_lat = WGS84_A_M * (1 - WGS84_E2) / w**3 + h
+        m_per_rad_lon = (WGS84_A_M / w + h) * np.cos(phi)
+        steps = [
+            (np.degrees(1.0 / m_per_rad_lon), 0.0, 0.0),
+            (0.0, np.degrees(1.0 / m_per_rad_lat), 0.0),
+            (0.0, 0.0, 1.0),
+        ]
+        out = np.empty((lon.size, 2, 3))
+        for k, (dlon, dlat, dh) in enumerate(steps):
+            plus = self.ground_to_image(lon + dlon, lat + dlat, h + dh)
+            minus = self.ground_to_image(lon - dlon, lat - dlat, h - dh)
+            out[:, 0, k] = (plus[0] - minus[0]) / 2.0
+            out[:, 1, k] = (plus[1] - minus[1]) / 2.0
+        return out
 
 
 class SensorType(Component):

@@ -1,0 +1,318 @@
+"""Reference frames, time and rotations.
+
+Conventions (tested in ``tests/framework/test_frames.py``, summarised in ``docs/conventions.md``):
+
+Time
+    ``t_s``: UTC seconds since the J2000 epoch 2000-01-01T12:00:00 UTC, leap seconds ignored
+    (a product's times are differences within minutes, so this does not matter for geometry).
+    UT1 is taken equal to UTC (|UT1-UTC| < 0.9 s rotates the Earth by < 0.4 arcsec ~ 1.2 m at
+    the equator; the simulator and the models use the same convention, so it cancels).
+
+Earth-fixed frame (ECEF)
+    WGS84 geocentric Cartesian, metres (EPSG:4978). Geodetic coordinates are WGS84 longitude,
+    latitude in degrees and height above the ellipsoid in metres (EPSG:4979), converted by pyproj.
+
+Inertial frame (ECI)
+    The ECEF frame rotated back about Z by the Greenwich mean sidereal angle (GMST, IAU 1982
+    model, :func:`gmst_rad`): ``X_ecef = R3(GMST) X_eci``. Precession, nutation and polar motion
+    are left out: over the minutes of an acquisition they are constant rotations far below the
+    attitude uncertainty, and every model and the simulator use the same definition.
+
+Orbit frame (local orbital, for roll/pitch/yaw)
+    From the inertial position ``P`` and velocity ``V``: ``Z_o = -P/|P|`` (towards the Earth's
+    centre), ``Y_o = -(P x V)/|P x V|`` (negative orbit normal), ``X_o = Y_o x Z_o`` (close to
+    the velocity). ``R_orbit_to_eci`` has these axes as columns.
+
+Roll, pitch, yaw
+    ``R_body_to_orbit = Rz(yaw) @ Ry(pitch) @ Rx(roll)``: roll about X (along track), pitch
+    about Y, yaw about Z (radians, right-handed, active rotations). With zero angles the body
+    axes are the orbit axes.
+
+Quaternions
+    Scalar first ``(w, x, y, z)``, unit norm, Hamilton convention; ``quat_to_matrix(q)`` is the
+    active rotation, so a quaternion "body to orbit" maps body-frame vectors to orbit-frame
+    vectors like ``R_body_to_orbit``.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+import pyproj
+from numpy.typing import ArrayLike, NDArray
+
+FloatArray = NDArray[np.float64]
+
+WGS84_A_M = 6378137.0
+"""WGS84 semi-major axis, metres."""
+WGS84_F = 1.0 / 298.257223563
+"""WGS84 flattening."""
+WGS84_B_M = WGS84_A_M * (1.0 - WGS84_F)
+"""WGS84 semi-minor axis, metres."""
+WGS84_E2 = WGS84_F * (2.0 - WGS84_F)
+"""WGS84 first eccentricity squared."""
+GM_M3_S2 = 3.986004418e14
+"""Earth's gravitational parameter (WGS84), m^3/s^2."""
+J2 = 1.08262668e-3
+"""Earth's second zonal harmonic (EGM96, unnormalised)."""
+OMEGA_EARTH_RAD_S = 7.2921151467e-5
+"""Earth's rotation rate (WGS84), rad/s (inertial, sidereal)."""
+SECONDS_PER_DAY = 86400.0
+
+
+# ----------------------------------------------------------------------------- geodesy
+@functools.cache
+def _geodetic_to_ecef() -> pyproj.Transformer:
+    return pyproj.Transformer.from_crs("EPSG:4979", "EPSG:4978", always_xy=True)
+
+
+@functools.cache
+def _ecef_to_geodetic() -> pyproj.Transformer:
+    return pyproj.Transformer.from_crs("EPSG:4978", "EPSG:4979", always_xy=True)
+
+
+def geodetic_to_ecef(lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike) -> FloatArray:
+    """WGS84 geodetic (degrees, ellipsoidal metres) -> ECEF metres, shape ``(..., 3)``."""
+    lon, lat, h = np.broadcast_arrays(
+        np.asarray(lon_deg, float), np.asarray(lat_deg, float), np.asarray(h_m, float)
+    )
+    x, y, z = _geodetic_to_ecef().transform(lon, lat, h)
+    return np.stack(np.broadcast_arrays(x, y, z), axis=-1).astype(np.float64)
+
+
+def ecef_to_geodetic(xyz_m: ArrayLike) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """ECEF metres ``(..., 3)`` -> WGS84 ``(lon_deg, lat_deg, h_m)``."""
+    xyz = np.asarray(xyz_m, dtype=np.float64)
+    lon, lat, h = _ecef_to_geodetic().transform(xyz[..., 0], xyz[..., 1], xyz[..., 2])
+    return (
+        np.asarray(lon, np.float64),
+        np.asarray(lat, np.float64),
+        np.asarray(h, np.float64),
+    )
+
+
+def ellipsoid_normal(lon_deg: ArrayLike, lat_deg: ArrayLike) -> FloatArray:
+    """Unit upward normal of the WGS84 ellipsoid at geodetic ``(lon, lat)``, ECEF ``(..., 3)``."""
+    lon = np.radians(np.asarray(lon_deg, float))
+    lat = np.radians(np.asarray(lat_deg, float))
+    return np.stack(
+        np.broadcast_arrays(np.cos(lat) * np.cos(lon), np.cos(lat) * np.sin(lon), np.sin(lat)),
+        axis=-1,
+    )
+
+
+def enu_basis(lon_deg: float, lat_deg: float) -> FloatArray:
+    """Rows: the ECEF unit vectors east, north, up at a geodetic location, shape ``(3, 3)``."""
+    lon, lat = np.radians(lon_deg), np.radians(lat_deg)
+    return np.array(
+        [
+            [-np.sin(lon), np.cos(lon), 0.0],
+            [-np.sin(lat) * np.cos(lon), -np.sin(lat) * np.sin(lon), np.cos(lat)],
+            [np.cos(lat) * np.cos(lon), np.cos(lat) * np.sin(lon), np.sin(lat)],
+        ]
+    )
+
+
+# ----------------------------------------------------------------------------- time
+J2000_JD = 2451545.0
+
+
+def gmst_rad(t_s: ArrayLike) -> FloatArray:
+    """Greenwich mean sidereal angle (IAU 1982, UT1 = UTC) at ``t_s`` seconds since J2000, rad.
+
+    ``GMST = 67310.54841 s + (876600 h + 8640184.812866 s) T + 0.093104 s T^2 - 6.2e-6 s T^3``
+    with ``T`` in Julian centuries of UT1 since J2000 (Vallado, eq. 3-47), reduced to [0, 2 pi).
+    """
+    t = np.asarray(t_s, dtype=np.float64)
+    centuries = t / (SECONDS_PER_DAY * 36525.0)
+    # split the big linear term to keep precision: 876600 h * T = t_s * (876600*3600)/(86400*36525)
+    seconds = (
+        67310.54841
+        + t * (876600.0 * 3600.0) / (SECONDS_PER_DAY * 36525.0)
+        + centuries * 8640184.812866
+        + 0.093104 * centuries**2
+        - 6.2e-6 * centuries**3
+    )
+    return np.mod(seconds, SECONDS_PER_DAY) * (2.0 * np.pi / SECONDS_PER_DAY)
+
+
+def rot_z(angle_rad: ArrayLike) -> FloatArray:
+    """Active rotation about Z by ``angle_rad``, shape ``(..., 3, 3)``."""
+    a = np.asarray(angle_rad, dtype=np.float64)
+    c, s = np.cos(a), np.sin(a)
+    z, o = np.zeros_like(a), np.ones_like(a)
+    return np.stack(
+        [np.stack([c, -s, z], -1), np.stack([s, c, z], -1), np.stack([z, z, o], -1)], -2
+    )
+
+
+def rot_y(angle_rad: ArrayLike) -> FloatArray:
+    """Active rotation about Y by ``angle_rad``, shape ``(..., 3, 3)``."""
+    a = np.asarray(angle_rad, dtype=np.float64)
+    c, s = np.cos(a), np.sin(a)
+    z, o = np.zeros_like(a), np.ones_like(a)
+    return np.stack(
+        [np.stack([c, z, s], -1), np.stack([z, o, z], -1), np.stack([-s, z, c], -1)], -2
+    )
+
+
+def rot_x(angle_rad: ArrayLike) -> FloatArray:
+    """Active rotation about X by ``angle_rad``, shape ``(..., 3, 3)``."""
+    a = np.asarray(angle_rad, dtype=np.float64)
+    c, s = np.cos(a), np.sin(a)
+    z, o = np.zeros_like(a), np.ones_like(a)
+    return np.stack(
+        [np.stack([o, z, z], -1), np.stack([z, c, -s], -1), np.stack([z, s, c], -1)], -2
+    )
+
+
+def eci_to_ecef_matrix(t_s: ArrayLike) -> FloatArray:
+    """``R_eci_to_ecef(t) = R3(-GMST)`` as matrices ``(..., 3, 3)``: ``X_ecef = R @ X_eci``."""
+    return rot_z(-gmst_rad(t_s))
+
+
+def eci_to_ecef(
+    t_s: ArrayLike, position_eci_m: ArrayLike, velocity_eci_m_s: ArrayLike | None = None
+) -> tuple[FloatArray, FloatArray | None]:
+    """Inertial position (and velocity) -> Earth-fixed, including the Earth-rotation term."""
+    r = eci_to_ecef_matrix(t_s)
+    p = np.einsum("...ij,...j->...i", r, np.asarray(position_eci_m, float))
+    if velocity_eci_m_s is None:
+        return p, None
+    v = np.einsum("...ij,...j->...i", r, np.asarray(velocity_eci_m_s, float))
+    v = v - np.cross([0.0, 0.0, OMEGA_EARTH_RAD_S], p)
+    return p, v
+
+
+def ecef_to_eci(
+    t_s: ArrayLike, position_ecef_m: ArrayLike, velocity_ecef_m_s: ArrayLike | None = None
+) -> tuple[FloatArray, FloatArray | None]:
+    """Earth-fixed position (and velocity) -> inertial, including the Earth-rotation term."""
+    r_t = np.swapaxes(eci_to_ecef_matrix(t_s), -1, -2)
+    p_ecef = np.asarray(position_ecef_m, float)
+    p = np.einsum("...ij,...j->...i", r_t, p_ecef)
+    if velocity_ecef_m_s is None:
+        return p, None
+    v_ecef = np.asarray(velocity_ecef_m_s, float) + np.cross([0.0, 0.0, OMEGA_EARTH_RAD_S], p_ecef)
+    return p, np.einsum("...ij,...j->...i", r_t, v_ecef)
+
+
+def orbit_to_eci_matrix(position_eci_m: ArrayLike, velocity_eci_m_s: ArrayLike) -> FloatArray:
+    """``R_orbit_to_eci`` from inertial position and velocity, ``(..., 3, 3)`` (columns X,Y,Z_o)."""
+    p = np.asarray(position_eci_m, float)
+    v = np.asarray(velocity_eci_m_s, float)
+    z = -p / np.linalg.norm(p, axis=-1, keepdims=True)
+    h = np.cross(p, v)
+    y = -h / np.linalg.norm(h, axis=-1, keepdims=True)
+    x = np.cross(y, z)
+    return np.stack([x, y, z], axis=-1)
+
+
+# ----------------------------------------------------------------------------- attitude
+def rpy_to_matrix(roll_rad: ArrayLike, pitch_rad: ArrayLike, yaw_rad: ArrayLike) -> FloatArray:
+    """``R_body_to_orbit = Rz(yaw) @ Ry(pitch) @ Rx(roll)``, shape ``(..., 3, 3)``."""
+    roll, pitch, yaw = np.broadcast_arrays(
+        np.asarray(roll_rad, float), np.asarray(pitch_rad, float), np.asarray(yaw_rad, float)
+    )
+    cr, sr = np.cos(roll), np.sin(roll)
+    cp, sp = np.cos(pitch), np.sin(pitch)
+    cy, sy = np.cos(yaw), np.sin(yaw)
+    return np.stack(
+        [
+            np.stack([cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr], -1),
+            np.stack([sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr], -1),
+            np.stack([-sp, cp * sr, cp * cr], -1),
+        ],
+        -2,
+    )
+
+
+def matrix_to_rpy(matrix: ArrayLike) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Inverse of :func:`rpy_to_matrix`: ``(roll, pitch, yaw)`` radians, pitch in [-pi/2, pi/2]."""
+    m = np.asarray(matrix, float)
+    pitch = -np.arcsin(np.clip(m[..., 2, 0], -1.0, 1.0))
+    roll = np.arctan2(m[..., 2, 1], m[..., 2, 2])
+    yaw = np.arctan2(m[..., 1, 0], m[..., 0, 0])
+    return roll, pitch, yaw
+
+
+def quat_to_matrix(quat_wxyz: ArrayLike) -> FloatArray:
+    """Unit quaternions ``(w, x, y, z)`` (normalised here) -> rotation matrices ``(..., 3, 3)``."""
+    q = np.asarray(quat_wxyz, float)
+    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    return np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
+        ],
+        -2,
+    )
+
+
+def matrix_to_quat(matrix: ArrayLike) -> FloatArray:
+    """Rotation matrices ``(..., 3, 3)`` -> unit quaternions ``(w, x, y, z)`` with ``w >= 0``."""
+    m = np.asarray(matrix, float)
+    trace = m[..., 0, 0] + m[..., 1, 1] + m[..., 2, 2]
+    # Shepperd's method: pick the largest of 4w^2, 4x^2, 4y^2, 4z^2 for stability
+    cands = np.stack([trace, m[..., 0, 0], m[..., 1, 1], m[..., 2, 2]], axis=-1)
+    k = np.argmax(cands, axis=-1)
+    r = lambda i, j: m[..., i, j]  # noqa: E731
+    # case w largest
+    s = np.sqrt(np.maximum(1.0 + trace, 1e-300)) * 2
+    qw = np.stack(
+        [0.25 * s, (r(2, 1) - r(1, 2)) / s, (r(0, 2) - r(2, 0)) / s, (r(1, 0) - r(0, 1)) / s], -1
+    )
+    s = np.sqrt(np.maximum(1.0 + r(0, 0) - r(1, 1) - r(2, 2), 1e-300)) * 2
+    qx = np.stack(
+        [(r(2, 1) - r(1, 2)) / s, 0.25 * s, (r(0, 1) + r(1, 0)) / s, (r(0, 2) + r(2, 0)) / s], -1
+    )
+    s = np.sqrt(np.maximum(1.0 + r(1, 1) - r(0, 0) - r(2, 2), 1e-300)) * 2
+    qy = np.stack(
+        [(r(0, 2) - r(2, 0)) / s, (r(0, 1) + r(1, 0)) / s, 0.25 * s, (r(1, 2) + r(2, 1)) / s], -1
+    )
+    s = np.sqrt(np.maximum(1.0 + r(2, 2) - r(0, 0) - r(1, 1), 1e-300)) * 2
+    qz = np.stack(
+        [(r(1, 0) - r(0, 1)) / s, (r(0, 2) + r(2, 0)) / s, (r(1, 2) + r(2, 1)) / s, 0.25 * s], -1
+    )
+    q = np.choose(k[..., None], [qw, qx, qy, qz])
+    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    return np.where(q[..., :1] < 0, -q, q)
+
+
+def small_rotation(rx_rad: ArrayLike, ry_rad: ArrayLike, rz_rad: ArrayLike) -> FloatArray:
+    """Rotation by the rotation vector ``(rx, ry, rz)`` (Rodrigues), shape ``(..., 3, 3)``.
+
+    Exact for any angle; used for corrections, which are small.
+    """
+    v = np.stack(np.broadcast_arrays(*(np.asarray(a, float) for a in (rx_rad, ry_rad, rz_rad))), -1)
+    theta = np.linalg.norm(v, axis=-1)
+    safe = np.where(theta > 1e-12, theta, 1.0)
+    k = v / safe[..., None]
+    kx, ky, kz = k[..., 0], k[..., 1], k[..., 2]
+    zero = np.zeros_like(kx)
+    kmat = np.stack(
+        [
+            np.stack([zero, -kz, ky], -1),
+            np.stack([kz, zero, -kx], -1),
+            np.stack([-ky, kx, zero], -1),
+        ],
+        -2,
+    )
+    s = np.where(theta > 1e-12, np.sin(theta), theta)[..., None, None]
+    c1 = np.where(theta > 1e-12, 1 - np.cos(theta), 0.5 * theta**2)[..., None, None]
+    eye = np.broadcast_to(np.eye(3), kmat.shape)
+    return eye + s * kmat + c1 * (kmat @ kmat)
+
+
+def matrix_to_rotvec(matrix: ArrayLike) -> FloatArray:
+    """Rotation matrices -> rotation vectors ``(..., 3)`` (axis times angle, angle in [0, pi))."""
+    q = matrix_to_quat(matrix)
+    w = np.clip(q[..., 0], -1.0, 1.0)
+    vec = q[..., 1:]
+    sin_half = np.linalg.norm(vec, axis=-1)
+    angle = 2.0 * np.arctan2(sin_half, w)
+    scale = np.where(sin_half > 1e-15, angle / np.where(sin_half > 1e-15, sin_half, 1.0), 2.0)
+    return vec * scale[..., None]
