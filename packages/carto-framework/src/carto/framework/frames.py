@@ -116,6 +116,25 @@ def enu_basis(lon_deg: float, lat_deg: float) -> FloatArray:
 
 # ----------------------------------------------------------------------------- time
 J2000_JD = 2451545.0
+_J2000_UTC = np.datetime64("2000-01-01T12:00:00", "ns")
+
+
+def utc_to_j2000_s(utc: str) -> float:
+    """ISO-8601 UTC time (``"2026-03-01T05:12:33.250Z"``) -> seconds since J2000 (no leap s)."""
+    text = str(utc).strip().removesuffix("Z").removesuffix("+00:00")
+    try:
+        stamp = np.datetime64(text, "ns")
+    except ValueError as exc:
+        from carto.framework.errors import InputError
+
+        raise InputError(f"invalid UTC time {utc!r}: {exc}") from None
+    return float((stamp - _J2000_UTC) / np.timedelta64(1, "ns")) * 1e-9
+
+
+def j2000_s_to_utc(t_s: float) -> str:
+    """Seconds since J2000 -> ISO-8601 UTC string with nanoseconds and a ``Z``."""
+    stamp = _J2000_UTC + np.timedelta64(round(float(t_s) * 1e9), "ns")
+    return str(stamp) + "Z"
 
 
 def gmst_rad(t_s: ArrayLike) -> FloatArray:
@@ -135,6 +154,15 @@ def gmst_rad(t_s: ArrayLike) -> FloatArray:
         - 6.2e-6 * centuries**3
     )
     return np.mod(seconds, SECONDS_PER_DAY) * (2.0 * np.pi / SECONDS_PER_DAY)
+
+
+def gmst_rate_rad_s(t_s: ArrayLike) -> FloatArray:
+    """Time derivative of :func:`gmst_rad`, rad/s (about 7.2921158e-5)."""
+    centuries = np.asarray(t_s, dtype=np.float64) / (SECONDS_PER_DAY * 36525.0)
+    seconds_per_second = (
+        876600.0 * 3600.0 + 8640184.812866 + 2 * 0.093104 * centuries - 3 * 6.2e-6 * centuries**2
+    ) / (SECONDS_PER_DAY * 36525.0)
+    return seconds_per_second * (2.0 * np.pi / SECONDS_PER_DAY)
 
 
 def rot_z(angle_rad: ArrayLike) -> FloatArray:

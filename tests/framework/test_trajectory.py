@@ -1,0 +1,134 @@
+"""Trajectory fitting, interpolation, corrections and serialisation against closed forms."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from carto.framework import frames
+from carto.framework.errors import InputError
+from carto.framework.trajectory import (
+    AttitudeSamples,
+    EphemerisSamples,
+    Trajectory,
+)
+
+from .geometry import EPOCH, circular_orbit, make_trajectory
+
+
+@pytest.mark.parametrize(("order", "tolerance_m"), [(1, 6000.0), (2, 200.0), (3, 1.0)])
+def test_polynomial_fit_order_and_residuals(order, tolerance_m):
+    traj = make_trajectory(span_s=40.0, order=order)
+    t = np.linspace(-40, 40, 333)  # between the samples
+    p_true, _ = circular_orbit(t)
+    p_fit, _ = traj.state_eci(t)
+    err = np.linalg.norm(p_fit - p_true, axis=1).max()
+    assert err < tolerance_m
+    report = traj.fit_report.as_dict()
+    assert report["x_m"]["max_abs"] < tolerance_m
+    if order > 1:  # the reported residuals describe the real error
+        assert err < 3 * max(report[c]["max_abs"] for c in ("x_m", "y_m", "z_m"))
+
+
+def test_lagrange_interpolation_is_exact_between_samples():
+    traj = make_trajectory(span_s=40.0, interpolation="lagrange")
+    t = np.linspace(-39, 39, 777)
+    p_true, v_true = circular_orbit(t)
+    p, v = traj.state_eci(t)
+    assert np.abs(p - p_true).max() < 1e-4
+    assert np.abs(v - v_true).max() < 1e-6
+
+
+def test_ecef_ephemeris_gives_the_same_trajectory():
+    t = np.arange(-20, 20.001, 0.125)
+    p, v = circular_orbit(t)
+    p_e, v_e = frames.eci_to_ecef(EPOCH + t, p, v)
+    q = np.tile([1.0, 0, 0, 0], (t.size, 1))
+    a = Trajectory.from_samples(EPOCH, EphemerisSamples(t, p, v), AttitudeSamples(t, q))
+    b = Trajectory.from_samples(EPOCH, EphemerisSamples(t, p_e, v_e, "ecef"), AttitudeSamples(t, q))
+    tt = np.linspace(-19, 19, 50)
+    np.testing.assert_allclose(a.evaluate(tt)[0], b.evaluate(tt)[0], atol=1e-3)
+    np.testing.assert_allclose(a.evaluate(tt)[1], b.evaluate(tt)[1], atol=1e-12)
+    # Earth-fixed velocity from the trajectory equals the input ECEF velocity
+    _, v_fit = b.position_velocity_ecef(t[10:-10])
+    np.testing.assert_allclose(v_fit, v_e[10:-10], atol=1e-3)
+
+
+def test_attitude_in_inertial_frame_matches_orbit_frame_attitude():
+    t = np.arange(-10, 10.001, 0.125)
+    p, v = circular_orbit(t)
+    roll, pitch, yaw = 0.05 + 1e-4 * t, -0.3 + 0.01 * t, 0.01 + 0 * t
+    r_b2o = frames.rpy_to_matrix(roll, pitch, yaw)
+    r_b2i = frames.orbit_to_eci_matrix(p, v) @ r_b2o
+    eph = EphemerisSamples(t, p, v)
+    a = Trajectory.from_samples(EPOCH, eph, AttitudeSamples(t, frames.matrix_to_quat(r_b2o)))
+    b = Trajectory.from_samples(EPOCH, eph, AttitudeSamples(t, frames.matrix_to_quat(r_b2i), "eci"))
+    tt = np.linspace(-9, 9, 41)
+    # compare pointing: angle between the body Z axes in ECEF
+    za = a.evaluate(tt)[1][..., :, 2]
+    zb = b.evaluate(tt)[1][..., :, 2]
+    angle = np.arccos(np.clip(np.sum(za * zb, -1), -1, 1))
+    assert angle.max() < 2e-7  # rad: both are cubic fits of the same smooth motion
+
+
+def test_attitude_correction_rotates_in_the_orbit_frame():
+    traj = make_trajectory(span_s=10.0, rpy=lambda t: (0 * t, 0 * t, 0 * t))
+    delta = 1e-3
+    corrected = traj.with_parameters({"trajectory.attitude.roll.c0": delta})
+    t = np.array([0.0, 5.0])
+    _, r0 = traj.evaluate(t)
+    _, r1 = corrected.evaluate(t)
+    # body Z (nadir) turns by delta about the orbit X axis (= body X here)
+    z0, z1 = r0[..., :, 2], r1[..., :, 2]
+    angle = np.arccos(np.clip(np.sum(z0 * z1, -1), -1, 1))
+    np.testing.assert_allclose(angle, delta, rtol=1e-6)
+    axis = np.cross(z0, z1)
+    axis /= np.linalg.norm(axis, axis=-1, keepdims=True)
+    np.testing.assert_allclose(np.abs(np.sum(axis * r0[..., :, 0], -1)), 1.0, atol=1e-9)
+
+
+def test_drift_term_uses_normalised_time_and_position_corrections():
+    traj = make_trajectory(
+        span_s=10.0, rpy=lambda t: (0 * t, 0 * t, 0 * t), position_correction_order=0
+    )
+    names = [p.name for p in traj.parameters]
+    assert "trajectory.attitude.pitch.c1" in names
+    assert "trajectory.position.radial.c0" in names
+    moved = traj.with_parameters({"trajectory.position.radial.c0": 25.0})
+    p0, _ = traj.evaluate(np.array([1.0]))
+    p1, _ = moved.evaluate(np.array([1.0]))
+    np.testing.assert_allclose(np.linalg.norm(p1) - np.linalg.norm(p0), 25.0, atol=1e-3)
+    drift = traj.with_parameters({"trajectory.attitude.pitch.c1": 2e-4})
+    _, ra = drift.evaluate(np.array([traj.t_mid_s, traj.t_mid_s + traj.t_half_s]))
+    _, rb = traj.evaluate(np.array([traj.t_mid_s, traj.t_mid_s + traj.t_half_s]))
+    ang = np.arccos(np.clip(np.sum(ra[:, :, 2] * rb[:, :, 2], -1), -1, 1))
+    np.testing.assert_allclose(ang, [0.0, 2e-4], atol=1e-9)  # tau = 0 at mid, 1 at the end
+
+
+def test_serialisation_round_trip():
+    traj = make_trajectory(span_s=10.0).with_parameters({"trajectory.attitude.yaw.c1": 1e-5})
+    again = Trajectory.from_dict(traj.to_dict())
+    t = np.linspace(-10, 10, 11)
+    for x, y in zip(traj.evaluate(t), again.evaluate(t), strict=True):
+        np.testing.assert_array_equal(x, y)
+    assert again.parameters == traj.parameters
+
+
+def test_bad_samples_raise_input_error():
+    t = np.arange(5.0)
+    with pytest.raises(InputError, match="strictly increasing"):
+        EphemerisSamples(t[::-1], np.zeros((5, 3)), np.zeros((5, 3)))
+    with pytest.raises(InputError, match=r"expected shape \(N, 3\)"):
+        EphemerisSamples(t, np.zeros((5, 2)), np.zeros((5, 3)))
+    with pytest.raises(InputError, match="NaN"):
+        AttitudeSamples(t, np.full((5, 4), np.nan))
+    p, v = circular_orbit(t)
+    with pytest.raises(InputError, match="order must be 1, 2 or 3"):
+        Trajectory.from_samples(
+            EPOCH,
+            EphemerisSamples(t, p, v),
+            AttitudeSamples(t, np.tile([1.0, 0, 0, 0], (5, 1))),
+            order=5,
+        )
+    with pytest.raises(InputError, match="missing field 'orbit'"):
+        Trajectory.from_dict({"epoch_j2000_s": 0.0, "attitude_frame": "orbit"})
