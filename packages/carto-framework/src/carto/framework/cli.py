@@ -15,6 +15,7 @@ import textwrap
 from collections.abc import Callable, Sequence
 
 import attrs
+import numpy as np
 
 from carto.framework import __version__
 from carto.framework.errors import CartoError, PluginError
@@ -127,6 +128,98 @@ def _add_plugins(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(handler=cmd_plugins, needs_registry=False)
 
 
+# --------------------------------------------------------------------------- project / locate
+def cmd_project(args: argparse.Namespace) -> int:
+    from carto.framework.point_table import read_point_table, write_point_table
+    from carto.framework.sensor import open_sensor
+
+    sensor = open_sensor(args.model, args.sensor)
+    table = read_point_table(args.ground, numeric=("lon_deg", "lat_deg", "h_m"))
+    line, sample = sensor.ground_to_image(table["lon_deg"], table["lat_deg"], table["h_m"])
+    out = {k: v for k, v in table.items() if k not in ("line", "sample")}
+    out["line"], out["sample"] = line, sample
+    write_point_table(args.out, out, precision=17)
+    outside = int(np.count_nonzero(~np.isfinite(line)))
+    print(
+        f"projected {line.size} point(s) into {args.model} -> {args.out}"
+        + (f" ({outside} outside the image or not converged: nan)" if outside else "")
+    )
+    return 0
+
+
+def cmd_locate(args: argparse.Namespace) -> int:
+    from carto.framework.point_table import read_point_table, write_point_table
+    from carto.framework.sensor import open_sensor
+
+    sensor = open_sensor(args.model, args.sensor)
+    table = read_point_table(args.image, numeric=("line", "sample", "h_m"))
+    lon, lat = sensor.image_to_ground(table["line"], table["sample"], table["h_m"])
+    out = {k: v for k, v in table.items() if k not in ("lon_deg", "lat_deg")}
+    out["lon_deg"], out["lat_deg"] = lon, lat
+    write_point_table(args.out, out, precision=17)
+    failed = int(np.count_nonzero(~np.isfinite(lon)))
+    print(
+        f"located {lon.size} point(s) of {args.model} -> {args.out}"
+        + (f" ({failed} not located: nan)" if failed else "")
+    )
+    return 0
+
+
+_PIXELS = (
+    "image coordinates: continuous (line, sample) in pixels, centre of the first pixel at "
+    "(0.5, 0.5)\n(GDAL's convention); heights: metres above the WGS84 ellipsoid."
+)
+
+
+def _add_project_locate(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "project",
+        help="ground -> image: project lon/lat/height points into an image",
+        description="Project ground points (CSV columns lon_deg,lat_deg,h_m) into the image of "
+        "MODEL;\nwrites the input columns plus line,sample (nan outside the image).\n\n" + _PIXELS,
+        epilog=_examples(
+            "carto project fore.model.json --ground points.csv --out pixels.csv",
+            "carto project IMG_01.tif --ground points.csv --out pixels.csv --sensor rpc",
+        ),
+        formatter_class=_formatter,
+    )
+    p.add_argument(
+        "model",
+        metavar="MODEL",
+        help="model file or product any sensor plugin opens (RPC GeoTIFF, _RPC.TXT ...)",
+    )
+    p.add_argument("--ground", required=True, metavar="IN.csv", help="lon_deg,lat_deg,h_m")
+    p.add_argument("--out", required=True, metavar="OUT.csv", help="output CSV")
+    p.add_argument(
+        "--sensor", metavar="TYPE", help="sensor type (see `carto plugins --kind sensor`)"
+    )
+    p.set_defaults(handler=cmd_project)
+
+    p = sub.add_parser(
+        "locate",
+        help="image -> ground: locate image points at given heights",
+        description="Locate image points (CSV columns line,sample,h_m) of MODEL on the surface at "
+        "the given\nellipsoidal heights; writes the input columns plus lon_deg,lat_deg.\n\n"
+        + _PIXELS,
+        epilog=_examples(
+            "carto locate fore.model.json --image pixels.csv --out ground.csv",
+            "carto locate scene_RPC.TXT --image pixels.csv --out ground.csv",
+        ),
+        formatter_class=_formatter,
+    )
+    p.add_argument(
+        "model",
+        metavar="MODEL",
+        help="model file or product any sensor plugin opens (RPC GeoTIFF, _RPC.TXT ...)",
+    )
+    p.add_argument("--image", required=True, metavar="IN.csv", help="line,sample,h_m")
+    p.add_argument("--out", required=True, metavar="OUT.csv", help="output CSV")
+    p.add_argument(
+        "--sensor", metavar="TYPE", help="sensor type (see `carto plugins --kind sensor`)"
+    )
+    p.set_defaults(handler=cmd_locate)
+
+
 # --------------------------------------------------------------------------- the parser
 def build_parser() -> argparse.ArgumentParser:
     """The ``carto`` argument parser with every sub-command."""
@@ -148,6 +241,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--debug", action="store_true", help="show tracebacks of unexpected errors")
     sub = parser.add_subparsers(title="commands", metavar="COMMAND")
     _add_plugins(sub)
+    _add_project_locate(sub)
     return parser
 
 

@@ -202,8 +202,13 @@ class SensorType(Component):
     """A kind of product that can be opened as a :class:`Sensor` (like a GDAL driver).
 
     ``identify`` must be cheap and must not raise for foreign files: ``carto project MODEL``
-    asks every registered sensor type in turn which of them can open ``MODEL``.
+    asks every registered sensor type in turn which of them can open ``MODEL``; when several
+    can, the one with the highest ``priority`` wins (a specific format over a generic one, e.g.
+    a Cartosat orthokit product over a plain RPC file); a tie is an error that asks for
+    ``--sensor``.
     """
+
+    priority: int = 0
 
     @abc.abstractmethod
     def identify(self, path: Path) -> bool:
@@ -219,3 +224,44 @@ def as_float_arrays(*values: ArrayLike) -> tuple[FloatArray, ...]:
     """Broadcast the arguments together as float64 arrays (the sensors' input convention)."""
     arrays = np.broadcast_arrays(*(np.asarray(v, dtype=np.float64) for v in values))
     return tuple(np.array(a, dtype=np.float64) for a in arrays)
+
+
+def open_sensor(path: str | Path, sensor_type: str | None = None) -> Sensor:
+    """Open ``path`` with the named sensor type, or with the one that identifies it.
+
+    Raises:
+        InputError: the file does not exist, no registered type recognises it, or several do
+            with the same priority.
+        UnknownComponentError: ``sensor_type`` is not registered.
+    """
+    from carto.framework.plugins import get_registry
+
+    path = Path(path)
+    if not path.exists():
+        raise InputError(f"{path}: no such file or directory")
+    registry = get_registry()
+    if sensor_type is not None:
+        return registry.get("sensor", sensor_type).open(path)
+    types = [info.component for info in registry.components("sensor")]
+    candidates = [t for t in types if _safe_identify(t, path)]
+    if not candidates:
+        names = ", ".join(t.name for t in types) or "none"
+        raise InputError(
+            f"{path}: no sensor type recognises this file (known: {names}); "
+            "name one with --sensor TYPE"
+        )
+    best = max(t.priority for t in candidates)
+    top = [t for t in candidates if t.priority == best]
+    if len(top) > 1:
+        raise InputError(
+            f"{path}: several sensor types recognise this file "
+            f"({', '.join(t.name for t in top)}); choose one with --sensor"
+        )
+    return top[0].open(path)
+
+
+def _safe_identify(sensor_type: SensorType, path: Path) -> bool:
+    try:
+        return bool(sensor_type.identify(path))
+    except Exception:  # noqa: BLE001 - a faulty identify must not hide the other types
+        return False

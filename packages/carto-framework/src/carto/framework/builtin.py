@@ -1,0 +1,28 @@
+"""The framework's own components, registered like any plugin through its entry point.
+
+``carto-framework`` declares this module in its ``[project.entry-points.carto]``, so the
+components it provides are listed and looked up exactly like a third party's.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+from carto.framework.linescan import LineScannerModelType
+from carto.framework.plugins import hookimpl
+from carto.framework.sensor import SensorType
+from carto.framework.trajectory import (
+    LagrangeTrajectoryModel,
+    PolynomialTrajectoryModel,
+    TrajectoryModel,
+)
+
+
+@hookimpl
+def carto_sensor_types() -> Sequence[SensorType]:
+    return [LineScannerModelType()]
+
+
+@hookimpl
+def carto_trajectory_models() -> Sequence[TrajectoryModel]:
+    return [PolynomialTrajectoryModel(), LagrangeTrajectoryModel()]
