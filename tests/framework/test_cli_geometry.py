@@ -115,3 +115,35 @@ def test_unrecognised_model_and_unknown_sensor(run_carto, tmp_path):
     assert res.returncode == 1
     assert "no such file or directory" in res.stderr
     assert "Traceback" not in res.stderr
+
+
+def test_project_an_rpc_geotiff_like_gdal(run_carto, tmp_path, shared_data):
+    import rasterio
+    from rasterio.transform import RPCTransformer
+
+    image = shared_data / "pleiades-reunion-pair" / "img_01.tif"
+    with rasterio.open(image) as ds:
+        rpcs = ds.rpcs
+    rng = np.random.default_rng(5)
+    lon = rpcs.long_off + rng.uniform(-0.5, 0.5, 50) * rpcs.long_scale
+    lat = rpcs.lat_off + rng.uniform(-0.5, 0.5, 50) * rpcs.lat_scale
+    h = rpcs.height_off + rng.uniform(-0.5, 0.5, 50) * rpcs.height_scale
+    write_point_table(tmp_path / "g.csv", {"lon_deg": lon, "lat_deg": lat, "h_m": h}, precision=17)
+    res = run_carto(
+        [
+            "project",
+            str(image),
+            "--ground",
+            str(tmp_path / "g.csv"),
+            "--out",
+            str(tmp_path / "p.csv"),
+        ],
+        with_test_plugins=False,
+    )
+    assert res.returncode == 0, res.stderr
+    got = read_point_table(tmp_path / "p.csv", numeric=("line", "sample"))
+    with RPCTransformer(rpcs) as tr:
+        row, col = tr.rowcol(lon, lat, h, op=lambda x: x)
+    # GDAL's rowcol returns continuous pixel coordinates, first pixel centre at 0.5
+    np.testing.assert_allclose(got["line"], row, atol=1e-6)
+    np.testing.assert_allclose(got["sample"], col, atol=1e-6)

@@ -10,6 +10,7 @@ from collections.abc import Sequence
 
 from carto.framework.linescan import LineScannerModelType
 from carto.framework.plugins import hookimpl
+from carto.framework.rpc import RPCSensorType
 from carto.framework.sensor import SensorType
 from carto.framework.trajectory import (
     LagrangeTrajectoryModel,
@@ -20,7 +21,7 @@ from carto.framework.trajectory import (
 
 @hookimpl
 def carto_sensor_types() -> Sequence[SensorType]:
-    return [LineScannerModelType()]
+    return [LineScannerModelType(), RPCSensorType()]
 
 
 @hookimpl
