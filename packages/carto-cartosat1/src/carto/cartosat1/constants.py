@@ -1,0 +1,22 @@
+"""Cartosat-1 (IRS-P5) constants (design brief section 3; Radhadevi et al. 2010).
+
+Angles in degrees where the name says ``_deg``; lengths in metres; times in seconds.
+"""
+
+ORBIT_ALTITUDE_M = 618e3
+"""Nominal orbit altitude (sun-synchronous, 10:30 descending node)."""
+ORBIT_INCLINATION_DEG = 97.87
+FORE_TILT_DEG = 26.0
+"""Fore camera: +26 deg along track (looks forward)."""
+AFT_TILT_DEG = -5.0
+"""Aft camera: -5 deg along track (looks backward)."""
+N_DETECTORS = 12000
+"""Detectors per line: two staggered arrays of 6000 (odd, even)."""
+DETECTOR_PITCH_M = 7e-6
+STAGGER_M = 35e-6
+"""Along-track distance between the odd and even arrays in the focal plane (5 lines)."""
+FOCAL_LENGTH_M = 1.945
+LINE_PERIOD_S = 0.336e-3
+RADIOMETRIC_BITS = 10
+ANCILLARY_STEP_S = 0.125
+"""Position, velocity and attitude are sampled every 125 ms."""

@@ -1,0 +1,17 @@
+"""Cartosat-2 constants (design brief section 3).
+
+Angles in degrees where the name says ``_deg``; lengths in metres; times in seconds.
+"""
+
+ORBIT_ALTITUDE_M = 630e3
+"""Nominal orbit altitude (sun-synchronous)."""
+ORBIT_INCLINATION_DEG = 97.91
+MAX_AGILITY_DEG = 45.0
+"""The platform steers up to 45 deg along and across track."""
+N_DETECTORS = 12000
+DETECTOR_PITCH_M = 7e-6
+STAGGER_M = 35e-6
+FOCAL_LENGTH_M = 5.6
+SWATH_M = 9.6e3
+RADIOMETRIC_BITS = 10
+ANCILLARY_STEP_S = 0.125
