@@ -188,3 +188,26 @@ def test_camera_look_angles_and_stagger():
     )
     _, ty = curved.tan_psi(s)
     np.testing.assert_allclose(curved.sample_from_tan_psi_y(ty), s, atol=1e-6)
+
+
+def test_locate_on_a_dem_lands_on_the_terrain_and_projects_back(cartosat1_pair):
+    from affine import Affine
+
+    from carto.framework.dem import DEM
+
+    s = cartosat1_pair["fore"]
+    lon0, lat0 = s.image_to_ground([6000.0], [6000.0], 0.0)
+    # a tilted plane rising 1 m per 10 m eastwards over 0.2 x 0.2 degrees
+    n = 400
+    x = lon0[0] - 0.1 + 0.0005 * (np.arange(n) + 0.5)
+    heights = np.tile(800.0 + (x - lon0[0]) * 111e3 * np.cos(np.radians(lat0[0])) * 0.1, (n, 1))
+    dem = DEM.from_array(
+        heights, Affine(0.0005, 0.0, lon0[0] - 0.1, 0.0, -0.0005, lat0[0] + 0.1), "EPSG:4326"
+    )
+    line = np.array([5000.0, 6000.0, 7000.0])
+    sample = np.array([5500.0, 6000.0, 6600.0])
+    lon, lat, h = s.locate_on_dem(line, sample, dem)
+    np.testing.assert_allclose(h, dem.height(lon, lat), atol=1e-2)
+    l2, s2 = s.ground_to_image(lon, lat, h)
+    np.testing.assert_allclose(l2, line, atol=1e-3)
+    np.testing.assert_allclose(s2, sample, atol=1e-3)

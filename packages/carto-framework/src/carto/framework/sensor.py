@@ -17,6 +17,7 @@ import abc
 import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 import attrs
 import numpy as np
@@ -120,6 +121,20 @@ class Sensor(abc.ABC):
         Returns:
             ``(lon_deg, lat_deg)``; NaN where the location cannot be computed.
         """
+
+    def locate_on_dem(
+        self, line: ArrayLike, sample: ArrayLike, dem: Any, **options: Any
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Locate image points on a DEM surface: ``(lon_deg, lat_deg, h_m)``.
+
+        ``dem`` is a :class:`carto.framework.dem.DEM` with ellipsoidal heights; the first
+        intersection of each line of sight with the terrain seen from the sensor is returned
+        (NaN where the ray leaves the DEM). ``options`` go to
+        :func:`carto.framework.dem.dem_surface_locate`.
+        """
+        from carto.framework.dem import dem_surface_locate
+
+        return dem_surface_locate(self, line, sample, dem, **options)
 
     # ------------------------------------------------------------------ adjustable parameters
     @property
