@@ -211,3 +211,38 @@ def test_locate_on_a_dem_lands_on_the_terrain_and_projects_back(cartosat1_pair):
     l2, s2 = s.ground_to_image(lon, lat, h)
     np.testing.assert_allclose(l2, line, atol=1e-3)
     np.testing.assert_allclose(s2, sample, atol=1e-3)
+
+
+def test_a_window_is_the_full_image_shifted(cartosat1_pair, tmp_path):
+    full = cartosat1_pair["aft"]
+    t = full.timing
+    crop_timing = LineTiming.constant(float(t.time(4000.5)), float(t.period(4000.5)))
+    crop = LineScanner(
+        "aft-crop",
+        2000,
+        crop_timing,
+        full.camera,
+        full.trajectory,
+        first_sample=3000,
+        width=2500,
+        first_line=4000,
+    )
+    assert crop.image_shape == (2000, 2500)
+    line = np.array([0.5, 1000.0, 1999.5])
+    sample = np.array([0.5, 1250.0, 2499.5])
+    lon, lat = crop.image_to_ground(line, sample, 300.0)
+    lon_f, lat_f = full.image_to_ground(line + 4000, sample + 3000, 300.0)
+    np.testing.assert_allclose(lon, lon_f, atol=1e-12)
+    np.testing.assert_allclose(lat, lat_f, atol=1e-12)
+    l2, s2 = crop.ground_to_image(lon, lat, 300.0)
+    np.testing.assert_allclose(l2, line, atol=1e-6)
+    np.testing.assert_allclose(s2, sample, atol=1e-6)
+    # outside the window but inside the full image: NaN for the crop
+    lon_o, lat_o = full.image_to_ground([100.0], [100.0], 0.0)
+    assert np.isnan(crop.ground_to_image(lon_o, lat_o, 0.0)[0][0])
+    again = LineScanner.load(crop.save(tmp_path / "crop.model.json"))
+    assert again.image_shape == (2000, 2500)
+    assert again.first_sample == 3000
+    assert again.first_line == 4000
+    with pytest.raises(InputError, match="first_sample 12000 is outside"):
+        LineScanner("x", 10, crop_timing, full.camera, full.trajectory, first_sample=12000)

@@ -386,8 +386,14 @@ class LineScanner(Sensor):
         name: image identifier (``"fore"``, ``"IMG_02"`` ...).
         n_lines: number of image lines.
         timing: :class:`LineTiming` of the lines.
-        camera: :class:`~carto.framework.camera.Camera` (its ``n_samples`` is the width).
+        camera: :class:`~carto.framework.camera.Camera` of the whole detector line.
         trajectory: :class:`~carto.framework.trajectory.Trajectory` of the platform body.
+        first_sample: detector index of the image's first column: an image that is a window
+            of the detector line (a crop, as the simulator renders) has ``sample = detector
+            sample - first_sample``; 0 for a full line.
+        width: number of image columns (default: the detectors from ``first_sample`` on).
+        first_line: line of the full acquisition that is this image's first line (for
+            reference only: ``timing`` already gives the times of this image's lines).
 
     Adjustable parameters are the trajectory's corrections followed by the camera's alignment
     corrections, with their own names (two sensors sharing a trajectory share the names of its
@@ -399,17 +405,34 @@ class LineScanner(Sensor):
     timing: LineTiming
     camera: Camera
     trajectory: Trajectory
+    first_sample: int = 0
+    width: int | None = None
+    first_line: int = 0
     _guess: _FirstGuess = attrs.field(factory=_FirstGuess, alias="guess", repr=False)
     _table: _LineTable = attrs.field(factory=_LineTable, init=False, repr=False)
 
     # ------------------------------------------------------------------ Sensor interface
+    def __attrs_post_init__(self) -> None:
+        if self.n_lines < 1:
+            raise InputError(f"sensor {self.name}: n_lines must be >= 1, got {self.n_lines}")
+        if not 0 <= self.first_sample < self.camera.n_samples:
+            raise InputError(
+                f"sensor {self.name}: first_sample {self.first_sample} is outside "
+                f"the {self.camera.n_samples} detectors"
+            )
+        if self.width is not None and self.width < 1:
+            raise InputError(f"sensor {self.name}: width must be >= 1, got {self.width}")
+
     @property
     def image_shape(self) -> tuple[int, int]:
-        return (int(self.n_lines), int(self.camera.n_samples))
+        return (int(self.n_lines), self.n_samples)
 
     @property
     def n_samples(self) -> int:
-        return int(self.camera.n_samples)
+        """Image width in columns."""
+        if self.width is not None:
+            return int(self.width)
+        return int(self.camera.n_samples - self.first_sample)
 
     @property
     def parameters(self) -> tuple[Parameter, ...]:
@@ -457,7 +480,9 @@ class LineScanner(Sensor):
         """Perspective centre ``(..., 3)`` and unit look direction ``(..., 3)``, ECEF."""
         line, sample = as_float_arrays(line, sample)
         p, r_c2e = self.camera_to_ecef(line)
-        u = np.einsum("...ij,...j->...i", r_c2e, self.camera.look_camera(sample))
+        u = np.einsum(
+            "...ij,...j->...i", r_c2e, self.camera.look_camera(sample + self.first_sample)
+        )
         return p, u
 
     def image_to_ground(
@@ -503,6 +528,7 @@ class LineScanner(Sensor):
             MAX_ITERATIONS,
         )
         result_line = self.timing.line(result_t)
+        sample = sample - self.first_sample
         ok = np.isfinite(result_line) & np.isfinite(sample)
         e = EDGE_TOLERANCE_PX
         inside = (
@@ -520,20 +546,6 @@ class LineScanner(Sensor):
         line, sample, inside = self.project(lon_deg, lat_deg, h_m)
         return np.where(inside, line, np.nan), np.where(inside, sample, np.nan)
 
-    def _focal_plane_offset(
-        self, x_ecef: FloatArray, line: FloatArray
-    ) -> tuple[FloatArray, FloatArray]:
-        """``f = v_x / v_z - tan psi_x(s)`` and the camera-frame vector ``v`` to ``x``."""
-        p, r_c2e = self.camera_to_ecef(line)
-        v = np.einsum("...ji,...j->...i", r_c2e, x_ecef - p)
-        vz = np.where(v[:, 2] != 0, v[:, 2], np.nan)
-        if self.camera.has_linear_along_track:
-            tx, _ = self.camera.tan_psi(np.zeros(1))
-            target = tx[0]
-        else:
-            target, _ = self.camera.tan_psi(self.camera.sample_from_tan_psi_y(v[:, 1] / vz))
-        return v[:, 0] / vz - target, v
-
     # ------------------------------------------------------------------ model file
     def to_dict(self) -> dict[str, Any]:
         """The full state as JSON-ready data (``format`` and ``version`` first)."""
@@ -542,6 +554,11 @@ class LineScanner(Sensor):
             "version": MODEL_VERSION,
             "name": self.name,
             "n_lines": self.n_lines,
+            "window": {
+                "first_line": self.first_line,
+                "first_sample": self.first_sample,
+                "width": self.n_samples,
+            },
             "timing": {
                 "line_nodes": list(self.timing.line_nodes),
                 "dt_nodes_s": list(self.timing.dt_nodes_s),
@@ -563,12 +580,16 @@ class LineScanner(Sensor):
                 f"(this Carto reads version {MODEL_VERSION})"
             )
         try:
+            window = d.get("window", {})
             return cls(
                 str(d["name"]),
                 int(d["n_lines"]),
                 LineTiming(d["timing"]["line_nodes"], d["timing"]["dt_nodes_s"]),
                 Camera.from_dict(d["camera"]),
                 Trajectory.from_dict(d["trajectory"]),
+                first_sample=int(window.get("first_sample", 0)),
+                width=None if window.get("width") is None else int(window["width"]),
+                first_line=int(window.get("first_line", 0)),
             )
         except KeyError as exc:
             raise InputError(f"{source}: missing field {exc.args[0]!r}") from None
