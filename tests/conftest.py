@@ -65,3 +65,37 @@ def run_carto(carto_exe: str) -> Callable[..., subprocess.CompletedProcess[str]]
         )
 
     return run
+
+
+@pytest.fixture(scope="session")
+def cartosat1_scene(tmp_path_factory) -> Path:
+    """A 400 x 400 px Cartosat-1 pair with realistic errors and point targets at the control
+    points (seed 11, gentle plains: on rough terrain a target's image is no longer symmetric,
+    which would blur the rendering check, not the geometry)."""
+    from .scenes import simulate
+
+    return simulate(
+        "cartosat1-pair",
+        tmp_path_factory.mktemp("c1"),
+        seed=11,
+        size=(400, 400),
+        point_targets=True,
+        n_checkpoints=20,
+        terrain="plains",
+    )
+
+
+@pytest.fixture(scope="session")
+def cartosat2_triplet_scene(tmp_path_factory) -> Path:
+    """A 400 x 400 px Cartosat-2 triplet with realistic agile errors and point targets."""
+    from .scenes import simulate
+
+    return simulate(
+        "cartosat2-triplet",
+        tmp_path_factory.mktemp("c2"),
+        seed=5,
+        size=(400, 400),
+        point_targets=True,
+        n_checkpoints=20,
+        terrain="plains",
+    )

@@ -370,10 +370,14 @@ def test_write_read_round_trip_utm(tmp_path: Path):
     assert DEM.open(tmp_path / "geoid.tif", vertical="ellipsoid").vertical == ELLIPSOID
 
 
-def test_write_to_a_missing_folder_and_open_errors(tmp_path: Path):
-    dem = DEM.constant(1.0)
+def test_write_creates_folders_and_open_errors(tmp_path: Path):
+    dem = DEM.constant(1.0, bounds=(0.0, 0.0, 1.0, 1.0))
+    written = dem.write(tmp_path / "new" / "folder" / "dem.tif")
+    assert DEM.open(written).height(0.5, 0.5) == pytest.approx(1.0)
+    assert [p.name for p in written.parent.iterdir()] == ["dem.tif"]  # no temporary left
+    (tmp_path / "file").write_text("x")
     with pytest.raises(InputError, match="cannot write DEM"):
-        dem.write(tmp_path / "no" / "such" / "dir.tif")
+        dem.write(tmp_path / "file" / "dem.tif")  # parent is a file
     with pytest.raises(InputError, match="no such file"):
         DEM.open(tmp_path / "missing.tif")
     junk = tmp_path / "junk.tif"

@@ -1,6 +1,18 @@
 """The ``carto`` entry point of carto-cartosat2.
 
 Registered in the distribution's ``[project.entry-points.carto]``; the framework loads it with
-pluggy. Components are added here (with ``@hookimpl``) as they are implemented and tested;
-nothing is registered before it works.
+pluggy. Components are added here as they are implemented and tested.
 """
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+from carto.cartosat2.presets import PaintbrushPreset, TripletPreset
+from carto.framework import hookimpl
+from carto.framework.scene import ScenePreset
+
+
+@hookimpl
+def carto_scene_presets() -> Sequence[ScenePreset]:
+    return [TripletPreset(), PaintbrushPreset()]

@@ -59,6 +59,14 @@ def sun_synchronous_pass(
     return epoch, el, EphemerisSamples(dt, p, v, "eci")
 
 
+def local_time_epoch(lon_deg: float, date: str, local_hours: float = 10.5) -> str:
+    """UTC time (ISO string) at which the mean local solar time at ``lon_deg`` on ``date``
+    (``YYYY-MM-DD``) is ``local_hours`` (10.5: a 10:30 sun-synchronous pass)."""
+    utc_hours = (local_hours - lon_deg / 15.0) % 24.0
+    t = frames.utc_to_j2000_s(f"{date}T00:00:00Z") + utc_hours * 3600.0
+    return frames.j2000_s_to_utc(round(t, 3))
+
+
 def attitude_from_law(dt_s: ArrayLike, law: AttitudeLaw) -> AttitudeSamples:
     """Attitude samples (body -> orbit quaternions) from a ``(roll, pitch, yaw)(dt)`` law."""
     t = np.asarray(dt_s, dtype=np.float64)
@@ -137,3 +145,74 @@ def centred_timing(
     t = crossing_time(trajectory, camera, lon_deg, lat_deg, h_m)
     line = n_lines / 2.0 if at_line is None else float(at_line)
     return LineTiming.constant(t - (line - 0.5) * period_s, period_s)
+
+
+# ----------------------------------------------------------------------------- attitude laws
+# A law gives R_body_to_orbit at times dt_s from the inertial state (P, V) at those times:
+# law(dt_s (N,), P_eci (N, 3), V_eci (N, 3)) -> (N, 3, 3).
+OrbitAttitudeLaw = Callable[[FloatArray, FloatArray, FloatArray], FloatArray]
+
+
+def yaw_steering_law(
+    epoch_j2000_s: float, *, roll_rad: float = 0.0, pitch_rad: float = 0.0
+) -> OrbitAttitudeLaw:
+    """Yaw steering: the body X axis follows the satellite's Earth-relative velocity, so the
+    detector line stays perpendicular to the ground track (Cartosat-1's stable mode).
+
+    ``yaw = atan2(v_y, v_x)`` of the Earth-relative velocity ``V - omega x P`` in the orbit
+    frame (a few degrees, largest at the equator); optional constant roll and pitch.
+    """
+    rate = float(frames.gmst_rate_rad_s(epoch_j2000_s))
+
+    def law(dt: FloatArray, p: FloatArray, v: FloatArray) -> FloatArray:
+        v_rel = v - np.cross([0.0, 0.0, rate], p)
+        v_o = np.einsum("nji,nj->ni", frames.orbit_to_eci_matrix(p, v), v_rel)
+        yaw = np.arctan2(v_o[:, 1], v_o[:, 0])
+        return frames.rpy_to_matrix(np.full_like(yaw, roll_rad), np.full_like(yaw, pitch_rad), yaw)
+
+    return law
+
+
+def pointing_law(
+    epoch_j2000_s: float,
+    aim_ecef: Callable[[FloatArray], FloatArray],
+    scan_direction_ecef: FloatArray,
+) -> OrbitAttitudeLaw:
+    """Agile pointing: body Z at the moving aim point ``aim_ecef(dt) -> (N, 3)``, body X along
+    the ground scan direction (unit ECEF vector), so lines are imaged across the scan.
+
+    A Cartosat-2 step-and-stare view scans its strip slower than the ground track moves: the
+    aim point advances at ``GSD / line period`` while the platform pitches to follow it.
+    """
+    gmst0 = float(frames.gmst_rad(epoch_j2000_s))
+    rate = float(frames.gmst_rate_rad_s(epoch_j2000_s))
+    s_dir = np.asarray(scan_direction_ecef, float) / np.linalg.norm(scan_direction_ecef)
+
+    def law(dt: FloatArray, p: FloatArray, v: FloatArray) -> FloatArray:
+        r_i2e = frames.rot_z(-(gmst0 + rate * dt))
+        p_ecef = np.einsum("nij,nj->ni", r_i2e, p)
+        z = aim_ecef(dt) - p_ecef
+        z /= np.linalg.norm(z, axis=1, keepdims=True)
+        x = s_dir - np.sum(s_dir * z, axis=1, keepdims=True) * z
+        x /= np.linalg.norm(x, axis=1, keepdims=True)
+        y = np.cross(z, x)
+        r_b2e = np.stack([x, y, z], axis=-1)
+        r_o2e = r_i2e @ frames.orbit_to_eci_matrix(p, v)
+        return np.swapaxes(r_o2e, -1, -2) @ r_b2e
+
+    return law
+
+
+def attitude_samples_from_law(
+    dt_s: FloatArray,
+    position_eci_m: FloatArray,
+    velocity_eci_m_s: FloatArray,
+    law: OrbitAttitudeLaw,
+) -> AttitudeSamples:
+    """Body -> orbit quaternion samples of an attitude law along an inertial trajectory."""
+    r = law(
+        np.asarray(dt_s, float),
+        np.asarray(position_eci_m, float),
+        np.asarray(velocity_eci_m_s, float),
+    )
+    return AttitudeSamples(dt_s, frames.matrix_to_quat(r), "orbit")

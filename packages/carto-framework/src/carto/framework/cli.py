@@ -12,13 +12,15 @@ import inspect
 import json
 import sys
 import textwrap
+import time
 from collections.abc import Callable, Sequence
+from pathlib import Path
 
 import attrs
 import numpy as np
 
 from carto.framework import __version__
-from carto.framework.errors import CartoError, PluginError
+from carto.framework.errors import CartoError, InputError, PluginError
 from carto.framework.plugins import KINDS, ComponentInfo, Registry, get_registry
 
 PROG = "carto"
@@ -220,6 +222,89 @@ def _add_project_locate(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(handler=cmd_locate)
 
 
+# --------------------------------------------------------------------------- simulate
+def cmd_simulate(args: argparse.Namespace) -> int:
+    from carto.framework.simulate import SimulationOptions
+
+    preset = get_registry().get("scene-preset", args.preset)
+    if args.terrain and args.dem:
+        raise InputError("give either --terrain or --dem, not both")
+    if args.size is not None and (args.size[0] < 1 or args.size[1] < 1):
+        raise InputError(f"--size must be positive, got {args.size[0]} {args.size[1]}")
+    if args.dem is not None and not Path(args.dem).is_file():
+        raise InputError(f"--dem {args.dem}: no such file")
+    options = SimulationOptions(
+        seed=args.seed,
+        terrain=args.terrain,
+        dem_path=None if args.dem is None else Path(args.dem),
+        size=None if args.size is None else (args.size[0], args.size[1]),
+        errors=args.errors,
+        n_gcps=args.gcps,
+        n_checkpoints=args.checkpoints,
+        point_targets=args.point_targets,
+    )
+    t0 = time.perf_counter()
+    manifest = preset.simulate(args.out, options, quiet=args.quiet)
+    scene = json.loads(Path(manifest).read_text())
+    print(
+        f"simulated {scene['preset']} (seed {scene['seed']}, terrain {scene['terrain']}, "
+        f"errors {scene['errors']}) in {time.perf_counter() - t0:.1f} s -> {manifest}"
+    )
+    for name, image in scene["images"].items():
+        print(f"  {name}: {image['raster']} (ancillary {image['ancillary']})")
+    return 0
+
+
+def _add_simulate(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "simulate",
+        help="simulate a scene with known truth (images, ancillary, control, truth)",
+        description="Render a simulated acquisition of PRESET into a scene folder: raw 10-bit "
+        "images (odd/even\narrays staggered), ancillary files with realistic errors, GCPs and "
+        "checkpoints,\nan SRTM-like initial DEM and truth/ (true DEM, ortho-image, models).",
+        epilog=_examples(
+            "carto simulate cartosat1-pair --out scene1",
+            "carto simulate cartosat1-pair --out s --terrain mountains --seed 7 --size 1000 1000",
+            "carto simulate cartosat2-triplet --out tri --gcps 2 --checkpoints 50",
+            "carto simulate cartosat1-pair --out s --dem my_dem.tif --errors none",
+        ),
+        formatter_class=_formatter,
+    )
+    p.add_argument(
+        "preset", metavar="PRESET", help="scene preset (carto plugins --kind scene-preset)"
+    )
+    p.add_argument("--out", required=True, metavar="DIR", help="scene folder to write")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument(
+        "--terrain",
+        metavar="NAME",
+        help="terrain preset: flat-coastal, plains, mixed, hilly, mountains",
+    )
+    p.add_argument("--dem", metavar="FILE", help="use this DEM (ellipsoidal heights) as terrain")
+    p.add_argument(
+        "--size",
+        type=int,
+        nargs=2,
+        metavar=("W", "H"),
+        help="window of each image in pixels (default 2000 2000)",
+    )
+    p.add_argument(
+        "--errors",
+        choices=("realistic", "none"),
+        default="realistic",
+        help="error sources of the product (default realistic)",
+    )
+    p.add_argument("--gcps", type=int, metavar="N", help="number of GCPs (preset default)")
+    p.add_argument("--checkpoints", type=int, metavar="N", help="number of checkpoints")
+    p.add_argument(
+        "--point-targets",
+        action="store_true",
+        help="paint bright targets at the control points (rendering checks)",
+    )
+    p.add_argument("--quiet", action="store_true", help="no progress messages")
+    p.set_defaults(handler=cmd_simulate)
+
+
 # --------------------------------------------------------------------------- the parser
 def build_parser() -> argparse.ArgumentParser:
     """The ``carto`` argument parser with every sub-command."""
@@ -242,6 +327,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(title="commands", metavar="COMMAND")
     _add_plugins(sub)
     _add_project_locate(sub)
+    _add_simulate(sub)
     return parser
 
 

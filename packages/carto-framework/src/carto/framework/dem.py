@@ -42,6 +42,7 @@ import attrs
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from carto.framework.atomic import atomic_output
 from carto.framework.component import Component
 from carto.framework.errors import InputError
 from carto.framework.sensor import Sensor, as_float_arrays
@@ -532,7 +533,6 @@ class DEM:
         from rasterio.errors import RasterioError
 
         path = Path(path)
-        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
         n_rows, n_cols = self.shape
         profile: dict[str, Any] = {
             "driver": "GTiff",
@@ -549,15 +549,13 @@ class DEM:
         if n_rows >= 256 and n_cols >= 256:
             profile.update(tiled=True, blockxsize=256, blockysize=256)
         try:
-            with rasterio.open(tmp, "w", **profile) as dst:
+            with atomic_output(path) as tmp, rasterio.open(tmp, "w", **profile) as dst:
                 dst.write(self.heights.astype(np.float32), 1)
                 dst.update_tags(
                     **{VERTICAL_TAG: _vertical_tag(self.vertical), "AREA_OR_POINT": "Area"}
                 )
                 dst.units = ("metre",)
-            os.replace(tmp, path)
         except (RasterioError, OSError) as exc:
-            tmp.unlink(missing_ok=True)
             raise InputError(f"cannot write DEM to {path}: {_first_line(exc)}") from exc
         return path
 

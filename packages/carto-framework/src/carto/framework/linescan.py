@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -41,6 +40,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from carto.framework import frames
+from carto.framework.atomic import atomic_output
 from carto.framework.camera import Camera
 from carto.framework.errors import InputError
 from carto.framework.sensor import Parameter, Sensor, SensorType, as_float_arrays
@@ -618,16 +618,9 @@ class LineScanner(Sensor):
 def write_json_atomic(path: str | os.PathLike[str], document: Any) -> Path:
     """Write ``document`` as indented JSON to ``path`` through a temporary file and a rename."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as fh:
-            json.dump(document, fh, indent=1)
-            fh.write("\n")
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with atomic_output(path) as tmp, tmp.open("w") as fh:
+        json.dump(document, fh, indent=1)
+        fh.write("\n")
     return path
 
 

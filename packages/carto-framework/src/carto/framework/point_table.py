@@ -9,13 +9,13 @@ from __future__ import annotations
 
 import csv
 import os
-import tempfile
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
+from carto.framework.atomic import atomic_output
 from carto.framework.errors import InputError
 
 
@@ -88,22 +88,15 @@ def write_point_table(
     n = {a.shape[0] for a in arrays}
     if len(n) > 1:
         raise InputError(f"{path}: columns differ in length: {sorted(n)}")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
 
     def fmt(value: object) -> str:
         if isinstance(value, float | np.floating):
             return "nan" if not np.isfinite(value) else f"{float(value):.{precision}g}"
         return str(value)
 
-    try:
-        with os.fdopen(fd, "w", newline="") as fh:
-            writer = csv.writer(fh)
-            writer.writerow(names)
-            for row in zip(*arrays, strict=True):
-                writer.writerow([fmt(v) for v in row])
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with atomic_output(path) as tmp, tmp.open("w", newline="") as fh:
+        writer = csv.writer(fh)
+        writer.writerow(names)
+        for row in zip(*arrays, strict=True):
+            writer.writerow([fmt(v) for v in row])
     return path

@@ -57,6 +57,7 @@ import attrs
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from carto.framework.atomic import atomic_output
 from carto.framework.errors import InputError
 from carto.framework.frames import WGS84_A_M, WGS84_E2
 from carto.framework.sensor import (
@@ -1147,10 +1148,6 @@ def read_worldview_xml(path: str | os.PathLike[str]) -> RPCCoefficients:
 
 
 # ----------------------------------------------------------------------------- writers
-def _temporary_name(path: Path) -> Path:
-    return path.with_name(f".{path.stem}.tmp{os.getpid()}{path.suffix}")
-
-
 def write_rpc_txt(rpc: RPCCoefficients, path: str | os.PathLike[str]) -> Path:
     """Write ``rpc`` as an ``_RPC.TXT`` (``KEY: value`` lines, full float precision).
 
@@ -1165,12 +1162,10 @@ def write_rpc_txt(rpc: RPCCoefficients, path: str | os.PathLike[str]) -> Path:
         lines.append(f"ERR_BIAS: {rpc.err_bias!r}")
     if rpc.err_rand is not None:
         lines.append(f"ERR_RAND: {rpc.err_rand!r}")
-    tmp = _temporary_name(p)
     try:
-        tmp.write_text("\n".join(lines) + "\n", encoding="ascii")
-        os.replace(tmp, p)
+        with atomic_output(p) as tmp:
+            tmp.write_text("\n".join(lines) + "\n", encoding="ascii")
     except OSError as err:
-        tmp.unlink(missing_ok=True)
         raise _fail(p, f"cannot write: {err.strerror or err}") from None
     return p
 
@@ -1192,39 +1187,32 @@ def write_geotiff_rpc(
     from rasterio.errors import RasterioError
 
     p = Path(path_tif)
-    tmp = _temporary_name(p)
+    if data is None and not p.is_file():
+        raise _fail(p, "no such file (pass data= to create a new GeoTIFF)")
     try:
-        if data is not None:
-            arr = np.asarray(data)
-            if arr.ndim == 2:
-                arr = arr[None]
-            if arr.ndim != 3 or 0 in arr.shape:
-                raise _fail(p, f"data must be (lines, samples) or (bands, lines, samples), "
-                               f"got shape {np.shape(data)}")  # fmt: skip
-            profile = {"driver": "GTiff", "count": arr.shape[0], "height": arr.shape[1],
-                       "width": arr.shape[2], "dtype": arr.dtype}  # fmt: skip
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
+        with atomic_output(p) as tmp, warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            if data is not None:
+                arr = np.asarray(data)
+                if arr.ndim == 2:
+                    arr = arr[None]
+                if arr.ndim != 3 or 0 in arr.shape:
+                    raise _fail(p, f"data must be (lines, samples) or (bands, lines, samples), "
+                                   f"got shape {np.shape(data)}")  # fmt: skip
+                profile = {"driver": "GTiff", "count": arr.shape[0], "height": arr.shape[1],
+                           "width": arr.shape[2], "dtype": arr.dtype}  # fmt: skip
                 with rasterio.open(tmp, "w", **profile) as dst:
                     dst.write(arr)
                     dst.rpcs = rpc.to_rasterio()
-        else:
-            if not p.is_file():
-                raise _fail(p, "no such file (pass data= to create a new GeoTIFF)")
-            shutil.copyfile(p, tmp)
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
+            else:
+                shutil.copyfile(p, tmp)
                 with rasterio.open(tmp, "r+") as dst:
                     if dst.driver != "GTiff":
                         raise _fail(p, f"not a GeoTIFF (GDAL driver {dst.driver})")
                     dst.rpcs = rpc.to_rasterio()
-        os.replace(tmp, p)
     except (RasterioError, OSError, TypeError, ValueError) as err:  # rasterio raises all four
         message = str(err).splitlines()[0] if str(err) else type(err).__name__
         raise _fail(p, f"cannot write the GeoTIFF RPC: {message}") from None
-    finally:
-        tmp.unlink(missing_ok=True)
-        Path(f"{tmp}.aux.xml").unlink(missing_ok=True)
     return p
 
 

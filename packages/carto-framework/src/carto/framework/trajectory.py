@@ -389,11 +389,21 @@ class Trajectory:
 
         The rotation chain is ``R_body_to_ecef = R_eci_to_ecef(t) @ R_orbit_to_eci(P, V) @
         R_correction(t) @ R_body_to_orbit(t)`` (for attitude given in eci/ecef,
-        ``R_body_to_orbit = R_orbit_to_eci^T @ R_body_to_eci``).
+        ``R_body_to_orbit = R_orbit_to_eci^T @ R_body_to_eci``), with the orbit frame of the
+        corrected position ``P``.
         """
         t = np.asarray(dt_s, dtype=np.float64)
         p_eci, v_eci = self.state_eci(t)
+        tau = (t - self.t_mid_s) / self.t_half_s
         r_o2i = frames.orbit_to_eci_matrix(p_eci, v_eci)
+        if self.position_correction_order >= 0:
+            c = self._correction_coeffs("position", _POSITION_NAMES, self.position_correction_order)
+            if c.any():
+                d = npoly.polyval(tau, c)  # (3, ...): along, across, radial
+                d_orbit = np.stack([d[0], d[1], -d[2]], axis=-1)  # radial up = -Z_o
+                p_eci = p_eci + np.einsum("...ij,...j->...i", r_o2i, d_orbit)
+                # the orbit frame follows the corrected position (it is defined by it)
+                r_o2i = frames.orbit_to_eci_matrix(p_eci, v_eci)
         r_i2e = frames.rot_z(-self.gmst_rad(t))
         r_o2e = r_i2e @ r_o2i
         a = self._angles(t)
@@ -405,19 +415,12 @@ class Trajectory:
                 r_b2o = np.swapaxes(r_o2i, -1, -2) @ r_b2f
             else:
                 r_b2o = np.swapaxes(r_o2e, -1, -2) @ r_b2f
-        tau = (t - self.t_mid_s) / self.t_half_s
         if self.attitude_correction_order >= 0:
             c = self._correction_coeffs("attitude", _ANGLE_NAMES, self.attitude_correction_order)
-            d = npoly.polyval(tau, c) if c.any() else None
-            if d is not None:
+            if c.any():
+                d = npoly.polyval(tau, c)
                 r_b2o = frames.rpy_to_matrix(d[0], d[1], d[2]) @ r_b2o
         p_ecef = np.einsum("...ij,...j->...i", r_i2e, p_eci)
-        if self.position_correction_order >= 0:
-            c = self._correction_coeffs("position", _POSITION_NAMES, self.position_correction_order)
-            if c.any():
-                d = npoly.polyval(tau, c)  # (3, ...): along, across, radial
-                d_orbit = np.stack([d[0], d[1], -d[2]], axis=-1)  # radial up = -Z_o
-                p_ecef = p_ecef + np.einsum("...ij,...j->...i", r_o2e, d_orbit)
         return p_ecef, r_o2e @ r_b2o
 
     def position_velocity_ecef(self, dt_s: ArrayLike) -> tuple[FloatArray, FloatArray]:

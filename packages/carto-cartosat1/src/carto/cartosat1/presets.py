@@ -1,0 +1,76 @@
+"""Simulator scene preset ``cartosat1-pair``: a Cartosat-1 Fore/Aft stereo pair.
+
+The platform flies a sun-synchronous orbit at 618 km (descending node at 10:30 local time),
+yaw-steered with zero roll and pitch; Fore (+26 deg) and Aft (-5 deg) image the target about
+52 s apart from one rigid body, so both images share one ancillary file (one body trajectory).
+"""
+
+from __future__ import annotations
+
+from carto.cartosat1 import constants as c
+from carto.framework import acquisition, frames, orbit
+from carto.framework.ancillary import CameraSpec
+from carto.framework.scene import ScenePreset
+from carto.framework.simulate import ScenePlan, SegmentPlan, SimulationOptions, ViewPlan
+
+DEFAULT_TARGET = (77.95, 30.30)
+"""Near Dehradun, India: hilly terrain as in the paper's test sites."""
+DEFAULT_DATE = "2026-03-01"
+
+
+def camera_specs() -> dict[str, CameraSpec]:
+    """Nominal Fore and Aft cameras (design brief section 3)."""
+    return {
+        name: CameraSpec(
+            name,
+            c.N_DETECTORS,
+            c.FOCAL_LENGTH_M,
+            c.DETECTOR_PITCH_M,
+            stagger_m=c.STAGGER_M,
+            mounting_rpy_deg=(0.0, tilt, 0.0),
+        )
+        for name, tilt in (("fore", c.FORE_TILT_DEG), ("aft", c.AFT_TILT_DEG))
+    }
+
+
+def cartosat1_pair_plan(
+    target: tuple[float, float] = DEFAULT_TARGET, date: str = DEFAULT_DATE
+) -> ScenePlan:
+    """The acquisition plan of a Cartosat-1 stereo pair over ``target`` (lon, lat)."""
+    lon, lat = target
+    epoch_utc = acquisition.local_time_epoch(lon, date)
+    epoch = frames.utc_to_j2000_s(epoch_utc)
+    a = frames.WGS84_A_M + c.ORBIT_ALTITUDE_M
+    elements = orbit.circular_orbit_over(
+        lon, lat, epoch, c.ORBIT_ALTITUDE_M, orbit.sun_synchronous_inclination(a), descending=True
+    )
+    cams = camera_specs()
+    views = tuple(
+        ViewPlan(name, cams[name], c.N_DETECTORS, c.LINE_PERIOD_S) for name in ("fore", "aft")
+    )
+    segment = SegmentPlan("body", (-45.0, 45.0), acquisition.yaw_steering_law(epoch), views)
+    gsd = c.ORBIT_ALTITUDE_M * c.DETECTOR_PITCH_M / c.FOCAL_LENGTH_M
+    return ScenePlan(
+        preset="cartosat1-pair",
+        platform="Cartosat-1 (IRS-P5)",
+        epoch_utc=epoch_utc,
+        elements=elements,
+        target=(lon, lat),
+        segments=(segment,),
+        gsd_m=gsd,
+        agile=False,
+        default_terrain="hilly",
+        default_size=(2000, 2000),
+        default_gcps=1,
+        default_checkpoints=50,
+    )
+
+
+class Cartosat1PairPreset(ScenePreset):
+    """Cartosat-1 Fore/Aft stereo pair from one pass (tied cameras, one body trajectory)."""
+
+    name = "cartosat1-pair"
+    description = "Cartosat-1 Fore (+26 deg) / Aft (-5 deg) stereo pair, 2.5 m, 52 s apart"
+
+    def plan(self, options: SimulationOptions) -> ScenePlan:
+        return cartosat1_pair_plan()

@@ -1,0 +1,149 @@
+"""Simulator scene presets of the agile Cartosat-2: ``cartosat2-triplet`` and
+``cartosat2-paintbrush``.
+
+Cartosat-2 steers its whole body. In step-and-stare imaging each view scans a strip of ground
+slower than the ground track moves: the aim point advances at ``GSD / line period`` (the line
+period is longer than the ground-pixel time) while the platform pitches back to follow it, so
+the attitude changes continuously during the image. A triplet images one area from one pass
+fore, near nadir and aft; a paint-brush set images adjacent strips side by side.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from carto.cartosat2 import constants as c
+from carto.framework import acquisition, frames, orbit
+from carto.framework.ancillary import CameraSpec
+from carto.framework.scene import ScenePreset
+from carto.framework.simulate import ScenePlan, SegmentPlan, SimulationOptions, ViewPlan
+
+DEFAULT_TARGET = (77.95, 30.30)
+DEFAULT_DATE = "2026-03-01"
+LINE_PERIOD_S = 0.4e-3
+"""Asynchronous line period, about 3.4 times the 0.118 ms ground-pixel time at nadir."""
+GSD_M = c.ORBIT_ALTITUDE_M * c.DETECTOR_PITCH_M / c.FOCAL_LENGTH_M
+TRIPLET_TIMES_S = (-45.0, 0.0, 45.0)
+"""Centre times of the fore, nadir and aft views: about +26, 0 and -26 degrees along track."""
+
+
+def camera_spec() -> CameraSpec:
+    return CameraSpec(
+        "pan", c.N_DETECTORS, c.FOCAL_LENGTH_M, c.DETECTOR_PITCH_M, stagger_m=c.STAGGER_M
+    )
+
+
+def _geometry(target: tuple[float, float], date: str):
+    lon, lat = target
+    epoch_utc = acquisition.local_time_epoch(lon, date)
+    epoch = frames.utc_to_j2000_s(epoch_utc)
+    a = frames.WGS84_A_M + c.ORBIT_ALTITUDE_M
+    elements = orbit.circular_orbit_over(
+        lon, lat, epoch, c.ORBIT_ALTITUDE_M, orbit.sun_synchronous_inclination(a), descending=True
+    )
+    # ground directions at the target: along the ground track (scan) and across it (left)
+    p0, v0 = orbit.elements_to_state(elements)
+    _, v_ecef = frames.eci_to_ecef(epoch, p0, v0)
+    up = frames.ellipsoid_normal(lon, lat)
+    along = v_ecef - np.dot(v_ecef, up) * up
+    along /= np.linalg.norm(along)
+    left = np.cross(up, along)
+    return epoch_utc, epoch, elements, up, along, left
+
+
+def _segment(
+    name: str, epoch: float, t_c: float, aim0: np.ndarray, along: np.ndarray
+) -> SegmentPlan:
+    v_scan = GSD_M / LINE_PERIOD_S
+
+    def aim(dt: np.ndarray) -> np.ndarray:
+        return aim0[None, :] + (dt - t_c)[:, None] * v_scan * along[None, :]
+
+    half = 0.5 * c.N_DETECTORS * LINE_PERIOD_S + 2.0
+    view = ViewPlan(name, camera_spec(), c.N_DETECTORS, LINE_PERIOD_S, centre_dt_s=t_c)
+    return SegmentPlan(
+        name, (t_c - half, t_c + half), acquisition.pointing_law(epoch, aim, along), (view,)
+    )
+
+
+def triplet_plan(
+    target: tuple[float, float] = DEFAULT_TARGET,
+    date: str = DEFAULT_DATE,
+    aim_height_m: float = 500.0,
+) -> ScenePlan:
+    """Fore / nadir / aft views of one area from one pass."""
+    epoch_utc, epoch, elements, _, along, _ = _geometry(target, date)
+    aim0 = frames.geodetic_to_ecef(target[0], target[1], aim_height_m)
+    segments = tuple(
+        _segment(name, epoch, t, aim0, along)
+        for name, t in zip(("fore", "nadir", "aft"), TRIPLET_TIMES_S, strict=True)
+    )
+    return ScenePlan(
+        preset="cartosat2-triplet",
+        platform="Cartosat-2",
+        epoch_utc=epoch_utc,
+        elements=elements,
+        target=target,
+        segments=segments,
+        gsd_m=GSD_M,
+        agile=True,
+        default_terrain="hilly",
+        default_size=(2000, 2000),
+        default_gcps=2,
+        default_checkpoints=50,
+    )
+
+
+def paintbrush_plan(
+    width_px: int,
+    target: tuple[float, float] = DEFAULT_TARGET,
+    date: str = DEFAULT_DATE,
+    n_swaths: int = 3,
+    overlap: float = 0.15,
+    aim_height_m: float = 500.0,
+) -> ScenePlan:
+    """``n_swaths`` adjacent strips side by side (``overlap`` of the window width), imaged one
+    after the other during one pass."""
+    epoch_utc, epoch, elements, _, along, left = _geometry(target, date)
+    spacing_m = width_px * GSD_M * (1.0 - overlap)
+    segments = []
+    for i in range(n_swaths):
+        offset = (i - (n_swaths - 1) / 2.0) * spacing_m
+        lon_lat_aim = frames.geodetic_to_ecef(target[0], target[1], aim_height_m) + offset * left
+        t_c = (i - (n_swaths - 1) / 2.0) * 20.0
+        segments.append(_segment(f"swath{i + 1}", epoch, t_c, lon_lat_aim, along))
+    return ScenePlan(
+        preset="cartosat2-paintbrush",
+        platform="Cartosat-2",
+        epoch_utc=epoch_utc,
+        elements=elements,
+        target=target,
+        segments=tuple(segments),
+        gsd_m=GSD_M,
+        agile=True,
+        default_terrain="hilly",
+        default_size=(2000, 2000),
+        default_gcps=2,
+        default_checkpoints=50,
+    )
+
+
+class TripletPreset(ScenePreset):
+    """Cartosat-2 fore/nadir/aft triplet of one area from one pass (agile step-and-stare)."""
+
+    name = "cartosat2-triplet"
+    description = "Cartosat-2 agile fore/nadir/aft triplet of one area, 0.8 m, one pass"
+
+    def plan(self, options: SimulationOptions) -> ScenePlan:
+        return triplet_plan()
+
+
+class PaintbrushPreset(ScenePreset):
+    """Cartosat-2 paint-brush: three adjacent swaths in one pass, joined by their overlaps."""
+
+    name = "cartosat2-paintbrush"
+    description = "Cartosat-2 paint-brush: 3 adjacent step-and-stare swaths, 15 % overlap"
+
+    def plan(self, options: SimulationOptions) -> ScenePlan:
+        width = (options.size or (2000, 2000))[0]
+        return paintbrush_plan(width)

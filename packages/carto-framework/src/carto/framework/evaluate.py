@@ -1,0 +1,100 @@
+"""Accuracy against independent checkpoints: the figures the paper and users report.
+
+:func:`checkpoint_accuracy` intersects the checkpoints' image coordinates in all images with
+the sensors being evaluated (least squares, :func:`carto.framework.intersect.intersect_sensors`)
+and compares the ground points with the checkpoints' true coordinates: RMSE along track, across
+track, planimetric and in height, in metres. Along track is the ground direction in which the
+first image's lines advance at each point; across track is perpendicular to it in the local
+horizontal plane.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from carto.framework import frames
+from carto.framework.errors import InputError
+from carto.framework.intersect import intersect_sensors
+from carto.framework.sensor import Sensor
+
+FloatArray = NDArray[np.float64]
+
+
+def _rms(values: FloatArray) -> float:
+    values = values[np.isfinite(values)]
+    return float(np.sqrt(np.mean(values**2))) if values.size else float("nan")
+
+
+def checkpoint_accuracy(
+    sensors: Mapping[str, Sensor], table: Mapping[str, NDArray]
+) -> dict[str, Any]:
+    """RMSE of the checkpoints intersected with ``sensors`` against their ground truth.
+
+    Args:
+        sensors: image name -> sensor (at least two images must see each point).
+        table: a long-format checkpoint table (``id, lon_deg, lat_deg, h_m, image, line,
+            sample``; one row per point and image), e.g. from
+            :func:`carto.framework.point_table.read_point_table`.
+
+    Returns:
+        ``{count, rmse_along_m, rmse_across_m, rmse_planimetric_m, rmse_height_m,
+        max_planimetric_m, max_height_m, images}``; NaN figures when no point could be
+        intersected.
+    """
+    names = [n for n in sensors if np.any(table["image"] == n)]
+    if len(names) < 2:
+        raise InputError(
+            f"checkpoints: need observations in >= 2 of the images "
+            f"{', '.join(sensors)}, found {', '.join(names) or 'none'}"
+        )
+    ids = sorted(set(table["id"].tolist()))
+    index = {p: i for i, p in enumerate(ids)}
+    n = len(ids)
+    lines = np.full((len(names), n), np.nan)
+    samples = np.full((len(names), n), np.nan)
+    truth = np.full((n, 3), np.nan)
+    for row in range(len(table["id"])):
+        i = index[table["id"][row]]
+        truth[i] = (table["lon_deg"][row], table["lat_deg"][row], table["h_m"][row])
+        if table["image"][row] in names:
+            k = names.index(table["image"][row])
+            lines[k, i] = table["line"][row]
+            samples[k, i] = table["sample"][row]
+    result = intersect_sensors([sensors[nm] for nm in names], lines, samples)
+    est = frames.geodetic_to_ecef(result.lon_deg, result.lat_deg, result.h_m)
+    true = frames.geodetic_to_ecef(truth[:, 0], truth[:, 1], truth[:, 2])
+    d = est - true
+    up = frames.ellipsoid_normal(truth[:, 0], truth[:, 1])
+    # along track: ground direction of increasing line in the first image
+    first = sensors[names[0]]
+    ok0 = np.isfinite(lines[0])
+    along = np.full((n, 3), np.nan)
+    if np.any(ok0):
+        lon_a, lat_a = first.image_to_ground(lines[0, ok0], samples[0, ok0], truth[ok0, 2])
+        lon_b, lat_b = first.image_to_ground(lines[0, ok0] + 1.0, samples[0, ok0], truth[ok0, 2])
+        vec = frames.geodetic_to_ecef(lon_b, lat_b, truth[ok0, 2]) - frames.geodetic_to_ecef(
+            lon_a, lat_a, truth[ok0, 2]
+        )
+        along[ok0] = vec
+    along -= np.sum(along * up, axis=1, keepdims=True) * up
+    along /= np.linalg.norm(along, axis=1, keepdims=True)
+    across = np.cross(up, along)
+    e_along = np.sum(d * along, axis=1)
+    e_across = np.sum(d * across, axis=1)
+    e_up = np.sum(d * up, axis=1)
+    valid = result.valid & np.isfinite(e_along) & np.isfinite(e_up)
+    plan = np.hypot(e_along, e_across)
+    return {
+        "count": int(valid.sum()),
+        "rmse_along_m": _rms(e_along[valid]),
+        "rmse_across_m": _rms(e_across[valid]),
+        "rmse_planimetric_m": _rms(plan[valid]),
+        "rmse_height_m": _rms(e_up[valid]),
+        "max_planimetric_m": float(plan[valid].max()) if valid.any() else float("nan"),
+        "max_height_m": float(np.abs(e_up[valid]).max()) if valid.any() else float("nan"),
+        "images": names,
+    }
