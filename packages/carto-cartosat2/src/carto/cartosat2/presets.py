@@ -52,7 +52,12 @@ def _geometry(target: tuple[float, float], date: str):
 
 
 def _segment(
-    name: str, epoch: float, t_c: float, aim0: np.ndarray, along: np.ndarray
+    name: str,
+    epoch: float,
+    t_c: float,
+    aim0: np.ndarray,
+    along: np.ndarray,
+    target: tuple[float, float] | None = None,
 ) -> SegmentPlan:
     v_scan = GSD_M / LINE_PERIOD_S
 
@@ -60,7 +65,9 @@ def _segment(
         return aim0[None, :] + (dt - t_c)[:, None] * v_scan * along[None, :]
 
     half = 0.5 * c.N_DETECTORS * LINE_PERIOD_S + 2.0
-    view = ViewPlan(name, camera_spec(), c.N_DETECTORS, LINE_PERIOD_S, centre_dt_s=t_c)
+    view = ViewPlan(
+        name, camera_spec(), c.N_DETECTORS, LINE_PERIOD_S, centre_dt_s=t_c, target=target
+    )
     return SegmentPlan(
         name, (t_c - half, t_c + half), acquisition.pointing_law(epoch, aim, along), (view,)
     )
@@ -109,11 +116,13 @@ def paintbrush_plan(
     segments = []
     for i in range(n_swaths):
         offset = (i - (n_swaths - 1) / 2.0) * spacing_m
-        lon_lat_aim = frames.geodetic_to_ecef(target[0], target[1], aim_height_m) + offset * left
+        aim = frames.geodetic_to_ecef(target[0], target[1], aim_height_m) + offset * left
+        lon, lat, _ = frames.ecef_to_geodetic(aim)
         t_c = (i - (n_swaths - 1) / 2.0) * 20.0
-        segments.append(_segment(f"swath{i + 1}", epoch, t_c, lon_lat_aim, along))
+        segments.append(_segment(f"swath{i + 1}", epoch, t_c, aim, along, (float(lon), float(lat))))
     return ScenePlan(
         preset="cartosat2-paintbrush",
+        control_min_views=1,
         platform="Cartosat-2",
         epoch_utc=epoch_utc,
         elements=elements,

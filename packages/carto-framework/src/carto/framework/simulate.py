@@ -120,7 +120,8 @@ class ViewPlan:
         n_lines_full: lines of the full acquisition (the window is cut from it).
         period_s: line period, seconds (constant over the image).
         centre_dt_s: time of the full image's middle line; None: the time at which the
-            camera sees the scene target (found on the true trajectory).
+            camera sees the view's target (found on the true trajectory).
+        target: (lon_deg, lat_deg) the window is centred on; None: the scene target.
     """
 
     name: str
@@ -128,6 +129,7 @@ class ViewPlan:
     n_lines_full: int
     period_s: float
     centre_dt_s: float | None = None
+    target: tuple[float, float] | None = None
 
 
 @attrs.frozen
@@ -167,6 +169,8 @@ class ScenePlan:
             the ground (blurring the raw image instead would mix the odd and even arrays,
             which see the ground at different times); 0 for none.
         noise_dn: read noise (one sigma) in digital numbers.
+        control_min_views: control points are placed where at least this many images see
+            them (None: all images; 1 for paint-brush swaths that only overlap pairwise).
     """
 
     preset: str
@@ -183,6 +187,7 @@ class ScenePlan:
     default_checkpoints: int = 50
     blur_sigma_px: float = 0.4
     noise_dn: float = 1.5
+    control_min_views: int | None = None
 
 
 @attrs.frozen
@@ -538,7 +543,11 @@ def simulate_scene(
                 cam = _true_camera(view.camera, drawn["camera_misalignment_rad"][view.camera.name])
                 if view.centre_dt_s is None:
                     t_c = acquisition.crossing_time(
-                        truth.trajectory, cam, *plan.target, h_mid, t_range_s=seg.span_s
+                        truth.trajectory,
+                        cam,
+                        *(view.target or plan.target),
+                        h_mid,
+                        t_range_s=seg.span_s,
                     )
                 else:
                     t_c = view.centre_dt_s
@@ -554,7 +563,7 @@ def simulate_scene(
         """Windows centred on the target seen at height ``h_target``."""
         placed = {}
         for name, full in full_sensors.items():
-            t_line, t_sample, _ = full.project(*plan.target, h_target)
+            t_line, t_sample, _ = full.project(*(views[name].target or plan.target), h_target)
             first_line, first_sample, height, width = _window(
                 views[name], size, float(t_line), float(t_sample)
             )
@@ -588,6 +597,8 @@ def simulate_scene(
             )
     h_target = float(dem.height(*plan.target))
     true_sensors = place(h_target if np.isfinite(h_target) else h_mid)
+    if any(v.target is not None for v in views.values()):
+        true_sensors = place(h_mid)  # several targets: centre on the middle height
     specs = {
         name: ImageSpec(
             name,
@@ -607,7 +618,7 @@ def simulate_scene(
     # --- control points (before rendering: point targets may mark them)
     with _Stage("control points", quiet):
         gcp_rows, check_rows, targets = _control_points(
-            true_sensors, dem, n_gcps, n_check, errors, rng_ctl
+            true_sensors, dem, n_gcps, n_check, errors, rng_ctl, plan.control_min_views
         )
     if options.point_targets and targets[0].size:
         texture = terrain_mod.add_point_targets(
@@ -720,27 +731,33 @@ def _control_points(
     n_check: int,
     errors: ErrorModel,
     rng: np.random.Generator,
+    min_views: int | None = None,
 ) -> tuple[dict[str, list], dict[str, list], tuple[FloatArray, FloatArray]]:
-    """GCP and checkpoint observation rows (long format) and their ground positions."""
+    """GCP and checkpoint observation rows (long format) and their ground positions.
+
+    Points are chosen where at least ``min_views`` images (None: all) see them; each gets a
+    row for every image that sees it."""
     west, south, east, north = dem.bounds_lonlat
     n = 160
     gx, gy = np.meshgrid(np.linspace(west, east, n), np.linspace(south, north, n))
     lon, lat = gx.ravel(), gy.ravel()
     h = dem.height(lon, lat)
-    inside = np.isfinite(h)
-    proj = {}
+    proj, seen_by = {}, {}
     for name, s in sensors.items():
         line, sample = s.ground_to_image(lon, lat, np.nan_to_num(h))
         n_l, n_s = s.image_shape
         margin = 16.0
-        inside &= (
-            np.isfinite(line)
+        seen_by[name] = (
+            np.isfinite(h)
+            & np.isfinite(line)
             & (line > margin)
             & (line < n_l - margin)
             & (sample > margin)
             & (sample < n_s - margin)
         )
         proj[name] = (line, sample)
+    n_seen = np.sum(list(seen_by.values()), axis=0)
+    inside = n_seen >= (len(sensors) if min_views is None else min_views)
     gcp_idx = _select_points(lon, lat, n_gcps, rng, exclude=~inside)
     taken = ~inside
     taken[gcp_idx] = True
@@ -773,6 +790,8 @@ def _control_points(
             else:
                 lo_m, la_m, hh_m = lo_, la_, hh
             for name in sensors:
+                if not seen_by[name][i]:
+                    continue
                 line, sample = proj[name][0][i], proj[name][1][i]
                 if noisy and errors.gcp_image_px:
                     line += rng.normal(0.0, errors.gcp_image_px)
