@@ -16,7 +16,7 @@ DEMO_OUT ?= demo-out
 .PHONY: demo test lint format lock clean
 
 demo: $(STAMP)
-	$(BIN)/carto plugins
+	$(BIN)/carto demo --out $(DEMO_OUT)
 
 test: $(STAMP) $(TEST_PLUGINS_STAMP)
 	$(BIN)/ruff check .

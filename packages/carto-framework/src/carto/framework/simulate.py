@@ -42,11 +42,10 @@ from carto.framework.camera import Camera
 from carto.framework.errors import InputError
 from carto.framework.linescan import LineScanner, LineTiming, write_json_atomic
 from carto.framework.point_table import write_point_table
+from carto.framework.scene import SCENE_FORMAT, SCENE_VERSION
 from carto.framework.trajectory import AttitudeSamples, EphemerisSamples, Trajectory
 
 FloatArray = NDArray[np.float64]
-SCENE_FORMAT = "carto-scene"
-SCENE_VERSION = 1
 TRUTH_STEP_S = 0.025
 """Sampling of the true motion (40 Hz: resolves jitter up to ~10 Hz with Lagrange)."""
 DN_MAX = 1023
