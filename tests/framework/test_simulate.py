@@ -13,6 +13,7 @@ import rasterio
 
 from carto.framework.ancillary import read_ancillary
 from carto.framework.dem import DEM
+from carto.framework.errors import InputError
 from carto.framework.linescan import LineScanner
 from carto.framework.point_table import read_point_table
 
@@ -265,3 +266,41 @@ def test_simulate_cli_writes_a_scene(run_carto, tmp_path):
     assert scene["terrain"] == "plains"
     assert "rendered fore" in res.stderr  # progress
     assert math.isfinite(scene["epoch_j2000_s"])
+
+
+def test_error_sizes_switch_single_sources(tmp_path):
+    scene = simulate(
+        "cartosat1-pair",
+        tmp_path / "e",
+        seed=1,
+        size=(80, 80),
+        n_checkpoints=3,
+        errors="none",
+        error_sizes=(("attitude_bias_deg", 0.05),),
+    )
+    drawn = json.loads((scene / "truth/errors.json").read_text())
+    seg = drawn["drawn"]["segments"][0]
+    assert any(v != 0 for v in seg["attitude_bias_rad"])
+    assert seg["ephemeris_bias_m"] == [0.0, 0.0, 0.0]
+    assert drawn["error_model"]["attitude_bias_deg"] == 0.05
+    with pytest.raises(InputError, match="unknown error source 'sun'"):
+        simulate("cartosat1-pair", tmp_path / "f", size=(80, 80), error_sizes=(("sun", 1.0),))
+
+
+def test_a_user_dem_becomes_the_terrain(tmp_path, cartosat1_scene):
+    user_dem = cartosat1_scene / "truth/dem.tif"  # any ellipsoidal DEM covering the area
+    scene = simulate(
+        "cartosat1-pair",
+        tmp_path / "u",
+        seed=1,
+        size=(100, 100),
+        n_checkpoints=4,
+        dem_path=user_dem,
+    )
+    manifest = json.loads((scene / "scene.json").read_text())
+    assert manifest["terrain"] == "file:dem.tif"
+    a, b = DEM.open(user_dem), DEM.open(scene / "truth/dem.tif")
+    west, south, east, north = b.bounds_lonlat
+    lon = np.linspace(west, east, 9)[1:-1]
+    lat = np.linspace(south, north, 9)[1:-1]
+    np.testing.assert_allclose(b.height(lon, lat), a.height(lon, lat), atol=0.5)

@@ -255,6 +255,18 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _parse_error_size(text: str) -> tuple[str, float]:
+    name, sep, value = text.partition("=")
+    try:
+        if not sep:
+            raise ValueError
+        return name.strip(), float(value)
+    except ValueError:
+        raise InputError(
+            f"--error-size {text!r}: expected NAME=VALUE, e.g. attitude_bias_deg=0.05"
+        ) from None
+
+
 def _add_simulate(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "simulate",
@@ -267,6 +279,7 @@ def _add_simulate(sub: argparse._SubParsersAction) -> None:
             "carto simulate cartosat1-pair --out s --terrain mountains --seed 7 --size 1000 1000",
             "carto simulate cartosat2-triplet --out tri --gcps 2 --checkpoints 50",
             "carto simulate cartosat1-pair --out s --dem my_dem.tif --errors none",
+            "carto simulate cartosat1-pair --out s --error-size attitude_bias_deg=0.05",
         ),
         formatter_class=_formatter,
     )

@@ -202,6 +202,9 @@ class SimulationOptions:
     n_checkpoints: int | None = None
     supersample: int = 2
     point_targets: bool = False
+    error_sizes: tuple[tuple[str, float], ...] = ()
+    """Overrides of single error sizes on top of ``errors``, e.g. ``(("attitude_bias_deg",
+    0.05),)``; 0 switches a source off."""
 
 
 def _progress(message: str) -> None:
@@ -512,6 +515,16 @@ def simulate_scene(
         if options.errors == "realistic"
         else ErrorModel.none()
     )
+    if options.error_sizes:
+        known = {f.name for f in attrs.fields(ErrorModel) if f.name != "jitter_hz"}
+        for name, value in options.error_sizes:
+            if name not in known:
+                raise InputError(
+                    f"unknown error source {name!r}; known: {', '.join(sorted(known))}"
+                )
+            if not (math.isfinite(value) and value >= 0):
+                raise InputError(f"error size {name}={value}: must be a number >= 0")
+        errors = attrs.evolve(errors, **dict(options.error_sizes))
     streams = np.random.SeedSequence(int(options.seed)).spawn(8)
     rng_err, rng_jit, rng_terrain, rng_tex, rng_ctl, rng_noise, rng_init = (
         np.random.default_rng(s) for s in streams[:7]
