@@ -1,23 +1,697 @@
 """Adjustment: observations + sensors -> adjusted sensors, residuals, sigma0, covariance.
 
-Here is the component contract that plugins use to add adjusters; the shared least-squares
-engine lives beside it as it lands.
+The engine (:func:`adjust_bundle`) is a weighted non-linear least-squares bundle adjustment
+shared by every adjuster (Cartosat-1 tied cameras, Cartosat-2 blocks, RPC bias compensation):
+
+Unknowns
+    the **free** parameters of the sensors (by name: two sensors whose parameters have the same
+    name, e.g. two cameras on one trajectory, share one unknown) and the ground coordinates of
+    every observed point, as local east/north/up displacements in metres.
+Observations (each with its standard deviation)
+    image measurements ``(line, sample)`` of points in images (GCPs and tie points); ground
+    coordinates of GCPs (east, north, up); optional height constraints on tie points (e.g.
+    from a DEM); a-priori values of the parameters (ephemeris and attitude enter as weighted
+    observations, so few GCPs suffice).
+Solution
+    Gauss-Newton. The normal equations are reduced to the parameters by eliminating the
+    3 x 3 point blocks (Schur complement), so the cost grows linearly with the number of
+    points; the reduced system is solved by Cholesky. A system whose reduced matrix is
+    singular raises :class:`~carto.framework.errors.AdjustmentError` naming the parameters
+    nothing determines.
+Robustness
+    iteratively reweighted least squares (Huber weights on normalised residuals) and, after
+    convergence, rejection of observations whose normalised residual exceeds
+    ``outlier_threshold`` (a GCP whose ground or image residuals are too large is flagged by
+    its id), then a final unweighted solution without them.
+Results
+    a-posteriori sigma0, the parameter covariance (``sigma0^2 S^-1``), residuals of every
+    observation, flagged outliers and a convergence report (:class:`AdjustmentResult`).
 """
 
 from __future__ import annotations
 
 import abc
-from collections.abc import Sequence
+import math
+from collections.abc import Mapping, Sequence
 from typing import Any
 
+import attrs
+import numpy as np
+from numpy.typing import NDArray
+
+from carto.framework import frames
 from carto.framework.component import Component
-from carto.framework.sensor import Sensor
+from carto.framework.errors import AdjustmentError, InputError
+from carto.framework.sensor import Parameter, Sensor
+
+FloatArray = NDArray[np.float64]
+
+
+def _f(value: Any) -> FloatArray:
+    return np.atleast_1d(np.asarray(value, dtype=np.float64))
+
+
+def _s(value: Any) -> NDArray[np.object_]:
+    return np.atleast_1d(np.asarray(value, dtype=object)).astype(str).astype(object)
+
+
+@attrs.frozen(eq=False)
+class Observations:
+    """What an adjustment is given, as aligned arrays.
+
+    Image measurements (one row per point and image):
+        ``point_id``, ``image``, ``line``, ``sample`` (pixels), ``sigma_px``.
+    Ground control (one row per GCP):
+        ``control_id``, ``control_lon_deg``, ``control_lat_deg``, ``control_h_m``,
+        ``control_sigma_planimetric_m`` (RMS of east and north together),
+        ``control_sigma_h_m``.
+    Height constraints (one row per constrained point, e.g. tie points on a DEM):
+        ``height_id``, ``height_m``, ``height_sigma_m``.
+    """
+
+    point_id: NDArray = attrs.field(converter=_s)
+    image: NDArray = attrs.field(converter=_s)
+    line: FloatArray = attrs.field(converter=_f)
+    sample: FloatArray = attrs.field(converter=_f)
+    sigma_px: FloatArray = attrs.field(converter=_f)
+    control_id: NDArray = attrs.field(factory=lambda: np.array([], object), converter=_s)
+    control_lon_deg: FloatArray = attrs.field(factory=lambda: np.array([]), converter=_f)
+    control_lat_deg: FloatArray = attrs.field(factory=lambda: np.array([]), converter=_f)
+    control_h_m: FloatArray = attrs.field(factory=lambda: np.array([]), converter=_f)
+    control_sigma_planimetric_m: FloatArray = attrs.field(
+        factory=lambda: np.array([]), converter=_f
+    )
+    control_sigma_h_m: FloatArray = attrs.field(factory=lambda: np.array([]), converter=_f)
+    height_id: NDArray = attrs.field(factory=lambda: np.array([], object), converter=_s)
+    height_m: FloatArray = attrs.field(factory=lambda: np.array([]), converter=_f)
+    height_sigma_m: FloatArray = attrs.field(factory=lambda: np.array([]), converter=_f)
+
+    def __attrs_post_init__(self) -> None:
+        n = self.point_id.size
+        for name in ("image", "line", "sample", "sigma_px"):
+            if getattr(self, name).size != n:
+                raise InputError(
+                    f"observations: {name} has {getattr(self, name).size} rows, point_id has {n}"
+                )
+        g = self.control_id.size
+        for name in (
+            "control_lon_deg",
+            "control_lat_deg",
+            "control_h_m",
+            "control_sigma_planimetric_m",
+            "control_sigma_h_m",
+        ):
+            if getattr(self, name).size != g:
+                raise InputError(
+                    f"observations: {name} has {getattr(self, name).size} rows, control_id has {g}"
+                )
+        if self.height_m.size != self.height_id.size or (
+            self.height_sigma_m.size != self.height_id.size
+        ):
+            raise InputError("observations: height_id, height_m, height_sigma_m differ in size")
+        if (
+            np.any(~(self.sigma_px > 0))
+            or np.any(~(self.control_sigma_h_m > 0))
+            or np.any(~(self.control_sigma_planimetric_m > 0))
+            or np.any(~(self.height_sigma_m > 0))
+        ):
+            raise InputError("observations: every sigma must be > 0")
+        if not np.all(np.isfinite(self.line) & np.isfinite(self.sample)):
+            raise InputError("observations: image coordinates contain NaN")
+
+    @classmethod
+    def from_tables(
+        cls,
+        gcps: Mapping[str, NDArray] | None = None,
+        ties: Mapping[str, NDArray] | None = None,
+        *,
+        default_sigma_px: float = 0.3,
+        default_sigma_planimetric_m: float = 0.7,
+        default_sigma_h_m: float = 1.0,
+    ) -> Observations:
+        """From long-format tables (``id, lon_deg, lat_deg, h_m, image, line, sample`` and
+        optional ``sigma_px``, ``sigma_planimetric_m``, ``sigma_h_m`` columns). Tie tables
+        need only ``id, image, line, sample``. Zero or missing sigmas take the defaults."""
+
+        def col(t: Mapping[str, NDArray], name: str, default: float) -> FloatArray:
+            if name not in t:
+                return np.full(len(t["id"]), default)
+            v = np.asarray(t[name], float)
+            return np.where(np.isfinite(v) & (v > 0), v, default)
+
+        ids, images, lines, samples, sig = [], [], [], [], []
+        c_id, c_lon, c_lat, c_h, c_sp, c_sh = [], [], [], [], [], []
+        for t in (gcps, ties):
+            if t is None or len(t["id"]) == 0:
+                continue
+            ids.append(np.asarray(t["id"], object))
+            images.append(np.asarray(t["image"], object))
+            lines.append(np.asarray(t["line"], float))
+            samples.append(np.asarray(t["sample"], float))
+            sig.append(col(t, "sigma_px", default_sigma_px))
+        if gcps is not None and len(gcps["id"]):
+            _, first = np.unique(np.asarray(gcps["id"], object), return_index=True)
+            c_id = np.asarray(gcps["id"], object)[first]
+            c_lon = np.asarray(gcps["lon_deg"], float)[first]
+            c_lat = np.asarray(gcps["lat_deg"], float)[first]
+            c_h = np.asarray(gcps["h_m"], float)[first]
+            c_sp = col(gcps, "sigma_planimetric_m", default_sigma_planimetric_m)[first]
+            c_sh = col(gcps, "sigma_h_m", default_sigma_h_m)[first]
+        cat = np.concatenate
+        return cls(
+            cat(ids) if ids else [],
+            cat(images) if images else [],
+            cat(lines) if lines else [],
+            cat(samples) if samples else [],
+            cat(sig) if sig else [],
+            c_id,
+            c_lon,
+            c_lat,
+            c_h,
+            c_sp,
+            c_sh,
+        )
+
+    def with_heights(self, ids: Any, h_m: Any, sigma_m: Any) -> Observations:
+        """A copy with height constraints on the points ``ids``."""
+        ids = _s(ids)
+        return attrs.evolve(
+            self,
+            height_id=ids,
+            height_m=np.broadcast_to(_f(h_m), ids.shape),
+            height_sigma_m=np.broadcast_to(_f(sigma_m), ids.shape),
+        )
+
+    def without_points(self, ids: Sequence[str]) -> Observations:
+        """A copy without the image measurements, control and heights of ``ids``."""
+        drop = set(ids)
+        keep = np.array([p not in drop for p in self.point_id], bool)
+        keep_c = np.array([p not in drop for p in self.control_id], bool)
+        keep_h = np.array([p not in drop for p in self.height_id], bool)
+        return Observations(
+            self.point_id[keep],
+            self.image[keep],
+            self.line[keep],
+            self.sample[keep],
+            self.sigma_px[keep],
+            self.control_id[keep_c],
+            self.control_lon_deg[keep_c],
+            self.control_lat_deg[keep_c],
+            self.control_h_m[keep_c],
+            self.control_sigma_planimetric_m[keep_c],
+            self.control_sigma_h_m[keep_c],
+            self.height_id[keep_h],
+            self.height_m[keep_h],
+            self.height_sigma_m[keep_h],
+        )
+
+
+@attrs.frozen(eq=False)
+class AdjustmentResult:
+    """The outcome of an adjustment.
+
+    Attributes:
+        sensors: the adjusted sensors (same keys as given).
+        parameters: names of the estimated (free) parameters, in covariance order.
+        values: their estimates; ``sigmas``: their a-posteriori standard deviations
+            (``sigma0 * sqrt(diag(S^-1))``).
+        covariance: a-posteriori covariance of the parameters (``sigma0^2 S^-1``).
+        covariance_unit: ``S^-1`` (covariance for sigma0 = 1).
+        sigma0: a-posteriori standard deviation of unit weight (1 when the a-priori sigmas
+            are right).
+        redundancy: number of observations minus number of unknowns.
+        points: point id -> estimated (lon_deg, lat_deg, h_m).
+        image_residuals: per image measurement ``(point_id, image, d_line, d_sample)``,
+            measured minus computed, pixels (NaN for rejected rows).
+        control_residuals: per GCP ``(id, d_east_m, d_north_m, d_up_m)``, measured minus
+            computed.
+        outliers: ids of points rejected (GCP blunders, wrong tie points).
+        iterations: Gauss-Newton iterations of the final solution; ``converged``: whether
+            the last correction was below the tolerance.
+        history: per iteration: max parameter correction in sigmas, max point move (m),
+            weighted RMS of normalised residuals.
+    """
+
+    sensors: dict[str, Sensor]
+    parameters: tuple[str, ...]
+    values: FloatArray
+    sigmas: FloatArray
+    covariance: FloatArray
+    covariance_unit: FloatArray
+    sigma0: float
+    redundancy: int
+    points: dict[str, tuple[float, float, float]]
+    image_residuals: dict[str, NDArray]
+    control_residuals: dict[str, NDArray]
+    outliers: tuple[str, ...]
+    iterations: int
+    converged: bool
+    history: tuple[dict[str, float], ...]
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-ready summary (for ``report.json``)."""
+        res = self.image_residuals
+        ok = np.isfinite(res["d_line"])
+        rms = (
+            float(np.sqrt(np.mean(res["d_line"][ok] ** 2 + res["d_sample"][ok] ** 2)))
+            if (ok.any())
+            else float("nan")
+        )
+        return {
+            "sigma0": self.sigma0,
+            "redundancy": self.redundancy,
+            "iterations": self.iterations,
+            "converged": self.converged,
+            "outliers": list(self.outliers),
+            "image_residual_rms_px": rms,
+            "parameters": {
+                n: {"value": float(v), "sigma": float(s)}
+                for n, v, s in zip(self.parameters, self.values, self.sigmas, strict=True)
+            },
+        }
+
+
+# ----------------------------------------------------------------------------- helpers
+def _enu(lon: FloatArray, lat: FloatArray) -> FloatArray:
+    """Rows east, north, up (ECEF unit vectors) per point, shape ``(N, 3, 3)``."""
+    lo, la = np.radians(lon), np.radians(lat)
+    e = np.stack([-np.sin(lo), np.cos(lo), np.zeros_like(lo)], -1)
+    n = np.stack([-np.sin(la) * np.cos(lo), -np.sin(la) * np.sin(lo), np.cos(la)], -1)
+    u = np.stack([np.cos(la) * np.cos(lo), np.cos(la) * np.sin(lo), np.sin(la)], -1)
+    return np.stack([e, n, u], axis=1)
+
+
+def _move(
+    lon: FloatArray, lat: FloatArray, h: FloatArray, d_enu: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Points displaced by ``(east, north, up)`` metres."""
+    x = frames.geodetic_to_ecef(lon, lat, h) + np.einsum("nij,ni->nj", _enu(lon, lat), d_enu)
+    return frames.ecef_to_geodetic(x)
+
+
+def _huber(v: FloatArray, k: float) -> FloatArray:
+    a = np.abs(v)
+    return np.where(a <= k, 1.0, k / np.maximum(a, 1e-300))
+
+
+@attrs.define
+class _Problem:
+    sensors: dict[str, Sensor]
+    obs: Observations
+    names: list[str]  # free parameters
+    priors: dict[str, Parameter]
+    point_ids: list[str]
+    lon: FloatArray
+    lat: FloatArray
+    h: FloatArray
+
+
+def _initial_points(
+    sensors: Mapping[str, Sensor],
+    obs: Observations,
+    point_ids: list[str],
+    heights: Mapping[str, float],
+) -> tuple[FloatArray, FloatArray, FloatArray, NDArray[np.bool_]]:
+    """Ground coordinates to start from: GCP coordinates, else intersection of the rays of
+    >= 2 images, else one ray at the constrained height."""
+    from carto.framework.intersect import intersect_sensors
+
+    n = len(point_ids)
+    index = {p: i for i, p in enumerate(point_ids)}
+    lon, lat, h = np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan)
+    for cid, clon, clat, ch in zip(
+        obs.control_id, obs.control_lon_deg, obs.control_lat_deg, obs.control_h_m, strict=True
+    ):
+        if cid in index:
+            i = index[cid]
+            lon[i], lat[i], h[i] = clon, clat, ch
+    names = list(sensors)
+    lines = np.full((len(names), n), np.nan)
+    samples = np.full((len(names), n), np.nan)
+    rows_i = np.array([index[p] for p in obs.point_id], dtype=np.intp)
+    for k, name in enumerate(names):
+        m = obs.image == name
+        lines[k, rows_i[m]] = obs.line[m]
+        samples[k, rows_i[m]] = obs.sample[m]
+    n_views = np.sum(np.isfinite(lines), axis=0)
+    todo = np.isnan(lon) & (n_views >= 2)
+    if np.any(todo):
+        res = intersect_sensors([sensors[nm] for nm in names], lines[:, todo], samples[:, todo])
+        lon[todo], lat[todo], h[todo] = res.lon_deg, res.lat_deg, res.h_m
+    single = np.isnan(lon) & (n_views >= 1)
+    for i in np.flatnonzero(single):
+        k = int(np.flatnonzero(np.isfinite(lines[:, i]))[0])
+        hh = heights.get(point_ids[i], np.nan)
+        if not np.isfinite(hh):
+            continue
+        lo, la = sensors[names[k]].image_to_ground(lines[k, i], samples[k, i], hh)
+        lon[i], lat[i], h[i] = float(lo), float(la), hh
+    return lon, lat, h, np.isfinite(lon) & np.isfinite(lat) & np.isfinite(h)
+
+
+def free_parameters(sensors: Mapping[str, Sensor]) -> tuple[list[str], dict[str, Parameter]]:
+    """Free parameter names (first-seen order; shared names once) and their definitions."""
+    names: list[str] = []
+    priors: dict[str, Parameter] = {}
+    for sensor in sensors.values():
+        for p in sensor.parameters:
+            if p.free and p.name not in priors:
+                names.append(p.name)
+                priors[p.name] = p
+    return names, priors
+
+
+# ----------------------------------------------------------------------------- the engine
+def adjust_bundle(
+    sensors: Mapping[str, Sensor],
+    obs: Observations,
+    *,
+    max_iterations: int = 20,
+    tolerance: float = 1e-4,
+    robust: bool = True,
+    outlier_threshold: float = 4.0,
+    dem: Any = None,
+) -> AdjustmentResult:
+    """Adjust ``sensors`` to ``obs`` (see the module docstring); return the result.
+
+    Args:
+        sensors: image name -> sensor; the images named in ``obs.image`` must be here.
+        obs: the observations.
+        max_iterations: Gauss-Newton iterations per solution.
+        tolerance: convergence when every parameter moves by less than ``tolerance`` of its
+            a-priori sigma and every point by less than 1 mm.
+        robust: reweight (Huber) and reject outliers (normalised residual above
+            ``outlier_threshold``), then solve again without them.
+        dem: optional DEM whose heights are re-read at the current position of points that
+            have height constraints (the constraint follows the point over the terrain).
+
+    Raises:
+        AdjustmentError: the system is singular (names the undetermined parameters) or no
+            point can be used.
+    """
+    unknown = sorted(set(obs.image) - set(sensors))
+    if unknown:
+        raise InputError(f"observations name images without a sensor: {', '.join(unknown)}")
+    names, priors = free_parameters(sensors)
+    outliers: list[str] = []
+    current = obs
+    result = None
+    for _round in range(10):
+        result, flagged = _solve(
+            dict(sensors),
+            current,
+            names,
+            priors,
+            max_iterations,
+            tolerance,
+            robust,
+            outlier_threshold,
+            dem,
+        )
+        if not robust or not flagged:
+            break
+        outliers.extend(flagged)
+        current = current.without_points(flagged)
+    assert result is not None
+    return attrs.evolve(result, outliers=tuple(outliers))
+
+
+def _solve(
+    sensors: dict[str, Sensor],
+    obs: Observations,
+    names: list[str],
+    priors: dict[str, Parameter],
+    max_iterations: int,
+    tolerance: float,
+    robust: bool,
+    threshold: float,
+    dem: Any,
+) -> tuple[AdjustmentResult, list[str]]:
+    heights = dict(zip(obs.height_id.tolist(), obs.height_m.tolist(), strict=True))
+    point_ids = sorted(set(obs.point_id.tolist()))
+    lon, lat, h, usable = _initial_points(sensors, obs, point_ids, heights)
+    if not usable.any():
+        raise AdjustmentError(
+            "no observed point can be placed on the ground (each needs a GCP, "
+            ">= 2 images, or one image and a height constraint)"
+        )
+    dropped = [p for p, u in zip(point_ids, usable, strict=True) if not u]
+    if dropped:
+        obs = obs.without_points(dropped)
+        point_ids = [p for p, u in zip(point_ids, usable, strict=True) if u]
+        lon, lat, h = lon[usable], lat[usable], h[usable]
+    n_pts, n_par = len(point_ids), len(names)
+    pindex = {p: i for i, p in enumerate(point_ids)}
+    obs_point = np.array([pindex[p] for p in obs.point_id], dtype=np.intp)
+    gidx = np.array([pindex.get(c, -1) for c in obs.control_id], dtype=np.intp)
+    hidx = np.array([pindex.get(c, -1) for c in obs.height_id], dtype=np.intp)
+    par_index = {n: i for i, n in enumerate(names)}
+    prior_sigma = np.array([priors[n].sigma for n in names])
+    prior_value = np.array([priors[n].value for n in names])
+    values = prior_value.copy()
+    w_img = np.ones(obs.point_id.size)
+    w_gcp = np.ones(gidx.size)
+    history: list[dict[str, float]] = []
+    converged = False
+    s_inv = np.zeros((n_par, n_par))
+    iterations = 0
+    reweight_rounds = 3 if robust else 0
+
+    def current_sensors() -> dict[str, Sensor]:
+        out = {}
+        for name, s in sensors.items():
+            own = {p.name for p in s.parameters}
+            vals = {n: float(values[i]) for n, i in par_index.items() if n in own}
+            out[name] = s.with_parameters(vals) if vals else s
+        return out
+
+    for it in range(max_iterations + reweight_rounds * max_iterations):
+        iterations = it + 1
+        cur = current_sensors()
+        n_cc = np.zeros((n_par, n_par))
+        b_c = np.zeros(n_par)
+        n_cp = np.zeros((n_pts, n_par, 3))
+        n_pp = np.zeros((n_pts, 3, 3))
+        b_p = np.zeros((n_pts, 3))
+        v_img = np.full((obs.point_id.size, 2), np.nan)
+        for name, sensor in cur.items():
+            rows = np.flatnonzero(obs.image == name)
+            if rows.size == 0:
+                continue
+            pi = obs_point[rows]
+            line, sample, _ = sensor.project(lon[pi], lat[pi], h[pi])
+            r = np.stack([obs.line[rows] - line, obs.sample[rows] - sample], -1)
+            ok = np.all(np.isfinite(r), axis=1)
+            v_img[rows] = r
+            own = [n for n in names if n in {p.name for p in sensor.parameters}]
+            wsig = np.sqrt(w_img[rows]) / obs.sigma_px[rows]
+            a_p = sensor.ground_partials(lon[pi], lat[pi], h[pi]) * wsig[:, None, None]
+            rw = np.where(ok[:, None], r, 0.0) * wsig[:, None]
+            a_p[~ok] = 0.0
+            np.add.at(n_pp, pi, np.einsum("nki,nkj->nij", a_p, a_p))
+            np.add.at(b_p, pi, np.einsum("nki,nk->ni", a_p, rw))
+            if own:
+                idx = np.array([par_index[n] for n in own], dtype=np.intp)
+                a_c = sensor.parameter_partials(lon[pi], lat[pi], h[pi], own)
+                a_c = a_c * wsig[:, None, None]
+                a_c[~ok] = 0.0
+                n_cc[np.ix_(idx, idx)] += np.einsum("nki,nkj->ij", a_c, a_c)
+                b_c[idx] += np.einsum("nki,nk->i", a_c, rw)
+                contrib = np.einsum("nki,nkj->nij", a_c, a_p)  # (n, Pi, 3)
+                tmp = np.zeros((rows.size, n_par, 3))
+                tmp[:, idx, :] = contrib
+                np.add.at(n_cp, pi, tmp)
+        # ground control (east, north, up)
+        v_gcp = np.zeros((gidx.size, 3))
+        if gidx.size:
+            ok = gidx >= 0
+            g = gidx[ok]
+            basis = _enu(lon[g], lat[g])
+            d = frames.geodetic_to_ecef(
+                obs.control_lon_deg[ok], obs.control_lat_deg[ok], obs.control_h_m[ok]
+            ) - frames.geodetic_to_ecef(lon[g], lat[g], h[g])
+            d_enu = np.einsum("nij,nj->ni", basis, d)
+            v_gcp[ok] = d_enu
+            sp = obs.control_sigma_planimetric_m[ok] / math.sqrt(2.0)
+            sig = np.stack([sp, sp, obs.control_sigma_h_m[ok]], -1)
+            wgt = w_gcp[ok][:, None] / sig**2
+            np.add.at(n_pp, g, np.einsum("ni,ij->nij", wgt, np.eye(3)))
+            np.add.at(b_p, g, wgt * d_enu)
+        # height constraints
+        if hidx.size:
+            ok = hidx >= 0
+            hh = hidx[ok]
+            target = obs.height_m[ok]
+            if dem is not None:
+                target = np.where(
+                    np.isfinite(dem.height(lon[hh], lat[hh])), dem.height(lon[hh], lat[hh]), target
+                )
+            wgt = 1.0 / obs.height_sigma_m[ok] ** 2
+            np.add.at(n_pp[:, 2, 2], hh, wgt)
+            np.add.at(b_p[:, 2], hh, wgt * (target - h[hh]))
+        # parameter priors
+        finite = np.isfinite(prior_sigma)
+        n_cc[finite, finite] += 1.0 / prior_sigma[finite] ** 2
+        b_c[finite] += (prior_value[finite] - values[finite]) / prior_sigma[finite] ** 2
+        # reduce: eliminate the points
+        det = np.linalg.det(n_pp)
+        good = det > 1e-18 * np.maximum(np.einsum("nii->n", n_pp) ** 3, 1e-300)
+        inv_pp = np.zeros_like(n_pp)
+        inv_pp[good] = np.linalg.inv(n_pp[good])
+        s = n_cc - np.einsum("npi,nij,nqj->pq", n_cp, inv_pp, n_cp)
+        rhs = b_c - np.einsum("npi,nij,nj->p", n_cp, inv_pp, b_p)
+        if n_par:
+            d_c, s_inv = _solve_reduced(s, rhs, names)
+        else:
+            d_c, s_inv = np.zeros(0), np.zeros((0, 0))
+        d_p = np.einsum("nij,nj->ni", inv_pp, b_p - np.einsum("npi,p->ni", n_cp, d_c))
+        values = values + d_c
+        lon, lat, h = _move(lon, lat, h, np.where(good[:, None], d_p, 0.0))
+        step_par = float(np.max(np.abs(d_c) / np.where(finite, prior_sigma, 1.0))) if n_par else 0.0
+        step_pt = float(np.max(np.linalg.norm(d_p, axis=1))) if n_pts else 0.0
+        norm_img = np.linalg.norm(v_img / obs.sigma_px[:, None], axis=1)
+        history.append(
+            {
+                "max_parameter_step_sigma": step_par,
+                "max_point_move_m": step_pt,
+                "rms_normalised_residual": float(np.sqrt(np.nanmean(norm_img**2))),
+            }
+        )
+        if step_par < tolerance and step_pt < 1e-3:
+            if reweight_rounds > 0:
+                reweight_rounds -= 1
+                w_img = _huber(np.nan_to_num(norm_img, nan=1e9), 2.0)
+                if gidx.size:
+                    sp = obs.control_sigma_planimetric_m / math.sqrt(2.0)
+                    nrm = np.linalg.norm(
+                        v_gcp / np.stack([sp, sp, obs.control_sigma_h_m], -1), axis=1
+                    )
+                    w_gcp = _huber(nrm, 2.0)
+                continue
+            converged = True
+            break
+
+    # final residuals with the final estimate
+    cur = current_sensors()
+    d_line = np.full(obs.point_id.size, np.nan)
+    d_sample = np.full(obs.point_id.size, np.nan)
+    for name, sensor in cur.items():
+        rows = np.flatnonzero(obs.image == name)
+        if rows.size:
+            pi = obs_point[rows]
+            line, sample, _ = sensor.project(lon[pi], lat[pi], h[pi])
+            d_line[rows] = obs.line[rows] - line
+            d_sample[rows] = obs.sample[rows] - sample
+    v_gcp = np.zeros((gidx.size, 3))
+    if gidx.size:
+        ok = gidx >= 0
+        g = gidx[ok]
+        d = frames.geodetic_to_ecef(
+            obs.control_lon_deg[ok], obs.control_lat_deg[ok], obs.control_h_m[ok]
+        ) - frames.geodetic_to_ecef(lon[g], lat[g], h[g])
+        v_gcp[ok] = np.einsum("nij,nj->ni", _enu(lon[g], lat[g]), d)
+    # sigma0 and redundancy
+    vpv = np.nansum((d_line / obs.sigma_px) ** 2 + (d_sample / obs.sigma_px) ** 2)
+    n_rows = 2 * int(np.sum(np.isfinite(d_line)))
+    if gidx.size:
+        sp = obs.control_sigma_planimetric_m / math.sqrt(2.0)
+        vpv += float(np.sum((v_gcp / np.stack([sp, sp, obs.control_sigma_h_m], -1)) ** 2))
+        n_rows += 3 * int(np.sum(gidx >= 0))
+    if hidx.size:
+        ok = hidx >= 0
+        vpv += float(np.sum(((obs.height_m[ok] - h[hidx[ok]]) / obs.height_sigma_m[ok]) ** 2))
+        n_rows += int(ok.sum())
+    finite = np.isfinite(prior_sigma)
+    vpv += float(np.sum(((values - prior_value)[finite] / prior_sigma[finite]) ** 2))
+    n_rows += int(finite.sum())
+    redundancy = n_rows - n_par - 3 * n_pts
+    sigma0 = math.sqrt(vpv / redundancy) if redundancy > 0 else float("nan")
+    scale = sigma0**2 if redundancy > 0 else 1.0
+    cov = s_inv * scale
+    # outliers: normalised residuals above the threshold
+    flagged: list[str] = []
+    if robust:
+        # a GCP blunder distorts the whole block: reject the worst GCP alone and solve again;
+        # only when the GCPs agree, reject every tie point above the threshold at once
+        norm_img = np.nan_to_num(np.hypot(d_line, d_sample) / obs.sigma_px, nan=0.0)
+        worst = {}
+        for pid, v in zip(obs.point_id.tolist(), norm_img.tolist(), strict=True):
+            worst[pid] = max(worst.get(pid, 0.0), v)
+        if gidx.size:
+            sp = obs.control_sigma_planimetric_m / math.sqrt(2.0)
+            nrm = np.linalg.norm(v_gcp / np.stack([sp, sp, obs.control_sigma_h_m], -1), axis=1)
+            for cid, v in zip(obs.control_id.tolist(), nrm.tolist(), strict=True):
+                worst[cid] = max(worst.get(cid, 0.0), v)
+        controls = set(obs.control_id.tolist())
+        bad_gcps = [(v, c) for c, v in worst.items() if c in controls and v > threshold]
+        if bad_gcps:
+            flagged = [max(bad_gcps)[1]]
+        else:
+            flagged = sorted(p for p, v in worst.items() if v > threshold)
+    points = {p: (float(lon[i]), float(lat[i]), float(h[i])) for i, p in enumerate(point_ids)}
+    adjusted = {n: s for n, s in current_sensors().items()}
+    result = AdjustmentResult(
+        sensors=adjusted,
+        parameters=tuple(names),
+        values=values,
+        sigmas=np.sqrt(np.clip(np.diag(cov), 0, None)),
+        covariance=cov,
+        covariance_unit=s_inv,
+        sigma0=sigma0,
+        redundancy=redundancy,
+        points=points,
+        image_residuals={
+            "point_id": obs.point_id,
+            "image": obs.image,
+            "d_line": d_line,
+            "d_sample": d_sample,
+        },
+        control_residuals={
+            "id": obs.control_id,
+            "d_east_m": v_gcp[:, 0],
+            "d_north_m": v_gcp[:, 1],
+            "d_up_m": v_gcp[:, 2],
+        },
+        outliers=(),
+        iterations=iterations,
+        converged=converged,
+        history=tuple(history),
+    )
+    return result, flagged
+
+
+def _solve_reduced(
+    s: FloatArray, rhs: FloatArray, names: Sequence[str]
+) -> tuple[FloatArray, FloatArray]:
+    """Solve the reduced normal equations; name the undetermined parameters if singular."""
+    scale = np.sqrt(np.abs(np.diag(s)))
+    scale = np.where(scale > 0, scale, 1.0)
+    s_n = s / np.outer(scale, scale)
+    try:
+        chol = np.linalg.cholesky(s_n)
+        eig_min = float(np.min(np.diag(chol)) ** 2)
+    except np.linalg.LinAlgError:
+        eig_min = 0.0
+    if eig_min < 1e-12:
+        w, v = np.linalg.eigh(s_n)
+        weak = v[:, int(np.argmin(w))]
+        involved = [names[i] for i in np.argsort(-np.abs(weak))[:4] if abs(weak[i]) > 0.2]
+        raise AdjustmentError(
+            "the adjustment is singular: nothing determines "
+            f"{', '.join(involved) or 'some parameters'} (add GCPs or tie points, give these "
+            "parameters a-priori sigmas, or fix them)"
+        )
+    inv_n = np.linalg.inv(s_n)
+    inv = inv_n / np.outer(scale, scale)
+    return inv @ rhs, inv
 
 
 class Adjuster(Component):
     """Estimates corrections to sensor parameters from ground control and tie points."""
 
     @abc.abstractmethod
-    def adjust(self, sensors: Sequence[Sensor], observations: Any, **options: Any) -> Any:
-        """Adjust ``sensors`` to ``observations`` (GCPs, tie points, priors); return the
-        adjustment result (adjusted sensors, residuals, sigma0, covariance, outliers)."""
+    def adjust(
+        self, sensors: Mapping[str, Sensor], observations: Observations, **options: Any
+    ) -> AdjustmentResult:
+        """Adjust ``sensors`` (image name -> sensor) to ``observations``; ``options`` are
+        adjuster specific (modes, correction orders, robust settings)."""

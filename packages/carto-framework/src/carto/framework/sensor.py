@@ -122,6 +122,19 @@ class Sensor(abc.ABC):
             ``(lon_deg, lat_deg)``; NaN where the location cannot be computed.
         """
 
+    def project(
+        self, lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike
+    ) -> tuple[FloatArray, FloatArray, NDArray[np.bool_]]:
+        """Ground -> image without clipping to the image: ``(line, sample, inside)``.
+
+        Models that can extrapolate beyond the image (the line scanner, RPCs) return the
+        extrapolated coordinates with ``inside`` False; adjustment and partial derivatives use
+        this, so points near the border keep their derivatives. The default is
+        :meth:`ground_to_image` with ``inside`` where it is finite.
+        """
+        line, sample = self.ground_to_image(lon_deg, lat_deg, h_m)
+        return line, sample, np.isfinite(line) & np.isfinite(sample)
+
     def locate_on_dem(
         self, line: ArrayLike, sample: ArrayLike, dem: Any, **options: Any
     ) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -180,8 +193,8 @@ class Sensor(abc.ABC):
         for k, name in enumerate(names):
             p = params[name]
             step = 1e-3 * p.sigma if math.isfinite(p.sigma) else 1e-6
-            plus = self.with_parameters({name: p.value + step}).ground_to_image(lon, lat, h)
-            minus = self.with_parameters({name: p.value - step}).ground_to_image(lon, lat, h)
+            plus = self.with_parameters({name: p.value + step}).project(lon, lat, h)
+            minus = self.with_parameters({name: p.value - step}).project(lon, lat, h)
             out[:, 0, k] = (plus[0] - minus[0]) / (2 * step)
             out[:, 1, k] = (plus[1] - minus[1]) / (2 * step)
         return out
@@ -206,8 +219,8 @@ class Sensor(abc.ABC):
         ]
         out = np.empty((lon.size, 2, 3))
         for k, (dlon, dlat, dh) in enumerate(steps):
-            plus = self.ground_to_image(lon + dlon, lat + dlat, h + dh)
-            minus = self.ground_to_image(lon - dlon, lat - dlat, h - dh)
+            plus = self.project(lon + dlon, lat + dlat, h + dh)
+            minus = self.project(lon - dlon, lat - dlat, h - dh)
             out[:, 0, k] = (plus[0] - minus[0]) / 2.0
             out[:, 1, k] = (plus[1] - minus[1]) / 2.0
         return out

@@ -1,0 +1,101 @@
+"""The bundle-adjustment engine on a simulated Cartosat-1 pair (truth from the simulator)."""
+
+from __future__ import annotations
+
+import math
+
+import attrs
+import numpy as np
+import pytest
+
+from carto.framework.adjust import Observations, adjust_bundle
+from carto.framework.errors import AdjustmentError, InputError
+from carto.framework.evaluate import checkpoint_accuracy
+from carto.framework.scene import Scene
+
+
+def _split(table: dict, every: int = 2):
+    """Half of the checkpoints as (perfectly measured) tie points, the rest to check."""
+    ids = np.array(sorted(set(table["id"])))
+    tie_ids = set(ids[::every])
+    m = np.array([i in tie_ids for i in table["id"]])
+    ties = {k: v[m] for k, v in table.items()}
+    ties["id"] = np.array(["T" + i for i in ties["id"]], object)
+    return ties, {k: v[~m] for k, v in table.items()}
+
+
+@pytest.fixture(scope="module")
+def scene(cartosat1_scene):
+    return Scene.open(cartosat1_scene)
+
+
+def test_one_gcp_and_tie_points_bring_200_m_to_metres(scene):
+    sensors = scene.sensors()
+    ties, check = _split(scene.control("checkpoints"))
+    before = checkpoint_accuracy(sensors, check)
+    assert before["rmse_planimetric_m"] > 50.0  # the injected system-level error
+    obs = Observations.from_tables(scene.control("gcps"), ties)
+    result = adjust_bundle(sensors, obs)
+    assert result.converged
+    after = checkpoint_accuracy(result.sensors, check)
+    assert after["rmse_planimetric_m"] < 3.0
+    assert after["rmse_height_m"] < 3.0
+    # the tie points are exact, the GCP has realistic errors: sigma0 well below 1
+    assert 0.0 < result.sigma0 < 1.0
+    assert result.redundancy > 0
+    assert set(result.parameters) >= {"trajectory.attitude.pitch.c0", "trajectory.attitude.roll.c1"}
+    assert np.all(result.sigmas > 0)
+    # residuals are reported per observation
+    assert result.image_residuals["d_line"].shape == obs.line.shape
+    assert result.outliers == ()
+
+
+def test_a_50_m_gcp_blunder_is_flagged(scene, cartosat1_scene):
+    from tests.scenes import simulate
+
+    three = Scene.open(
+        simulate(
+            "cartosat1-pair",
+            cartosat1_scene.parent / "blunder",
+            seed=11,
+            size=(400, 400),
+            n_gcps=3,
+            n_checkpoints=20,
+            terrain="plains",
+        )
+    )
+    sensors = three.sensors()
+    ties, check = _split(three.control("checkpoints"))
+    gcps = three.control("gcps")
+    clean = adjust_bundle(sensors, Observations.from_tables(gcps, ties))
+    bad = dict(gcps)
+    bad["lat_deg"] = np.where(
+        gcps["id"] == "G002", gcps["lat_deg"] + 50.0 / 111_320.0, gcps["lat_deg"]
+    )
+    blundered = adjust_bundle(sensors, Observations.from_tables(bad, ties))
+    assert blundered.outliers == ("G002",)
+    a = checkpoint_accuracy(clean.sensors, check)["rmse_planimetric_m"]
+    b = checkpoint_accuracy(blundered.sensors, check)["rmse_planimetric_m"]
+    assert b <= 1.1 * a + 0.05
+
+
+def test_singular_setup_names_the_missing_parameters(scene):
+    # no priors and no ground control: the absolute orientation is undetermined
+    sensors = scene.sensors()
+    sensors = {
+        n: s.with_parameters(sigmas={p.name: math.inf for p in s.parameters})
+        for n, s in sensors.items()
+    }
+    ties, _ = _split(scene.control("checkpoints"))
+    with pytest.raises(AdjustmentError, match="nothing determines trajectory"):
+        adjust_bundle(sensors, Observations.from_tables(None, ties))
+
+
+def test_observation_validation():
+    with pytest.raises(InputError, match="sigma must be > 0"):
+        Observations(["a"], ["fore"], [1.0], [2.0], [0.0])
+    with pytest.raises(InputError, match="line has 2 rows"):
+        Observations(["a"], ["fore"], [1.0, 2.0], [2.0], [1.0])
+    obs = Observations(["a", "b"], ["fore", "aft"], [1.0, 2.0], [2.0, 3.0], [1.0, 1.0])
+    assert obs.without_points(["a"]).point_id.tolist() == ["b"]
+    assert attrs.evolve(obs).line.tolist() == [1.0, 2.0]
