@@ -8,11 +8,25 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+from carto.cartosat1.adjust import Cartosat1Adjuster
 from carto.cartosat1.presets import Cartosat1PairPreset
+from carto.cartosat1.sensor import Cartosat1SensorType
 from carto.framework import hookimpl
+from carto.framework.adjust import Adjuster
 from carto.framework.scene import ScenePreset
+from carto.framework.sensor import SensorType
 
 
 @hookimpl
 def carto_scene_presets() -> Sequence[ScenePreset]:
     return [Cartosat1PairPreset()]
+
+
+@hookimpl
+def carto_sensor_types() -> Sequence[SensorType]:
+    return [Cartosat1SensorType()]
+
+
+@hookimpl
+def carto_adjusters() -> Sequence[Adjuster]:
+    return [Cartosat1Adjuster()]

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+from carto.framework.adjust import Adjuster, RPCBiasAdjuster
 from carto.framework.linescan import LineScannerModelType
 from carto.framework.plugins import hookimpl
 from carto.framework.rpc import RPCSensorType
@@ -27,3 +28,8 @@ def carto_sensor_types() -> Sequence[SensorType]:
 @hookimpl
 def carto_trajectory_models() -> Sequence[TrajectoryModel]:
     return [PolynomialTrajectoryModel(), LagrangeTrajectoryModel()]
+
+
+@hookimpl
+def carto_adjusters() -> Sequence[Adjuster]:
+    return [RPCBiasAdjuster()]

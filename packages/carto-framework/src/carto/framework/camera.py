@@ -190,6 +190,16 @@ class Camera:
             self, parameters=replace_parameters(self.parameters, values, free, sigmas)
         )
 
+    def with_calibrated_alignment(self) -> Camera:
+        """The camera with its estimated alignment corrections folded into the calibrated
+        ``alignment_rpy_rad`` (in-flight calibration result) and the corrections reset to 0."""
+        corr = {p.name.rsplit(".", 1)[1]: p.value for p in self.parameters}
+        align = tuple(
+            a + corr.get(axis, 0.0) for a, axis in zip(self.alignment_rpy_rad, _AXES, strict=True)
+        )
+        params = tuple(attrs.evolve(p, value=0.0) for p in self.parameters)
+        return attrs.evolve(self, alignment_rpy_rad=align, parameters=params)
+
     # ------------------------------------------------------------------ geometry
     def _u(self, sample: FloatArray) -> FloatArray:
         half = self.n_samples / 2.0

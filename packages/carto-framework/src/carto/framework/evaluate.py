@@ -98,3 +98,56 @@ def checkpoint_accuracy(
         "max_height_m": float(np.abs(e_up[valid]).max()) if valid.any() else float("nan"),
         "images": names,
     }
+
+
+def predicted_checkpoint_sigma(result: Any, table: Mapping[str, NDArray],
+                               sigma_px: float = 0.0) -> dict[str, float]:
+    """Predicted accuracy of points intersected with adjusted sensors (covariance propagation).
+
+    For each point of ``table`` (long format, as for :func:`checkpoint_accuracy`) the ground
+    position intersected from its image coordinates depends on the estimated parameters
+    ``c`` as ``dX/dc = -(A_X^T A_X)^-1 A_X^T A_c``; its covariance is
+    ``dX/dc Cov_c dX/dc^T`` plus, when ``sigma_px > 0``, the measurement term
+    ``sigma_px^2 (A_X^T A_X)^-1``. ``Cov_c`` is the a-priori covariance ``S^-1`` scaled by
+    ``max(1, sigma0)^2`` (a sigma0 below 1 comes from too few redundant ground observations to
+    judge, not from better data).
+
+    Returns:
+        ``{predicted_sigma_planimetric_m, predicted_sigma_height_m}``: RMS over the points of
+        the predicted east/north (together) and up standard deviations.
+    """
+    sensors = result.sensors
+    names = list(result.parameters)
+    cov = result.covariance_unit * max(1.0, float(np.nan_to_num(result.sigma0, nan=1.0))) ** 2
+    ids = sorted(set(table["id"].tolist()))
+    e2, u2 = [], []
+    for pid in ids:
+        rows = np.flatnonzero(table["id"] == pid)
+        a_x, a_c = [], []
+        for r in rows:
+            image = table["image"][r]
+            if image not in sensors:
+                continue
+            s = sensors[image]
+            lon, lat, h = table["lon_deg"][r], table["lat_deg"][r], table["h_m"][r]
+            a_x.append(s.ground_partials(lon, lat, h)[0])
+            own = [n for n in names if n in {p.name for p in s.parameters}]
+            block = np.zeros((2, len(names)))
+            if own:
+                part = s.parameter_partials(lon, lat, h, own)[0]
+                block[:, [names.index(n) for n in own]] = part
+            a_c.append(block)
+        if len(a_x) < 2:
+            continue
+        ax = np.concatenate(a_x)
+        ac = np.concatenate(a_c)
+        n_inv = np.linalg.inv(ax.T @ ax)
+        dxdc = -n_inv @ ax.T @ ac
+        c_x = dxdc @ cov @ dxdc.T + sigma_px**2 * n_inv
+        e2.append(c_x[0, 0] + c_x[1, 1])
+        u2.append(c_x[2, 2])
+    if not e2:
+        return {"predicted_sigma_planimetric_m": float("nan"),
+                "predicted_sigma_height_m": float("nan")}
+    return {"predicted_sigma_planimetric_m": float(np.sqrt(np.mean(e2))),
+            "predicted_sigma_height_m": float(np.sqrt(np.mean(u2)))}

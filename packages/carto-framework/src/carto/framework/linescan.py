@@ -233,9 +233,7 @@ class _LineTable:
         t_lo = float(timing.time(-0.5 * n))
         t_hi = float(timing.time(1.5 * n))
         periods = np.diff(np.asarray(timing.dt_nodes_s)) / np.diff(np.asarray(timing.line_nodes))
-        self.spacing = float(
-            min(2.0 * periods.min(), max((t_hi - t_lo) / 8192.0, 0.25 * periods.min()))
-        )
+        self.spacing = float(2.0 * periods.min())
         self.tolerance_s = LINE_TOLERANCE * float(periods.min())
         k = int(np.ceil((t_hi - t_lo) / self.spacing)) + 8
         self.node0 = t_lo - 4 * self.spacing

@@ -579,6 +579,7 @@ class RPCSensor(Sensor):
         *,
         parameters: Sequence[Parameter] | None = None,
         source: str = "",
+        prefix: str = "",
     ) -> None:
         if not isinstance(rpc, RPCCoefficients):
             raise InputError(f"RPCSensor needs RPCCoefficients, got {type(rpc).__name__}")
@@ -589,12 +590,18 @@ class RPCSensor(Sensor):
         if len(shape) != 2 or min(shape) < 1:
             raise InputError(f"RPC sensor image_shape must be two positive ints, got {image_shape}")
         self._shape: tuple[int, int] = (shape[0], shape[1])
-        params = default_rpc_parameters() if parameters is None else tuple(parameters)
-        if tuple(p.name for p in params) != _PARAMETER_NAMES:
+        if parameters is None:
+            params = tuple(attrs.evolve(p, name=prefix + p.name) for p in default_rpc_parameters())
+        else:
+            params = tuple(parameters)
+        expected = tuple(prefix + n for n in _PARAMETER_NAMES)
+        if tuple(p.name for p in params) != expected:
             raise InputError(
-                f"RPC sensor parameters must be {', '.join(_PARAMETER_NAMES)} in that order, "
+                f"RPC sensor parameters must be {', '.join(expected)} in that order, "
                 f"got {', '.join(p.name for p in params)}"
             )
+        self.prefix = prefix
+        self.metadata: dict[str, str] = {}
         self._params = params
         v = [p.value for p in params]
         self._affine = np.array([[1.0 + v[1], v[2]], [v[4], 1.0 + v[5]]])
@@ -629,7 +636,18 @@ class RPCSensor(Sensor):
     ) -> RPCSensor:
         """A new sensor with some parameter values, free flags or sigmas replaced."""
         params = replace_parameters(self._params, values, free, sigmas)
-        return RPCSensor(self._rpc, self._shape, parameters=params, source=self.source)
+        return RPCSensor(
+            self._rpc, self._shape, parameters=params, source=self.source, prefix=self.prefix
+        )
+
+    def with_prefix(self, prefix: str) -> RPCSensor:
+        """The same sensor whose parameter names start with ``prefix`` (e.g. the image name,
+        so that several RPC images in one adjustment get independent corrections)."""
+        n = len(self.prefix)
+        params = tuple(attrs.evolve(p, name=prefix + p.name[n:]) for p in self._params)
+        return RPCSensor(
+            self._rpc, self._shape, parameters=params, source=self.source, prefix=prefix
+        )
 
     def _correct(self, line: FloatArray, samp: FloatArray) -> tuple[FloatArray, FloatArray]:
         if self._identity:
@@ -691,12 +709,15 @@ class RPCSensor(Sensor):
         line, samp = (a.ravel() for a in self._rpc.project(lon_deg, lat_deg, h_m))
         if names is None:
             names = [p.name for p in self._params if p.free]
-        unknown = sorted(set(names) - set(_PARAMETER_NAMES))
+        n = len(self.prefix)
+        unknown = sorted(
+            m for m in names if not m.startswith(self.prefix) or m[n:] not in _PARAMETER_NAMES
+        )
         if unknown:
             raise InputError(f"unknown RPC sensor parameter(s) {', '.join(unknown)}")
         out = np.zeros((line.size, 2, len(names)))
         for k, name in enumerate(names):
-            row = 0 if name.startswith("rpc.line.") else 1
+            row = 0 if name[n:].startswith("rpc.line.") else 1
             term = name.rsplit(".", 1)[1]
             out[:, row, k] = 1.0 if term == "c0" else (line if term == "c_line" else samp)
         return out

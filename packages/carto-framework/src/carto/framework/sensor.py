@@ -247,6 +247,12 @@ class SensorType(Component):
         """Open ``path`` as a sensor; raise :class:`carto.framework.errors.InputError` naming
         the file and field when it is not a valid product of this type."""
 
+    def open_all(self, path: Path) -> dict[str, Sensor]:
+        """Open every image of a product (a stereo pair, a scene folder) as named sensors.
+
+        The default opens ``path`` as one image named after the file."""
+        return {Path(path).stem: self.open(path)}
+
 
 def as_float_arrays(*values: ArrayLike) -> tuple[FloatArray, ...]:
     """Broadcast the arguments together as float64 arrays (the sensors' input convention)."""

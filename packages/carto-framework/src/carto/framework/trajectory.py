@@ -313,33 +313,13 @@ class Trajectory:
                 ang(attitude.dt_s) - angles,
             ),
         )
-        params: list[Parameter] = []
-        for k in range(attitude_correction_order + 1):
-            sigma = attitude_sigma_rad[min(k, len(attitude_sigma_rad) - 1)]
-            for name in _ANGLE_NAMES:
-                params.append(
-                    Parameter(
-                        f"{prefix}attitude.{name}.c{k}",
-                        0.0,
-                        sigma,
-                        "rad",
-                        description=f"{name} correction, coefficient of tau^{k} (orbit frame)",
-                    )
-                )
-        for k in range(position_correction_order + 1):
-            sigma = position_sigma_m[min(k, len(position_sigma_m) - 1)]
-            for name in _POSITION_NAMES:
-                params.append(
-                    Parameter(
-                        f"{prefix}position.{name}.c{k}",
-                        0.0,
-                        sigma,
-                        "m",
-                        description=f"{name}-track position correction, coefficient of tau^{k}"
-                        if name != "radial"
-                        else f"radial position correction, tau^{k}",
-                    )
-                )
+        params = _correction_parameters(
+            prefix,
+            attitude_correction_order,
+            position_correction_order,
+            attitude_sigma_rad,
+            position_sigma_m,
+        )
         return cls(
             float(epoch_j2000_s),
             attitude.frame,
@@ -365,6 +345,30 @@ class Trajectory:
         """A new trajectory with some correction values / free flags / sigmas replaced."""
         params = replace_parameters(self.parameters, values, free, sigmas)
         return attrs.evolve(self, parameters=params)
+
+    def with_correction_orders(
+        self, attitude: int | None = None, position: int | None = None
+    ) -> Trajectory:
+        """The trajectory with correction polynomials of other orders (-1: none).
+
+        Coefficients that exist in both keep their value, sigma and free flag; new ones start
+        at zero with the default a-priori sigmas."""
+        att = self.attitude_correction_order if attitude is None else int(attitude)
+        pos = self.position_correction_order if position is None else int(position)
+        if not -1 <= att <= 3 or not -1 <= pos <= 3:
+            raise InputError("correction orders must be between -1 (none) and 3")
+        old = {p.name: p for p in self.parameters}
+        params = tuple(old.get(p.name, p) for p in _correction_parameters(self.prefix, att, pos))
+        return attrs.evolve(
+            self, parameters=params, attitude_correction_order=att, position_correction_order=pos
+        )
+
+    def with_prefix(self, prefix: str) -> Trajectory:
+        """The same trajectory whose parameter names start with ``prefix`` instead (so that
+        sensors sharing it can be given independent corrections)."""
+        n = len(self.prefix)
+        params = tuple(attrs.evolve(p, name=prefix + p.name[n:]) for p in self.parameters)
+        return attrs.evolve(self, parameters=params, prefix=prefix)
 
     def _correction_coeffs(self, group: str, names: tuple[str, ...], order: int) -> FloatArray:
         values = {p.name: p.value for p in self.parameters}
@@ -512,6 +516,43 @@ class Trajectory:
             raise InputError(f"trajectory: missing field {exc.args[0]!r}") from None
         except (TypeError, ValueError) as exc:
             raise InputError(f"trajectory: invalid value: {exc}") from None
+
+
+def _correction_parameters(
+    prefix: str,
+    attitude_order: int,
+    position_order: int,
+    attitude_sigma_rad: tuple[float, ...] = (1e-3, 1e-4, 1e-5, 1e-5),
+    position_sigma_m: tuple[float, ...] = (30.0, 5.0),
+) -> tuple[Parameter, ...]:
+    """The correction parameters of the given orders, zero, with a-priori sigmas by power."""
+    params: list[Parameter] = []
+    for k in range(attitude_order + 1):
+        sigma = attitude_sigma_rad[min(k, len(attitude_sigma_rad) - 1)]
+        for name in _ANGLE_NAMES:
+            params.append(
+                Parameter(
+                    f"{prefix}attitude.{name}.c{k}",
+                    0.0,
+                    sigma,
+                    "rad",
+                    description=f"{name} correction, coefficient of tau^{k} (orbit frame)",
+                )
+            )
+    for k in range(position_order + 1):
+        sigma = position_sigma_m[min(k, len(position_sigma_m) - 1)]
+        for name in _POSITION_NAMES:
+            what = "radial" if name == "radial" else f"{name}-track"
+            params.append(
+                Parameter(
+                    f"{prefix}position.{name}.c{k}",
+                    0.0,
+                    sigma,
+                    "m",
+                    description=f"{what} position correction, coefficient of tau^{k}",
+                )
+            )
+    return tuple(params)
 
 
 def _ecef_to_eci_by_angle(
