@@ -318,6 +318,90 @@ def _add_simulate(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(handler=cmd_simulate)
 
 
+# --------------------------------------------------------------------------- adjust
+def cmd_adjust(args: argparse.Namespace) -> int:
+    from carto.framework.workflow import adjust_product
+
+    options: dict[str, object] = {}
+    if args.mode:
+        options["mode"] = args.mode
+    if args.attitude_order is not None:
+        options["attitude_order"] = args.attitude_order
+    if args.no_robust:
+        options["robust"] = False
+    report = adjust_product(
+        args.source,
+        args.out,
+        n_gcps=args.gcps,
+        adjuster=args.adjuster,
+        ties=args.ties,
+        options=options,
+        sensor_type=args.sensor,
+        quiet=args.quiet,
+    )
+    print(
+        f"{report['adjuster']}: {report['gcps_used']} GCPs, {report['tie_points']} tie points, "
+        f"sigma0 {report['sigma0']:.3f}, outliers: {', '.join(report['outliers']) or 'none'}"
+    )
+    cp = report.get("checkpoints")
+    if cp:
+        before = report["checkpoints_before"]
+        print(
+            f"checkpoints ({cp['count']}): planimetric RMSE {cp['rmse_planimetric_m']:.2f} m "
+            f"(predicted {cp['predicted_sigma_planimetric_m']:.2f} m), height "
+            f"{cp['rmse_height_m']:.2f} m; before: {before['rmse_planimetric_m']:.1f} m / "
+            f"{before['rmse_height_m']:.1f} m"
+        )
+    print(f"outputs in {args.out}: report.json, residuals.png, adjusted models and RPCs")
+    return 0
+
+
+def _add_adjust(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "adjust",
+        help="adjust sensor orientations with GCPs and automatic tie points",
+        description="Adjust the images of a scene folder (carto simulate) or of a JSON "
+        "configuration:\nGCPs, automatic tie points matched on system-level ortho-images "
+        "(or a tie-point\nCSV), then an adjuster (default by platform: cartosat1-combined, "
+        "rpc-bias ...).\nWrites adjusted model files, corrected RPCs (<image>_RPC.TXT, GDAL "
+        "reads them beside\n<image>.tif), residuals.png and report.json (checkpoint accuracy "
+        'when the scene has\ncheckpoints).\n\nconfiguration: {"images": {NAME: '
+        '{"model": FILE, "raster": FILE}}, "gcps": CSV,\n  "dem": FILE, '
+        '"geoid": GTX}',
+        epilog=_examples(
+            "carto adjust scene1 --gcps 1 --out adj1",
+            "carto adjust scene1 --gcps 1 --mode separate --out adj1-separate",
+            "carto adjust pair.json --adjuster rpc-bias --out adj",
+        ),
+        formatter_class=_formatter,
+    )
+    p.add_argument("source", metavar="SCENE_OR_CONFIG", help="scene folder or JSON configuration")
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder")
+    p.add_argument("--gcps", type=int, metavar="N", help="number of GCPs to use (default all)")
+    p.add_argument("--adjuster", metavar="NAME", help="adjuster (carto plugins --kind adjuster)")
+    p.add_argument(
+        "--mode",
+        help="adjuster mode (cartosat1-combined: combined, separate, "
+        "calibration; rpc-bias: shift, affine)",
+    )
+    p.add_argument(
+        "--attitude-order",
+        type=int,
+        metavar="K",
+        help="order of the attitude correction polynomials (0 bias, 1 + drift ...)",
+    )
+    p.add_argument(
+        "--ties",
+        default="auto",
+        metavar="auto|none|FILE",
+        help="tie points: automatic (default), none, or a CSV id,image,line,sample",
+    )
+    p.add_argument("--sensor", metavar="TYPE", help="sensor type of the product")
+    p.add_argument("--no-robust", action="store_true", help="no outlier rejection")
+    p.add_argument("--quiet", action="store_true", help="no progress messages")
+    p.set_defaults(handler=cmd_adjust)
+
+
 # --------------------------------------------------------------------------- demo
 def cmd_demo(args: argparse.Namespace) -> int:
     from carto.framework.demo import format_table, run_demo
@@ -385,6 +469,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_plugins(sub)
     _add_project_locate(sub)
     _add_simulate(sub)
+    _add_adjust(sub)
     _add_demo(sub)
     return parser
 

@@ -100,8 +100,9 @@ def checkpoint_accuracy(
     }
 
 
-def predicted_checkpoint_sigma(result: Any, table: Mapping[str, NDArray],
-                               sigma_px: float = 0.0) -> dict[str, float]:
+def predicted_checkpoint_sigma(
+    result: Any, table: Mapping[str, NDArray], sigma_px: float = 0.0
+) -> dict[str, float]:
     """Predicted accuracy of points intersected with adjusted sensors (covariance propagation).
 
     For each point of ``table`` (long format, as for :func:`checkpoint_accuracy`) the ground
@@ -147,7 +148,11 @@ def predicted_checkpoint_sigma(result: Any, table: Mapping[str, NDArray],
         e2.append(c_x[0, 0] + c_x[1, 1])
         u2.append(c_x[2, 2])
     if not e2:
-        return {"predicted_sigma_planimetric_m": float("nan"),
-                "predicted_sigma_height_m": float("nan")}
-    return {"predicted_sigma_planimetric_m": float(np.sqrt(np.mean(e2))),
-            "predicted_sigma_height_m": float(np.sqrt(np.mean(u2)))}
+        return {
+            "predicted_sigma_planimetric_m": float("nan"),
+            "predicted_sigma_height_m": float("nan"),
+        }
+    return {
+        "predicted_sigma_planimetric_m": float(np.sqrt(np.mean(e2))),
+        "predicted_sigma_height_m": float(np.sqrt(np.mean(u2))),
+    }

@@ -1,17 +1,61 @@
 """Image matching: tie points and area-based matches with scores.
 
 A :class:`Matcher` finds corresponding points between two images; matches come back as a
-:class:`Matches` value. Image coordinates follow the project convention (first pixel centre at
-``(0.5, 0.5)``, see :mod:`carto.framework.sensor`).
+:class:`Matches` value. This module also holds the area-based matching functions Carto's own
+matcher (:class:`NCCMatcher`, name ``"ncc"``) is built from:
+
+* :func:`match_ncc`: normalised cross-correlation (OpenCV ``matchTemplate`` with
+  ``TM_CCOEFF_NORMED``: Pearson's correlation coefficient, invariant to gain and offset) of a
+  ``template x template`` window around each left point over the offsets ``-search..+search``
+  (lines and samples) around an optional per-point guess in the right image. The integer peak
+  is refined to sub-pixel by a parabola through the peak and its two neighbours in each
+  direction, or a 2-D quadratic fitted to the 3 x 3 neighbourhood, or least-squares matching
+  (``"lsm"``: Gauss-Newton on translation, gain and offset with the right image resampled by
+  cubic convolution, started from the parabola). A point is dropped when its template or
+  search window leaves the image or holds NaN, when its template has no texture (constant),
+  when the best score is below ``min_score``, or when the peak is on the border of the search
+  range (the true peak may lie beyond it).
+* :func:`match_bidirectional`: left -> right, then right -> left from the positions found;
+  matches that do not come back within ``tolerance`` pixels are dropped.
+* :func:`pyramid_match`: coarse-to-fine over ``cv2.pyrDown`` pyramids, offsets of a level
+  (cleaned by a local median) are the guesses of the next one.
+* :func:`global_shift`: phase correlation for a first guess of a global translation.
+* :func:`grid_points`: regular candidate points (the matchers take any points: an interest
+  operator can replace the grid).
+
+Conventions
+    * Image coordinates follow the project convention: continuous ``(line, sample)``, the
+      centre of the first pixel at ``(0.5, 0.5)`` (see :mod:`carto.framework.sensor`). Arrays
+      of points are ``(N, 2)`` with columns ``(line, sample)``.
+    * Offsets are ``right - left`` in pixels: the content at ``p`` in the left image is at
+      ``p + offset`` in the right one.
+    * The template is centred on the pixel that holds the point (centre ``floor(p) + 0.5``);
+      the offset found there is applied to the point itself, so the point's fraction of a
+      pixel is kept.
+    * Scores are correlation coefficients in [-1, 1] (the integer peak's value).
+
+Accuracy (measured, ``tests/framework/test_match.py``): the 3-point fits are biased by the
+asymmetry of the correlation peak of a small template (peak locking): 0.06 px RMS for the
+parabola, 0.04-0.05 px for the 2-D quadratic, on exact sub-pixel translations of a
+multi-scale texture; least-squares matching brings it to 0.011 px RMS (0.022 px in a smooth
+affine + sinusoidal displacement field). :class:`NCCMatcher` uses ``"lsm"``.
+
+Speed: one ``matchTemplate`` call per point (a loop over points, everything else vectorised):
+about 40 000 points/s for 15 x 15 templates and +-11 pixel searches with the parabola, 14 000
+points/s with least-squares matching (one core); :class:`NCCMatcher` (pyramid, both
+directions) about 5 000 points/s.
 """
 
 from __future__ import annotations
 
 import abc
+import math
+from typing import Any
 
 import attrs
 import numpy as np
-from numpy.typing import NDArray
+from numpy.lib.stride_tricks import sliding_window_view
+from numpy.typing import ArrayLike, NDArray
 
 from carto.framework.component import Component
 from carto.framework.errors import InputError
@@ -60,3 +104,730 @@ class Matcher(Component):
         Returns:
             the matches found, possibly none; never raises for images that simply do not match.
         """
+
+
+# ----------------------------------------------------------------------------- helpers
+SUBPIXEL_METHODS = ("parabola", "quadratic", "lsm", "none")
+"""Sub-pixel peak estimators of :func:`match_ncc`."""
+
+_LSM_CHUNK = 1024  # points refined together by least-squares matching
+_FLAT_STD = 1e-6  # templates with a standard deviation below this (relative) have no texture
+
+# least-squares 2-D quadratic on the 3 x 3 neighbourhood of a peak: rows of the pseudo-inverse
+# map the 9 scores (row-major, offsets -1, 0, 1) to (a0, a_x, a_y, a_xx, a_xy, a_yy)
+_DY, _DX = np.mgrid[-1:2, -1:2]
+_QUAD_PINV = np.linalg.pinv(
+    np.stack(
+        [
+            np.ones(9),
+            _DX.ravel(),
+            _DY.ravel(),
+            _DX.ravel() ** 2,
+            (_DX * _DY).ravel(),
+            _DY.ravel() ** 2,
+        ],
+        axis=1,
+    ).astype(np.float64)
+)
+
+
+def _as_image(image: ArrayLike, name: str) -> NDArray[np.float32]:
+    """A 2-D float32 C-contiguous image (OpenCV's input), or InputError."""
+    array = np.asarray(image)
+    if array.ndim != 2 or min(array.shape) < 1:
+        raise InputError(f"{name} image must be a non-empty 2-D array, got shape {array.shape}")
+    if not (np.issubdtype(array.dtype, np.integer) or np.issubdtype(array.dtype, np.floating)):
+        raise InputError(f"{name} image dtype {array.dtype} is not real numeric")
+    return np.ascontiguousarray(array, dtype=np.float32)
+
+
+def _as_points(points: ArrayLike, name: str) -> NDArray[np.float64]:
+    array = np.asarray(points, dtype=np.float64)
+    if array.ndim == 1 and array.size == 2:
+        array = array[None]
+    if array.ndim != 2 or array.shape[1] != 2:
+        raise InputError(f"{name} must be an (N, 2) array of (line, sample), got {array.shape}")
+    return array
+
+
+def _check_int(value: Any, name: str, minimum: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
+        raise InputError(f"{name} must be an integer >= {minimum}, got {value!r}")
+    return int(value)
+
+
+def _nan_integral(image: NDArray[np.float32]) -> NDArray[np.int64] | None:
+    """Summed-area table of the NaN pixels (``None`` when there is none)."""
+    nan = np.isnan(image)
+    if not nan.any():
+        return None
+    table = np.zeros((image.shape[0] + 1, image.shape[1] + 1), np.int64)
+    table[1:, 1:] = nan.cumsum(0).cumsum(1)
+    return table
+
+
+def _windows_clean(
+    table: NDArray[np.int64] | None, r0: NDArray[np.intp], c0: NDArray[np.intp], size: int
+) -> NDArray[np.bool_]:
+    """True where the ``size x size`` windows at ``(r0, c0)`` hold no NaN."""
+    if table is None:
+        return np.ones(r0.shape, bool)
+    r1, c1 = r0 + size, c0 + size
+    count = table[r1, c1] - table[r0, c1] - table[r1, c0] + table[r0, c0]
+    return count == 0
+
+
+def _subpixel(neighbourhood: NDArray[np.float64], method: str) -> NDArray[np.float64]:
+    """Sub-pixel ``(d_line, d_sample)`` of peaks from their 3 x 3 score neighbourhoods."""
+    n = neighbourhood
+    out = np.zeros((n.shape[0], 2))
+    if method == "none" or n.shape[0] == 0:
+        return out
+    with np.errstate(divide="ignore", invalid="ignore"):
+        den_r = n[:, 0, 1] - 2.0 * n[:, 1, 1] + n[:, 2, 1]
+        den_c = n[:, 1, 0] - 2.0 * n[:, 1, 1] + n[:, 1, 2]
+        dr = np.where(den_r < 0.0, 0.5 * (n[:, 0, 1] - n[:, 2, 1]) / den_r, 0.0)
+        dc = np.where(den_c < 0.0, 0.5 * (n[:, 1, 0] - n[:, 1, 2]) / den_c, 0.0)
+        out[:, 0] = np.clip(dr, -0.5, 0.5)
+        out[:, 1] = np.clip(dc, -0.5, 0.5)
+        if method == "quadratic":
+            a = n.reshape(-1, 9) @ _QUAD_PINV.T  # (a0, a_x, a_y, a_xx, a_xy, a_yy)
+            hxx, hxy, hyy = 2.0 * a[:, 3], a[:, 4], 2.0 * a[:, 5]
+            det = hxx * hyy - hxy * hxy
+            ok = (hxx < 0.0) & (det > 0.0)
+            dx = (-hyy * a[:, 1] + hxy * a[:, 2]) / det
+            dy = (hxy * a[:, 1] - hxx * a[:, 2]) / det
+            ok &= (np.abs(dx) <= 1.0) & (np.abs(dy) <= 1.0)
+            out[:, 0] = np.where(ok, dy, out[:, 0])
+            out[:, 1] = np.where(ok, dx, out[:, 1])
+    return out
+
+
+def _keys_weights(fraction: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Keys (a = -0.5) cubic convolution weights of the taps -1, 0, 1, 2: ``(M, 4)``."""
+    f = fraction[:, None]
+    return np.concatenate(
+        [
+            ((-0.5 * f + 1.0) * f - 0.5) * f,
+            (1.5 * f - 2.5) * f * f + 1.0,
+            ((-1.5 * f + 2.0) * f + 0.5) * f,
+            (0.5 * f - 0.5) * f * f,
+        ],
+        axis=1,
+    )
+
+
+def _lsm_refine(
+    left: NDArray[np.float32],
+    right: NDArray[np.float32],
+    t0: NDArray[np.intp],
+    offset: NDArray[np.float64],
+    template: int,
+    iterations: int = 6,
+) -> NDArray[np.float64]:
+    """Least-squares matching (translation, gain and offset) from ``offset``.
+
+    For each template at ``t0`` (top-left 0-based index in ``left``), Gauss-Newton on
+    ``sum (g R(x + d) + o - T(x))^2`` with ``R`` resampled by Keys cubic convolution; the
+    right patch is resampled one pixel wider for its central-difference gradients. Iterations
+    stop for a point when its step is below 1e-4 px. Points whose window would leave the image,
+    that diverge (moving more than a pixel from ``offset``) or become singular keep ``offset``.
+    """
+    out = offset.copy()
+    for start in range(0, t0.shape[0], _LSM_CHUNK):  # chunks keep the work arrays in cache
+        chunk = slice(start, start + _LSM_CHUNK)
+        out[chunk] = _lsm_chunk(left, right, t0[chunk], offset[chunk], template, iterations)
+    return out
+
+
+def _lsm_chunk(
+    left: NDArray[np.float32],
+    right: NDArray[np.float32],
+    t0: NDArray[np.intp],
+    offset: NDArray[np.float64],
+    template: int,
+    iterations: int,
+) -> NDArray[np.float64]:
+    m = t0.shape[0]
+    out = offset.copy()
+    t = template
+    size = t + 5
+    d = offset.copy()
+    gain = np.ones(m)
+    bias = np.zeros(m)
+    tmpl = sliding_window_view(left, (t, t))[t0[:, 0], t0[:, 1]].astype(np.float64)
+    windows = sliding_window_view(right, (size, size))
+    h, w = right.shape
+    failed = np.zeros(m, bool)
+    running = np.ones(m, bool)
+    for _ in range(iterations):
+        base = np.floor(d).astype(np.intp)
+        start = t0 + base - 2
+        inside = (start >= 0).all(axis=1) & (start[:, 0] + size <= h) & (start[:, 1] + size <= w)
+        failed |= running & ~(inside & np.isfinite(d).all(axis=1))
+        running &= ~failed
+        idx = np.flatnonzero(running)
+        if idx.size == 0:
+            break
+        block = windows[start[idx, 0], start[idx, 1]].astype(np.float64)
+        frac = d[idx] - base[idx]
+        wr, wc = _keys_weights(frac[:, 0]), _keys_weights(frac[:, 1])
+        cols = wc[:, 0, None, None] * block[:, :, 0 : t + 2]
+        for j in range(1, 4):
+            cols += wc[:, j, None, None] * block[:, :, j : j + t + 2]
+        patch = wr[:, 0, None, None] * cols[:, 0 : t + 2]
+        for i in range(1, 4):
+            patch += wr[:, i, None, None] * cols[:, i : i + t + 2]
+        inner = patch[:, 1:-1, 1:-1].reshape(idx.size, -1)
+        g = gain[idx, None]
+        ga = (0.5 * (patch[:, 2:, 1:-1] - patch[:, :-2, 1:-1])).reshape(idx.size, -1) * g
+        gb = (0.5 * (patch[:, 1:-1, 2:] - patch[:, 1:-1, :-2])).reshape(idx.size, -1) * g
+        resid = tmpl[idx].reshape(idx.size, -1) - g * inner - bias[idx, None]
+        columns = (ga, gb, inner)
+        normal = np.empty((idx.size, 4, 4))
+        rhs = np.empty((idx.size, 4))
+        for a in range(3):
+            for b in range(a, 3):
+                normal[:, a, b] = normal[:, b, a] = np.einsum("nk,nk->n", columns[a], columns[b])
+            normal[:, a, 3] = normal[:, 3, a] = columns[a].sum(axis=1)
+            rhs[:, a] = np.einsum("nk,nk->n", columns[a], resid)
+        normal[:, 3, 3] = t * t
+        rhs[:, 3] = resid.sum(axis=1)
+        ok = np.linalg.det(normal) > 1e-12 * np.einsum("nii->n", normal) ** 4
+        step = np.zeros((idx.size, 4))
+        if ok.any():
+            step[ok] = np.linalg.solve(normal[ok], rhs[ok][..., None])[..., 0]
+        failed[idx[~ok]] = True
+        d[idx] += step[:, :2]
+        gain[idx] += step[:, 2]
+        bias[idx] += step[:, 3]
+        running[idx[np.hypot(step[:, 0], step[:, 1]) < 1e-4]] = False
+        running &= ~failed
+    good = ~failed & np.isfinite(d).all(axis=1)
+    good &= (np.abs(d - offset) <= 1.0).all(axis=1) & (gain > 0.0)
+    out[good] = d[good]
+    return out
+
+
+@attrs.frozen
+class _Found:
+    """Per input point: right position (NaN where no match) and score (NaN likewise)."""
+
+    right: NDArray[np.float64]
+    score: NDArray[np.float64]
+
+    @property
+    def ok(self) -> NDArray[np.bool_]:
+        return np.isfinite(self.score)
+
+
+def _match_points(
+    left: NDArray[np.float32],
+    right: NDArray[np.float32],
+    points: NDArray[np.float64],
+    guess: NDArray[np.float64],
+    template: int,
+    search: int,
+    subpixel: str,
+    min_score: float,
+    nan_left: NDArray[np.int64] | None,
+    nan_right: NDArray[np.int64] | None,
+) -> _Found:
+    """The correlation of :func:`match_ncc` on prepared inputs, one row per input point."""
+    import cv2
+
+    n = points.shape[0]
+    right_pts = np.full((n, 2), np.nan)
+    scores = np.full(n, np.nan)
+    half = template // 2
+    size = 2 * (half + search) + 1
+    ok = np.isfinite(points).all(axis=1) & np.isfinite(guess).all(axis=1)
+    pts = np.where(ok[:, None], points, 0.0)
+    g = np.rint(np.where(ok[:, None], guess, 0.0))
+    # the template is centred on the pixel holding the point (centre at index + 0.5)
+    centre = np.floor(pts).astype(np.intp)
+    t0 = centre - half
+    s0 = centre + g.astype(np.intp) - half - search
+    h_l, w_l = left.shape
+    h_r, w_r = right.shape
+    ok &= (t0[:, 0] >= 0) & (t0[:, 1] >= 0)
+    ok &= (t0[:, 0] + template <= h_l) & (t0[:, 1] + template <= w_l)
+    ok &= (s0[:, 0] >= 0) & (s0[:, 1] >= 0)
+    ok &= (s0[:, 0] + size <= h_r) & (s0[:, 1] + size <= w_r)
+    idx = np.flatnonzero(ok)
+    clean = _windows_clean(nan_left, t0[idx, 0], t0[idx, 1], template)
+    clean &= _windows_clean(nan_right, s0[idx, 0], s0[idx, 1], size)
+    idx = idx[clean]
+    if idx.size == 0:
+        return _Found(right_pts, scores)
+    templates = sliding_window_view(left, (template, template))[t0[idx, 0], t0[idx, 1]]
+    spread = templates.reshape(idx.size, -1).std(axis=1)
+    level = np.abs(templates.reshape(idx.size, -1).mean(axis=1))
+    textured = spread > _FLAT_STD * np.maximum(level, 1.0)
+    idx, templates = idx[textured], templates[textured]
+    n_off = 2 * search + 1
+    surface = np.empty((idx.size, n_off, n_off), np.float32)
+    for k, (i, tmpl) in enumerate(zip(idx, templates, strict=True)):
+        r, c = s0[i]
+        surface[k] = cv2.matchTemplate(
+            right[r : r + size, c : c + size], tmpl, cv2.TM_CCOEFF_NORMED
+        )
+    surface[np.isnan(surface)] = -1.0
+    flat = surface.reshape(idx.size, -1)
+    peak = flat.argmax(axis=1)
+    best = flat[np.arange(idx.size), peak].astype(np.float64)
+    pr, pc = np.divmod(peak, n_off)
+    inner = (pr > 0) & (pr < n_off - 1) & (pc > 0) & (pc < n_off - 1)
+    good = inner & (best >= min_score)
+    idx, pr, pc, best, surface = idx[good], pr[good], pc[good], best[good], surface[good]
+    rows = pr[:, None, None] + np.arange(-1, 2)[None, :, None]
+    cols = pc[:, None, None] + np.arange(-1, 2)[None, None, :]
+    neighbourhood = surface[np.arange(idx.size)[:, None, None], rows, cols].astype(np.float64)
+    sub = _subpixel(neighbourhood, "parabola" if subpixel == "lsm" else subpixel)
+    offset = g[idx] + np.stack([pr, pc], axis=1) - search + sub
+    if subpixel == "lsm":
+        offset = _lsm_refine(left, right, t0[idx], offset, template)
+    right_pts[idx] = points[idx] + offset
+    scores[idx] = best
+    return _Found(right_pts, scores)
+
+
+def _matches(points: NDArray[np.float64], found: _Found) -> Matches:
+    ok = found.ok
+    return Matches(
+        points[ok, 0], points[ok, 1], found.right[ok, 0], found.right[ok, 1], found.score[ok]
+    )
+
+
+def _check_options(template: int, search: int, subpixel: str, min_score: float) -> None:
+    if _check_int(template, "template", 3) % 2 == 0:
+        raise InputError(f"template must be odd (a centred window), got {template}")
+    _check_int(search, "search", 1)
+    if subpixel not in SUBPIXEL_METHODS:
+        raise InputError(f"subpixel {subpixel!r} is not one of {', '.join(SUBPIXEL_METHODS)}")
+    if not -1.0 <= float(min_score) <= 1.0:
+        raise InputError(f"min_score must be within [-1, 1], got {min_score}")
+
+
+def _guesses(guess_offsets: ArrayLike | None, n: int) -> NDArray[np.float64]:
+    if guess_offsets is None:
+        return np.zeros((n, 2))
+    guess = np.asarray(guess_offsets, dtype=np.float64)
+    if guess.shape == (2,):
+        guess = np.broadcast_to(guess, (n, 2))
+    if guess.shape != (n, 2):
+        raise InputError(
+            f"guess_offsets must be (N, 2) like the points ({n}, 2) or one (2,) offset, "
+            f"got {guess.shape}"
+        )
+    return np.array(guess)
+
+
+# ----------------------------------------------------------------------------- matching
+def match_ncc(
+    left: ArrayLike,
+    right: ArrayLike,
+    points_left: ArrayLike,
+    *,
+    template: int = 15,
+    search: int = 11,
+    subpixel: str = "parabola",
+    min_score: float = 0.6,
+    guess_offsets: ArrayLike | None = None,
+) -> Matches:
+    """Match points of the left image in the right one by normalised cross-correlation.
+
+    Args:
+        left, right: single-band images (2-D, any real dtype; NaN = no data).
+        points_left: ``(N, 2)`` ``(line, sample)`` in the left image.
+        template: side of the square template, odd, pixels.
+        search: the search reaches ``+-search`` pixels around the guess in both directions.
+        subpixel: ``"parabola"`` (default; separable 3-point parabolas), ``"quadratic"``
+            (2-D least-squares quadratic on the 3 x 3 neighbourhood; falls back to the
+            parabolas where it has no maximum), ``"lsm"`` (least-squares matching from the
+            parabola's estimate; points where it fails keep that estimate; the most accurate,
+            see the module docstring) or ``"none"`` (integer offsets).
+        min_score: smallest accepted correlation score.
+        guess_offsets: ``(N, 2)`` (or one ``(2,)``) expected offsets ``right - left``,
+            pixels; rounded to integers to centre the search. Default zero.
+
+    Returns:
+        the matches, in the input order, of the points that pass all the tests (see the module
+        docstring); scores are the integer-peak correlation coefficients.
+
+    Raises:
+        InputError: malformed images, points, guesses or options.
+    """
+    _check_options(template, search, subpixel, min_score)
+    left_img, right_img = _as_image(left, "left"), _as_image(right, "right")
+    points = _as_points(points_left, "points_left")
+    guess = _guesses(guess_offsets, points.shape[0])
+    found = _match_points(
+        left_img,
+        right_img,
+        points,
+        guess,
+        template,
+        search,
+        subpixel,
+        float(min_score),
+        _nan_integral(left_img),
+        _nan_integral(right_img),
+    )
+    return _matches(points, found)
+
+
+def _bidirectional(
+    left: NDArray[np.float32],
+    right: NDArray[np.float32],
+    points: NDArray[np.float64],
+    guess: NDArray[np.float64],
+    template: int,
+    search: int,
+    subpixel: str,
+    min_score: float,
+    tolerance: float,
+    nan_left: NDArray[np.int64] | None,
+    nan_right: NDArray[np.int64] | None,
+) -> _Found:
+    forward = _match_points(
+        left, right, points, guess, template, search, subpixel, min_score, nan_left, nan_right
+    )
+    ok = forward.ok
+    back_guess = np.where(ok[:, None], points - forward.right, 0.0)
+    back_points = np.where(ok[:, None], forward.right, np.nan)
+    backward = _match_points(  # the check needs no more than the parabola's accuracy
+        right,
+        left,
+        back_points,
+        back_guess,
+        template,
+        search,
+        "parabola" if subpixel == "lsm" else subpixel,
+        min_score,
+        nan_right,
+        nan_left,
+    )
+    closure = np.hypot(*(backward.right - points).T)
+    keep = backward.ok & (closure <= tolerance)
+    score = np.where(keep, np.minimum(forward.score, backward.score), np.nan)
+    right_pts = np.where(keep[:, None], forward.right, np.nan)
+    return _Found(right_pts, score)
+
+
+def match_bidirectional(
+    left: ArrayLike,
+    right: ArrayLike,
+    points_left: ArrayLike,
+    *,
+    tolerance: float = 0.5,
+    template: int = 15,
+    search: int = 11,
+    subpixel: str = "parabola",
+    min_score: float = 0.6,
+    guess_offsets: ArrayLike | None = None,
+) -> Matches:
+    """:func:`match_ncc` left -> right, then right -> left from the positions found.
+
+    A match is kept when the backward match lands within ``tolerance`` pixels of the left
+    point it started from (a consistency check that removes most matches on repeated patterns
+    and occlusions). The score is the smaller of the two directions' scores.
+    """
+    _check_options(template, search, subpixel, min_score)
+    if not float(tolerance) > 0.0:
+        raise InputError(f"tolerance must be > 0 pixels, got {tolerance}")
+    left_img, right_img = _as_image(left, "left"), _as_image(right, "right")
+    points = _as_points(points_left, "points_left")
+    guess = _guesses(guess_offsets, points.shape[0])
+    found = _bidirectional(
+        left_img,
+        right_img,
+        points,
+        guess,
+        template,
+        search,
+        subpixel,
+        float(min_score),
+        float(tolerance),
+        _nan_integral(left_img),
+        _nan_integral(right_img),
+    )
+    return _matches(points, found)
+
+
+def _regularise(
+    points: NDArray[np.float64],
+    offsets: NDArray[np.float64],
+    ok: NDArray[np.bool_],
+    fallback: NDArray[np.float64],
+    max_deviation: float,
+    k: int = 9,
+) -> NDArray[np.float64]:
+    """Offsets for every point: the found ones, unless they differ from the median of their
+    ``k`` nearest found neighbours by more than ``max_deviation`` (then that median); points
+    without a match get the median of their neighbours' (or ``fallback`` when none matched)."""
+    good = np.flatnonzero(ok)
+    if good.size == 0:
+        return fallback.copy()
+    from scipy.spatial import cKDTree
+
+    finite = np.isfinite(points).all(axis=1)
+    query = np.where(finite[:, None], points, 0.0)
+    tree = cKDTree(points[good])
+    kk = min(k, good.size)
+    _, nearest = tree.query(query, k=kk)
+    nearest = np.asarray(nearest).reshape(points.shape[0], kk)
+    median = np.median(offsets[good][nearest], axis=1)
+    deviation = np.hypot(*(offsets - median).T)
+    keep = ok & (deviation <= max_deviation)
+    return np.where(keep[:, None], offsets, median)
+
+
+def pyramid_match(
+    left: ArrayLike,
+    right: ArrayLike,
+    points_left: ArrayLike,
+    *,
+    levels: int = 3,
+    template: int = 15,
+    search: int = 11,
+    subpixel: str = "parabola",
+    min_score: float = 0.6,
+    coarse_min_score: float = 0.5,
+    guess_offsets: ArrayLike | None = None,
+    bidirectional: bool = True,
+    tolerance: float = 0.5,
+) -> Matches:
+    """Coarse-to-fine matching over image pyramids (``cv2.pyrDown``, factor 2 per level).
+
+    At the coarsest level the points are matched with the given guesses (scaled); the offsets
+    found are cleaned (each compared with the median of its 9 nearest neighbours: more than
+    2 pixels of that level away, or unmatched, it is replaced by the median) and passed, scaled
+    by two, as the guesses of the next level. The full-resolution level is matched with
+    :func:`match_bidirectional` (or :func:`match_ncc` when ``bidirectional`` is False). The
+    search reach is about ``search * (2**levels - 1)`` pixels.
+
+    Args:
+        levels: number of pyramid levels including the full resolution (1 = no pyramid);
+            reduced where the images get smaller than a search window.
+        coarse_min_score: smallest score accepted at the coarse levels.
+        others: as :func:`match_ncc` and :func:`match_bidirectional`.
+    """
+    import cv2
+
+    _check_options(template, search, subpixel, min_score)
+    levels = _check_int(levels, "levels", 1)
+    if not float(tolerance) > 0.0:
+        raise InputError(f"tolerance must be > 0 pixels, got {tolerance}")
+    left_img, right_img = _as_image(left, "left"), _as_image(right, "right")
+    points = _as_points(points_left, "points_left")
+    offsets = _guesses(guess_offsets, points.shape[0])
+    pyramid = [(left_img, right_img)]
+    need = template + 2 * search
+    while len(pyramid) < levels:
+        a, b = pyramid[-1]
+        if min(*a.shape, *b.shape) < 2 * need:
+            break
+        pyramid.append((cv2.pyrDown(a), cv2.pyrDown(b)))
+    for level in range(len(pyramid) - 1, 0, -1):
+        a, b = pyramid[level]
+        scale = 2.0**level
+        found = _match_points(
+            a,
+            b,
+            points / scale,
+            offsets / scale,
+            template,
+            search,
+            "parabola" if subpixel == "lsm" else subpixel,
+            float(coarse_min_score),
+            _nan_integral(a),
+            _nan_integral(b),
+        )
+        level_offsets = (found.right - points / scale) * scale
+        offsets = _regularise(points, level_offsets, found.ok, offsets, 2.0 * scale)
+    found = (
+        _bidirectional(
+            left_img,
+            right_img,
+            points,
+            offsets,
+            template,
+            search,
+            subpixel,
+            float(min_score),
+            float(tolerance),
+            _nan_integral(left_img),
+            _nan_integral(right_img),
+        )
+        if bidirectional
+        else _match_points(
+            left_img,
+            right_img,
+            points,
+            offsets,
+            template,
+            search,
+            subpixel,
+            float(min_score),
+            _nan_integral(left_img),
+            _nan_integral(right_img),
+        )
+    )
+    return _matches(points, found)
+
+
+def _upsampled_correlation(
+    spectrum: NDArray[np.complex128], centre: tuple[float, float], half: float, n: int
+) -> NDArray[np.float64]:
+    """Real part of the inverse DFT of ``spectrum`` on an ``n x n`` grid of shifts spanning
+    ``centre +- half`` pixels (matrix-multiply DFT, after Guizar-Sicairos et al. 2008)."""
+    rows, cols = spectrum.shape
+    ky = np.fft.fftfreq(rows)
+    kx = np.fft.fftfreq(cols)
+    ys = centre[0] + np.linspace(-half, half, n)
+    xs = centre[1] + np.linspace(-half, half, n)
+    kernel_y = np.exp(2j * np.pi * np.outer(ys, ky))
+    kernel_x = np.exp(2j * np.pi * np.outer(kx, xs))
+    return (kernel_y @ spectrum @ kernel_x).real / spectrum.size
+
+
+def global_shift(left: ArrayLike, right: ArrayLike) -> tuple[float, float, float]:
+    """The translation ``right - left`` between two images by phase correlation.
+
+    ``cv2.phaseCorrelate`` with a Hann window (which down-weights the borders, where content
+    enters and leaves) on the common ``min(shape)`` top-left region, NaN replaced by the mean,
+    gives the integer peak. Its own sub-pixel estimate (a 5 x 5 centroid) is biased by up to
+    0.3 px, so the peak is refined on the normalised cross-power spectrum evaluated at
+    sub-pixel shifts by matrix-multiply DFTs: a 1/8 px grid over +-1.5 px, then 1/64 and
+    1/512 px grids around the maximum (the correlation of a pure translation is a sharp, symmetric
+    periodic sinc there). Shifts up to about a quarter of the image size are recovered
+    reliably (100 px on a 400 px ortho).
+
+    Returns:
+        ``(d_line, d_sample, score)``: content at ``(line, sample)`` in ``left`` is at
+        ``(line + d_line, sample + d_sample)`` in ``right``; ``score`` is
+        ``cv2.phaseCorrelate``'s peak response in [0, 1] (near 0: no reliable shift).
+
+    Raises:
+        InputError: malformed images, or fewer than 8 x 8 common pixels.
+    """
+    import cv2
+
+    a = _as_image(left, "left").astype(np.float64)
+    b = _as_image(right, "right").astype(np.float64)
+    rows, cols = min(a.shape[0], b.shape[0]), min(a.shape[1], b.shape[1])
+    if min(rows, cols) < 8:
+        raise InputError(f"global_shift: images of {rows} x {cols} common pixels are too small")
+    a, b = a[:rows, :cols].copy(), b[:rows, :cols].copy()
+    for img in (a, b):
+        nan = np.isnan(img)
+        img[nan] = float(np.mean(img[~nan])) if (~nan).any() else 0.0
+        img -= img.mean()
+    window = cv2.createHanningWindow((cols, rows), cv2.CV_64F)
+    (d_sample, d_line), response = cv2.phaseCorrelate(a, b, window)
+    # refine on the whitened cross-power spectrum (phase ramp of the shift)
+    cross = np.conj(np.fft.fft2(a * window)) * np.fft.fft2(b * window)
+    magnitude = np.abs(cross)
+    cross = np.where(magnitude > 1e-12 * magnitude.max(), cross / np.maximum(magnitude, 1e-300), 0)
+    centre = (float(np.round(d_line)), float(np.round(d_sample)))
+    for half, n in ((1.5, 25), (0.125, 17), (1.0 / 64.0, 17)):
+        surface = _upsampled_correlation(cross, centre, half, n)
+        k_r, k_c = np.unravel_index(int(np.argmax(surface)), surface.shape)
+        step = 2.0 * half / (n - 1)
+        centre = (centre[0] - half + k_r * step, centre[1] - half + k_c * step)
+    return float(centre[0]), float(centre[1]), float(response)
+
+
+def grid_points(shape: tuple[int, int], spacing: float, margin: float = 0.0) -> NDArray[np.float64]:
+    """Regular candidate points ``(N, 2)`` ``(line, sample)`` on pixel centres.
+
+    Rows and columns every ``spacing`` pixels from ``margin`` (the distance of the first and
+    last points from the image edges, pixels), centred in the image; row-major order.
+    """
+    rows, cols = (int(v) for v in shape)
+    spacing = float(spacing)
+    margin = float(margin)
+    if not spacing >= 1.0:
+        raise InputError(f"spacing must be >= 1 pixel, got {spacing}")
+    if margin < 0.0:
+        raise InputError(f"margin must be >= 0, got {margin}")
+
+    def axis(n: int) -> NDArray[np.float64]:
+        span = n - 2.0 * margin - 1.0
+        if span < 0:
+            return np.empty(0)
+        count = int(span // spacing) + 1
+        start = math.floor(margin + 0.5 * (span - (count - 1) * spacing))
+        return start + 0.5 + np.round(np.arange(count) * spacing)
+
+    lines, samples = axis(rows), axis(cols)
+    grid_l, grid_s = np.meshgrid(lines, samples, indexing="ij")
+    return np.stack([grid_l.ravel(), grid_s.ravel()], axis=1)
+
+
+class NCCMatcher(Matcher):
+    """Dense-grid NCC matcher: global phase-correlation shift, pyramid, left-right check.
+
+    ``match(left, right)`` takes points every ``spacing`` pixels of the left image (margin
+    ``template // 2 + 1``), estimates the global shift with :func:`global_shift` (used as
+    the first guess when its response exceeds ``min_response``) and matches them with
+    :func:`pyramid_match` (bidirectional at full resolution). The candidate points do not
+    depend on the images' content: the matcher is independent of how points are chosen
+    (:meth:`match_points` takes any points).
+    """
+
+    name = "ncc"
+    description = (
+        "normalised cross-correlation on a grid: phase-correlation first guess, "
+        "3-level pyramid, sub-pixel parabola, left-right consistency check"
+    )
+
+    def __init__(
+        self,
+        *,
+        spacing: float = 32.0,
+        template: int = 15,
+        search: int = 11,
+        levels: int = 3,
+        min_score: float = 0.6,
+        tolerance: float = 0.5,
+        subpixel: str = "lsm",
+        use_global_shift: bool = True,
+        min_response: float = 0.05,
+    ) -> None:
+        _check_options(template, search, subpixel, min_score)
+        self.spacing = float(spacing)
+        self.template = int(template)
+        self.search = int(search)
+        self.levels = _check_int(levels, "levels", 1)
+        self.min_score = float(min_score)
+        self.tolerance = float(tolerance)
+        self.subpixel = subpixel
+        self.use_global_shift = bool(use_global_shift)
+        self.min_response = float(min_response)
+
+    def match(self, left: NDArray, right: NDArray) -> Matches:
+        left_img = _as_image(left, "left")
+        points = grid_points(left_img.shape, self.spacing, self.template // 2 + 1)
+        return self.match_points(left, right, points)
+
+    def match_points(self, left: NDArray, right: NDArray, points: ArrayLike) -> Matches:
+        """Match given left points (``(N, 2)`` line, sample) like :meth:`match`."""
+        guess = np.zeros(2)
+        if self.use_global_shift:
+            d_line, d_sample, response = global_shift(left, right)
+            if response >= self.min_response:
+                guess = np.array([d_line, d_sample])
+        return pyramid_match(
+            left,
+            right,
+            points,
+            levels=self.levels,
+            template=self.template,
+            search=self.search,
+            subpixel=self.subpixel,
+            min_score=self.min_score,
+            guess_offsets=guess,
+            tolerance=self.tolerance,
+        )

@@ -294,6 +294,37 @@ def open_sensor(path: str | Path, sensor_type: str | None = None) -> Sensor:
     return top[0].open(path)
 
 
+def open_sensors(path: str | Path, sensor_type: str | None = None) -> dict[str, Sensor]:
+    """Open every image of a product (scene folder, stereo product, single image) by name.
+
+    Like :func:`open_sensor`, but through the sensor type's ``open_all``.
+    """
+    from carto.framework.plugins import get_registry
+
+    path = Path(path)
+    if not path.exists():
+        raise InputError(f"{path}: no such file or directory")
+    registry = get_registry()
+    if sensor_type is not None:
+        return registry.get("sensor", sensor_type).open_all(path)
+    types = [info.component for info in registry.components("sensor")]
+    candidates = [t for t in types if _safe_identify(t, path)]
+    if not candidates:
+        names = ", ".join(t.name for t in types) or "none"
+        raise InputError(
+            f"{path}: no sensor type recognises this product (known: {names}); "
+            "name one with --sensor TYPE"
+        )
+    best = max(t.priority for t in candidates)
+    top = [t for t in candidates if t.priority == best]
+    if len(top) > 1:
+        raise InputError(
+            f"{path}: several sensor types recognise this product "
+            f"({', '.join(t.name for t in top)}); choose one with --sensor"
+        )
+    return top[0].open_all(path)
+
+
 def _safe_identify(sensor_type: SensorType, path: Path) -> bool:
     try:
         return bool(sensor_type.identify(path))

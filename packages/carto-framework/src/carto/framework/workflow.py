@@ -1,0 +1,405 @@
+"""Workflows behind the commands: the steps ``carto adjust`` chains, with their outputs.
+
+``adjust_product`` opens a scene (or a configuration file naming images, models, GCPs and tie
+points), selects GCPs, finds tie points automatically when asked, runs an adjuster from the
+registry and writes: the adjusted model files (rigorous models) or corrected RPC files,
+corrected RPCs fitted to every adjusted rigorous model (``<image>_RPC.TXT``, which GDAL reads as
+the sidecar of ``<image>.tif``), a residual plot (``residuals.png``) and ``report.json``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import sys
+import time
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from carto.framework.adjust import AdjustmentResult, Observations
+from carto.framework.errors import InputError
+from carto.framework.linescan import LineScanner, write_json_atomic
+from carto.framework.plugins import get_registry
+from carto.framework.point_table import read_point_table, write_point_table
+from carto.framework.rpc import RPCSensor, fit_rpc, write_rpc_txt
+from carto.framework.sensor import Sensor, open_sensors
+
+Table = dict[str, NDArray]
+
+
+def select_gcps(table: Table, n: int | None) -> Table:
+    """``n`` GCPs of a long-format table (all when ``n`` is None): one -> the one nearest the
+    centroid of all; more -> the first ``n`` ids in file order (the simulator lists them
+    spread over the scene)."""
+    ids = list(dict.fromkeys(table["id"].tolist()))
+    if n is None or n >= len(ids):
+        if n is not None and n > len(ids):
+            raise InputError(f"--gcps {n}: the product has only {len(ids)} GCPs")
+        return table
+    if n < 0:
+        raise InputError(f"--gcps must be >= 0, got {n}")
+    if n == 0:
+        return {k: v[:0] for k, v in table.items()}
+    if n == 1:
+        lon = np.array([table["lon_deg"][table["id"] == i][0] for i in ids])
+        lat = np.array([table["lat_deg"][table["id"] == i][0] for i in ids])
+        keep = {ids[int(np.argmin((lon - lon.mean()) ** 2 + (lat - lat.mean()) ** 2))]}
+    else:
+        keep = set(ids[:n])
+    m = np.array([i in keep for i in table["id"]])
+    return {k: v[m] for k, v in table.items()}
+
+
+def _default_adjuster(sensors: Mapping[str, Sensor], platform: str) -> str:
+    if all(isinstance(s, RPCSensor) for s in sensors.values()):
+        return "rpc-bias"
+    if platform.startswith("Cartosat-1"):
+        return "cartosat1-combined"
+    if platform.startswith("Cartosat-2"):
+        return "cartosat2-bba"
+    raise InputError("no default adjuster for this product; name one with --adjuster")
+
+
+def residual_plot(result: AdjustmentResult, path: Path, title: str) -> Path:
+    """Image residual vectors per image (scaled) and GCP ground residuals, as a PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from carto.framework.atomic import atomic_output
+
+    res = result.image_residuals
+    images = list(result.sensors)
+    fig, axes = plt.subplots(1, len(images) + 1, figsize=(4.2 * (len(images) + 1), 4.2))
+    for ax, name in zip(axes, images, strict=False):
+        m = (res["image"] == name) & np.isfinite(res["d_line"])
+        n_l, n_s = result.sensors[name].image_shape
+        pts = np.array([p for p in res["point_id"][m]])
+        lines = np.array([result.points.get(p, (np.nan,) * 3) for p in pts])
+        if lines.size:
+            line_px, sample_px, _ = result.sensors[name].project(
+                lines[:, 0], lines[:, 1], lines[:, 2]
+            )
+            scale = (
+                0.05
+                * max(n_l, n_s)
+                / max(float(np.nanmax(np.hypot(res["d_line"][m], res["d_sample"][m]))), 1e-9)
+            )
+            ax.quiver(
+                sample_px,
+                line_px,
+                res["d_sample"][m] * scale,
+                -res["d_line"][m] * scale,
+                angles="xy",
+                scale_units="xy",
+                scale=1,
+                width=0.004,
+            )
+        else:
+            scale = float("nan")
+        ax.set_xlim(0, n_s)
+        ax.set_ylim(n_l, 0)
+        ax.set_aspect("equal")
+        rms = (
+            float(np.sqrt(np.nanmean(res["d_line"][m] ** 2 + res["d_sample"][m] ** 2)))
+            if (m.any())
+            else float("nan")
+        )
+        ax.set_title(f"{name}: {m.sum()} obs, RMS {rms:.2f} px (arrows x{scale:.0f})", fontsize=9)
+        ax.set_xlabel("sample (px)")
+        ax.set_ylabel("line (px)")
+    ax = axes[-1]
+    cr = result.control_residuals
+    if len(cr["id"]):
+        ax.scatter(cr["d_east_m"], cr["d_north_m"], c=cr["d_up_m"], cmap="coolwarm")
+        for i, cid in enumerate(cr["id"]):
+            ax.annotate(str(cid), (cr["d_east_m"][i], cr["d_north_m"][i]), fontsize=7)
+        ax.axhline(0, color="grey", lw=0.5)
+        ax.axvline(0, color="grey", lw=0.5)
+    ax.set_title("GCP residuals (m; colour: up)", fontsize=9)
+    ax.set_xlabel("east (m)")
+    ax.set_ylabel("north (m)")
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    with atomic_output(path) as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
+    plt.close(fig)
+    return path
+
+
+def _progress(message: str, quiet: bool) -> None:
+    if not quiet:
+        print(f"carto adjust: {message}", file=sys.stderr, flush=True)
+
+
+def adjust_product(
+    source: str | os.PathLike[str],
+    out_dir: str | os.PathLike[str],
+    *,
+    n_gcps: int | None = None,
+    adjuster: str | None = None,
+    ties: str = "auto",
+    options: Mapping[str, Any] | None = None,
+    sensor_type: str | None = None,
+    quiet: bool = False,
+) -> dict[str, Any]:
+    """Adjust a scene or configured product and write the outputs; return the report.
+
+    Args:
+        source: a scene folder (``carto simulate``) or a JSON configuration (see
+            ``carto adjust --help``).
+        out_dir: output folder.
+        n_gcps: number of GCPs to use (None: all that the product has).
+        adjuster: adjuster name (default from the platform).
+        ties: ``"auto"`` (automatic tie points), ``"none"``, or a CSV file
+            (``id,image,line,sample[,sigma_px]``).
+        options: adjuster options (mode, attitude_order ...).
+    """
+    from carto.framework.evaluate import checkpoint_accuracy, predicted_checkpoint_sigma
+    from carto.framework.scene import Scene
+
+    t0 = time.perf_counter()
+    src = Path(source)
+    out = Path(out_dir)
+    options = dict(options or {})
+    checkpoints = None
+    dem = None
+    rasters: dict[str, Path] = {}
+    if src.is_dir() or src.name == "scene.json":
+        scene = Scene.open(src)
+        sensors = open_sensors(scene.root, sensor_type)
+        gcps = scene.control("gcps")
+        checkpoints = scene.control("checkpoints")
+        platform = str(scene.manifest.get("platform", ""))
+        rasters = {n: scene.raster(n) for n in scene.image_names}
+        init = scene.manifest.get("init_dem")
+        if init:
+            from carto.framework.dem import DEM
+
+            dem = DEM.open(scene.path(init))
+    elif src.suffix.lower() == ".json":
+        config = _read_config(src)
+        sensors, rasters, gcps, dem, platform = config
+    else:
+        raise InputError(f"{src}: expected a scene folder or a JSON configuration file")
+    gcps = select_gcps(gcps, n_gcps) if gcps is not None else None
+    n_used = len(set(gcps["id"].tolist())) if gcps is not None else 0
+    # tie points
+    tie_table: Table | None = None
+    if ties == "auto":
+        from carto.framework.tiepoints import automatic_tie_points
+
+        if dem is None:
+            raise InputError(
+                "automatic tie points need a DEM (the scene's init_dem.tif or "
+                '"dem" in the configuration)'
+            )
+        _progress("matching tie points on system-level ortho-images", quiet)
+        tie_table = automatic_tie_points(rasters, sensors, dem)
+    elif ties != "none":
+        tie_table = read_point_table(ties, numeric=("line", "sample"), text=("id", "image"))
+    n_ties = len(set(tie_table["id"].tolist())) if tie_table is not None else 0
+    obs = Observations.from_tables(gcps, tie_table)
+    if dem is not None and tie_table is not None and options.pop("tie_heights", True):
+        obs = _with_dem_heights(obs, sensors, dem, float(options.pop("height_sigma_m", 30.0)))
+    name = adjuster or _default_adjuster(sensors, platform)
+    component = get_registry().get("adjuster", name)
+    _progress(
+        f"adjusting {len(sensors)} images with {name} ({n_used} GCPs, {n_ties} tie points)", quiet
+    )
+    result = component.adjust(sensors, obs, dem=dem, **options)
+    # outputs
+    out.mkdir(parents=True, exist_ok=True)
+    files = _write_models(result, out)
+    plot = residual_plot(
+        result,
+        out / "residuals.png",
+        f"{name}: {n_used} GCPs, {n_ties} tie points, sigma0 {result.sigma0:.2f}",
+    )
+    report: dict[str, Any] = {
+        "source": str(src),
+        "adjuster": name,
+        "options": {k: v for k, v in options.items() if isinstance(v, str | int | float)},
+        "gcps_used": n_used,
+        "tie_points": n_ties,
+        "sigma0": result.sigma0,
+        "outliers": list(result.outliers),
+        "converged": result.converged,
+        "iterations": result.iterations,
+        "adjustment": result.summary(),
+        "files": {**files, "residual_plot": plot.name},
+        "seconds": round(time.perf_counter() - t0, 1),
+    }
+    if checkpoints is not None and len(checkpoints["id"]):
+        acc = checkpoint_accuracy(result.sensors, checkpoints)
+        pred = predicted_checkpoint_sigma(result, checkpoints)
+        before = checkpoint_accuracy(sensors, checkpoints)
+        report["checkpoints"] = {
+            k: acc[k]
+            for k in (
+                "count",
+                "rmse_along_m",
+                "rmse_across_m",
+                "rmse_planimetric_m",
+                "rmse_height_m",
+            )
+        } | {
+            "predicted_sigma_planimetric_m": pred["predicted_sigma_planimetric_m"],
+            "predicted_sigma_height_m": pred["predicted_sigma_height_m"],
+        }
+        report["checkpoints_before"] = {
+            k: before[k]
+            for k in (
+                "count",
+                "rmse_along_m",
+                "rmse_across_m",
+                "rmse_planimetric_m",
+                "rmse_height_m",
+            )
+        }
+    if tie_table is not None:
+        write_point_table(out / "tie_points.csv", tie_table)
+        report["files"]["tie_points"] = "tie_points.csv"
+    write_json_atomic(out / "report.json", _jsonable(report))
+    return report
+
+
+def _jsonable(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def _with_dem_heights(
+    obs: Observations, sensors: Mapping[str, Sensor], dem: Any, sigma_m: float
+) -> Observations:
+    """Height constraints for tie points (not GCPs) from the DEM at their first location."""
+    controls = set(obs.control_id.tolist())
+    ties = sorted(set(obs.point_id.tolist()) - controls)
+    if not ties:
+        return obs
+    first = {}
+    for pid, image, line, sample in zip(obs.point_id, obs.image, obs.line, obs.sample, strict=True):
+        first.setdefault(pid, (image, line, sample))
+    heights = []
+    for pid in ties:
+        image, line, sample = first[pid]
+        _, _, h = sensors[image].locate_on_dem(np.array([line]), np.array([sample]), dem)
+        heights.append(float(h[0]))
+    h = np.array(heights)
+    ok = np.isfinite(h)
+    return obs.with_heights(np.array(ties, object)[ok], h[ok], sigma_m)
+
+
+def _write_models(result: AdjustmentResult, out: Path) -> dict[str, Any]:
+    files: dict[str, Any] = {"models": {}, "rpc": {}}
+    for name, sensor in result.sensors.items():
+        if isinstance(sensor, LineScanner):
+            files["models"][name] = sensor.save(out / f"{name}.model.json").name
+            rpc, report = fit_rpc(sensor, h_range=_height_range(result))
+            files["rpc"][name] = {
+                "file": write_rpc_txt(rpc, out / f"{name}_RPC.TXT").name,
+                "fit_check_max_px": report.check_max_px,
+            }
+        elif isinstance(sensor, RPCSensor):
+            corrected = _bake_rpc(sensor)
+            files["rpc"][name] = {"file": write_rpc_txt(corrected, out / f"{name}_RPC.TXT").name}
+    return files
+
+
+def _height_range(result: AdjustmentResult) -> tuple[float, float]:
+    h = np.array([p[2] for p in result.points.values()]) if result.points else np.array([0.0])
+    lo, hi = float(np.nanmin(h)), float(np.nanmax(h))
+    pad = max(200.0, 0.5 * (hi - lo))
+    return lo - pad, hi + pad
+
+
+def _bake_rpc(sensor: RPCSensor) -> Any:
+    """An RPC that includes the sensor's image-space correction (refitted on a 3-D grid)."""
+    h0, hs = sensor.rpc.height_off, abs(sensor.rpc.height_scale)
+    rpc, _ = fit_rpc(sensor, h_range=(h0 - hs, h0 + hs))
+    return rpc
+
+
+def _read_config(path: Path) -> tuple[dict[str, Sensor], dict[str, Path], Table | None, Any, str]:
+    """A JSON configuration: ``{"images": {name: {"model": file, "raster": file,
+    "sensor": type}}, "gcps": csv, "dem": file, "geoid": gtx, "platform": text}``; paths
+    relative to the file."""
+    from carto.framework.dem import DEM, Geoid
+    from carto.framework.sensor import open_sensor
+
+    try:
+        doc = json.loads(path.read_text())
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read configuration: {exc.strerror}") from None
+    except ValueError as exc:
+        raise InputError(f"{path}: not a JSON configuration: {exc}") from None
+    base = path.parent
+    images = doc.get("images")
+    if not isinstance(images, dict) or len(images) < 1:
+        raise InputError(f"{path}: field 'images' must map image names to models")
+    sensors: dict[str, Sensor] = {}
+    rasters: dict[str, Path] = {}
+    for name, spec in images.items():
+        if "model" not in spec:
+            raise InputError(f"{path}: images.{name} has no 'model'")
+        sensor = open_sensor(base / spec["model"], spec.get("sensor"))
+        if "raster" in spec:
+            rasters[name] = base / spec["raster"]
+            sensor = _crop_offset(sensor, rasters[name])
+        sensors[name] = sensor
+    gcps = None
+    if doc.get("gcps"):
+        gcps = read_point_table(
+            base / doc["gcps"],
+            numeric=("lon_deg", "lat_deg", "h_m", "line", "sample"),
+            text=("id", "image"),
+        )
+    dem = None
+    if doc.get("dem"):
+        geoid = Geoid.open(base / doc["geoid"]) if doc.get("geoid") else None
+        dem = DEM.open(base / doc["dem"], geoid=geoid)
+    return sensors, rasters, gcps, dem, str(doc.get("platform", ""))
+
+
+def _crop_offset(sensor: Sensor, raster: Path) -> Sensor:
+    """An RPC sensor of a full scene, restricted to a crop whose pixel offset is in the crop's
+    (non-georeferenced) geotransform, as in CNES's test data."""
+    import warnings
+
+    import attrs
+    import rasterio
+
+    if not isinstance(sensor, RPCSensor):
+        return sensor
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        with rasterio.open(raster) as ds:
+            t, crs, shape = ds.transform, ds.crs, (ds.height, ds.width)
+    if crs is not None or t.b != 0 or t.d != 0 or t.a != 1 or abs(t.e) != 1:
+        return sensor
+    col_off, row_off = t.c, t.f if t.e > 0 else -t.f
+    if col_off == 0 and row_off == 0 and shape == sensor.image_shape:
+        return sensor
+    rpc = attrs.evolve(
+        sensor.rpc, line_off=sensor.rpc.line_off - row_off, samp_off=sensor.rpc.samp_off - col_off
+    )
+    return RPCSensor(
+        rpc,
+        shape,
+        parameters=sensor.parameters,
+        source=f"{sensor.source} (crop at row {row_off:g}, column {col_off:g})",
+        prefix=sensor.prefix,
+    )

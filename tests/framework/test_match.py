@@ -1,0 +1,327 @@
+"""Area-based matching against independent truth: known warps of synthetic textures, and the
+ortho-images of a simulated Cartosat-1 pair whose true geometry gives the expected shift."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import attrs
+import cv2
+import numpy as np
+import pyproj
+import pytest
+import rasterio
+from scipy import ndimage
+
+from carto.framework import get_registry
+from carto.framework.dem import DEM
+from carto.framework.errors import InputError
+from carto.framework.match import (
+    Matcher,
+    Matches,
+    NCCMatcher,
+    global_shift,
+    grid_points,
+    match_bidirectional,
+    match_ncc,
+    pyramid_match,
+)
+from carto.framework.ortho import OrthoGrid, orthorectify
+from carto.framework.scene import Scene
+from carto.framework.simulate import SimulationOptions, simulate_scene
+
+
+def texture(shape: tuple[int, int], seed: int, wrap: bool = False) -> np.ndarray:
+    """Multi-scale Gaussian-filtered noise (periodic with ``wrap``), float64."""
+    rng = np.random.default_rng(seed)
+    out = np.zeros(shape)
+    for sigma, amplitude in ((1.0, 1.0), (2.5, 1.5), (6.0, 2.0), (15.0, 3.0)):
+        noise = rng.normal(size=shape)
+        out += (
+            amplitude
+            * sigma
+            * ndimage.gaussian_filter(noise, sigma, mode="wrap" if wrap else "reflect")
+        )
+    return out
+
+
+def fourier_shifted(image: np.ndarray, shift: tuple[float, float]) -> np.ndarray:
+    """A periodic image translated exactly by ``shift`` (rows, cols)."""
+    return np.fft.ifft2(ndimage.fourier_shift(np.fft.fft2(image), shift)).real
+
+
+def offsets(m: Matches) -> np.ndarray:
+    return np.stack([m.right_line - m.left_line, m.right_sample - m.left_sample], axis=1)
+
+
+def field(rows: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A smooth displacement field: affine plus sinusoids (pixels)."""
+    d_r = 0.8 + 0.004 * rows - 0.003 * cols + 0.7 * np.sin(2 * np.pi * cols / 230.0)
+    d_c = -1.3 + 0.002 * rows + 0.005 * cols + 0.6 * np.cos(2 * np.pi * rows / 180.0)
+    return d_r, d_c
+
+
+@pytest.fixture(scope="module")
+def warped() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Left texture, right = left warped by ``field`` (cv2.remap, Lanczos), grid points, and
+    the true right positions of the points."""
+    size = 500
+    left = texture((size, size), 1).astype(np.float32)
+    rows, cols = np.mgrid[0:size, 0:size].astype(np.float64)
+    d_r, d_c = field(rows, cols)
+    # right(q) = left(q + d(q)) (0-based indices)
+    right = cv2.remap(
+        left,
+        (cols + d_c).astype(np.float32),
+        (rows + d_r).astype(np.float32),
+        cv2.INTER_LANCZOS4,
+        borderMode=cv2.BORDER_REFLECT,
+    )
+    points = grid_points(left.shape, 10, 30)
+    # the content of left at p is at q in right with q + d(q) = p (fixed point)
+    p = points - 0.5
+    q = p.copy()
+    for _ in range(60):
+        d_r, d_c = field(q[:, 0], q[:, 1])
+        q = p - np.stack([d_r, d_c], axis=1)
+    return left, right, points, q + 0.5
+
+
+def errors(m: Matches, points: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    index = {tuple(p): i for i, p in enumerate(points)}
+    rows = [index[(a, b)] for a, b in zip(m.left_line, m.left_sample, strict=True)]
+    return np.stack([m.right_line, m.right_sample], axis=1) - truth[rows]
+
+
+# ----------------------------------------------------------------------------- accuracy
+def test_smooth_displacement_field_is_recovered(warped):
+    left, right, points, truth = warped
+    results = {}
+    for method in ("lsm", "quadratic", "parabola"):
+        m = match_ncc(left, right, points, subpixel=method)
+        assert len(m) > 0.98 * len(points), method
+        err = errors(m, points, truth)
+        results[method] = np.sqrt(np.mean(err**2, axis=0))
+        assert np.abs(err).max() < 0.5, method
+    assert np.all(results["lsm"] <= 0.05), results  # measured 0.022 px
+    assert np.all(results["quadratic"] <= 0.06), results  # measured 0.047 px
+    assert np.all(results["parabola"] <= 0.07), results  # measured 0.056 px (peak asymmetry)
+    assert np.all(results["lsm"] < results["parabola"])
+
+
+def test_subpixel_accuracy_on_exact_translations():
+    """Exact (Fourier) translations by every tenth of a pixel in both directions."""
+    big = texture((400, 400), 2, wrap=True)
+    points = grid_points((300, 300), 12, 25)
+    err = {"lsm": [], "parabola": [], "none": []}
+    for f in np.linspace(0.0, 0.9, 10):
+        shift = (0.7 * f + 1.0, -f)
+        right = fourier_shifted(big, shift)[50:350, 50:350]
+        for method in err:
+            m = match_ncc(big[50:350, 50:350], right, points, subpixel=method)
+            assert len(m) > 0.98 * len(points)
+            err[method].append(offsets(m) - shift)
+    rms = {k: np.sqrt(np.mean(np.concatenate(v) ** 2, axis=0)) for k, v in err.items()}
+    assert np.all(rms["lsm"] < 0.02), rms  # measured 0.011 px
+    assert np.all(rms["parabola"] < 0.08), rms
+    assert np.all(rms["none"] > 0.2), rms  # integer offsets: uniform error, 0.29 px RMS
+
+
+def test_uniform_and_noise_regions_give_no_matches():
+    rng = np.random.default_rng(3)
+    size = 300
+    left = texture((size, size), 4)
+    left[:, 100:200] = 50.0  # uniform
+    left[:, 200:] = 50.0 + rng.normal(size=(size, 100))  # noise, independent in both images
+    right = np.roll(left, (2, 1), axis=(0, 1))
+    right[:, 200:] = 50.0 + rng.normal(size=(size, 100))
+    points = grid_points(left.shape, 8, 20)
+    m = match_ncc(left, right, points, subpixel="lsm")
+    assert np.all(m.left_sample < 100 + 7)  # only where the templates hold texture
+    assert len(m) > 0.8 * np.sum(points[:, 1] < 90)
+    np.testing.assert_allclose(offsets(m), np.broadcast_to((2.0, 1.0), (len(m), 2)), atol=0.01)
+    # with any threshold the noise points match, with low scores only
+    low = match_ncc(left, right, points, min_score=-1.0)
+    noise = low.left_sample > 215
+    assert noise.sum() > 0
+    assert np.all(low.score[noise] < 0.6)
+    assert not np.any((low.left_sample > 107) & (low.left_sample < 193))  # uniform: never
+
+
+def test_points_with_windows_off_the_image_nan_or_peak_on_border_are_dropped():
+    left = texture((200, 200), 5)
+    right = np.roll(left, (3, -2), axis=(0, 1))
+    points = np.array([[100.5, 100.5], [5.5, 100.5], [100.5, 195.2], [60.5, 60.5], [140.5, 140.5]])
+    right_nan = right.copy()
+    right_nan[55:58, 50:52] = np.nan  # inside the search window of (60.5, 60.5)
+    m = match_ncc(left, right_nan, points, subpixel="lsm")
+    np.testing.assert_array_equal(m.left_line, [100.5, 140.5])
+    np.testing.assert_allclose(offsets(m), [[3, -2], [3, -2]], atol=0.01)
+    # the true offset beyond the search range: the peak is on the border -> dropped
+    far = np.roll(left, (14, 0), axis=(0, 1))
+    for search in (11, 13):  # the score rises towards the border: no match near it
+        beyond = match_ncc(left, far, points[[0, 4]], search=search)
+        assert not np.any(np.abs(offsets(beyond)[:, 0] - 14.0) <= 3.0)
+    assert len(match_ncc(left, far, points[[0, 4]], search=11, guess_offsets=(12.0, 0.0))) == 2
+    # the point's fraction of a pixel is kept
+    m = match_ncc(left, right, [[100.9, 100.1]], subpixel="lsm")
+    np.testing.assert_allclose([m.right_line[0], m.right_sample[0]], [103.9, 98.1], atol=0.01)
+
+
+def test_bidirectional_check_removes_wrong_matches_on_a_repeated_pattern():
+    """A 9-pixel periodic pattern with 7 % unique texture and noise: forward matching often
+    picks a neighbouring period; the left-right check removes most of those."""
+    rng = np.random.default_rng(4)
+    size = 400
+    tile = ndimage.gaussian_filter(rng.normal(size=(9, 9)), 1.0, mode="wrap")
+    periodic = np.tile(tile, (size // 9 + 2, size // 9 + 2))
+    unique = ndimage.gaussian_filter(rng.normal(size=periodic.shape), 1.0)
+    base = 0.93 * periodic / periodic.std() + 0.07 * unique / unique.std()
+    true = np.array([2.0, 3.0])
+    left = base[9 : 9 + size, 9 : 9 + size] + rng.normal(0, 0.15, (size, size))
+    right = base[7 : 7 + size, 6 : 6 + size] + rng.normal(0, 0.15, (size, size))
+    points = grid_points(left.shape, 8, 30)
+    forward = match_ncc(left, right, points)
+    both = match_bidirectional(left, right, points)
+    wrong_f = np.hypot(*(offsets(forward) - true).T) > 1.0
+    wrong_b = np.hypot(*(offsets(both) - true).T) > 1.0
+    assert wrong_f.sum() > 100  # measured 206 of 1699
+    assert wrong_b.sum() < 0.35 * wrong_f.sum()  # measured 52 of 1258
+    assert wrong_b.mean() < 0.5 * wrong_f.mean()
+    assert np.sum(~wrong_b) > 0.7 * np.sum(~wrong_f)  # most right matches survive
+
+
+# ----------------------------------------------------------------------------- large offsets
+def test_global_shift_recovers_integer_plus_fraction_shifts():
+    big = texture((1024, 1024), 3, wrap=True)
+    for shift in ((37.4, -58.7), (-91.25, 12.6), (3.5, 0.2), (0.0, 0.0)):
+        moved = fourier_shifted(big, shift)
+        d_line, d_sample, score = global_shift(big[200:600, 250:650], moved[200:600, 250:650])
+        assert abs(d_line - shift[0]) < 0.05, shift
+        assert abs(d_sample - shift[1]) < 0.05, shift
+        assert score > 0.3
+    d_line, d_sample, score = global_shift(texture((300, 300), 8), texture((300, 300), 9))
+    assert score < 0.1  # unrelated images
+
+
+def test_guesses_and_pyramid_reach_large_offsets():
+    shift = (37.4, -58.7)
+    big = texture((1024, 1024), 6, wrap=True)
+    left = big[200:700, 200:700]
+    right = fourier_shifted(big, shift)[200:700, 200:700]
+    points = grid_points(left.shape, 25, 20)
+    unguided = match_ncc(left, right, points)  # out of reach: no right match
+    assert not np.any(np.hypot(*(offsets(unguided) - shift).T) < 1.0)
+    guided = match_ncc(left, right, points, guess_offsets=(37.0, -59.0), subpixel="lsm")
+    assert len(guided) > 0.6 * len(points)
+    np.testing.assert_allclose(offsets(guided), np.broadcast_to(shift, (len(guided), 2)), atol=0.1)
+    # four levels reach 11 * (1 + 2 + 4 + 8) = 165 px without a guess
+    pyr = pyramid_match(left, right, points, levels=4, subpixel="lsm")
+    assert len(pyr) > 0.6 * len(points)
+    np.testing.assert_allclose(offsets(pyr), np.broadcast_to(shift, (len(pyr), 2)), atol=0.1)
+
+
+def test_grid_points_are_pixel_centres_inside_the_margin():
+    points = grid_points((100, 60), 10, 8)
+    assert np.all(points % 1 == 0.5)
+    assert points.min() >= 8
+    assert points[:, 0].max() <= 100 - 8
+    assert points[:, 1].max() <= 60 - 8
+    assert len(np.unique(np.diff(np.unique(points[:, 0])))) == 1
+    assert grid_points((10, 10), 5, 6).shape == (0, 2)
+
+
+def test_ncc_matcher_component_recovers_a_shift():
+    matcher = NCCMatcher()
+    assert isinstance(matcher, Matcher)
+    assert matcher.name == "ncc"
+    assert matcher.description
+    big = texture((800, 800), 7, wrap=True)
+    left = big[100:500, 100:500]
+    right = fourier_shifted(big, (-23.3, 61.8))[100:500, 100:500]
+    m = matcher.match(left, right)
+    assert isinstance(m, Matches)
+    assert len(m) > 50
+    np.testing.assert_allclose(offsets(m), np.broadcast_to((-23.3, 61.8), (len(m), 2)), atol=0.05)
+    assert len(matcher.match(left, texture((400, 400), 99))) < 5  # unrelated images
+
+
+# ----------------------------------------------------------------------------- real images
+@pytest.fixture(scope="module")
+def plains_pair(tmp_path_factory) -> Scene:
+    """A single-array (unstaggered) Cartosat-1 pair over plains, realistic product errors."""
+    out: Path = tmp_path_factory.mktemp("match_plains")
+    opts = SimulationOptions(seed=7, size=(400, 400), terrain="plains", n_gcps=0, n_checkpoints=0)
+    plan = get_registry().get("scene-preset", "cartosat1-pair").plan(opts)
+    segment = plan.segments[0]
+    views = tuple(
+        attrs.evolve(v, camera=attrs.evolve(v.camera, stagger_m=0.0)) for v in segment.views
+    )
+    plan = attrs.evolve(plan, segments=(attrs.evolve(segment, views=views),))
+    simulate_scene(plan, out, opts, quiet=True)
+    return Scene.open(out)
+
+
+def test_system_level_orthos_of_a_cartosat1_pair_match_with_the_expected_shift(plains_pair):
+    """Orthos of Fore and Aft made with the product models (realistic errors) on the initial
+    DEM are shifted against each other by tens of pixels; for each matched Fore ortho pixel,
+    the true models and the true DEM say where its ground point is in the Aft ortho."""
+    scene = plains_pair
+    product, true = scene.sensors(), scene.truth_sensors()
+    init = DEM.open(scene.path("init_dem.tif"))
+    truth_dem = DEM.open(scene.path("truth/dem.tif"))
+    grid = OrthoGrid.covering(list(product.values()), init, 2.5)
+    orthos = {}
+    for name in ("fore", "aft"):
+        with rasterio.open(scene.raster(name)) as ds:
+            raw = ds.read(1)
+        orthos[name] = orthorectify(raw, product[name], grid, init)
+    m = NCCMatcher(spacing=16).match(orthos["fore"], orthos["aft"])
+    assert len(m) > 200
+    # expected position: Fore ortho pixel -> Fore raw (product, init DEM) -> true ground (true
+    # model, true DEM) -> Aft raw (true model) -> Aft ortho (product, init DEM)
+    to_ll = pyproj.Transformer.from_crs(grid.crs, "EPSG:4326", always_xy=True)
+    to_map = pyproj.Transformer.from_crs("EPSG:4326", grid.crs, always_xy=True)
+    lon, lat = to_ll.transform(*grid.xy(m.left_line - 0.5, m.left_sample - 0.5))
+    line, sample = product["fore"].ground_to_image(lon, lat, init.height(lon, lat))
+    g_lon, g_lat, g_h = true["fore"].locate_on_dem(line, sample, truth_dem)
+    line, sample = true["aft"].ground_to_image(g_lon, g_lat, g_h)
+    a_lon, a_lat, _ = product["aft"].locate_on_dem(line, sample, init)
+    x, y = to_map.transform(a_lon, a_lat)
+    inv = ~grid.transform
+    expected = np.stack([inv.e * y + inv.f, inv.a * x + inv.c], axis=1)
+    shift = np.nanmedian(expected - np.stack([m.left_line, m.left_sample], axis=1), axis=0)
+    assert np.hypot(*shift) > 20  # the system-level orthos are far apart
+    err = np.hypot(*(np.stack([m.right_line, m.right_sample], axis=1) - expected).T)
+    err = err[np.isfinite(err)]
+    assert err.size > 0.9 * len(m)
+    assert np.median(err) < 0.12  # measured 0.08 px
+    assert np.percentile(err, 90) < 0.4  # measured 0.29 px
+    d_line, d_sample, _ = global_shift(orthos["fore"], orthos["aft"])
+    assert np.hypot(d_line - shift[0], d_sample - shift[1]) < 0.5
+
+
+# ----------------------------------------------------------------------------- errors
+def test_bad_inputs_raise_input_error():
+    image = texture((100, 100), 1)
+    points = grid_points(image.shape, 20, 20)
+    cases = [
+        lambda: match_ncc(image, image, points, template=14),
+        lambda: match_ncc(image, image, points, template=1),
+        lambda: match_ncc(image, image, points, search=0),
+        lambda: match_ncc(image, image, points, subpixel="gaussian"),
+        lambda: match_ncc(image, image, points, min_score=1.5),
+        lambda: match_ncc(image, image, np.zeros((4, 3))),
+        lambda: match_ncc(image, image, points, guess_offsets=np.zeros((3, 2))),
+        lambda: match_ncc(image[None], image, points),
+        lambda: match_ncc(image.astype(complex), image, points),
+        lambda: match_bidirectional(image, image, points, tolerance=0.0),
+        lambda: pyramid_match(image, image, points, levels=0),
+        lambda: global_shift(image[:4], image),
+        lambda: grid_points((100, 100), 0.5),
+        lambda: NCCMatcher(template=4),
+    ]
+    for case in cases:
+        with pytest.raises(InputError) as info:
+            case()
+        assert "\n" not in str(info.value)

@@ -1,0 +1,74 @@
+"""``carto adjust`` on a simulated Cartosat-1 pair: automatic tie points, one GCP, outputs."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+from rasterio.transform import RPCTransformer
+
+from carto.framework.linescan import LineScanner
+from carto.framework.rpc import read_rpc
+
+
+def test_adjust_a_scene_with_one_gcp_and_automatic_tie_points(run_carto, tmp_path, cartosat1_scene):
+    out = tmp_path / "adj"
+    res = run_carto(
+        ["adjust", str(cartosat1_scene), "--gcps", "1", "--out", str(out), "--quiet"],
+        with_test_plugins=False,
+    )
+    assert res.returncode == 0, res.stderr
+    report = json.loads((out / "report.json").read_text())
+    for key in ("gcps_used", "tie_points", "sigma0", "outliers", "checkpoints"):
+        assert key in report
+    assert report["gcps_used"] == 1
+    assert report["tie_points"] >= 30
+    cp = report["checkpoints"]
+    assert {
+        "count",
+        "rmse_along_m",
+        "rmse_across_m",
+        "rmse_planimetric_m",
+        "rmse_height_m",
+        "predicted_sigma_planimetric_m",
+    } <= set(cp)
+    assert cp["rmse_planimetric_m"] < 3.0
+    assert cp["rmse_height_m"] < 4.0
+    assert report["checkpoints_before"]["rmse_planimetric_m"] > 50.0
+    assert (out / "residuals.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # the adjusted model re-opens, and the corrected RPC agrees with it when GDAL reads it
+    fore = LineScanner.load(out / "fore.model.json")
+    rpc = read_rpc(out / "fore_RPC.TXT")
+    lon, lat = fore.image_to_ground(
+        np.array([50.0, 200.0, 350.0]), np.array([60.0, 200.0, 330.0]), 250.0
+    )
+    with RPCTransformer(rpc.to_rasterio()) as tr:
+        row, col = tr.rowcol(lon, lat, np.full(3, 250.0), op=lambda x: x)
+    np.testing.assert_allclose(row, [50.0, 200.0, 350.0], atol=0.02)
+    np.testing.assert_allclose(col, [60.0, 200.0, 330.0], atol=0.02)
+
+
+def test_adjust_errors_are_one_line(run_carto, tmp_path, cartosat1_scene):
+    res = run_carto(
+        ["adjust", str(cartosat1_scene), "--gcps", "9", "--out", str(tmp_path / "x"), "--quiet"],
+        with_test_plugins=False,
+    )
+    assert res.returncode == 1
+    assert "the product has only 1 GCPs" in res.stderr
+    res = run_carto(
+        [
+            "adjust",
+            str(cartosat1_scene),
+            "--adjuster",
+            "nope",
+            "--ties",
+            "none",
+            "--out",
+            str(tmp_path / "y"),
+            "--quiet",
+        ],
+        with_test_plugins=False,
+    )
+    assert res.returncode == 1
+    assert "unknown adjuster 'nope'" in res.stderr
+    assert "Traceback" not in res.stderr
