@@ -67,6 +67,29 @@ def run_demo(
     t1 = time.perf_counter()
     system = checkpoint_accuracy(scene.sensors(), checkpoints)
     rows.append(_row("system level (ancillary only)", 0, system, time.perf_counter() - t1))
+    if "cartosat1-combined" in registry.names("adjuster"):
+        from carto.framework.workflow import adjust_product
+
+        ties = None
+        for label, mode in (
+            ("stagger + tied adjustment, 1 GCP", "combined"),
+            ("separate cameras, 1 GCP", "separate"),
+        ):
+            t1 = time.perf_counter()
+            rep = adjust_product(
+                manifest.parent,
+                out / f"adjust-{mode}",
+                n_gcps=1,
+                adjuster="cartosat1-combined",
+                ties=ties or "auto",
+                options={"mode": mode},
+                quiet=quiet,
+            )
+            ties = str(out / f"adjust-{mode}" / "tie_points.csv")
+            row = _row(label, rep["gcps_used"], rep["checkpoints"], time.perf_counter() - t1)
+            row["tie_points"] = rep["tie_points"]
+            row["sigma0"] = rep["sigma0"]
+            rows.append(row)
     m = scene.manifest
     title = (
         f"Carto demo: {m['platform']} stereo pair (simulated, {m['terrain']} terrain, "

@@ -128,6 +128,16 @@ def _lonlat_transformer(crs_wkt: str) -> Any:
     )
 
 
+@functools.lru_cache(maxsize=16)
+def _dem_transformer(crs_wkt: str) -> Any:
+    """``EPSG:4326 -> crs`` in lon/lat order (a DEM's CRS), cached per CRS."""
+    import pyproj
+
+    return pyproj.Transformer.from_crs(
+        pyproj.CRS.from_epsg(4326), pyproj.CRS.from_wkt(crs_wkt), always_xy=True
+    )
+
+
 def _project(
     sensor: Sensor, lon: FloatArray, lat: FloatArray, h: FloatArray
 ) -> tuple[FloatArray, FloatArray]:
@@ -383,14 +393,87 @@ def _cells(nodes: IntArray, positions: IntArray) -> tuple[IntArray, FloatArray]:
     return i, (positions - nodes[i]) / span
 
 
-def _bilerp(
-    values: FloatArray, ir: IntArray, fr: FloatArray, ic: IntArray, fc: FloatArray
-) -> FloatArray:
-    """Bilinear interpolation of node values ``(n_r, n_c)`` at pixels (separable)."""
-    ic1 = np.minimum(ic + 1, values.shape[1] - 1)
-    ir1 = np.minimum(ir + 1, values.shape[0] - 1)
-    cols = values[:, ic] * (1.0 - fc) + values[:, ic1] * fc
-    return cols[ir] * (1.0 - fr)[:, None] + cols[ir1] * fr[:, None]
+@functools.cache
+def _evaluate_kernel() -> Any:
+    """The compiled per-pixel evaluation (numba is imported on first use only)."""
+    import numba
+
+    @numba.njit(parallel=True, cache=True, nogil=True)
+    def evaluate(coeffs, dem_rc, ir, fr, ic, fc, heights, h_ref, line, sample):  # pragma: no cover
+        """Bilinear interpolation of the node coefficients and DEM coordinates at each pixel,
+        the DEM height there (bilinear, NaN outside the span of its pixel centres or next to
+        nodata, as :meth:`DEM.height`), and the polynomials in ``h - h_ref`` evaluated."""
+        n_r, n_c = coeffs.shape[2], coeffs.shape[3]
+        h_rows, h_cols = heights.shape
+        tol = 1e-9
+        for a in numba.prange(ir.shape[0]):
+            i0 = ir[a]
+            i1 = min(i0 + 1, n_r - 1)
+            wr = fr[a]
+            for b in range(ic.shape[0]):
+                j0 = ic[b]
+                j1 = min(j0 + 1, n_c - 1)
+                wc = fc[b]
+                w00 = (1.0 - wr) * (1.0 - wc)
+                w01 = (1.0 - wr) * wc
+                w10 = wr * (1.0 - wc)
+                w11 = wr * wc
+                row = (
+                    w00 * dem_rc[0, i0, j0]
+                    + w01 * dem_rc[0, i0, j1]
+                    + w10 * dem_rc[0, i1, j0]
+                    + w11 * dem_rc[0, i1, j1]
+                )
+                col = (
+                    w00 * dem_rc[1, i0, j0]
+                    + w01 * dem_rc[1, i0, j1]
+                    + w10 * dem_rc[1, i1, j0]
+                    + w11 * dem_rc[1, i1, j1]
+                )
+                if not (
+                    row >= -tol
+                    and row <= h_rows - 1 + tol
+                    and col >= -tol
+                    and col <= h_cols - 1 + tol
+                ):
+                    line[a, b] = np.nan
+                    sample[a, b] = np.nan
+                    continue
+                r0 = min(max(math.floor(row), 0), max(h_rows - 2, 0))
+                c0 = min(max(math.floor(col), 0), max(h_cols - 2, 0))
+                tr = min(max(row - r0, 0.0), 1.0)
+                tc = min(max(col - c0, 0.0), 1.0)
+                r1 = r0 + 1 if h_rows > 1 else r0
+                c1 = c0 + 1 if h_cols > 1 else c0
+                top = heights[r0, c0] * (1.0 - tc) + heights[r0, c1] * tc
+                bottom = heights[r1, c0] * (1.0 - tc) + heights[r1, c1] * tc
+                u = top * (1.0 - tr) + bottom * tr - h_ref
+                for k in range(2):
+                    p0 = (
+                        w00 * coeffs[k, 0, i0, j0]
+                        + w01 * coeffs[k, 0, i0, j1]
+                        + w10 * coeffs[k, 0, i1, j0]
+                        + w11 * coeffs[k, 0, i1, j1]
+                    )
+                    p1 = (
+                        w00 * coeffs[k, 1, i0, j0]
+                        + w01 * coeffs[k, 1, i0, j1]
+                        + w10 * coeffs[k, 1, i1, j0]
+                        + w11 * coeffs[k, 1, i1, j1]
+                    )
+                    p2 = (
+                        w00 * coeffs[k, 2, i0, j0]
+                        + w01 * coeffs[k, 2, i0, j1]
+                        + w10 * coeffs[k, 2, i1, j0]
+                        + w11 * coeffs[k, 2, i1, j1]
+                    )
+                    value = p0 + u * (p1 + u * p2)
+                    if k == 0:
+                        line[a, b] = value
+                    else:
+                        sample[a, b] = value
+
+    return evaluate
 
 
 def _cell_any(flags: NDArray[np.bool_]) -> NDArray[np.bool_]:
@@ -451,6 +534,7 @@ class OrthoMapper:
         self._to_lonlat = _lonlat_transformer(grid.crs.to_wkt())
         self._n_lines, self._n_samples = sensor.image_shape
         self._box: tuple[float, float, float, float] | None = None
+        self._heights = np.ascontiguousarray(dem.heights, dtype=np.float64)
 
     # ------------------------------------------------------------------ public
     def map(
@@ -528,16 +612,20 @@ class OrthoMapper:
         return self._box
 
     def _nodes(
-        self, rows: IntArray, cols: IntArray
-    ) -> tuple[FloatArray, FloatArray, FloatArray, float]:
-        """Polynomial coefficients in ``u = h - h_ref`` at the nodes ``(2, 3, n_r, n_c)``
-        (line/sample; order 0, 1, 2), node lon and lat, and ``h_ref``."""
-        rr, cc = np.meshgrid(rows, cols, indexing="ij")
-        x, y = self.grid.xy(rr, cc)
-        lon, lat = self._to_lonlat.transform(x, y)
-        lon, lat = np.asarray(lon, np.float64), np.asarray(lat, np.float64)
-        lon = lon.flat[0] + (np.mod(lon - lon.flat[0] + 180.0, 360.0) - 180.0)
+        self, rows: IntArray, cols: IntArray, check_rows: IntArray, check_cols: IntArray
+    ) -> tuple[FloatArray, FloatArray, float, FloatArray, FloatArray]:
+        """Everything computed exactly for a block, in one ``project`` call.
+
+        Returns:
+            polynomial coefficients in ``u = h - h_ref`` at the nodes ``(2, 3, n_r, n_c)``
+            (line/sample; order 0, 1, 2), the nodes' DEM pixel coordinates ``(2, n_r, n_c)``
+            (row, col centre indices), ``h_ref``, and the exact ``(line, sample)`` of the check
+            pixels ``check_rows x check_cols``.
+        """
+        lon, lat = self.grid.lonlat(rows[:, None], cols[None, :])
+        lon_c, lat_c = self.grid.lonlat(check_rows[:, None], check_cols[None, :])
         h0 = self.dem.height(lon, lat)
+        h_c = self.dem.height(lon_c, lat_c)
         valid = np.isfinite(h0)
         if valid.any():
             h_ref = float(np.mean(h0[valid]))
@@ -546,20 +634,46 @@ class OrthoMapper:
             h_ref = 0.5 * (lo + hi)
         h0 = np.where(valid, h0, h_ref)
         shape = h0.shape
-        lon3 = np.concatenate([lon.ravel()] * 3)
-        lat3 = np.concatenate([lat.ravel()] * 3)
-        h3 = np.concatenate([(h0 - _DH_M).ravel(), h0.ravel(), (h0 + _DH_M).ravel()])
-        line3, sample3 = _project(self.sensor, lon3, lat3, h3)
+        n = h0.size
+        lines, samples = _project(
+            self.sensor,
+            np.concatenate([lon.ravel()] * 3 + [lon_c.ravel()]),
+            np.concatenate([lat.ravel()] * 3 + [lat_c.ravel()]),
+            np.concatenate([(h0 - _DH_M).ravel(), h0.ravel(), (h0 + _DH_M).ravel(), h_c.ravel()]),
+        )
         coeffs = np.empty((2, 3, *shape))
         d0 = h0 - h_ref
-        for k, values in enumerate((line3, sample3)):
-            lo_, mid, hi_ = (v.reshape(shape) for v in np.split(values, 3))
+        for k, values in enumerate((lines, samples)):
+            lo_, mid, hi_ = (values[m * n : (m + 1) * n].reshape(shape) for m in range(3))
             v1 = (hi_ - lo_) / (2.0 * _DH_M)
             v2 = (hi_ - 2.0 * mid + lo_) / _DH_M**2
             coeffs[k, 0] = mid - v1 * d0 + 0.5 * v2 * d0**2
             coeffs[k, 1] = v1 - v2 * d0
             coeffs[k, 2] = 0.5 * v2
-        return coeffs, lon, lat, h_ref
+        check_shape = lon_c.shape
+        return (
+            coeffs,
+            np.stack(self._dem_pixel(lon, lat)),
+            h_ref,
+            lines[3 * n :].reshape(check_shape),
+            samples[3 * n :].reshape(check_shape),
+        )
+
+    def _dem_pixel(self, lon: FloatArray, lat: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """DEM centre indices ``(row, col)`` (0 = first pixel centre) of WGS84 lon/lat, the
+        convention of :meth:`DEM.height` (longitudes wrapped into the DEM's 360 degrees)."""
+        dem = self.dem
+        x, y = _dem_transformer(dem.crs.to_wkt()).transform(lon, lat)
+        x, y = np.asarray(x, np.float64), np.asarray(y, np.float64)
+        t = dem.transform
+        if dem.crs.is_geographic:
+            n_rows, n_cols = dem.shape
+            start = t.c + 0.5 * (t.a * n_cols + t.b * n_rows) - 180.0 - 1e-12
+            x = start + np.mod(x - start, 360.0)
+        inv = ~t
+        col = inv.a * x + inv.b * y + inv.c - 0.5
+        row = inv.d * x + inv.e * y + inv.f - 0.5
+        return row, col
 
     def _block(
         self, r0: int, r1: int, c0: int, c1: int, step: int
@@ -567,26 +681,15 @@ class OrthoMapper:
         n_rows, n_cols = self.grid.shape
         node_r = _node_positions(r0, r1, step, n_rows)
         node_c = _node_positions(c0, c1, step, n_cols)
-        coeffs, lon_n, lat_n, h_ref = self._nodes(node_r, node_c)
+        cr, cc = _cell_centres(node_r), _cell_centres(node_c)
+        coeffs, dem_rc, h_ref, exact_l, exact_s = self._nodes(node_r, node_c, cr, cc)
         ir, fr = _cells(node_r, np.arange(r0, r1))
         ic, fc = _cells(node_c, np.arange(c0, c1))
-        lon = _bilerp(lon_n, ir, fr, ic, fc)
-        lat = _bilerp(lat_n, ir, fr, ic, fc)
-        u = self.dem.height(lon, lat) - h_ref
-        del lon, lat
-        maps = []
-        for k in range(2):
-            value = _bilerp(coeffs[k, 2], ir, fr, ic, fc)
-            value *= u
-            value += _bilerp(coeffs[k, 1], ir, fr, ic, fc)
-            value *= u
-            value += _bilerp(coeffs[k, 0], ir, fr, ic, fc)
-            maps.append(value)
-        line, sample = maps
+        line = np.empty((r1 - r0, c1 - c0))
+        sample = np.empty((r1 - r0, c1 - c0))
+        _evaluate_kernel()(coeffs, dem_rc, ir, fr, ic, fc, self._heights, h_ref, line, sample)
 
         # check: exact mapping at the centre pixel of every cell
-        cr, cc = _cell_centres(node_r), _cell_centres(node_c)
-        exact_l, exact_s = self.exact(cr[:, None], cc[None, :])
         got_l = line[np.ix_(cr - r0, cc - c0)]
         got_s = sample[np.ix_(cr - r0, cc - c0)]
         error = np.hypot(got_l - exact_l, got_s - exact_s)
