@@ -207,6 +207,25 @@ def test_mapping_matches_exact_per_pixel_on_rough_terrain(mountains):
             assert mapper.stats.max_check_error_px < 0.01 or mapper.stats.cells_exact > 0
 
 
+def test_mapping_with_a_projected_dem_and_a_geographic_grid(hilly):
+    """Other CRSs: the DEM resampled on a UTM grid, the ortho on a lon/lat grid."""
+    truth_dem = DEM.open(hilly.path("truth/dem.tif"))
+    sensor = hilly.truth_sensors()["fore"]
+    utm = OrthoGrid.covering(sensor, truth_dem, 5.0)
+    rows, cols = np.mgrid[-20 : utm.shape[0] + 20, -20 : utm.shape[1] + 20]
+    heights = truth_dem.height(*utm.lonlat(rows, cols))
+    dem = DEM.from_array(heights, utm.transform @ Affine.translation(-20, -20), utm.crs)
+    for grid in (
+        OrthoGrid.covering(sensor, dem, 2.5),
+        OrthoGrid.covering(sensor, dem, 2.5e-5, crs="EPSG:4326"),
+    ):
+        ref_l, ref_s = exact_mapping(sensor, grid, dem)
+        line, sample = ortho_mapping(sensor, grid, dem)
+        both = np.isfinite(line) & np.isfinite(ref_l)
+        assert both.sum() > 0.5 * line.size
+        assert np.hypot(line - ref_l, sample - ref_s)[both].max() < 0.01
+
+
 def test_naive_interpolation_fails_where_the_dem_is_rough(mountains):
     """The reason for the height-aware scheme: image coordinates interpolated between exact
     nodes (each at its own DEM height) are off by far more than 0.01 px on this terrain."""

@@ -530,8 +530,11 @@ def match_bidirectional(
     """:func:`match_ncc` left -> right, then right -> left from the positions found.
 
     A match is kept when the backward match lands within ``tolerance`` pixels of the left
-    point it started from (a consistency check that removes most matches on repeated patterns
-    and occlusions). The score is the smaller of the two directions' scores.
+    point it started from: a consistency check that removes most wrong matches on nearly
+    repeated patterns and occlusions (on an exactly periodic pattern both directions pick a
+    period at random and a wrong pair survives as often as a right one). The backward pass uses
+    the parabola when ``subpixel`` is ``"lsm"`` (the check needs no more). The score is the
+    smaller of the two directions' scores. Other arguments as :func:`match_ncc`.
     """
     _check_options(template, search, subpixel, min_score)
     if not float(tolerance) > 0.0:
@@ -605,13 +608,20 @@ def pyramid_match(
     2 pixels of that level away, or unmatched, it is replaced by the median) and passed, scaled
     by two, as the guesses of the next level. The full-resolution level is matched with
     :func:`match_bidirectional` (or :func:`match_ncc` when ``bidirectional`` is False). The
-    search reach is about ``search * (2**levels - 1)`` pixels.
+    search reach is about ``search * (2**levels - 1)`` pixels around the guesses (77 px for the
+    defaults); give larger offsets as ``guess_offsets`` (e.g. from :func:`global_shift`). The
+    coarse levels use the parabola when ``subpixel`` is ``"lsm"`` (their offsets are only
+    guesses).
 
     Args:
         levels: number of pyramid levels including the full resolution (1 = no pyramid);
-            reduced where the images get smaller than a search window.
+            reduced where the images get smaller than two search windows.
         coarse_min_score: smallest score accepted at the coarse levels.
-        others: as :func:`match_ncc` and :func:`match_bidirectional`.
+        template, search, subpixel, min_score, guess_offsets: as :func:`match_ncc`.
+        bidirectional, tolerance: the left-right check of :func:`match_bidirectional`.
+
+    Returns:
+        the full-resolution matches, in the input order.
     """
     import cv2
 
@@ -780,7 +790,7 @@ class NCCMatcher(Matcher):
     name = "ncc"
     description = (
         "normalised cross-correlation on a grid: phase-correlation first guess, "
-        "3-level pyramid, sub-pixel parabola, left-right consistency check"
+        "3-level pyramid, least-squares sub-pixel refinement, left-right consistency check"
     )
 
     def __init__(
@@ -815,13 +825,14 @@ class NCCMatcher(Matcher):
     def match_points(self, left: NDArray, right: NDArray, points: ArrayLike) -> Matches:
         """Match given left points (``(N, 2)`` line, sample) like :meth:`match`."""
         guess = np.zeros(2)
-        if self.use_global_shift:
-            d_line, d_sample, response = global_shift(left, right)
+        left_img, right_img = _as_image(left, "left"), _as_image(right, "right")
+        if self.use_global_shift and min(*left_img.shape, *right_img.shape) >= 8:
+            d_line, d_sample, response = global_shift(left_img, right_img)
             if response >= self.min_response:
                 guess = np.array([d_line, d_sample])
         return pyramid_match(
-            left,
-            right,
+            left_img,
+            right_img,
             points,
             levels=self.levels,
             template=self.template,

@@ -19,10 +19,16 @@ Mapping method
     v2 (h - h0)^2 / 2`` (the image coordinates of a fixed ``(x, y)`` are very nearly linear in
     ``h``: the quadratic term is about ``1e-7 px/m^2`` for a 600 km orbit, the cubic one is
     below ``1e-4 px`` for a kilometre of relief). The polynomial coefficients are interpolated
-    bilinearly to every pixel and evaluated at the pixel's **own** DEM height (the DEM is
-    sampled at each pixel; the pixel's lon/lat are interpolated between the nodes, an error
-    below a micrometre). The coefficients vary as smoothly as the sensor geometry does, however
-    rough the terrain.
+    bilinearly to every pixel and evaluated at the pixel's **own** DEM height: the DEM is
+    sampled bilinearly at each pixel, at DEM pixel coordinates interpolated between the nodes
+    (the map projection is smooth: an error below a micrometre). The coefficients vary as
+    smoothly as the sensor geometry does, however rough the terrain. The per-pixel evaluation
+    is one compiled (numba) pass, parallel over rows.
+
+    Measured (``benchmarks/ortho_speed.py``, ``tests/framework/test_ortho.py``): 1e-5 px from
+    the exact per-pixel mapping at ``coarse_step=16`` (1.4e-4 px at 64) on 4000-6000 m
+    mountains with 35-45 degree slopes, where interpolating the image coordinates themselves
+    errs by more than half a pixel; a 4000 x 4000 image is orthorectified in about 1.4 s.
 
     The check: the exact mapping is computed at the centre pixel of **every** coarse cell (the
     point where bilinear interpolation is worst) and compared with the interpolated one. Cells

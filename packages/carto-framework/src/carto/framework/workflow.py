@@ -206,8 +206,13 @@ def adjust_product(
         tie_table = read_point_table(ties, numeric=("line", "sample"), text=("id", "image"))
     n_ties = len(set(tie_table["id"].tolist())) if tie_table is not None else 0
     obs = Observations.from_tables(gcps, tie_table)
-    if dem is not None and tie_table is not None and options.pop("tie_heights", True):
-        obs = _with_dem_heights(obs, sensors, dem, float(options.pop("height_sigma_m", 30.0)))
+    # a DEM height on every tie point fixes what tie points cannot (a shift along the stereo
+    # parallax looks like a height change); with GCPs it would only pull the block towards the
+    # coarse DEM's errors, so by default it is used only without GCPs
+    tie_heights = bool(options.pop("tie_heights", n_used == 0))
+    height_sigma_m = float(options.pop("height_sigma_m", 30.0))
+    if dem is not None and tie_table is not None and tie_heights:
+        obs = _with_dem_heights(obs, sensors, dem, height_sigma_m)
     name = adjuster or _default_adjuster(sensors, platform)
     component = get_registry().get("adjuster", name)
     _progress(
