@@ -49,7 +49,11 @@ def run_scene(work: Path, seed: int, terrain: str, size: tuple[int, int]) -> dic
     preset.simulate(
         scene_dir,
         SimulationOptions(
-            seed=seed, terrain=terrain, size=(int(size[0]), int(size[1])), n_gcps=3, n_checkpoints=50
+            seed=seed,
+            terrain=terrain,
+            size=(int(size[0]), int(size[1])),
+            n_gcps=3,
+            n_checkpoints=50,
         ),
         quiet=True,
     )
