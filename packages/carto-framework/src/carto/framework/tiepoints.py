@@ -133,7 +133,12 @@ def automatic_tie_points(
         d_line, d_sample, _ = global_shift(orthos[ref], orthos[name])
         guess = np.tile([d_line, d_sample], (points.shape[0], 1))
         matches = pyramid_match(
-            orthos[ref], orthos[name], points, guess_offsets=guess, min_score=min_score
+            orthos[ref],
+            orthos[name],
+            points,
+            guess_offsets=guess,
+            min_score=min_score,
+            subpixel="lsm",
         )
         found[name] = (
             np.stack([matches.left_line, matches.left_sample], -1),
