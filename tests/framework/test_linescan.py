@@ -246,3 +246,16 @@ def test_a_window_is_the_full_image_shifted(cartosat1_pair, tmp_path):
     assert again.first_line == 4000
     with pytest.raises(InputError, match="first_sample 12000 is outside"):
         LineScanner("x", 10, crop_timing, full.camera, full.trajectory, first_sample=12000)
+
+
+def test_polynomial_partials_match_numeric_differences(cartosat1_pair):
+    from carto.framework.sensor import Sensor
+
+    s = cartosat1_pair["fore"]
+    s = s.with_trajectory(s.trajectory.with_correction_orders(attitude=2, position=1))
+    lon, lat = s.image_to_ground([100.0, 6000.0, 11000.0], [300.0, 6000.0, 9000.0], 400.0)
+    names = [p.name for p in s.parameters if p.free]
+    fast = s.parameter_partials(lon, lat, 400.0, names)
+    slow = Sensor.parameter_partials(s, lon, lat, 400.0, names)  # all numeric
+    # the all-numeric reference is the less precise one for tiny tau^2 steps
+    np.testing.assert_allclose(fast, slow, rtol=1e-3, atol=0.05)

@@ -8,11 +8,25 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+from carto.cartosat2.adjust import Cartosat2BlockAdjuster
 from carto.cartosat2.presets import PaintbrushPreset, TripletPreset
+from carto.cartosat2.sensor import Cartosat2SensorType
 from carto.framework import hookimpl
+from carto.framework.adjust import Adjuster
 from carto.framework.scene import ScenePreset
+from carto.framework.sensor import SensorType
 
 
 @hookimpl
 def carto_scene_presets() -> Sequence[ScenePreset]:
     return [TripletPreset(), PaintbrushPreset()]
+
+
+@hookimpl
+def carto_sensor_types() -> Sequence[SensorType]:
+    return [Cartosat2SensorType()]
+
+
+@hookimpl
+def carto_adjusters() -> Sequence[Adjuster]:
+    return [Cartosat2BlockAdjuster()]

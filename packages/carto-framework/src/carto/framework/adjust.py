@@ -481,20 +481,23 @@ def _solve(
             pi = obs_point[rows]
             line, sample, _ = sensor.project(lon[pi], lat[pi], h[pi])
             r = np.stack([obs.line[rows] - line, obs.sample[rows] - sample], -1)
-            ok = np.all(np.isfinite(r), axis=1)
-            v_img[rows] = r
             own = [n for n in names if n in {p.name for p in sensor.parameters}]
             wsig = np.sqrt(w_img[rows]) / obs.sigma_px[rows]
             a_p = sensor.ground_partials(lon[pi], lat[pi], h[pi]) * wsig[:, None, None]
+            if own:
+                a_c = sensor.parameter_partials(lon[pi], lat[pi], h[pi], own)
+            # rows whose projection or derivatives fail (far outside the model) sit out
+            ok = np.all(np.isfinite(r), axis=1) & np.all(np.isfinite(a_p), axis=(1, 2))
+            if own:
+                ok &= np.all(np.isfinite(a_c), axis=(1, 2))
+            v_img[rows] = np.where(ok[:, None], r, np.nan)
+            a_p = np.where(ok[:, None, None], a_p, 0.0)
             rw = np.where(ok[:, None], r, 0.0) * wsig[:, None]
-            a_p[~ok] = 0.0
             np.add.at(n_pp, pi, np.einsum("nki,nkj->nij", a_p, a_p))
             np.add.at(b_p, pi, np.einsum("nki,nk->ni", a_p, rw))
             if own:
                 idx = np.array([par_index[n] for n in own], dtype=np.intp)
-                a_c = sensor.parameter_partials(lon[pi], lat[pi], h[pi], own)
-                a_c = a_c * wsig[:, None, None]
-                a_c[~ok] = 0.0
+                a_c = np.where(ok[:, None, None], a_c * wsig[:, None, None], 0.0)
                 n_cc[np.ix_(idx, idx)] += np.einsum("nki,nkj->ij", a_c, a_c)
                 b_c[idx] += np.einsum("nki,nk->i", a_c, rw)
                 contrib = np.einsum("nki,nkj->nij", a_c, a_p)  # (n, Pi, 3)

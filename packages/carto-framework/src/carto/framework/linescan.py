@@ -53,6 +53,9 @@ MODEL_VERSION = 1
 LINE_TOLERANCE = 1e-8
 MAX_ITERATIONS = 25
 HEIGHT_TOLERANCE_M = 1e-6
+TABLE_MARGIN_LINES = 3000
+"""Ground -> image works this many lines (or half an image) beyond the image's ends: room for
+the orientation errors an adjustment starts from; farther points come back NaN."""
 EDGE_TOLERANCE_PX = 1e-6
 """Points this close outside the image border still count as inside (rounding of round trips)."""
 
@@ -171,8 +174,7 @@ class _FirstGuess:
         return _eval_guess(lon, lat, h, self.offset, self.scale, self.coeffs)
 
 
-@numba.njit(parallel=True, cache=True, nogil=True)
-def _eval_guess(
+def _eval_guess_py(
     lon: FloatArray,
     lat: FloatArray,
     h: FloatArray,
@@ -230,8 +232,9 @@ class _LineTable:
     def build(self, sensor: LineScanner) -> None:
         n = max(int(sensor.n_lines), 1)
         timing = sensor.timing
-        t_lo = float(timing.time(-0.5 * n))
-        t_hi = float(timing.time(1.5 * n))
+        margin = max(0.5 * n, TABLE_MARGIN_LINES)
+        t_lo = float(timing.time(-margin))
+        t_hi = float(timing.time(n + margin))
         periods = np.diff(np.asarray(timing.dt_nodes_s)) / np.diff(np.asarray(timing.line_nodes))
         self.spacing = float(2.0 * periods.min())
         self.tolerance_s = LINE_TOLERANCE * float(periods.min())
@@ -325,8 +328,7 @@ def _focal_offset(
     return v[0] / v[2] - target
 
 
-@numba.njit(parallel=True, cache=True, nogil=True)
-def _solve_lines(
+def _solve_lines_py(
     x: FloatArray,
     guess: FloatArray,
     node0: float,
@@ -374,6 +376,31 @@ def _solve_lines(
                 out_line[i] = l1
                 out_sample[i] = _sample_from_tan_y(tan_y, v[1] / v[2], half)
     return out_line, out_sample
+
+
+PARALLEL_MIN_POINTS = 20_000
+"""Below this many points the compiled kernels run on one thread (no thread start-up cost)."""
+_eval_guess_parallel = numba.njit(parallel=True, cache=True, nogil=True)(_eval_guess_py)
+_eval_guess_serial = numba.njit(cache=True, nogil=True)(_eval_guess_py)
+_solve_lines_parallel = numba.njit(parallel=True, cache=True, nogil=True)(_solve_lines_py)
+_solve_lines_serial = numba.njit(cache=True, nogil=True)(_solve_lines_py)
+
+
+def _eval_guess(
+    lon: FloatArray,
+    lat: FloatArray,
+    h: FloatArray,
+    offset: FloatArray,
+    scale: FloatArray,
+    c: FloatArray,
+) -> FloatArray:
+    fn = _eval_guess_parallel if lon.shape[0] >= PARALLEL_MIN_POINTS else _eval_guess_serial
+    return fn(lon, lat, h, offset, scale, c)
+
+
+def _solve_lines(x: FloatArray, *args: Any) -> tuple[FloatArray, FloatArray]:
+    fn = _solve_lines_parallel if x.shape[0] >= PARALLEL_MIN_POINTS else _solve_lines_serial
+    return fn(x, *args)
 
 
 @attrs.frozen(eq=False)
@@ -459,6 +486,48 @@ class LineScanner(Sensor):
             part(values, known_c), part(free, known_c), part(sigmas, known_c)
         )
         return attrs.evolve(self, trajectory=trajectory, camera=camera)
+
+    def parameter_partials(
+        self,
+        lon_deg: ArrayLike,
+        lat_deg: ArrayLike,
+        h_m: ArrayLike,
+        names: Sequence[str] | None = None,
+    ) -> FloatArray:
+        """Partials of ``(line, sample)`` w.r.t. parameters, ``(N, 2, P)``.
+
+        A correction polynomial's coefficient ``c_k`` moves the image point like ``c_0`` times
+        ``tau^k`` at the point's imaging time (the angle or offset added at that time is
+        ``sum_k c_k tau^k``), so only the ``c_0`` derivatives are taken numerically (central
+        differences, as the base class) and the others follow; camera parameters are
+        differentiated numerically.
+        """
+        lon, lat, h = (a.ravel() for a in as_float_arrays(lon_deg, lat_deg, h_m))
+        if names is None:
+            names = [p.name for p in self.parameters if p.free]
+        prefix = self.trajectory.prefix
+        base: dict[str, str] = {}
+        for name in names:
+            rest = name[len(prefix) :] if name.startswith(prefix) else ""
+            group, _, power = rest.rpartition(".c")
+            if rest and power.isdigit() and group.split(".")[0] in ("attitude", "position"):
+                base[name] = f"{prefix}{group}.c0"
+        numeric = list(dict.fromkeys([base.get(n, n) for n in names]))
+        d = super().parameter_partials(lon, lat, h, numeric)
+        col = {n: i for i, n in enumerate(numeric)}
+        out = np.empty((lon.size, 2, len(names)))
+        tau = None
+        for k, name in enumerate(names):
+            if name in base and name != base[name]:
+                if tau is None:
+                    line, _, _ = self.project(lon, lat, h)
+                    t = self.timing.time(line)
+                    tau = (t - self.trajectory.t_mid_s) / self.trajectory.t_half_s
+                power = int(name.rpartition(".c")[2])
+                out[:, :, k] = d[:, :, col[base[name]]] * (tau**power)[:, None]
+            else:
+                out[:, :, k] = d[:, :, col[name]]
+        return out
 
     def with_trajectory(self, trajectory: Trajectory) -> LineScanner:
         """The same image seen from another (e.g. adjusted, shared) trajectory."""

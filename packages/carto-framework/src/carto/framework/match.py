@@ -776,6 +776,439 @@ def grid_points(shape: tuple[int, int], spacing: float, margin: float = 0.0) -> 
     return np.stack([grid_l.ravel(), grid_s.ravel()], axis=1)
 
 
+# ----------------------------------------------------------------------------- interest points
+FORSTNER_SUBPIXEL = ("lsq", "parabola", "none")
+"""Sub-pixel estimators of :func:`forstner_points`."""
+
+_TRACE_EPS = 1e-12  # traces below this fraction of the largest count as no gradient
+_GOLDEN = 0.6180339887498949  # tie-breaking sequence of the non-maximum suppression
+
+
+@attrs.frozen(eq=False)
+class _StructureTensor:
+    """Gradient products per pixel (``g_r^2``, ``g_r g_c``, ``g_c^2``, rows / columns), their
+    means over the integration window, and where the window's gradients are all defined."""
+
+    grr: NDArray[np.float64]
+    grc: NDArray[np.float64]
+    gcc: NDArray[np.float64]
+    nrr: NDArray[np.float64]
+    nrc: NDArray[np.float64]
+    ncc: NDArray[np.float64]
+    valid: NDArray[np.bool_]
+
+
+def _check_window(window: Any) -> int:
+    if _check_int(window, "window", 3) % 2 == 0:
+        raise InputError(f"window must be odd (a centred box), got {window}")
+    return int(window)
+
+
+def _structure_tensor(image: NDArray[np.float32], window: int) -> _StructureTensor:
+    """Scharr gradients and their products averaged over a ``window x window`` box.
+
+    NaN pixels are filled with the mean before the gradients; every pixel whose window holds a
+    gradient that touches NaN (or the image border) is marked invalid.
+    """
+    import cv2
+
+    nan = np.isnan(image)
+    filled = image
+    if nan.any():
+        fill = float(np.mean(image[~nan])) if (~nan).any() else 0.0
+        filled = np.where(nan, np.float32(fill), image)
+    # Scharr 3 x 3 derivatives, normalised to grey values per pixel
+    g_r = cv2.Scharr(filled, cv2.CV_64F, 0, 1) / 32.0
+    g_c = cv2.Scharr(filled, cv2.CV_64F, 1, 0) / 32.0
+    grr, grc, gcc = g_r * g_r, g_r * g_c, g_c * g_c
+    size = (window, window)
+    nrr = cv2.boxFilter(grr, cv2.CV_64F, size, borderType=cv2.BORDER_REFLECT)
+    nrc = cv2.boxFilter(grc, cv2.CV_64F, size, borderType=cv2.BORDER_REFLECT)
+    ncc = cv2.boxFilter(gcc, cv2.CV_64F, size, borderType=cv2.BORDER_REFLECT)
+    reach = window // 2 + 1  # the window's half-width plus the gradient stencil's
+    invalid = np.zeros(image.shape, bool)
+    if nan.any():
+        kernel = np.ones((2 * reach + 1, 2 * reach + 1), np.uint8)
+        invalid = cv2.dilate(nan.view(np.uint8), kernel).astype(bool)
+    invalid[:reach] = invalid[-reach:] = True
+    invalid[:, :reach] = invalid[:, -reach:] = True
+    return _StructureTensor(grr, grc, gcc, nrr, nrc, ncc, ~invalid)
+
+
+def _weight_roundness(
+    t: _StructureTensor,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """``w = det N / trace N`` and ``q = 4 det N / trace N^2`` (0 where there is no gradient
+    or the window is invalid)."""
+    det = t.nrr * t.ncc - t.nrc * t.nrc
+    trace = t.nrr + t.ncc
+    top = float(trace[t.valid].max()) if t.valid.any() else 0.0
+    ok = t.valid & (trace > _TRACE_EPS * top) & (trace > 0.0)
+    safe = np.where(ok, trace, 1.0)
+    w = np.where(ok, np.maximum(det, 0.0) / safe, 0.0)
+    q = np.where(ok, np.clip(4.0 * det / (safe * safe), 0.0, 1.0), 0.0)
+    return w, q
+
+
+def forstner_measures(
+    image: ArrayLike, *, window: int = 5
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The Forstner interest measures of every pixel: weight ``w`` and roundness ``q``.
+
+    The structure tensor ``N = mean over a window x window box of g g^T`` (``g`` the Scharr
+    gradient, grey values per pixel) has eigenvalues ``l1 >= l2 >= 0``; ``N^-1`` is the
+    covariance of a point located by least squares in that window. So
+
+    * ``w = det N / trace N = l1 l2 / (l1 + l2)`` (grey values^2 per pixel^2): the precision of
+      that point, large where the window holds strong gradients in two directions;
+    * ``q = 4 det N / trace N^2 = 1 - ((l1 - l2) / (l1 + l2))^2`` in ``[0, 1]``: the roundness
+      of its error ellipse, 0 on a straight edge, 1 where the gradients are isotropic.
+
+    Args:
+        image: 2-D single-band image, any real dtype; NaN = no data.
+        window: side of the (odd) box over which the gradient products are averaged, pixels.
+
+    Returns:
+        ``(w, q)`` of the image's shape; NaN where the window (plus the gradient stencil)
+        touches NaN or the image border, 0 where the window has no gradient.
+    """
+    img = _as_image(image, "image")
+    t = _structure_tensor(img, _check_window(window))
+    w, q = _weight_roundness(t)
+    return np.where(t.valid, w, np.nan), np.where(t.valid, q, np.nan)
+
+
+def _lsq_corners(
+    t: _StructureTensor, rows: NDArray[np.intp], cols: NDArray[np.intp], window: int
+) -> NDArray[np.float64]:
+    """Forstner's least-squares corner point near each pixel ``(rows, cols)``: the point
+    closest (weighted by ``|g|^2``) to the lines through every pixel of the window along its
+    edge direction (normal ``g``): ``x = N^-1 sum(g g^T x_k)`` over the window pixels ``x_k``.
+    The window is re-centred once on the pixel holding the first estimate. Returns 0-based
+    index coordinates; a pixel whose estimate leaves its window (or whose tensor is singular)
+    keeps its centre."""
+    h = window // 2
+    offsets = np.arange(-h, h + 1, dtype=np.float64)
+    d_r = np.broadcast_to(offsets[:, None], (window, window))
+    d_c = np.broadcast_to(offsets[None, :], (window, window))
+    views = [sliding_window_view(a, (window, window)) for a in (t.grr, t.grc, t.gcc)]
+    centre = np.stack([rows, cols], axis=1).astype(np.intp)
+    out = centre.astype(np.float64)
+    active = np.ones(rows.shape, bool)
+    for _ in range(2):
+        idx = np.flatnonzero(active)
+        if idx.size == 0:
+            break
+        r0, c0 = centre[idx, 0] - h, centre[idx, 1] - h
+        grr, grc, gcc = (v[r0, c0] for v in views)
+        nrr, nrc, ncc = grr.sum(axis=(1, 2)), grc.sum(axis=(1, 2)), gcc.sum(axis=(1, 2))
+        br = (grr * d_r + grc * d_c).sum(axis=(1, 2))
+        bc = (grc * d_r + gcc * d_c).sum(axis=(1, 2))
+        det = nrr * ncc - nrc * nrc
+        with np.errstate(divide="ignore", invalid="ignore"):
+            x_r = (ncc * br - nrc * bc) / det
+            x_c = (nrr * bc - nrc * br) / det
+        good = (det > 1e-12 * (nrr + ncc) ** 2) & (np.abs(x_r) <= h) & (np.abs(x_c) <= h)
+        good &= np.isfinite(x_r) & np.isfinite(x_c)
+        out[idx[good], 0] = centre[idx[good], 0] + x_r[good]
+        out[idx[good], 1] = centre[idx[good], 1] + x_c[good]
+        # re-centre where the estimate lies in another pixel whose window is valid
+        moved = np.rint(out[idx]).astype(np.intp)
+        again = good & (moved != centre[idx]).any(axis=1)
+        again &= t.valid[moved[:, 0], moved[:, 1]]
+        centre[idx[again]] = moved[again]
+        active[:] = False
+        active[idx[again]] = True
+    return out
+
+
+def _parabola_peaks(
+    w: NDArray[np.float64], rows: NDArray[np.intp], cols: NDArray[np.intp]
+) -> NDArray[np.float64]:
+    """Vertex of the 3-point parabolas through ``w`` at each peak, per direction (within
+    +-0.5 px); 0-based index coordinates."""
+    out = np.stack([rows, cols], axis=1).astype(np.float64)
+    for axis, (dr, dc) in enumerate(((1, 0), (0, 1))):
+        minus, centre, plus = w[rows - dr, cols - dc], w[rows, cols], w[rows + dr, cols + dc]
+        den = minus - 2.0 * centre + plus
+        with np.errstate(divide="ignore", invalid="ignore"):
+            step = np.where(den < 0.0, 0.5 * (minus - plus) / den, 0.0)
+        out[:, axis] += np.clip(np.nan_to_num(step), -0.5, 0.5)
+    return out
+
+
+def _disk(radius: float) -> NDArray[np.uint8]:
+    r = math.floor(radius)
+    dy, dx = np.mgrid[-r : r + 1, -r : r + 1]
+    return (dy * dy + dx * dx <= radius * radius).astype(np.uint8)
+
+
+def spread_order(
+    points: ArrayLike,
+    weights: ArrayLike,
+    shape: tuple[int, int],
+    grid_cells: tuple[int, int],
+    per_cell: int | None = None,
+) -> NDArray[np.intp]:
+    """Indices of the points to keep so that they cover the image: the best ``per_cell``
+    (highest weight) of each of ``grid_cells = (rows, cols)`` equal cells of an image of
+    ``shape``, ordered round-robin (every cell's best, then every cell's second best ...,
+    by decreasing weight within a round), so that any prefix is well distributed too.
+    ``per_cell=None`` keeps all points (only reordering them)."""
+    pts = _as_points(points, "points")
+    w = np.asarray(weights, np.float64)
+    n_rows, n_cols = (_check_int(v, "grid_cells", 1) for v in grid_cells)
+    if pts.shape[0] == 0:
+        return np.empty(0, np.intp)
+    cell_r = np.clip((pts[:, 0] / shape[0] * n_rows).astype(np.intp), 0, n_rows - 1)
+    cell_c = np.clip((pts[:, 1] / shape[1] * n_cols).astype(np.intp), 0, n_cols - 1)
+    cell = cell_r * n_cols + cell_c
+    order = np.lexsort((-w, cell))  # by cell, best first
+    sorted_cell = cell[order]
+    first = np.searchsorted(sorted_cell, sorted_cell, side="left")
+    rank = np.empty(pts.shape[0], np.intp)
+    rank[order] = np.arange(pts.shape[0]) - first
+    keep = np.arange(pts.shape[0])
+    if per_cell is not None:
+        keep = keep[rank < _check_int(per_cell, "per_cell", 1)]
+    return keep[np.lexsort((-w[keep], rank[keep]))]
+
+
+def forstner_points(
+    image: ArrayLike,
+    *,
+    window: int = 5,
+    min_roundness: float = 0.5,
+    weight_quantile: float = 0.7,
+    min_weight: float = 0.0,
+    nms_radius: float | None = None,
+    max_points: int | None = None,
+    grid_cells: tuple[int, int] | None = None,
+    per_cell: int | None = None,
+    subpixel: str = "lsq",
+) -> NDArray[np.float64]:
+    """Interest points by the Forstner operator (Forstner & Gulch 1987).
+
+    Method: the weight ``w`` and roundness ``q`` of every pixel (:func:`forstner_measures`,
+    a ``window x window`` box of Scharr gradient products); candidate pixels have
+    ``q > min_roundness`` (an error ellipse no more elongated than about 3.7 : 1 for 0.5:
+    straight edges are rejected) and ``w`` above the threshold ``max(quantile(w,
+    weight_quantile), min_weight)``, the quantile taken over the valid pixels of the image
+    (0.7: only the top 30 % of the image's weights qualify, whatever its contrast; raise
+    ``min_weight``, in grey values^2 per pixel^2, to reject faint texture or noise). Points
+    are the candidates whose weight is the largest within ``nms_radius`` pixels among the
+    candidates (non-maximum suppression by a grey dilation with a disk; exact ties are broken
+    by a fixed pseudo-random order, so no two points' pixels are closer than the radius).
+
+    Sub-pixel location (``subpixel``): ``"lsq"`` (default) Forstner's least-squares corner
+    point, the point that best fits the lines through the window's pixels along their edge
+    directions, weighted by the squared gradient (the exact corner of straight edges meeting
+    in the window: an L, T, X junction; one re-centring iteration, ignored where it leaves
+    the window); ``"parabola"``: the vertex of 3-point parabolas through ``w``; ``"none"``:
+    the pixel centre.
+
+    Args:
+        image: 2-D single-band image, any real dtype; NaN = no data (no point is found where
+            the window or the gradient stencil touches NaN or the image border).
+        window: side of the odd integration box, pixels.
+        min_roundness: smallest roundness ``q``, in [0, 1).
+        weight_quantile: quantile of the valid pixels' weights that a candidate must exceed,
+            in [0, 1).
+        min_weight: absolute floor of the weight threshold.
+        nms_radius: suppression radius, pixels (default ``window``).
+        max_points: keep at most this many points (the best; round-robin over the cells with
+            ``grid_cells``).
+        grid_cells: ``(rows, cols)``: divide the image into equal cells and keep the best
+            ``per_cell`` points of each, so that the points cover the image.
+        per_cell: points kept per cell (default ``ceil(max_points / cells)`` with
+            ``max_points``, else 1).
+        subpixel: ``"lsq"``, ``"parabola"`` or ``"none"``.
+
+    Returns:
+        ``(N, 2)`` ``(line, sample)`` in the project convention (first pixel centre at
+        ``(0.5, 0.5)``), by decreasing weight (round-robin over the cells with
+        ``grid_cells``).
+
+    Raises:
+        InputError: malformed image or options.
+    """
+    import cv2
+
+    img = _as_image(image, "image")
+    window = _check_window(window)
+    if not 0.0 <= float(min_roundness) < 1.0:
+        raise InputError(f"min_roundness must be within [0, 1), got {min_roundness}")
+    if not 0.0 <= float(weight_quantile) < 1.0:
+        raise InputError(f"weight_quantile must be within [0, 1), got {weight_quantile}")
+    if not float(min_weight) >= 0.0:
+        raise InputError(f"min_weight must be >= 0, got {min_weight}")
+    radius = float(window if nms_radius is None else nms_radius)
+    if not radius >= 1.0:
+        raise InputError(f"nms_radius must be >= 1 pixel, got {nms_radius}")
+    if max_points is not None:
+        max_points = _check_int(max_points, "max_points", 0)
+    if subpixel not in FORSTNER_SUBPIXEL:
+        raise InputError(f"subpixel {subpixel!r} is not one of {', '.join(FORSTNER_SUBPIXEL)}")
+    cells = None
+    if grid_cells is not None:
+        cells = tuple(_check_int(v, "grid_cells", 1) for v in grid_cells)
+        if len(cells) != 2:
+            raise InputError(f"grid_cells must be (rows, cols), got {grid_cells!r}")
+        if per_cell is None:
+            n_cells = cells[0] * cells[1]
+            per_cell = -(-max_points // n_cells) if max_points else 1
+        per_cell = _check_int(per_cell, "per_cell", 1)
+    t = _structure_tensor(img, window)
+    w, q = _weight_roundness(t)
+    empty = np.empty((0, 2))
+    if not t.valid.any():
+        return empty
+    threshold = max(float(np.quantile(w[t.valid], float(weight_quantile))), float(min_weight))
+    candidate = t.valid & (q > float(min_roundness)) & (w > threshold)
+    if not candidate.any():
+        return empty
+    n_rows, n_cols = w.shape
+    tie = (np.arange(w.size, dtype=np.float64).reshape(w.shape) * _GOLDEN) % 1.0
+    ranked = np.where(candidate, w * (1.0 + 1e-9 * tie), 0.0)
+    peak = candidate & (ranked >= cv2.dilate(ranked, _disk(radius)))
+    rows, cols = np.nonzero(peak)
+    weight = w[rows, cols]
+    if subpixel == "lsq":
+        index = _lsq_corners(t, rows, cols, window)
+    elif subpixel == "parabola":
+        index = _parabola_peaks(w, rows, cols)
+    else:
+        index = np.stack([rows, cols], axis=1).astype(np.float64)
+    points = index + 0.5
+    if cells is not None:
+        order = spread_order(points, weight, (n_rows, n_cols), cells, per_cell)
+    else:
+        order = np.argsort(-weight, kind="stable")
+    if max_points is not None:
+        order = order[:max_points]
+    return points[order]
+
+
+def _reduce(image: NDArray[np.float32], factor: int) -> NDArray[np.float64]:
+    """Block mean over ``factor x factor`` pixels; NaN where a block holds any NaN."""
+    import cv2
+
+    if factor == 1:
+        return image.astype(np.float64)
+    valid = np.isfinite(image)
+    shape = (max(image.shape[1] // factor, 1), max(image.shape[0] // factor, 1))
+    h, w = shape[1] * factor, shape[0] * factor
+    data = np.where(valid, image, 0.0).astype(np.float32)[:h, :w]
+    mean = cv2.resize(data, shape, interpolation=cv2.INTER_AREA).astype(np.float64)
+    frac = cv2.resize(valid[:h, :w].astype(np.float32), shape, interpolation=cv2.INTER_AREA)
+    return np.where(frac > 0.999, mean / np.maximum(frac, 1e-6), np.nan)
+
+
+def masked_ncc(
+    left: NDArray[np.float64], right: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Normalised cross-correlation of two images with NaN (no data) for **every** shift,
+    over the valid pixels the two images share at that shift (Padfield 2012, "Masked object
+    registration in the Fourier domain": six FFT correlations).
+
+    Returns:
+        ``(ncc, overlap)``, both ``(H_l + H_r - 1, W_l + W_r - 1)``: element ``(i, j)`` is
+        the shift ``(d_line, d_sample) = (i - H_l + 1, j - W_l + 1)`` (content at ``p`` in
+        ``left`` at ``p + d`` in ``right``); ``ncc`` is NaN where fewer than 2 pixels overlap
+        or either side is constant; ``overlap`` counts the shared valid pixels.
+    """
+    from scipy import fft
+
+    a, b = np.asarray(left, np.float64), np.asarray(right, np.float64)
+    ma, mb = np.isfinite(a), np.isfinite(b)
+    a = np.where(ma, a - (a[ma].mean() if ma.any() else 0.0), 0.0)
+    b = np.where(mb, b - (b[mb].mean() if mb.any() else 0.0), 0.0)
+    out_shape = (a.shape[0] + b.shape[0] - 1, a.shape[1] + b.shape[1] - 1)
+    size = tuple(fft.next_fast_len(n, real=True) for n in out_shape)
+
+    def spectrum(x: NDArray[np.float64]) -> NDArray[np.complex128]:
+        return fft.rfft2(x, size)
+
+    def corr(fa: NDArray[np.complex128], fb: NDArray[np.complex128]) -> NDArray[np.float64]:
+        # c(d) = sum_p A(p) B(p + d), circular over the padded size; negative shifts wrap
+        full = fft.irfft2(np.conj(fa) * fb, size)
+        rows = np.r_[size[0] - a.shape[0] + 1 : size[0], 0 : b.shape[0]]
+        cols = np.r_[size[1] - a.shape[1] + 1 : size[1], 0 : b.shape[1]]
+        return full[np.ix_(rows, cols)]
+
+    fa, fb = spectrum(a), spectrum(b)
+    fma, fmb = spectrum(ma.astype(np.float64)), spectrum(mb.astype(np.float64))
+    overlap = np.rint(corr(fma, fmb))
+    sum_a, sum_b = corr(fa, fmb), corr(fma, fb)
+    sum_aa = corr(spectrum(a * a), fmb)
+    sum_bb = corr(fma, spectrum(b * b))
+    sum_ab = corr(fa, fb)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        n = np.where(overlap >= 2, overlap, np.nan)
+        cov = sum_ab - sum_a * sum_b / n
+        var_a = sum_aa - sum_a * sum_a / n
+        var_b = sum_bb - sum_b * sum_b / n
+        scale = np.sqrt(np.maximum(var_a, 0.0) * np.maximum(var_b, 0.0))
+        tiny = 1e-9 * np.nanmax(np.sqrt(np.abs(sum_aa * sum_bb))) if np.any(overlap >= 2) else 0
+        ncc = np.where(scale > tiny, cov / scale, np.nan)
+    return np.clip(ncc, -1.0, 1.0), np.maximum(overlap, 0.0)
+
+
+def coarse_shift(
+    left: ArrayLike,
+    right: ArrayLike,
+    *,
+    size: int = 256,
+    min_overlap: float = 0.15,
+) -> tuple[float, float, float]:
+    """A large translation ``right - left`` between partially overlapping images with NaN
+    borders (e.g. system-level ortho-images on one grid, hundreds of pixels apart).
+
+    Both images are reduced by block means over ``f x f`` pixels, ``f`` the smallest power of
+    two that brings the larger image to at most ``size`` pixels (a reduced pixel is valid when
+    its whole block is). The correlation coefficient over the shared valid pixels is computed
+    for every shift at once (:func:`masked_ncc`); shifts whose overlap is smaller than
+    ``min_overlap`` times the smaller image's valid area are ignored (a small overlap can
+    correlate by chance). The best shift is refined by a parabola through its neighbours in
+    each direction and scaled back by ``f``. Unlike :func:`global_shift` (phase correlation,
+    about a quarter of the image size) it finds shifts as large as the images themselves,
+    whatever the shape of their valid areas; the accuracy is a fraction of ``f`` pixels: a
+    first guess for :func:`pyramid_match`, whose reach (77 px with its defaults) covers that.
+
+    Returns:
+        ``(d_line, d_sample, score)``: the shift, pixels, and its correlation coefficient
+        (``(0, 0, 0)`` when the images share no valid area of the required size).
+
+    Raises:
+        InputError: malformed images or options.
+    """
+    a, b = _as_image(left, "left"), _as_image(right, "right")
+    size = _check_int(size, "size", 16)
+    if not 0.0 < float(min_overlap) <= 1.0:
+        raise InputError(f"min_overlap must be within (0, 1], got {min_overlap}")
+    factor = 1
+    while max(*a.shape, *b.shape) / factor > size:
+        factor *= 2
+    ra, rb = _reduce(a, factor), _reduce(b, factor)
+    n_a, n_b = int(np.isfinite(ra).sum()), int(np.isfinite(rb).sum())
+    if min(n_a, n_b) < 4:
+        return 0.0, 0.0, 0.0
+    ncc, overlap = masked_ncc(ra, rb)
+    ncc = np.where(overlap >= max(float(min_overlap) * min(n_a, n_b), 4.0), ncc, np.nan)
+    if not np.isfinite(ncc).any():
+        return 0.0, 0.0, 0.0
+    k_r, k_c = np.unravel_index(int(np.nanargmax(ncc)), ncc.shape)
+    best = float(ncc[k_r, k_c])
+    peak = np.array([k_r, k_c], np.float64)
+    padded = np.pad(ncc, 1, constant_values=np.nan)
+    block = padded[k_r : k_r + 3, k_c : k_c + 3]
+    if np.isfinite(block[[0, 1, 1, 1, 2], [1, 0, 1, 2, 1]]).all():
+        peak += _subpixel(block[None], "parabola")[0]
+    d = (peak - np.array([ra.shape[0] - 1, ra.shape[1] - 1])) * factor
+    # block means of f x f pixels: the centre of block k is at f k + f / 2 in both images
+    return float(d[0]), float(d[1]), best
+
+
 class NCCMatcher(Matcher):
     """Dense-grid NCC matcher: global phase-correlation shift, pyramid, left-right check.
 
