@@ -541,8 +541,10 @@ def _solve(
         good = det > 1e-18 * np.maximum(np.einsum("nii->n", n_pp) ** 3, 1e-300)
         inv_pp = np.zeros_like(n_pp)
         inv_pp[good] = np.linalg.inv(n_pp[good])
-        s = n_cc - np.einsum("npi,nij,nqj->pq", n_cp, inv_pp, n_cp)
-        rhs = b_c - np.einsum("npi,nij,nj->p", n_cp, inv_pp, b_p)
+        # S = N_cc - sum_n N_cp N_pp^-1 N_pc (a BLAS product over points, linear in their number)
+        cp_inv = np.einsum("npi,nij->npj", n_cp, inv_pp)
+        s = n_cc - np.tensordot(cp_inv, n_cp, axes=([0, 2], [0, 2]))
+        rhs = b_c - np.einsum("npj,nj->p", cp_inv, b_p)
         if n_par:
             d_c, s_inv = _solve_reduced(s, rhs, names)
         else:

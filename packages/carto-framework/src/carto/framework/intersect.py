@@ -28,7 +28,7 @@ Methods
     approximate for RPCs and other models whose lines of sight are curved in ECEF), then refines
     the point by Gauss-Newton in ground space: unknowns are east/north/up displacements in
     metres, observations the measured image coordinates, partials
-    :meth:`Sensor.ground_partials`, predictions the sensors' own ``ground_to_image``. The result
+    :meth:`Sensor.ground_partials`, predictions the sensors' own ``project`` (unclipped). The result
     therefore minimises the (weighted) image-space residuals of the sensors' exact models,
     whatever their curvature; with error-free image points it is the exact ground point.
 """
@@ -362,7 +362,7 @@ def intersect_sensors(
         normal = np.zeros((active.size, 3, 3))
         rhs = np.zeros((active.size, 3))
         for i, sensor in enumerate(sensors):
-            pred = np.stack(sensor.ground_to_image(la, ph, hh), axis=-1)  # (M, 2)
+            pred = np.stack(sensor.project(la, ph, hh)[:2], axis=-1)  # (M, 2)
             jac = sensor.ground_partials(la, ph, hh)  # (M, 2, 3)
             wi = w[i, active]
             ok = (wi > 0) & np.isfinite(pred).all(-1) & np.isfinite(jac).all((-1, -2))
@@ -391,7 +391,7 @@ def intersect_sensors(
     local_o = np.empty((k, n, 3))
     local_u = np.empty((k, n, 3))
     for i, sensor in enumerate(sensors):
-        pred = np.stack(sensor.ground_to_image(lon, lat, h), axis=-1)
+        pred = np.stack(sensor.project(lon, lat, h)[:2], axis=-1)
         residuals_px[i] = np.where(w[i, :, None] > 0, observed[i] - pred, np.nan)
         local_o[i], local_u[i] = sensor_rays(sensor, lines_a[i], samples_a[i], h - 1.0, h + 1.0)
     rms_px = np.where(invalid, np.nan, _weighted_rms(np.linalg.norm(residuals_px, axis=-1), w))

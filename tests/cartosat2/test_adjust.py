@@ -1,0 +1,48 @@
+"""Sensor type cartosat2 and the cartosat2-bba block adjustment on a simulated triplet."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from carto.framework import get_registry
+from carto.framework.adjust import Observations
+from carto.framework.errors import InputError
+from carto.framework.evaluate import checkpoint_accuracy
+from carto.framework.linescan import LineScanner
+from carto.framework.scene import Scene
+from carto.framework.sensor import open_sensor, open_sensors
+from carto.framework.workflow import select_gcps
+
+
+def test_each_view_has_its_own_trajectory(cartosat2_triplet_scene):
+    sensors = open_sensors(cartosat2_triplet_scene)
+    assert list(sensors) == ["fore", "nadir", "aft"]
+    assert all(isinstance(s, LineScanner) for s in sensors.values())
+    assert sensors["fore"].trajectory is not sensors["nadir"].trajectory
+    assert open_sensor(cartosat2_triplet_scene / "aft.tif").name == "aft"
+    assert not get_registry().get("sensor", "cartosat2").identify(cartosat2_triplet_scene / "x")
+
+
+def test_block_adjustment_with_two_gcps(cartosat2_triplet_scene):
+    scene = Scene.open(cartosat2_triplet_scene)
+    cps = scene.control("checkpoints")
+    ids = np.array(sorted(set(cps["id"])))
+    tie_ids = set(ids[::2])
+    m = np.array([i in tie_ids for i in cps["id"]])
+    ties = {k: v[m] for k, v in cps.items()}
+    ties["id"] = np.array(["T" + i for i in ties["id"]], object)
+    check = {k: v[~m] for k, v in cps.items()}
+    obs = Observations.from_tables(select_gcps(scene.control("gcps"), 2), ties)
+    adjuster = get_registry().get("adjuster", "cartosat2-bba")
+    result = adjuster.adjust(scene.sensors(), obs)
+    # independent corrections per image: prefixed by the image name, quadratic by default
+    assert {n.split(".")[0] for n in result.parameters} == {"fore", "nadir", "aft"}
+    assert any(n.endswith(".c2") for n in result.parameters)
+    before = checkpoint_accuracy(scene.sensors(), check)
+    after = checkpoint_accuracy(result.sensors, check)
+    assert before["rmse_planimetric_m"] > 50.0
+    assert after["rmse_planimetric_m"] < 2.0
+    assert after["rmse_height_m"] < 3.0
+    with pytest.raises(InputError, match=r"attitude_order must be 0\.\.3"):
+        adjuster.adjust(scene.sensors(), obs, attitude_order=5)
