@@ -107,7 +107,7 @@ class Matcher(Component):
 
 
 # ----------------------------------------------------------------------------- helpers
-SUBPIXEL_METHODS = ("parabola", "quadratic", "lsm", "none")
+SUBPIXEL_METHODS = ("parabola", "quadratic", "lsm", "lsm-affine", "none")
 """Sub-pixel peak estimators of :func:`match_ncc`."""
 
 _LSM_CHUNK = 1024  # points refined together by least-squares matching
@@ -309,6 +309,172 @@ def _lsm_chunk(
     return out
 
 
+def _peak_method(subpixel: str) -> str:
+    """The peak estimator of a sub-pixel method (least-squares matching starts from the
+    parabola)."""
+    return "parabola" if subpixel in ("lsm", "lsm-affine") else subpixel
+
+
+def _keys_derivatives(fraction: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Derivatives of :func:`_keys_weights` with respect to the fraction: ``(..., 4)``."""
+    f = fraction[..., None]
+    return np.concatenate(
+        [
+            (-1.5 * f + 2.0) * f - 0.5,
+            (4.5 * f - 5.0) * f,
+            (-4.5 * f + 4.0) * f + 0.5,
+            (1.5 * f - 1.0) * f,
+        ],
+        axis=-1,
+    )
+
+
+def _lsm_affine_refine(
+    left: NDArray[np.float32],
+    right: NDArray[np.float32],
+    t0: NDArray[np.intp],
+    offset: NDArray[np.float64],
+    template: int,
+    points: NDArray[np.float64],
+    iterations: int = 12,
+) -> NDArray[np.float64]:
+    """Least-squares matching with an affine geometry, gain and offset, from ``offset``.
+
+    The template pixel at ``x`` from the template centre ``c`` (pixel indices) is compared
+    with the right image at ``c + d + (I + A) x`` (Keys cubic convolution, 16 taps, with its
+    exact derivatives): Gauss-Newton on ``d`` (2), ``A`` (4), gain and offset, with a small
+    Levenberg damping. The result is the offset of the **point** itself, ``d + A (p - c)``:
+    where the displacement varies across the template (relief parallax between views), the
+    translation-only estimate is the displacement where the template's texture is, not at its
+    centre. Points whose estimate fails (a window leaving the image, divergence more than a
+    pixels from ``offset``, ``|A|`` entries beyond 0.6, a singular system) keep ``offset``.
+    """
+    out = offset.copy()
+    for start in range(0, t0.shape[0], _LSM_CHUNK // 2):
+        chunk = slice(start, start + _LSM_CHUNK // 2)
+        out[chunk] = _lsm_affine_chunk(
+            left, right, t0[chunk], offset[chunk], template, points[chunk], iterations
+        )
+    return out
+
+
+def _lsm_affine_chunk(
+    left: NDArray[np.float32],
+    right: NDArray[np.float32],
+    t0: NDArray[np.intp],
+    offset: NDArray[np.float64],
+    template: int,
+    points: NDArray[np.float64],
+    iterations: int,
+) -> NDArray[np.float64]:
+    m, t = t0.shape[0], template
+    half = t // 2
+    h, w = right.shape
+    flat = right.ravel()
+    x_r, x_c = (v.ravel().astype(np.float64) for v in np.mgrid[-half : half + 1, -half : half + 1])
+    tmpl = sliding_window_view(left, (t, t))[t0[:, 0], t0[:, 1]].reshape(m, -1).astype(np.float64)
+    centre = (t0 + half).astype(np.float64)  # template centre, 0-based index
+    taps = np.arange(-1, 3)
+    d = offset.copy()
+    a = np.zeros((m, 4))  # A = [[a0, a1], [a2, a3]]
+    gain, bias = np.ones(m), np.zeros(m)
+    failed = np.zeros(m, bool)
+    running = np.ones(m, bool)
+    for _ in range(iterations):
+        idx = np.flatnonzero(running)
+        if idx.size == 0:
+            break
+        ai = a[idx]
+        pr = (
+            centre[idx, 0, None]
+            + d[idx, 0, None]
+            + (1 + ai[:, 0, None]) * x_r
+            + ai[:, 1, None] * x_c
+        )
+        pc = (
+            centre[idx, 1, None]
+            + d[idx, 1, None]
+            + ai[:, 2, None] * x_r
+            + (1 + ai[:, 3, None]) * x_c
+        )
+        br, bc = np.floor(pr), np.floor(pc)
+        inside = (br.min(axis=1) >= 1) & (br.max(axis=1) <= h - 3)
+        inside &= (bc.min(axis=1) >= 1) & (bc.max(axis=1) <= w - 3)
+        inside &= np.isfinite(pr).all(axis=1) & np.isfinite(pc).all(axis=1)
+        failed[idx[~inside]] = True
+        running[idx[~inside]] = False
+        keep = inside
+        idx, pr, pc, br, bc, ai = idx[keep], pr[keep], pc[keep], br[keep], bc[keep], ai[keep]
+        if idx.size == 0:
+            break
+        fr, fc = pr - br, pc - bc
+        wr, wc = _keys_weights(fr.ravel()), _keys_weights(fc.ravel())
+        dwr, dwc = _keys_derivatives(fr.ravel()), _keys_derivatives(fc.ravel())
+        rows = br.astype(np.intp).ravel()[:, None] + taps  # (k, 4)
+        cols = bc.astype(np.intp).ravel()[:, None] + taps
+        values = flat[rows[:, :, None] * w + cols[:, None, :]].astype(np.float64)  # (k, 4, 4)
+        along = np.einsum("kij,kj->ki", values, wc)  # interpolated along the columns
+        along_d = np.einsum("kij,kj->ki", values, dwc)
+        shape = (idx.size, x_r.size)
+        patch = np.einsum("ki,ki->k", along, wr).reshape(shape)
+        g_r = np.einsum("ki,ki->k", along, dwr).reshape(shape)
+        g_c = np.einsum("ki,ki->k", along_d, wr).reshape(shape)
+        if not np.isfinite(patch).all():
+            bad = ~np.isfinite(patch).all(axis=1)
+            failed[idx[bad]] = True
+            running[idx[bad]] = False
+        g = gain[idx, None]
+        jac = np.stack(
+            [
+                g * g_r,
+                g * g_c,
+                g * g_r * x_r,
+                g * g_r * x_c,
+                g * g_c * x_r,
+                g * g_c * x_c,
+                patch,
+                np.ones(shape),
+            ],
+            axis=2,
+        )  # (n, pixels, 8)
+        resid = tmpl[idx] - g * patch - bias[idx, None]
+        jac_t = jac.transpose(0, 2, 1)
+        normal = jac_t @ jac
+        rhs = (jac_t @ resid[..., None])[..., 0]
+        diag = np.einsum("nii->ni", normal)
+        normal[:, np.arange(8), np.arange(8)] += 1e-6 * diag + 1e-12
+        ok = np.isfinite(normal).all(axis=(1, 2)) & np.isfinite(rhs).all(axis=1)
+        ok &= (diag > 0.0).all(axis=1)
+        step = np.zeros((idx.size, 8))
+        if ok.any():
+            # Jacobi-scaled solve: the damping keeps the scaled system positive definite
+            scale = 1.0 / np.sqrt(np.einsum("nii->ni", normal[ok]))
+            scaled = normal[ok] * scale[:, :, None] * scale[:, None, :]
+            step[ok] = np.linalg.solve(scaled, (rhs[ok] * scale)[..., None])[..., 0] * scale
+        ok &= np.isfinite(step).all(axis=1)
+        failed[idx[~ok]] = True
+        d[idx] += step[:, :2]
+        a[idx] += step[:, 2:6]
+        gain[idx] += step[:, 6]
+        bias[idx] += step[:, 7]
+        small = (np.hypot(step[:, 0], step[:, 1]) < 1e-4) & (
+            np.abs(step[:, 2:6]).max(axis=1) < 1e-5
+        )
+        running[idx[small]] = False
+        running &= ~failed
+    good = ~failed & np.isfinite(d).all(axis=1) & np.isfinite(a).all(axis=1)
+    good &= (np.abs(d - offset) <= 2.0).all(axis=1) & (np.abs(a).max(axis=1) <= 0.6) & (gain > 0.0)
+    # the displacement at the point itself: the offset at the centre plus A (p - c)
+    rel = points - 0.5 - centre
+    at_point = d + np.stack(
+        [a[:, 0] * rel[:, 0] + a[:, 1] * rel[:, 1], a[:, 2] * rel[:, 0] + a[:, 3] * rel[:, 1]],
+        axis=1,
+    )
+    out = offset.copy()
+    out[good] = at_point[good]
+    return out
+
+
 @attrs.frozen
 class _Found:
     """Per input point: right position (NaN where no match) and score (NaN likewise)."""
@@ -383,10 +549,12 @@ def _match_points(
     rows = pr[:, None, None] + np.arange(-1, 2)[None, :, None]
     cols = pc[:, None, None] + np.arange(-1, 2)[None, None, :]
     neighbourhood = surface[np.arange(idx.size)[:, None, None], rows, cols].astype(np.float64)
-    sub = _subpixel(neighbourhood, "parabola" if subpixel == "lsm" else subpixel)
+    sub = _subpixel(neighbourhood, _peak_method(subpixel))
     offset = g[idx] + np.stack([pr, pc], axis=1) - search + sub
-    if subpixel == "lsm":
+    if subpixel in ("lsm", "lsm-affine"):
         offset = _lsm_refine(left, right, t0[idx], offset, template)
+    if subpixel == "lsm-affine":
+        offset = _lsm_affine_refine(left, right, t0[idx], offset, template, points[idx])
     right_pts[idx] = points[idx] + offset
     scores[idx] = best
     return _Found(right_pts, scores)
@@ -446,7 +614,9 @@ def match_ncc(
             (2-D least-squares quadratic on the 3 x 3 neighbourhood; falls back to the
             parabolas where it has no maximum), ``"lsm"`` (least-squares matching from the
             parabola's estimate; points where it fails keep that estimate; the most accurate,
-            see the module docstring) or ``"none"`` (integer offsets).
+            see the module docstring), ``"lsm-affine"`` (least-squares matching with an
+            affine geometry, from the ``"lsm"`` estimate: the offset of the point itself where
+            the displacement varies across the template) or ``"none"`` (integer offsets).
         min_score: smallest accepted correlation score.
         guess_offsets: ``(N, 2)`` (or one ``(2,)``) expected offsets ``right - left``,
             pixels; rounded to integers to centre the search. Default zero.
@@ -496,14 +666,16 @@ def _bidirectional(
     ok = forward.ok
     back_guess = np.where(ok[:, None], points - forward.right, 0.0)
     back_points = np.where(ok[:, None], forward.right, np.nan)
-    backward = _match_points(  # the check needs no more than the parabola's accuracy
+    # the check needs no more than the parabola's accuracy, except where the forward position
+    # is the affine estimate at the point (the translation peak may lie elsewhere)
+    backward = _match_points(
         right,
         left,
         back_points,
         back_guess,
         template,
         search,
-        "parabola" if subpixel == "lsm" else subpixel,
+        subpixel if subpixel == "lsm-affine" else _peak_method(subpixel),
         min_score,
         nan_right,
         nan_left,
@@ -533,8 +705,11 @@ def match_bidirectional(
     point it started from: a consistency check that removes most wrong matches on nearly
     repeated patterns and occlusions (on an exactly periodic pattern both directions pick a
     period at random and a wrong pair survives as often as a right one). The backward pass uses
-    the parabola when ``subpixel`` is ``"lsm"`` (the check needs no more). The score is the
-    smaller of the two directions' scores. Other arguments as :func:`match_ncc`.
+    the parabola when ``subpixel`` is ``"lsm"`` (the check needs no more), least-squares
+    matching with an affine geometry when it is ``"lsm-affine"`` (the forward position is then
+    the displacement at the point, which the translation peak of a distorted template misses
+    by up to a pixel). The score is the smaller of the two directions' scores. Other arguments
+    as :func:`match_ncc`.
     """
     _check_options(template, search, subpixel, min_score)
     if not float(tolerance) > 0.0:
@@ -610,8 +785,8 @@ def pyramid_match(
     :func:`match_bidirectional` (or :func:`match_ncc` when ``bidirectional`` is False). The
     search reach is about ``search * (2**levels - 1)`` pixels around the guesses (77 px for the
     defaults); give larger offsets as ``guess_offsets`` (e.g. from :func:`global_shift`). The
-    coarse levels use the parabola when ``subpixel`` is ``"lsm"`` (their offsets are only
-    guesses).
+    coarse levels use the parabola when ``subpixel`` is least-squares matching (their offsets
+    are only guesses).
 
     Args:
         levels: number of pyramid levels including the full resolution (1 = no pyramid);
@@ -649,7 +824,7 @@ def pyramid_match(
             offsets / scale,
             template,
             search,
-            "parabola" if subpixel == "lsm" else subpixel,
+            _peak_method(subpixel),
             float(coarse_min_score),
             _nan_integral(a),
             _nan_integral(b),

@@ -43,7 +43,7 @@ from __future__ import annotations
 
 import inspect
 import warnings
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from itertools import permutations
 from pathlib import Path
 from typing import Any
@@ -175,9 +175,7 @@ def candidate_points(
 
     img = _as_image(image, "image")
     if method not in CANDIDATE_METHODS:
-        raise InputError(
-            f"candidates {method!r} is not one of {', '.join(CANDIDATE_METHODS)}"
-        )
+        raise InputError(f"candidates {method!r} is not one of {', '.join(CANDIDATE_METHODS)}")
     spacing = float(spacing_px)
     if not spacing >= 4.0:
         raise InputError(f"spacing_px must be >= 4 pixels, got {spacing_px}")
@@ -193,9 +191,10 @@ def candidate_points(
     ).reshape(-1, 2)
     finite = np.isfinite(img[(centres[:, 0] - 0.5).astype(int), (centres[:, 1] - 0.5).astype(int)])
     if method == "grid":
-        if spacing_px and np.isfinite(img).all():
-            return grid_points(img.shape, spacing, margin=2 * spacing / 3)
-        return centres[finite]
+        points = grid_points(img.shape, spacing, margin=2 * spacing / 3)
+        return points[
+            np.isfinite(img[(points[:, 0] - 0.5).astype(int), (points[:, 1] - 0.5).astype(int)])
+        ]
     points = forstner_points(
         img,
         window=window,
@@ -204,9 +203,8 @@ def candidate_points(
         grid_cells=cells,
         per_cell=per_cell,
     )
-    cell_of = (
-        np.clip((points[:, 0] / size[0]).astype(int), 0, cells[0] - 1) * cells[1]
-        + np.clip((points[:, 1] / size[1]).astype(int), 0, cells[1] - 1)
+    cell_of = np.clip((points[:, 0] / size[0]).astype(int), 0, cells[0] - 1) * cells[1] + np.clip(
+        (points[:, 1] / size[1]).astype(int), 0, cells[1] - 1
     )
     empty = np.ones(cells[0] * cells[1], bool)
     empty[cell_of] = False
@@ -249,6 +247,24 @@ def _rows_of(points: NDArray[np.float64], matches: Matches) -> NDArray[np.intp]:
     return order[np.searchsorted(key[order], found)]
 
 
+def _covered(
+    image: NDArray[np.float32], positions: NDArray[np.float64], size: int
+) -> NDArray[np.bool_]:
+    """True where the ``size x size`` window around each position is inside ``image`` and
+    free of NaN."""
+    from carto.framework.match import _nan_integral, _windows_clean
+
+    out = np.zeros(positions.shape[0], bool)
+    finite = np.isfinite(positions).all(axis=1)
+    start = np.floor(np.where(finite[:, None], positions, 0.0)).astype(np.intp) - size // 2
+    inside = finite & (start >= 0).all(axis=1)
+    inside &= (start[:, 0] + size <= image.shape[0]) & (start[:, 1] + size <= image.shape[1])
+    idx = np.flatnonzero(inside)
+    table = _nan_integral(image)
+    out[idx] = _windows_clean(table, start[idx, 0], start[idx, 1], size)
+    return out
+
+
 def match_views(
     orthos: Mapping[str, NDArray],
     reference: str,
@@ -261,64 +277,73 @@ def match_views(
     tolerance_px: float = 0.5,
     closure_px: float = 0.5,
     closure_search: int = 3,
-    require_closure: bool | None = None,
+    require_closure: bool = True,
     guesses: Mapping[str, tuple[float, float]] | None = None,
+    subpixel: str = "lsm-affine",
 ) -> MultiViewMatches:
     """Match candidate points of the reference ortho in every other view, with closures.
 
     1. First guess per view: :func:`~carto.framework.match.coarse_shift` of the reference
        against it (or ``guesses[view]``, ``(d_line, d_sample)`` ortho pixels).
     2. Reference -> view: :func:`~carto.framework.match.pyramid_match` (``levels``,
-       ``template``, ``search``, least-squares sub-pixel, both directions within
-       ``tolerance_px``, scores >= ``min_score`` both ways).
+       ``template``, ``search``, ``subpixel``, both directions within ``tolerance_px``,
+       scores >= ``min_score`` both ways).
     3. Closures (three views or more): for every ordered pair of other views ``(u, v)`` in
        which a point was matched, its position in ``u`` is matched in ``v``
        (:func:`~carto.framework.match.match_ncc` around the position the reference's match
-       gave, ``+-closure_search`` pixels, least-squares sub-pixel, score >= ``min_score``);
-       the pair is consistent when the two positions in ``v`` agree within ``closure_px``
-       ortho pixels in both directions of the pair. An observation is confirmed by any
-       consistent pair it is part of; with ``require_closure`` (default: three views or
-       more) unconfirmed observations are dropped: with three views a disagreement drops
-       both other views (it cannot tell which is wrong), with more it drops only the views
-       that agree with none.
+       gave, ``+-closure_search`` pixels, ``subpixel``, score >= ``min_score``); the pair is
+       consistent when, in both directions, the position found agrees with the reference's
+       match within ``closure_px`` ortho pixels (A -> B -> C agrees with A -> C). An
+       observation is confirmed by any consistent pair it is part of.
+    4. With ``require_closure`` (default), an observation is kept only when confirmed, or
+       when no closure was possible: no other view covers the point (its ortho has no data
+       in the ``template + 2 search`` window around the point's expected position, the
+       reference position plus the first guess). With three views a disagreement drops both
+       other views (it cannot tell which is wrong); with more, only the views that agree
+       with none. A view that covers the point but found no match makes the others
+       unconfirmable: they are dropped too (the point is doubtful). Two views: no closure,
+       the left-right check only.
 
     Args:
         orthos: view name -> ortho-image, all on one grid.
         reference: the view whose ``points`` are matched.
-        points: ``(N, 2)`` candidates on the reference ortho ``(line, sample)``.
+        points: ``(N, 2)`` distinct candidates on the reference ortho ``(line, sample)``.
+        template, search, levels, min_score, tolerance_px, subpixel: matching options
+            (:func:`~carto.framework.match.pyramid_match`; ``tolerance_px`` is its left-right
+            tolerance).
+        closure_px, closure_search, require_closure: the closure check.
+        guesses: first guesses by view, instead of the coarse shift.
     """
-    from carto.framework.match import _as_points, coarse_shift, match_ncc, pyramid_match
+    from carto.framework.match import _as_image, _as_points, coarse_shift, match_ncc, pyramid_match
 
     if reference not in orthos:
         raise InputError(f"tie points: reference {reference!r} is not one of the images")
     if not float(closure_px) > 0.0:
         raise InputError(f"closure_px must be > 0 pixels, got {closure_px}")
-    pts = np.unique(_as_points(points, "points"), axis=0)
-    if pts.shape[0] != np.asarray(points).reshape(-1, 2).shape[0]:
-        raise InputError("tie points: the candidate points must be distinct")
     pts = _as_points(points, "points")
+    if np.unique(pts, axis=0).shape[0] != pts.shape[0]:
+        raise InputError("tie points: the candidate points must be distinct")
     views = (reference, *(n for n in orthos if n != reference))
+    images = [_as_image(orthos[v], v) for v in views]
     n_v, n = len(views), pts.shape[0]
-    if require_closure is None:
-        require_closure = n_v >= 3
     positions = np.full((n_v, n, 2), np.nan)
     scores = np.full((n_v, n), np.nan)
+    covered = np.zeros((n_v, n), bool)
     positions[0] = pts
-    ref = orthos[reference]
-    for k, name in enumerate(views[1:], start=1):
-        if guesses is not None and name in guesses:
-            guess = np.asarray(guesses[name], np.float64)
+    for k in range(1, n_v):
+        if guesses is not None and views[k] in guesses:
+            guess = np.asarray(guesses[views[k]], np.float64).reshape(2)
         else:
-            d_line, d_sample, _ = coarse_shift(ref, orthos[name])
+            d_line, d_sample, _ = coarse_shift(images[0], images[k])
             guess = np.array([d_line, d_sample])
         found = pyramid_match(
-            ref,
-            orthos[name],
+            images[0],
+            images[k],
             pts,
             levels=levels,
             template=template,
             search=search,
-            subpixel="lsm",
+            subpixel=subpixel,
             min_score=min_score,
             guess_offsets=guess,
             tolerance=tolerance_px,
@@ -326,9 +351,11 @@ def match_views(
         rows = _rows_of(pts, found)
         positions[k, rows] = np.stack([found.right_line, found.right_sample], axis=1)
         scores[k, rows] = found.score
+        covered[k] = _covered(images[k], pts + guess, template + 2 * search)
+    covered |= np.isfinite(scores)
     closure = np.zeros((n_v, n), bool)
     if n_v >= 3:
-        # consistent[u, v]: the position in u, matched in v, lands on the position in v
+        # agree[u, v]: the position in u, matched in v, lands on the reference's match in v
         agree = np.zeros((n_v, n_v, n), bool)
         pair_score = np.full((n_v, n_v, n), np.nan)
         for u, v in permutations(range(1, n_v), 2):
@@ -336,34 +363,38 @@ def match_views(
             if both.size == 0:
                 continue
             found = match_ncc(
-                orthos[views[u]],
-                orthos[views[v]],
+                images[u],
+                images[v],
                 positions[u, both],
                 template=template,
                 search=closure_search,
-                subpixel="lsm",
+                subpixel=subpixel,
                 min_score=min_score,
                 guess_offsets=positions[v, both] - positions[u, both],
             )
             rows = both[_rows_of(positions[u, both], found)]
-            miss = np.hypot(found.right_line - positions[v, rows, 0], found.right_sample - positions[v, rows, 1])
+            miss = np.hypot(
+                found.right_line - positions[v, rows, 0], found.right_sample - positions[v, rows, 1]
+            )
             agree[u, v, rows] = miss <= float(closure_px)
             pair_score[u, v, rows] = found.score
         consistent = agree & agree.transpose(1, 0, 2)
         closure[1:] = consistent[1:, 1:].any(axis=1)
         with np.errstate(invalid="ignore"):
-            best_pair = np.where(consistent, np.fmin(pair_score, pair_score.transpose(1, 0, 2)), np.nan)
+            best_pair = np.where(
+                consistent, np.fmin(pair_score, pair_score.transpose(1, 0, 2)), np.nan
+            )
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN columns
             confirm_score = np.nanmax(best_pair, axis=1)
         scores = np.where(closure, np.fmin(scores, confirm_score), scores)
         if require_closure:
-            drop = ~closure
-            drop[0] = False
+            # a closure was possible for view k where another non-reference view covers it
+            others = covered[1:].sum(axis=0)[None, :] - covered[1:]
+            drop = np.zeros((n_v, n), bool)
+            drop[1:] = np.isfinite(scores[1:]) & ~closure[1:] & (others > 0)
             positions[drop] = np.nan
             scores[drop] = np.nan
-    elif require_closure:
-        raise InputError("require_closure needs at least three views")
     closure[0] = closure[1:].any(axis=0)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # points without any match
@@ -395,7 +426,8 @@ def automatic_tie_points(
     levels: int = 3,
     tolerance_px: float = 0.5,
     closure_px: float = 0.5,
-    require_closure: bool | None = None,
+    require_closure: bool = True,
+    subpixel: str = "lsm-affine",
     forstner: Mapping[str, Any] | None = None,
 ) -> dict[str, NDArray]:
     """Tie points of ``sensors``' images, as a long table ``id, image, line, sample, score,
@@ -456,6 +488,7 @@ def automatic_tie_points(
         tolerance_px=tolerance_px,
         closure_px=closure_px,
         require_closure=require_closure,
+        subpixel=subpixel,
     )
     # back to raw image coordinates, with the model that made each ortho
     raw = np.full(mv.positions.shape, np.nan)
@@ -478,10 +511,8 @@ def automatic_tie_points(
             points[keep], weight, grid.shape, _cells(grid.shape, spacing_px), per_cell
         )
         keep = np.sort(keep[order])
-    view_idx, point_idx = np.nonzero(seen[:, keep].T.T)
-    point_idx = keep[point_idx]
-    order = np.lexsort((view_idx, point_idx))
-    view_idx, point_idx = view_idx[order], point_idx[order]
+    point_pos, view_idx = np.nonzero(seen[:, keep].T)  # row-major: by point, then view
+    point_idx = keep[point_pos]
     ids = np.array([f"A{i:05d}" for i in range(points.shape[0])], object)
     return {
         "id": ids[point_idx],
@@ -568,10 +599,3 @@ class OrthoTiePointMatcher(Matcher):
             guess_offsets=(d_line, d_sample),
             tolerance=o.get("tolerance_px", 0.5),
         )
-
-
-def views_of(table: Mapping[str, NDArray]) -> Sequence[str]:
-    """The image names of a tie-point table, in order of first appearance."""
-    images = np.asarray(table["image"], object)
-    _, first = np.unique(images, return_index=True)
-    return [str(images[i]) for i in np.sort(first)]
