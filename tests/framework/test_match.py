@@ -14,6 +14,7 @@ import pytest
 import rasterio
 from rasterio.errors import NotGeoreferencedWarning
 from scipy import ndimage
+from scipy.spatial import cKDTree
 
 from carto.framework import get_registry
 from carto.framework.dem import DEM
@@ -22,11 +23,16 @@ from carto.framework.match import (
     Matcher,
     Matches,
     NCCMatcher,
+    coarse_shift,
+    forstner_measures,
+    forstner_points,
     global_shift,
     grid_points,
+    masked_ncc,
     match_bidirectional,
     match_ncc,
     pyramid_match,
+    spread_order,
 )
 from carto.framework.ortho import OrthoGrid, orthorectify
 from carto.framework.scene import Scene
@@ -324,6 +330,252 @@ def test_bad_inputs_raise_input_error():
         lambda: global_shift(image[:4], image),
         lambda: grid_points((100, 100), 0.5),
         lambda: NCCMatcher(template=4),
+    ]
+    for case in cases:
+        with pytest.raises(InputError) as info:
+            case()
+        assert "\n" not in str(info.value)
+
+
+# ----------------------------------------------------------------------------- affine LSM
+def test_affine_least_squares_matching_recovers_the_displacement_at_the_point(warped):
+    """Where the displacement varies across the template, translation-only matching measures
+    it where the texture is; the affine model measures it at the point itself."""
+    left, right, points, truth = warped
+    m = match_ncc(left, right, points, subpixel="lsm-affine")
+    assert len(m) > 0.98 * len(points)
+    rms = np.sqrt(np.mean(errors(m, points, truth) ** 2, axis=0))
+    assert np.all(rms < 0.02), rms  # measured 0.013 px ("lsm": 0.022)
+    # a strong affine warp: 4-8 % scale and shear
+    size = left.shape[0]
+    rows, cols = np.mgrid[0:size, 0:size].astype(np.float64)
+
+    def strong(r: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return 0.8 + 0.08 * r - 0.05 * c, -1.3 + 0.04 * r + 0.06 * c
+
+    d_r, d_c = strong(rows, cols)
+    warped_right = cv2.remap(
+        left,
+        (cols + d_c).astype(np.float32),
+        (rows + d_r).astype(np.float32),
+        cv2.INTER_LANCZOS4,
+        borderMode=cv2.BORDER_REFLECT,
+    )
+    off_grid = points + np.array([0.31, -0.27])  # points anywhere in their pixel
+    p = off_grid - 0.5
+    q = p.copy()
+    for _ in range(200):
+        a, b = strong(q[:, 0], q[:, 1])
+        q = p - np.stack([a, b], axis=1)
+    true_right = q + 0.5
+    rms = {}
+    for method in ("lsm", "lsm-affine"):
+        m = match_ncc(
+            left,
+            warped_right,
+            off_grid,
+            subpixel=method,
+            guess_offsets=true_right - off_grid,
+            min_score=0.3,
+        )
+        assert len(m) > 0.95 * len(points)
+        rms[method] = np.sqrt(np.mean(errors(m, off_grid, true_right) ** 2))
+    assert rms["lsm-affine"] < 0.01, rms  # measured 0.004 px
+    assert rms["lsm"] > 0.05, rms  # measured 0.09 px
+
+
+# ----------------------------------------------------------------------------- Forstner
+def rendered(function, shape: tuple[int, int], supersample: int = 8) -> np.ndarray:
+    """``function(line, sample)`` (continuous project coordinates, first pixel centre at 0.5)
+    averaged over each pixel: an anti-aliased rendering."""
+    rows, cols = shape
+    line, sample = (np.mgrid[0 : rows * supersample, 0 : cols * supersample] + 0.5) / supersample
+    values = function(line, sample)
+    return values.reshape(rows, supersample, cols, supersample).mean(axis=(1, 3))
+
+
+def test_forstner_finds_rectangle_corners_at_their_subpixel_positions():
+    rng = np.random.default_rng(0)
+    rects = []
+    for i in range(4):
+        for j in range(4):
+            top, left = 20 + 45 * i + rng.uniform(0, 1), 20 + 45 * j + rng.uniform(0, 1)
+            rects.append((top, left, top + rng.uniform(18, 25), left + rng.uniform(18, 25)))
+
+    def scene(line: np.ndarray, sample: np.ndarray) -> np.ndarray:
+        out = np.zeros_like(line)
+        for top, left, bottom, right in rects:
+            out += 100.0 * ((line >= top) & (line < bottom) & (sample >= left) & (sample < right))
+        return out
+
+    image = ndimage.gaussian_filter(rendered(scene, (200, 200)), 0.6)
+    corners = np.array([(r[a], r[b]) for r in rects for a in (0, 2) for b in (1, 3)])
+    points = forstner_points(image)
+    distance, nearest = cKDTree(corners).query(points)
+    assert len(points) == len(corners)  # every corner once, nothing else (edges, flat)
+    assert len(np.unique(nearest)) == len(corners)
+    # the least-squares corner of a blurred corner lies ~0.15 px inside it (the blur rounds
+    # the corner); the pixel of the weight's maximum is 1.5-2 px inside
+    assert distance.max() < 0.35, distance.max()  # measured 0.30 (RMS 0.20)
+    pixel = cKDTree(corners).query(forstner_points(image, subpixel="none"))[0]
+    assert pixel.min() > 1.0  # the least-squares location is what makes it sub-pixel
+
+
+def test_forstner_locates_checkerboard_junctions_to_hundredths_of_a_pixel():
+    origin, side = np.array([10.37, 10.81]), 14.0
+
+    def board(line: np.ndarray, sample: np.ndarray) -> np.ndarray:
+        cells = np.floor((line - origin[0]) / side) + np.floor((sample - origin[1]) / side)
+        return 100.0 * (cells % 2)
+
+    image = ndimage.gaussian_filter(rendered(board, (150, 150)), 0.6)
+    junctions = np.stack(
+        np.meshgrid(*(o + side * np.arange(-1, 12) for o in origin), indexing="ij"), axis=-1
+    ).reshape(-1, 2)
+    inside = np.all((junctions > 6) & (junctions < 144), axis=1)
+    points = forstner_points(image)
+    distance, nearest = cKDTree(junctions).query(points)
+    assert len(points) == inside.sum() == len(np.unique(nearest))
+    assert distance.max() < 0.05, distance.max()  # measured 0.031 px (symmetric junctions)
+
+
+def test_forstner_gives_no_points_on_flat_images_or_straight_edges():
+    assert forstner_points(np.full((100, 100), 7.0)).shape == (0, 2)
+    angle = np.radians(23.0)
+
+    def edge(line: np.ndarray, sample: np.ndarray) -> np.ndarray:
+        return 100.0 * ((line - 75) * np.cos(angle) - (sample - 75) * np.sin(angle) > 0)
+
+    image = ndimage.gaussian_filter(rendered(edge, (150, 150)), 0.6)
+    _, q = forstner_measures(image)
+    assert np.nanmax(q) < 0.05  # an edge's error ellipse is a line: roundness ~0
+    assert forstner_points(image).shape == (0, 2)
+    assert forstner_points(image, min_roundness=0.0).shape[0] > 0  # only roundness rejects it
+
+
+def test_forstner_measures_are_nan_where_undefined_and_points_avoid_nan():
+    image = texture((200, 200), 11)
+    image[80:120, 60:100] = np.nan
+    w, q = forstner_measures(image, window=7)
+    reach = 7 // 2 + 1
+    assert np.isnan(w[80 - reach : 120 + reach, 60 - reach : 100 + reach]).all()
+    assert np.isnan(w[:reach]).all()
+    assert np.isnan(w[:, -reach:]).all()
+    finite = np.isfinite(q)
+    assert finite.mean() > 0.8
+    assert np.all((q[finite] >= 0) & (q[finite] <= 1))
+    assert np.all(w[finite] >= 0)
+    points = forstner_points(image, window=7, subpixel="none", weight_quantile=0.0)
+    assert len(points) > 100
+    index = (points - 0.5).astype(int)
+    for r, c in index:
+        assert np.isfinite(image[r - reach : r + reach + 1, c - reach : c + reach + 1]).all()
+
+
+def test_forstner_non_maximum_suppression_radius_is_respected():
+    image = texture((300, 300), 12)
+    counts = []
+    for radius in (2.0, 4.5, 9.0):
+        points = forstner_points(image, nms_radius=radius, subpixel="none", weight_quantile=0.0)
+        counts.append(len(points))
+        assert not cKDTree(points).query_pairs(radius), radius
+    assert counts[0] > counts[1] > counts[2] > 0
+
+
+def test_forstner_grid_cells_spread_the_points_over_the_image():
+    """Strong texture on the left, weak on the right: the best points all lie on the left;
+    with grid cells every cell gets its share, best first in round-robin order."""
+    image = texture((240, 240), 13)
+    image[:, 120:] *= 0.1
+    best = forstner_points(image, max_points=32, weight_quantile=0.0)
+    assert np.all(best[:, 1] < 120)
+    spread = forstner_points(
+        image, max_points=32, weight_quantile=0.0, grid_cells=(4, 4), per_cell=2
+    )
+    cell = (spread // 60).astype(int)
+    counts = np.zeros((4, 4), int)
+    np.add.at(counts, (cell[:, 0], cell[:, 1]), 1)
+    assert np.all(counts == 2)
+    first_round = (spread[:16] // 60).astype(int)
+    assert len({tuple(c) for c in first_round}) == 16  # the first 16: one per cell
+    one_each = forstner_points(image, weight_quantile=0.0, grid_cells=(4, 4))
+    assert len(one_each) == 16
+
+
+def test_spread_order_is_round_robin_over_cells_by_weight():
+    points = np.array([[10, 10], [20, 20], [15, 80], [30, 90], [12, 85], [80, 80]], float)
+    weights = np.array([5.0, 1.0, 3.0, 9.0, 4.0, 0.5])
+    order = spread_order(points, weights, (100, 100), (2, 2))
+    # cells: 0 -> {0, 1}, 1 -> {2, 3, 4}, 3 -> {5}; round 1 by weight: 3, 0, 5; then 4, 1; 2
+    np.testing.assert_array_equal(order, [3, 0, 5, 4, 1, 2])
+    np.testing.assert_array_equal(spread_order(points, weights, (100, 100), (2, 2), 1), [3, 0, 5])
+
+
+# ----------------------------------------------------------------------------- coarse shift
+def test_masked_ncc_is_the_correlation_over_the_shared_valid_pixels():
+    rng = np.random.default_rng(14)
+    a = rng.normal(size=(30, 40))
+    b = rng.normal(size=(25, 35))
+    a[rng.random(a.shape) < 0.2] = np.nan
+    b[:5, :7] = np.nan
+    ncc, overlap = masked_ncc(a, b)
+    assert ncc.shape == overlap.shape == (30 + 25 - 1, 40 + 35 - 1)
+    for d_line, d_sample in ((0, 0), (-7, 12), (10, -20), (-25, 30)):
+        # pairs a[p], b[p + d]
+        rows = np.arange(max(0, -d_line), min(30, 25 - d_line))
+        cols = np.arange(max(0, -d_sample), min(40, 35 - d_sample))
+        x = a[np.ix_(rows, cols)].ravel()
+        y = b[np.ix_(rows + d_line, cols + d_sample)].ravel()
+        both = np.isfinite(x) & np.isfinite(y)
+        i, j = d_line + 30 - 1, d_sample + 40 - 1
+        assert overlap[i, j] == both.sum()
+        np.testing.assert_allclose(ncc[i, j], np.corrcoef(x[both], y[both])[0, 1], atol=1e-9)
+
+
+def test_coarse_shift_finds_shifts_as_large_as_the_images_between_nan_bordered_ones():
+    """Two 400 x 400 views of one texture far apart on a 720 px canvas (as system-level
+    orthos on a common grid) whose ground overlaps on about 70 % of their area."""
+    big = texture((1400, 1400), 15)
+    place = np.array([250, 220])  # canvas p shows big[p + place]
+    shift = np.array([230, -170])  # content at p in left is at p + shift in right
+    left = np.full((720, 720), np.nan)
+    right = np.full((720, 720), np.nan)
+    left[50:450, 80:480] = big[50 + place[0] : 450 + place[0], 80 + place[1] : 480 + place[1]]
+    r0, c0 = 250, 0
+    src = np.array([r0, c0]) + place - shift
+    right[r0 : r0 + 400, c0 : c0 + 400] = big[src[0] : src[0] + 400, src[1] : src[1] + 400]
+    d_line, d_sample, score = coarse_shift(left, right)
+    assert np.hypot(d_line - shift[0], d_sample - shift[1]) < 2.0, (d_line, d_sample)
+    assert score > 0.8
+    # the pyramid takes it from there
+    points = grid_points(left.shape, 25, 20)
+    points = points[
+        np.isfinite(left[(points[:, 0] - 0.5).astype(int), (points[:, 1] - 0.5).astype(int)])
+    ]
+    m = pyramid_match(left, right, points, guess_offsets=(d_line, d_sample), subpixel="lsm")
+    assert len(m) > 50
+    np.testing.assert_allclose(offsets(m), np.broadcast_to(shift, (len(m), 2)), atol=0.05)
+    assert coarse_shift(left, np.full((100, 100), np.nan)) == (0.0, 0.0, 0.0)
+
+
+def test_forstner_and_coarse_shift_bad_inputs_raise_input_error():
+    image = texture((60, 60), 1)
+    cases = [
+        lambda: forstner_points(image, window=4),
+        lambda: forstner_points(image, window=1),
+        lambda: forstner_points(image, min_roundness=1.0),
+        lambda: forstner_points(image, weight_quantile=-0.1),
+        lambda: forstner_points(image, min_weight=-1.0),
+        lambda: forstner_points(image, nms_radius=0.5),
+        lambda: forstner_points(image, max_points=-1),
+        lambda: forstner_points(image, grid_cells=(0, 3)),
+        lambda: forstner_points(image, grid_cells=(2, 2), per_cell=0),
+        lambda: forstner_points(image, subpixel="centroid"),
+        lambda: forstner_points(image[None]),
+        lambda: forstner_measures(image, window=6),
+        lambda: coarse_shift(image, image, size=8),
+        lambda: coarse_shift(image, image, min_overlap=0.0),
+        lambda: match_ncc(image, image, [[30.5, 30.5]], subpixel="lsm-projective"),
     ]
     for case in cases:
         with pytest.raises(InputError) as info:

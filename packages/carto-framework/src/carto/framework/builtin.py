@@ -10,6 +10,7 @@ from collections.abc import Sequence
 
 from carto.framework.adjust import Adjuster, RPCBiasAdjuster
 from carto.framework.linescan import LineScannerModelType
+from carto.framework.match import Matcher, NCCMatcher
 from carto.framework.plugins import hookimpl
 from carto.framework.rpc import RPCSensorType
 from carto.framework.sensor import SensorType
@@ -33,3 +34,10 @@ def carto_trajectory_models() -> Sequence[TrajectoryModel]:
 @hookimpl
 def carto_adjusters() -> Sequence[Adjuster]:
     return [RPCBiasAdjuster()]
+
+
+@hookimpl
+def carto_matchers() -> Sequence[Matcher]:
+    from carto.framework.tiepoints import OrthoTiePointMatcher
+
+    return [NCCMatcher(), OrthoTiePointMatcher()]
