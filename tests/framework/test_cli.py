@@ -88,7 +88,9 @@ def test_unknown_component_is_a_one_line_error(run_carto):
 def test_unknown_component_of_a_kind(run_carto):
     result = run_carto(["plugins", "nope", "--kind", "matcher"], with_test_plugins=False)
     assert result.returncode == 1
-    assert result.stderr.strip() == ("carto: error: unknown matcher 'nope'; available: ncc, ortho-forstner")
+    assert result.stderr.strip() == (
+        "carto: error: unknown matcher 'nope'; available: ncc, ortho-forstner"
+    )
 
 
 def test_usage_error_exit_code(run_carto):
