@@ -8,7 +8,7 @@ yaw-steered with zero roll and pitch; Fore (+26 deg) and Aft (-5 deg) image the 
 from __future__ import annotations
 
 from carto.cartosat1 import constants as c
-from carto.framework import acquisition, frames, orbit
+from carto.framework import acquisition
 from carto.framework.ancillary import CameraSpec
 from carto.framework.scene import ScenePreset
 from carto.framework.simulate import ScenePlan, SegmentPlan, SimulationOptions, ViewPlan
@@ -38,11 +38,8 @@ def cartosat1_pair_plan(
 ) -> ScenePlan:
     """The acquisition plan of a Cartosat-1 stereo pair over ``target`` (lon, lat)."""
     lon, lat = target
-    epoch_utc = acquisition.local_time_epoch(lon, date)
-    epoch = frames.utc_to_j2000_s(epoch_utc)
-    a = frames.WGS84_A_M + c.ORBIT_ALTITUDE_M
-    elements = orbit.circular_orbit_over(
-        lon, lat, epoch, c.ORBIT_ALTITUDE_M, orbit.sun_synchronous_inclination(a), descending=True
+    epoch_utc, epoch, elements = acquisition.sun_synchronous_overpass(
+        lon, lat, date, c.ORBIT_ALTITUDE_M
     )
     cams = camera_specs()
     views = tuple(

@@ -35,11 +35,8 @@ def camera_spec() -> CameraSpec:
 
 def _geometry(target: tuple[float, float], date: str):
     lon, lat = target
-    epoch_utc = acquisition.local_time_epoch(lon, date)
-    epoch = frames.utc_to_j2000_s(epoch_utc)
-    a = frames.WGS84_A_M + c.ORBIT_ALTITUDE_M
-    elements = orbit.circular_orbit_over(
-        lon, lat, epoch, c.ORBIT_ALTITUDE_M, orbit.sun_synchronous_inclination(a), descending=True
+    epoch_utc, epoch, elements = acquisition.sun_synchronous_overpass(
+        lon, lat, date, c.ORBIT_ALTITUDE_M
     )
     # ground directions at the target: along the ground track (scan) and across it (left)
     p0, v0 = orbit.elements_to_state(elements)

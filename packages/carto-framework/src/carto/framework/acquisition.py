@@ -67,6 +67,31 @@ def local_time_epoch(lon_deg: float, date: str, local_hours: float = 10.5) -> st
     return frames.j2000_s_to_utc(round(t, 3))
 
 
+def sun_synchronous_overpass(
+    lon_deg: float,
+    lat_deg: float,
+    date: str,
+    altitude_m: float,
+    *,
+    local_hours: float = 10.5,
+    descending: bool = True,
+) -> tuple[str, float, orbit.OrbitElements]:
+    """A sun-synchronous circular orbit over ``(lon, lat)`` at ``local_hours`` local solar time
+    on ``date``: ``(epoch_utc, epoch_j2000_s, elements at the epoch)``."""
+    epoch_utc = local_time_epoch(lon_deg, date, local_hours)
+    epoch = frames.utc_to_j2000_s(epoch_utc)
+    a = frames.WGS84_A_M + altitude_m
+    elements = orbit.circular_orbit_over(
+        lon_deg,
+        lat_deg,
+        epoch,
+        altitude_m,
+        orbit.sun_synchronous_inclination(a),
+        descending=descending,
+    )
+    return epoch_utc, epoch, elements
+
+
 def attitude_from_law(dt_s: ArrayLike, law: AttitudeLaw) -> AttitudeSamples:
     """Attitude samples (body -> orbit quaternions) from a ``(roll, pitch, yaw)(dt)`` law."""
     t = np.asarray(dt_s, dtype=np.float64)

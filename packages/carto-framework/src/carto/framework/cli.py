@@ -131,40 +131,40 @@ def _add_plugins(sub: argparse._SubParsersAction) -> None:
 
 
 # --------------------------------------------------------------------------- project / locate
-def cmd_project(args: argparse.Namespace) -> int:
+def _transform_points(
+    args: argparse.Namespace, inputs: tuple[str, str, str], outputs: tuple[str, str], forward: bool
+) -> int:
+    """Read a point table, project or locate it with the model, write it with new columns."""
     from carto.framework.point_table import read_point_table, write_point_table
     from carto.framework.sensor import open_sensor
 
     sensor = open_sensor(args.model, args.sensor)
-    table = read_point_table(args.ground, numeric=("lon_deg", "lat_deg", "h_m"))
-    line, sample = sensor.ground_to_image(table["lon_deg"], table["lat_deg"], table["h_m"])
-    out = {k: v for k, v in table.items() if k not in ("line", "sample")}
-    out["line"], out["sample"] = line, sample
+    source = args.ground if forward else args.image
+    table = read_point_table(source, numeric=inputs)
+    method = sensor.ground_to_image if forward else sensor.image_to_ground
+    first, second = method(*(table[c] for c in inputs))
+    out = {k: v for k, v in table.items() if k not in outputs}
+    out[outputs[0]], out[outputs[1]] = first, second
     write_point_table(args.out, out, precision=17)
-    outside = int(np.count_nonzero(~np.isfinite(line)))
+    failed = int(np.count_nonzero(~np.isfinite(first)))
+    verb, note = (
+        ("projected", "outside the image or not converged")
+        if forward
+        else ("located", "not located")
+    )
     print(
-        f"projected {line.size} point(s) into {args.model} -> {args.out}"
-        + (f" ({outside} outside the image or not converged: nan)" if outside else "")
+        f"{verb} {first.size} point(s) with {args.model} -> {args.out}"
+        + (f" ({failed} {note}: nan)" if failed else "")
     )
     return 0
+
+
+def cmd_project(args: argparse.Namespace) -> int:
+    return _transform_points(args, ("lon_deg", "lat_deg", "h_m"), ("line", "sample"), True)
 
 
 def cmd_locate(args: argparse.Namespace) -> int:
-    from carto.framework.point_table import read_point_table, write_point_table
-    from carto.framework.sensor import open_sensor
-
-    sensor = open_sensor(args.model, args.sensor)
-    table = read_point_table(args.image, numeric=("line", "sample", "h_m"))
-    lon, lat = sensor.image_to_ground(table["line"], table["sample"], table["h_m"])
-    out = {k: v for k, v in table.items() if k not in ("lon_deg", "lat_deg")}
-    out["lon_deg"], out["lat_deg"] = lon, lat
-    write_point_table(args.out, out, precision=17)
-    failed = int(np.count_nonzero(~np.isfinite(lon)))
-    print(
-        f"located {lon.size} point(s) of {args.model} -> {args.out}"
-        + (f" ({failed} not located: nan)" if failed else "")
-    )
-    return 0
+    return _transform_points(args, ("line", "sample", "h_m"), ("lon_deg", "lat_deg"), False)
 
 
 _PIXELS = (

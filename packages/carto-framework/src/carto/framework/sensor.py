@@ -260,6 +260,33 @@ def as_float_arrays(*values: ArrayLike) -> tuple[FloatArray, ...]:
     return tuple(np.array(a, dtype=np.float64) for a in arrays)
 
 
+def _sensor_type_for(path: Path, sensor_type: str | None, what: str) -> SensorType:
+    """The named sensor type, or the one that identifies ``path`` (highest priority)."""
+    from carto.framework.plugins import get_registry
+
+    if not path.exists():
+        raise InputError(f"{path}: no such file or directory")
+    registry = get_registry()
+    if sensor_type is not None:
+        return registry.get("sensor", sensor_type)
+    types = [info.component for info in registry.components("sensor")]
+    candidates = [t for t in types if _safe_identify(t, path)]
+    if not candidates:
+        names = ", ".join(t.name for t in types) or "none"
+        raise InputError(
+            f"{path}: no sensor type recognises this {what} (known: {names}); "
+            "name one with --sensor TYPE"
+        )
+    best = max(t.priority for t in candidates)
+    top = [t for t in candidates if t.priority == best]
+    if len(top) > 1:
+        raise InputError(
+            f"{path}: several sensor types recognise this {what} "
+            f"({', '.join(t.name for t in top)}); choose one with --sensor"
+        )
+    return top[0]
+
+
 def open_sensor(path: str | Path, sensor_type: str | None = None) -> Sensor:
     """Open ``path`` with the named sensor type, or with the one that identifies it.
 
@@ -268,30 +295,8 @@ def open_sensor(path: str | Path, sensor_type: str | None = None) -> Sensor:
             with the same priority.
         UnknownComponentError: ``sensor_type`` is not registered.
     """
-    from carto.framework.plugins import get_registry
-
     path = Path(path)
-    if not path.exists():
-        raise InputError(f"{path}: no such file or directory")
-    registry = get_registry()
-    if sensor_type is not None:
-        return registry.get("sensor", sensor_type).open(path)
-    types = [info.component for info in registry.components("sensor")]
-    candidates = [t for t in types if _safe_identify(t, path)]
-    if not candidates:
-        names = ", ".join(t.name for t in types) or "none"
-        raise InputError(
-            f"{path}: no sensor type recognises this file (known: {names}); "
-            "name one with --sensor TYPE"
-        )
-    best = max(t.priority for t in candidates)
-    top = [t for t in candidates if t.priority == best]
-    if len(top) > 1:
-        raise InputError(
-            f"{path}: several sensor types recognise this file "
-            f"({', '.join(t.name for t in top)}); choose one with --sensor"
-        )
-    return top[0].open(path)
+    return _sensor_type_for(path, sensor_type, "file").open(path)
 
 
 def open_sensors(path: str | Path, sensor_type: str | None = None) -> dict[str, Sensor]:
@@ -299,30 +304,8 @@ def open_sensors(path: str | Path, sensor_type: str | None = None) -> dict[str, 
 
     Like :func:`open_sensor`, but through the sensor type's ``open_all``.
     """
-    from carto.framework.plugins import get_registry
-
     path = Path(path)
-    if not path.exists():
-        raise InputError(f"{path}: no such file or directory")
-    registry = get_registry()
-    if sensor_type is not None:
-        return registry.get("sensor", sensor_type).open_all(path)
-    types = [info.component for info in registry.components("sensor")]
-    candidates = [t for t in types if _safe_identify(t, path)]
-    if not candidates:
-        names = ", ".join(t.name for t in types) or "none"
-        raise InputError(
-            f"{path}: no sensor type recognises this product (known: {names}); "
-            "name one with --sensor TYPE"
-        )
-    best = max(t.priority for t in candidates)
-    top = [t for t in candidates if t.priority == best]
-    if len(top) > 1:
-        raise InputError(
-            f"{path}: several sensor types recognise this product "
-            f"({', '.join(t.name for t in top)}); choose one with --sensor"
-        )
-    return top[0].open_all(path)
+    return _sensor_type_for(path, sensor_type, "product").open_all(path)
 
 
 def _safe_identify(sensor_type: SensorType, path: Path) -> bool:
