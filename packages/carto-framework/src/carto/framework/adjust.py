@@ -407,6 +407,7 @@ def adjust_bundle(
             robust,
             outlier_threshold,
             dem,
+            start=result,  # after a rejection, continue from the previous solution
         )
         if not robust or not flagged:
             break
@@ -426,10 +427,16 @@ def _solve(
     robust: bool,
     threshold: float,
     dem: Any,
+    start: AdjustmentResult | None = None,
 ) -> tuple[AdjustmentResult, list[str]]:
     heights = dict(zip(obs.height_id.tolist(), obs.height_m.tolist(), strict=True))
     point_ids = sorted(set(obs.point_id.tolist()))
-    lon, lat, h, usable = _initial_points(sensors, obs, point_ids, heights)
+    if start is not None and all(p in start.points for p in point_ids):
+        xyz = np.array([start.points[p] for p in point_ids], dtype=np.float64)
+        lon, lat, h = xyz[:, 0], xyz[:, 1], xyz[:, 2]
+        usable = np.ones(len(point_ids), bool)
+    else:
+        lon, lat, h, usable = _initial_points(sensors, obs, point_ids, heights)
     if not usable.any():
         raise AdjustmentError(
             "no observed point can be placed on the ground (each needs a GCP, "
@@ -449,6 +456,8 @@ def _solve(
     prior_sigma = np.array([priors[n].sigma for n in names])
     prior_value = np.array([priors[n].value for n in names])
     values = prior_value.copy()
+    if start is not None and tuple(start.parameters) == tuple(names):
+        values = np.array(start.values, dtype=np.float64)
     w_img = np.ones(obs.point_id.size)
     w_gcp = np.ones(gidx.size)
     history: list[dict[str, float]] = []
