@@ -95,3 +95,27 @@ def test_paintbrush_swaths_are_side_by_side_with_overlap(tmp_path):
         gap = np.linalg.norm(centres[b][1] - centres[a][1])  # distance between swath centres
         assert gap == pytest.approx(0.85 * width, rel=0.1)  # 15 % overlap
     assert (scene / "swath1.ancillary.json").is_file()
+
+
+def test_paintbrush_block_pairs_and_per_swath_accuracy(tmp_path):
+    from carto.framework.evaluate import monoplot_accuracy
+    from carto.framework.scene import Scene
+    from carto.framework.tiepoints import overlapping_pairs
+
+    scene = Scene.open(
+        simulate(
+            "cartosat2-paintbrush",
+            tmp_path / "pb",
+            seed=3,
+            size=(200, 150),
+            n_checkpoints=9,
+            terrain="plains",
+        )
+    )
+    truth = scene.truth_sensors()
+    assert overlapping_pairs(truth, 250.0) == [("swath1", "swath2"), ("swath2", "swath3")]
+    exact = monoplot_accuracy(truth, scene.control("checkpoints"))
+    assert set(exact) <= {"swath1", "swath2", "swath3"}
+    assert all(v["rmse_planimetric_m"] < 1e-3 for v in exact.values())  # true models: exact
+    system = monoplot_accuracy(scene.sensors(), scene.control("checkpoints"))
+    assert all(v["rmse_planimetric_m"] > 20.0 for v in system.values())

@@ -156,3 +156,31 @@ def predicted_checkpoint_sigma(
         "predicted_sigma_planimetric_m": float(np.sqrt(np.mean(e2))),
         "predicted_sigma_height_m": float(np.sqrt(np.mean(u2))),
     }
+
+
+def monoplot_accuracy(
+    sensors: Mapping[str, Sensor], table: Mapping[str, NDArray]
+) -> dict[str, dict[str, float]]:
+    """Planimetric accuracy of each image alone (monoplotting): every checkpoint's image
+    coordinates are located at its true height with that image's sensor and compared with its
+    true position. This is how swaths that do not overlap (paint-brush) are judged.
+
+    Returns:
+        image name -> ``{count, rmse_planimetric_m, max_planimetric_m}``.
+    """
+    out: dict[str, dict[str, float]] = {}
+    for name, sensor in sensors.items():
+        m = table["image"] == name
+        if not np.any(m):
+            continue
+        lon, lat = sensor.image_to_ground(table["line"][m], table["sample"][m], table["h_m"][m])
+        est = frames.geodetic_to_ecef(lon, lat, table["h_m"][m])
+        true = frames.geodetic_to_ecef(table["lon_deg"][m], table["lat_deg"][m], table["h_m"][m])
+        err = np.linalg.norm(est - true, axis=1)
+        ok = np.isfinite(err)
+        out[name] = {
+            "count": int(ok.sum()),
+            "rmse_planimetric_m": _rms(err[ok]),
+            "max_planimetric_m": float(err[ok].max()) if ok.any() else float("nan"),
+        }
+    return out

@@ -825,3 +825,57 @@ class OrthoTiePointMatcher(Matcher):
         return Matches(
             points[ok, 0], points[ok, 1], right_pts[:, 0], right_pts[:, 1], mv.scores[1, ok]
         )
+
+
+def _footprint_box(sensor: Sensor, h_m: float) -> tuple[float, float, float, float]:
+    n_l, n_s = sensor.image_shape
+    line = np.array([0.0, 0.0, n_l, n_l])
+    sample = np.array([0.0, n_s, 0.0, n_s])
+    lon, lat = sensor.image_to_ground(line, sample, np.full(4, h_m))
+    return (
+        float(np.nanmin(lon)),
+        float(np.nanmin(lat)),
+        float(np.nanmax(lon)),
+        float(np.nanmax(lat)),
+    )
+
+
+def overlapping_pairs(sensors: Mapping[str, Sensor], h_m: float = 0.0) -> list[tuple[str, str]]:
+    """Pairs of images whose ground footprints (bounding boxes at ``h_m``) overlap."""
+    names = list(sensors)
+    boxes = {n: _footprint_box(sensors[n], h_m) for n in names}
+    pairs = []
+    for i, a in enumerate(names):
+        for b in names[i + 1 :]:
+            (w1, s1, e1, n1), (w2, s2, e2, n2) = boxes[a], boxes[b]
+            if w1 < e2 and w2 < e1 and s1 < n2 and s2 < n1:
+                pairs.append((a, b))
+    return pairs
+
+
+def block_tie_points(
+    rasters: Mapping[str, Path | NDArray],
+    sensors: Mapping[str, Sensor],
+    dem: Any,
+    **options: Any,
+) -> dict[str, NDArray]:
+    """Tie points of a block whose images need not all overlap one reference (paint-brush
+    swaths, strips): when the first image's footprint overlaps every other, one multi-view
+    :func:`automatic_tie_points`; otherwise :func:`automatic_tie_points` on every overlapping
+    pair, with point ids prefixed by the pair so that they stay distinct."""
+    h_mid = float(np.nanmedian(dem.heights)) if hasattr(dem, "heights") else 0.0
+    pairs = overlapping_pairs(sensors, h_mid)
+    names = list(sensors)
+    if len(names) <= 2 or all((names[0], n) in pairs for n in names[1:]):
+        return automatic_tie_points(rasters, sensors, dem, **options)
+    tables = []
+    for a, b in pairs:
+        t = automatic_tie_points(
+            {a: rasters[a], b: rasters[b]}, {a: sensors[a], b: sensors[b]}, dem, **options
+        )
+        t["id"] = np.array([f"{a}-{b}:{i}" for i in t["id"]], object)
+        tables.append(t)
+    if not tables:
+        raise InputError("tie points: no two images of the block overlap")
+    keys = tables[0].keys()
+    return {k: np.concatenate([t[k] for t in tables]) for k in keys}

@@ -161,7 +161,11 @@ def adjust_product(
             (``id,image,line,sample[,sigma_px]``).
         options: adjuster options (mode, attitude_order ...).
     """
-    from carto.framework.evaluate import checkpoint_accuracy, predicted_checkpoint_sigma
+    from carto.framework.evaluate import (
+        checkpoint_accuracy,
+        monoplot_accuracy,
+        predicted_checkpoint_sigma,
+    )
     from carto.framework.scene import Scene
 
     t0 = time.perf_counter()
@@ -193,7 +197,7 @@ def adjust_product(
     # tie points
     tie_table: Table | None = None
     if ties == "auto":
-        from carto.framework.tiepoints import automatic_tie_points
+        from carto.framework.tiepoints import block_tie_points
 
         if dem is None:
             raise InputError(
@@ -201,7 +205,7 @@ def adjust_product(
                 '"dem" in the configuration)'
             )
         _progress("matching tie points on system-level ortho-images", quiet)
-        tie_table = automatic_tie_points(rasters, sensors, dem)
+        tie_table = block_tie_points(rasters, sensors, dem)
     elif ties != "none":
         tie_table = read_point_table(ties, numeric=("line", "sample"), text=("id", "image"))
     n_ties = len(set(tie_table["id"].tolist())) if tie_table is not None else 0
@@ -242,6 +246,7 @@ def adjust_product(
         "seconds": round(time.perf_counter() - t0, 1),
     }
     if checkpoints is not None and len(checkpoints["id"]):
+        report["checkpoints_per_image"] = monoplot_accuracy(result.sensors, checkpoints)
         acc = checkpoint_accuracy(result.sensors, checkpoints)
         pred = predicted_checkpoint_sigma(result, checkpoints)
         before = checkpoint_accuracy(sensors, checkpoints)
