@@ -22,7 +22,13 @@ from typing import Any
 
 import attrs
 
-from carto.framework.adjust import Adjuster, AdjustmentResult, Observations, adjust_bundle
+from carto.framework.adjust import (
+    Adjuster,
+    AdjustmentResult,
+    Observations,
+    adjust_bundle,
+    line_scanner_corrections,
+)
 from carto.framework.errors import InputError
 from carto.framework.linescan import LineScanner
 from carto.framework.sensor import Sensor
@@ -41,26 +47,19 @@ def prepare_sensors(
         raise InputError(
             f"cartosat1-combined: mode must be one of {', '.join(MODES)}, got {mode!r}"
         )
-    if not 0 <= attitude_order <= 3:
-        raise InputError(f"cartosat1-combined: attitude_order must be 0..3, got {attitude_order}")
-    out: dict[str, LineScanner] = {}
     names = list(sensors)
-    for name, sensor in sensors.items():
-        if not isinstance(sensor, LineScanner):
-            raise InputError(
-                f"cartosat1-combined adjusts rigorous line scanners; image {name!r} "
-                f"is {type(sensor).__name__} (use the rpc-bias adjuster)"
-            )
-        traj = sensor.trajectory.with_correction_orders(
-            attitude=attitude_order, position=0 if estimate_position else -1
+    return {
+        name: line_scanner_corrections(
+            name,
+            sensor,
+            "cartosat1-combined",
+            attitude_order=attitude_order,
+            estimate_position=estimate_position,
+            independent=mode == "separate",
+            free_camera=mode == "calibration" and name != names[0],
         )
-        if mode == "separate":
-            traj = traj.with_prefix(f"{name}.trajectory.")
-        cam = sensor.camera
-        calibrate = mode == "calibration" and name != names[0]
-        cam = cam.with_parameters(free={p.name: calibrate for p in cam.parameters})
-        out[name] = attrs.evolve(sensor, trajectory=traj, camera=cam)
-    return out
+        for name, sensor in sensors.items()
+    }
 
 
 class Cartosat1Adjuster(Adjuster):

@@ -19,10 +19,13 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-import attrs
-
-from carto.framework.adjust import Adjuster, AdjustmentResult, Observations, adjust_bundle
-from carto.framework.errors import InputError
+from carto.framework.adjust import (
+    Adjuster,
+    AdjustmentResult,
+    Observations,
+    adjust_bundle,
+    line_scanner_corrections,
+)
 from carto.framework.linescan import LineScanner
 from carto.framework.sensor import Sensor
 
@@ -31,21 +34,17 @@ def prepare_sensors(
     sensors: Mapping[str, Sensor], attitude_order: int = 2, estimate_position: bool = False
 ) -> dict[str, LineScanner]:
     """Independent corrections per image (parameter names prefixed by the image name)."""
-    if not 0 <= attitude_order <= 3:
-        raise InputError(f"cartosat2-bba: attitude_order must be 0..3, got {attitude_order}")
-    out: dict[str, LineScanner] = {}
-    for name, sensor in sensors.items():
-        if not isinstance(sensor, LineScanner):
-            raise InputError(
-                f"cartosat2-bba adjusts rigorous line scanners; image {name!r} is "
-                f"{type(sensor).__name__} (use the rpc-bias adjuster)"
-            )
-        traj = sensor.trajectory.with_correction_orders(
-            attitude=attitude_order, position=0 if estimate_position else -1
-        ).with_prefix(f"{name}.trajectory.")
-        cam = sensor.camera.with_parameters(free={p.name: False for p in sensor.camera.parameters})
-        out[name] = attrs.evolve(sensor, trajectory=traj, camera=cam)
-    return out
+    return {
+        name: line_scanner_corrections(
+            name,
+            sensor,
+            "cartosat2-bba",
+            attitude_order=attitude_order,
+            estimate_position=estimate_position,
+            independent=True,
+        )
+        for name, sensor in sensors.items()
+    }
 
 
 class Cartosat2BlockAdjuster(Adjuster):

@@ -700,6 +700,40 @@ def _solve_reduced(
     return inv @ rhs, inv
 
 
+def line_scanner_corrections(
+    name: str,
+    sensor: Sensor,
+    adjuster: str,
+    *,
+    attitude_order: int,
+    estimate_position: bool,
+    independent: bool,
+    free_camera: bool = False,
+) -> Sensor:
+    """A line scanner set up for an adjuster: attitude corrections of ``attitude_order``,
+    optional position bias, parameter names prefixed by the image ``name`` when
+    ``independent`` (otherwise sensors on one trajectory share them), camera alignment free
+    or fixed. Other sensors raise :class:`InputError` naming ``adjuster``."""
+    from carto.framework.linescan import LineScanner
+
+    if not 0 <= attitude_order <= 3:
+        raise InputError(f"{adjuster}: attitude_order must be 0..3, got {attitude_order}")
+    if not isinstance(sensor, LineScanner):
+        raise InputError(
+            f"{adjuster} adjusts rigorous line scanners; image {name!r} is "
+            f"{type(sensor).__name__} (use the rpc-bias adjuster)"
+        )
+    traj = sensor.trajectory.with_correction_orders(
+        attitude=attitude_order, position=0 if estimate_position else -1
+    )
+    if independent:
+        traj = traj.with_prefix(f"{name}.trajectory.")
+    cam = sensor.camera.with_parameters(
+        free={p.name: free_camera for p in sensor.camera.parameters}
+    )
+    return attrs.evolve(sensor, trajectory=traj, camera=cam)
+
+
 class Adjuster(Component):
     """Estimates corrections to sensor parameters from ground control and tie points."""
 

@@ -307,43 +307,23 @@ def _measured_ancillary(
 def _draw_errors(
     errors: ErrorModel, rng: np.random.Generator, n_segments: int, cameras: Sequence[str]
 ) -> dict[str, Any]:
+    def draw(sigma: float) -> list[float]:
+        """Three normal draws of ``sigma`` (none when the source is switched off)."""
+        return (rng.normal(0.0, sigma, 3) if sigma else np.zeros(3)).tolist()
+
     deg = np.radians
-    eph = rng.normal(0.0, errors.ephemeris_bias_m, 3) if errors.ephemeris_bias_m else np.zeros(3)
-    seg = []
-    for _ in range(n_segments):
-        seg.append(
-            {
-                "ephemeris_bias_m": eph.tolist(),
-                "attitude_bias_rad": (
-                    rng.normal(0, deg(errors.attitude_bias_deg), 3)
-                    if errors.attitude_bias_deg
-                    else np.zeros(3)
-                ).tolist(),
-                "attitude_drift_rad_s": (
-                    rng.normal(0, deg(errors.attitude_drift_deg_s), 3)
-                    if errors.attitude_drift_deg_s
-                    else np.zeros(3)
-                ).tolist(),
-                "attitude_tau2_rad": (
-                    rng.normal(0, deg(errors.attitude_smooth_deg), 3)
-                    if errors.attitude_smooth_deg
-                    else np.zeros(3)
-                ).tolist(),
-                "attitude_tau3_rad": (
-                    rng.normal(0, deg(errors.attitude_smooth_deg), 3)
-                    if errors.attitude_smooth_deg
-                    else np.zeros(3)
-                ).tolist(),
-            }
-        )
-    mis = {
-        c: (
-            rng.normal(0, deg(errors.misalignment_deg), 3)
-            if errors.misalignment_deg
-            else np.zeros(3)
-        ).tolist()
-        for c in cameras
-    }
+    eph = draw(errors.ephemeris_bias_m)
+    seg = [
+        {
+            "ephemeris_bias_m": eph,
+            "attitude_bias_rad": draw(deg(errors.attitude_bias_deg)),
+            "attitude_drift_rad_s": draw(deg(errors.attitude_drift_deg_s)),
+            "attitude_tau2_rad": draw(deg(errors.attitude_smooth_deg)),
+            "attitude_tau3_rad": draw(deg(errors.attitude_smooth_deg)),
+        }
+        for _ in range(n_segments)
+    ]
+    mis = {c: draw(deg(errors.misalignment_deg)) for c in cameras}
     return {"segments": seg, "camera_misalignment_rad": mis}
 
 
