@@ -30,11 +30,13 @@ from pathlib import Path
 import numpy as np
 
 from carto.framework import get_registry
+from carto.framework.adjust import HEIGHT_OFFSET
 from carto.framework.evaluate import checkpoint_accuracy
 from carto.framework.scene import Scene
 from carto.framework.simulate import SimulationOptions
 from carto.framework.workflow import adjust_product
 
+SRTM_OFFSET_SIGMA_M = 4.0
 KEYS = ("rmse_along_m", "rmse_across_m", "rmse_planimetric_m", "rmse_height_m")
 
 
@@ -161,6 +163,10 @@ def ventoux(data: Path, work: Path) -> dict:
                 "fixed": ["left"],
                 "tie_heights": heights,
                 "height_sigma_m": 10.0,
+                # SRTM's absolute vertical error is common to the whole tile (Rodriguez et
+                # al. 2006: 6.2 m LE90 over Eurasia, sigma ~ 3.8 m), so it is one estimated
+                # offset with that prior, not a per-point error that averages out
+                "height_offset_sigma_m": SRTM_OFFSET_SIGMA_M,
             },
         )
         p = rep["adjustment"]["parameters"]
@@ -172,6 +178,8 @@ def ventoux(data: Path, work: Path) -> dict:
             "line_sigma_px": p["right.rpc.line.c0"]["sigma"],
             "sample_offset_px": p["right.rpc.sample.c0"]["value"],
             "sample_sigma_px": p["right.rpc.sample.c0"]["sigma"],
+            "srtm_offset_m": p.get(HEIGHT_OFFSET, {}).get("value"),
+            "srtm_offset_sigma_m": p.get(HEIGHT_OFFSET, {}).get("sigma"),
         }
 
     biased = run("right_image_bias.geom", True)

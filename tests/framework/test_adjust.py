@@ -99,3 +99,29 @@ def test_observation_validation():
     obs = Observations(["a", "b"], ["fore", "aft"], [1.0, 2.0], [2.0, 3.0], [1.0, 1.0])
     assert obs.without_points(["a"]).point_id.tolist() == ["b"]
     assert attrs.evolve(obs).line.tolist() == [1.0, 2.0]
+
+
+def test_a_common_dem_height_offset_is_estimated_not_absorbed(scene):
+    """Tie-point heights from a 'DEM' 8 m too high: as independent constraints they drag the
+    block up; with a common offset unknown the offset is estimated and the block stays put."""
+    from carto.framework.adjust import HEIGHT_OFFSET
+
+    sensors = scene.sensors()
+    ties, check = _split(scene.control("checkpoints"))
+    _, first = np.unique(ties["id"], return_index=True)
+    obs = Observations.from_tables(scene.control("gcps"), ties)
+    biased_h = ties["h_m"][first] + 8.0
+
+    dragged = adjust_bundle(sensors, obs.with_heights(ties["id"][first], biased_h, 2.0))
+    height_dragged = checkpoint_accuracy(dragged.sensors, check)["rmse_height_m"]
+    assert height_dragged > 4.0
+    assert HEIGHT_OFFSET not in dragged.parameters
+
+    result = adjust_bundle(sensors, obs.with_heights(ties["id"][first], biased_h, 2.0, 20.0))
+    k = result.parameters.index(HEIGHT_OFFSET)
+    # the GCP's own height error (1 m) moves the datum: compare with the a-priori sigma
+    # (the exact tie points make sigma0 << 1 and the a-posteriori sigma too small)
+    assert abs(result.values[k] - 8.0) < 3.0 * math.sqrt(result.covariance_unit[k, k])
+    assert checkpoint_accuracy(result.sensors, check)["rmse_height_m"] < 3.0
+    with pytest.raises(InputError, match="height_offset_sigma_m"):
+        obs.with_heights(ties["id"][first], biased_h, 2.0, -1.0)

@@ -46,6 +46,10 @@ from carto.framework.sensor import Parameter, Sensor
 
 FloatArray = NDArray[np.float64]
 
+#: Name of the unknown common offset of the height constraints (constraint minus adjusted
+#: height, metres), estimated when ``Observations.height_offset_sigma_m > 0``.
+HEIGHT_OFFSET = "height_constraints.offset_m"
+
 
 def _f(value: Any) -> FloatArray:
     return np.atleast_1d(np.asarray(value, dtype=np.float64))
@@ -66,7 +70,12 @@ class Observations:
         ``control_sigma_planimetric_m`` (RMS of east and north together),
         ``control_sigma_h_m``.
     Height constraints (one row per constrained point, e.g. tie points on a DEM):
-        ``height_id``, ``height_m``, ``height_sigma_m``.
+        ``height_id``, ``height_m``, ``height_sigma_m`` (the point's own, independent error),
+        and ``height_offset_sigma_m``: a-priori sigma of one offset common to all the
+        constraint heights (a DEM's absolute vertical error, e.g. SRTM's few metres, does not
+        average out over many points). When > 0 the offset is estimated as the unknown
+        :data:`HEIGHT_OFFSET` (constraint height minus adjusted height, metres); 0 treats the
+        constraint errors as independent.
     """
 
     point_id: NDArray = attrs.field(converter=_s)
@@ -85,6 +94,7 @@ class Observations:
     height_id: NDArray = attrs.field(factory=lambda: np.array([], object), converter=_s)
     height_m: FloatArray = attrs.field(factory=lambda: np.array([]), converter=_f)
     height_sigma_m: FloatArray = attrs.field(factory=lambda: np.array([]), converter=_f)
+    height_offset_sigma_m: float = attrs.field(default=0.0, converter=float)
 
     def __attrs_post_init__(self) -> None:
         n = self.point_id.size
@@ -109,6 +119,11 @@ class Observations:
             self.height_sigma_m.size != self.height_id.size
         ):
             raise InputError("observations: height_id, height_m, height_sigma_m differ in size")
+        offset_sigma = self.height_offset_sigma_m
+        if not (offset_sigma >= 0 and math.isfinite(offset_sigma)):
+            raise InputError(
+                f"observations: height_offset_sigma_m must be >= 0, got {offset_sigma}"
+            )
         if (
             np.any(~(self.sigma_px > 0))
             or np.any(~(self.control_sigma_h_m > 0))
@@ -172,14 +187,18 @@ class Observations:
             c_sh,
         )
 
-    def with_heights(self, ids: Any, h_m: Any, sigma_m: Any) -> Observations:
-        """A copy with height constraints on the points ``ids``."""
+    def with_heights(
+        self, ids: Any, h_m: Any, sigma_m: Any, offset_sigma_m: float = 0.0
+    ) -> Observations:
+        """A copy with height constraints on the points ``ids`` (independent error
+        ``sigma_m`` each, and a common offset of a-priori sigma ``offset_sigma_m``)."""
         ids = _s(ids)
         return attrs.evolve(
             self,
             height_id=ids,
             height_m=np.broadcast_to(_f(h_m), ids.shape),
             height_sigma_m=np.broadcast_to(_f(sigma_m), ids.shape),
+            height_offset_sigma_m=offset_sigma_m,
         )
 
     def without_points(self, ids: Sequence[str]) -> Observations:
@@ -203,6 +222,7 @@ class Observations:
             self.height_id[keep_h],
             self.height_m[keep_h],
             self.height_sigma_m[keep_h],
+            self.height_offset_sigma_m,
         )
 
 
@@ -272,20 +292,18 @@ class AdjustmentResult:
 
 
 # ----------------------------------------------------------------------------- helpers
-def _enu(lon: FloatArray, lat: FloatArray) -> FloatArray:
-    """Rows east, north, up (ECEF unit vectors) per point, shape ``(N, 3, 3)``."""
-    lo, la = np.radians(lon), np.radians(lat)
-    e = np.stack([-np.sin(lo), np.cos(lo), np.zeros_like(lo)], -1)
-    n = np.stack([-np.sin(la) * np.cos(lo), -np.sin(la) * np.sin(lo), np.cos(la)], -1)
-    u = np.stack([np.cos(la) * np.cos(lo), np.cos(la) * np.sin(lo), np.sin(la)], -1)
-    return np.stack([e, n, u], axis=1)
+def _add_unique(target: FloatArray, index: NDArray[np.intp], values: FloatArray) -> None:
+    """``target[index] += values`` for an ``index`` without repeats (as ``np.add.at``)."""
+    target[index] += values
 
 
 def _move(
     lon: FloatArray, lat: FloatArray, h: FloatArray, d_enu: FloatArray
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Points displaced by ``(east, north, up)`` metres."""
-    x = frames.geodetic_to_ecef(lon, lat, h) + np.einsum("nij,ni->nj", _enu(lon, lat), d_enu)
+    x = frames.geodetic_to_ecef(lon, lat, h) + np.einsum(
+        "nij,ni->nj", frames.enu_basis(lon, lat), d_enu
+    )
     return frames.ecef_to_geodetic(x)
 
 
@@ -379,7 +397,7 @@ def adjust_bundle(
         obs: the observations.
         max_iterations: Gauss-Newton iterations per solution.
         tolerance: convergence when every parameter moves by less than ``tolerance`` of its
-            a-priori sigma and every point by less than 1 mm.
+            a-priori sigma and the points by less than 1 mm RMS (none by more than 5 cm).
         robust: reweight (Huber) and reject outliers (normalised residual above
             ``outlier_threshold``), then solve again without them.
         dem: optional DEM whose heights are re-read at the current position of points that
@@ -393,11 +411,15 @@ def adjust_bundle(
     if unknown:
         raise InputError(f"observations name images without a sensor: {', '.join(unknown)}")
     names, priors = free_parameters(sensors)
+    if obs.height_offset_sigma_m > 0 and obs.height_id.size:
+        names.append(HEIGHT_OFFSET)
+        priors[HEIGHT_OFFSET] = Parameter(HEIGHT_OFFSET, 0.0, obs.height_offset_sigma_m, "m")
     outliers: list[str] = []
     current = obs
     result = None
+    weights = None
     for _round in range(10):
-        result, flagged = _solve(
+        result, flagged, weights = _solve(
             dict(sensors),
             current,
             names,
@@ -408,10 +430,16 @@ def adjust_bundle(
             outlier_threshold,
             dem,
             start=result,  # after a rejection, continue from the previous solution
+            start_weights=weights,  # ... and its robust weights
         )
         if not robust or not flagged:
             break
         outliers.extend(flagged)
+        drop = set(flagged)
+        weights = (
+            weights[0][[p not in drop for p in current.point_id]],
+            weights[1][[c not in drop for c in current.control_id]],
+        )
         current = current.without_points(flagged)
     assert result is not None
     return attrs.evolve(result, outliers=tuple(outliers))
@@ -428,7 +456,8 @@ def _solve(
     threshold: float,
     dem: Any,
     start: AdjustmentResult | None = None,
-) -> tuple[AdjustmentResult, list[str]]:
+    start_weights: tuple[FloatArray, FloatArray] | None = None,
+) -> tuple[AdjustmentResult, list[str], tuple[FloatArray, FloatArray]]:
     heights = dict(zip(obs.height_id.tolist(), obs.height_m.tolist(), strict=True))
     point_ids = sorted(set(obs.point_id.tolist()))
     if start is not None and all(p in start.points for p in point_ids):
@@ -460,11 +489,12 @@ def _solve(
         values = np.array(start.values, dtype=np.float64)
     w_img = np.ones(obs.point_id.size)
     w_gcp = np.ones(gidx.size)
+    if start_weights is not None and start_weights[0].size == w_img.size:
+        w_img, w_gcp = start_weights[0].copy(), start_weights[1].copy()
     history: list[dict[str, float]] = []
     converged = False
     s_inv = np.zeros((n_par, n_par))
     iterations = 0
-    reweight_rounds = 3 if robust else 0
 
     def current_sensors() -> dict[str, Sensor]:
         out = {}
@@ -474,7 +504,8 @@ def _solve(
             out[name] = s.with_parameters(vals) if vals else s
         return out
 
-    for it in range(max_iterations + reweight_rounds * max_iterations):
+    reweighting = robust and start_weights is not None
+    for it in range(2 * max_iterations if robust else max_iterations):
         iterations = it + 1
         cur = current_sensors()
         n_cc = np.zeros((n_par, n_par))
@@ -483,42 +514,58 @@ def _solve(
         n_pp = np.zeros((n_pts, 3, 3))
         b_p = np.zeros((n_pts, 3))
         v_img = np.full((obs.point_id.size, 2), np.nan)
+        linear = {}
         for name, sensor in cur.items():
             rows = np.flatnonzero(obs.image == name)
             if rows.size == 0:
                 continue
             pi = obs_point[rows]
-            line, sample, _ = sensor.project(lon[pi], lat[pi], h[pi])
-            r = np.stack([obs.line[rows] - line, obs.sample[rows] - sample], -1)
             own = [n for n in names if n in {p.name for p in sensor.parameters}]
-            wsig = np.sqrt(w_img[rows]) / obs.sigma_px[rows]
-            a_p = sensor.ground_partials(lon[pi], lat[pi], h[pi]) * wsig[:, None, None]
-            if own:
-                a_c = sensor.parameter_partials(lon[pi], lat[pi], h[pi], own)
+            line, sample, a_p, a_c = sensor.linearize(lon[pi], lat[pi], h[pi], own)
+            r = np.stack([obs.line[rows] - line, obs.sample[rows] - sample], -1)
             # rows whose projection or derivatives fail (far outside the model) sit out
             ok = np.all(np.isfinite(r), axis=1) & np.all(np.isfinite(a_p), axis=(1, 2))
             if own:
                 ok &= np.all(np.isfinite(a_c), axis=(1, 2))
             v_img[rows] = np.where(ok[:, None], r, np.nan)
-            a_p = np.where(ok[:, None, None], a_p, 0.0)
+            linear[name] = (rows, pi, own, a_p, a_c, r, ok)
+        norm_img = np.linalg.norm(v_img / obs.sigma_px[:, None], axis=1)
+        weight_change = 0.0
+        if reweighting:
+            # iteratively reweighted least squares: Huber weights from the residuals at the
+            # current estimate, every iteration, until neither estimate nor weights change
+            new_w = _huber(np.nan_to_num(norm_img, nan=1e9), 2.0)
+            weight_change = float(np.max(np.abs(new_w - w_img), initial=0.0))
+            w_img = new_w
+        for rows, pi, own, a_p, a_c, r, ok in linear.values():
+            wsig = np.sqrt(w_img[rows]) / obs.sigma_px[rows]
+            a_p = np.where(ok[:, None, None], a_p * wsig[:, None, None], 0.0)
             rw = np.where(ok[:, None], r, 0.0) * wsig[:, None]
-            np.add.at(n_pp, pi, np.einsum("nki,nkj->nij", a_p, a_p))
-            np.add.at(b_p, pi, np.einsum("nki,nk->ni", a_p, rw))
+            a_pt = np.swapaxes(a_p, 1, 2)
+            # a point is measured at most once per image as a rule: plain fancy-index adds
+            once = np.unique(pi).size == pi.size
+            add = _add_unique if once else np.add.at
+            add(n_pp, pi, a_pt @ a_p)
+            add(b_p, pi, (a_pt @ rw[:, :, None])[:, :, 0])
             if own:
                 idx = np.array([par_index[n] for n in own], dtype=np.intp)
                 a_c = np.where(ok[:, None, None], a_c * wsig[:, None, None], 0.0)
-                n_cc[np.ix_(idx, idx)] += np.einsum("nki,nkj->ij", a_c, a_c)
-                b_c[idx] += np.einsum("nki,nk->i", a_c, rw)
-                contrib = np.einsum("nki,nkj->nij", a_c, a_p)  # (n, Pi, 3)
-                tmp = np.zeros((rows.size, n_par, 3))
-                tmp[:, idx, :] = contrib
-                np.add.at(n_cp, pi, tmp)
+                flat = a_c.reshape(-1, len(own))
+                n_cc[np.ix_(idx, idx)] += flat.T @ flat
+                b_c[idx] += flat.T @ rw.reshape(-1)
+                contrib = np.swapaxes(a_c, 1, 2) @ a_p  # (n, Pi, 3)
+                if once:
+                    n_cp[pi[:, None], idx[None, :], :] += contrib
+                else:
+                    tmp = np.zeros((rows.size, n_par, 3))
+                    tmp[:, idx, :] = contrib
+                    np.add.at(n_cp, pi, tmp)
         # ground control (east, north, up)
         v_gcp = np.zeros((gidx.size, 3))
         if gidx.size:
             ok = gidx >= 0
             g = gidx[ok]
-            basis = _enu(lon[g], lat[g])
+            basis = frames.enu_basis(lon[g], lat[g])
             d = frames.geodetic_to_ecef(
                 obs.control_lon_deg[ok], obs.control_lat_deg[ok], obs.control_h_m[ok]
             ) - frames.geodetic_to_ecef(lon[g], lat[g], h[g])
@@ -539,8 +586,15 @@ def _solve(
                     np.isfinite(dem.height(lon[hh], lat[hh])), dem.height(lon[hh], lat[hh]), target
                 )
             wgt = 1.0 / obs.height_sigma_m[ok] ** 2
+            offset = 0.0
+            if HEIGHT_OFFSET in par_index:  # target = h + offset
+                k = par_index[HEIGHT_OFFSET]
+                offset = values[k]
+                n_cc[k, k] += wgt.sum()
+                b_c[k] += np.sum(wgt * (target - h[hh] - offset))
+                np.add.at(n_cp[:, k, 2], hh, wgt)
             np.add.at(n_pp[:, 2, 2], hh, wgt)
-            np.add.at(b_p[:, 2], hh, wgt * (target - h[hh]))
+            np.add.at(b_p[:, 2], hh, wgt * (target - h[hh] - offset))
         # parameter priors
         finite = np.isfinite(prior_sigma)
         n_cc[finite, finite] += 1.0 / prior_sigma[finite] ** 2
@@ -562,28 +616,25 @@ def _solve(
         values = values + d_c
         lon, lat, h = _move(lon, lat, h, np.where(good[:, None], d_p, 0.0))
         step_par = float(np.max(np.abs(d_c) / np.where(finite, prior_sigma, 1.0))) if n_par else 0.0
-        step_pt = float(np.max(np.linalg.norm(d_p, axis=1))) if n_pts else 0.0
-        norm_img = np.linalg.norm(v_img / obs.sigma_px[:, None], axis=1)
+        moves = np.linalg.norm(d_p, axis=1)
+        step_pt = float(np.max(moves)) if n_pts else 0.0
+        rms_pt = float(np.sqrt(np.mean(moves**2))) if n_pts else 0.0
         history.append(
             {
                 "max_parameter_step_sigma": step_par,
                 "max_point_move_m": step_pt,
+                "rms_point_move_m": rms_pt,
                 "rms_normalised_residual": float(np.sqrt(np.nanmean(norm_img**2))),
             }
         )
-        if step_par < tolerance and step_pt < 1e-3:
-            if reweight_rounds > 0:
-                reweight_rounds -= 1
-                w_img = _huber(np.nan_to_num(norm_img, nan=1e9), 2.0)
-                if gidx.size:
-                    sp = obs.control_sigma_planimetric_m / math.sqrt(2.0)
-                    nrm = np.linalg.norm(
-                        v_gcp / np.stack([sp, sp, obs.control_sigma_h_m], -1), axis=1
-                    )
-                    w_gcp = _huber(nrm, 2.0)
-                continue
+        # converged: parameters move by < tolerance sigma, points by < 1 mm RMS (and none by
+        # more than 5 cm: a weakly determined point may wobble while its weight settles)
+        small = step_par < tolerance and rms_pt < 1e-3 and step_pt < 0.05
+        if small and (not robust or (reweighting and weight_change < 0.01)):
             converged = True
             break
+        # near the solution (points move < 1 m), start reweighting
+        reweighting = reweighting or (robust and step_pt < 1.0)
 
     # final residuals with the final estimate
     cur = current_sensors()
@@ -603,7 +654,7 @@ def _solve(
         d = frames.geodetic_to_ecef(
             obs.control_lon_deg[ok], obs.control_lat_deg[ok], obs.control_h_m[ok]
         ) - frames.geodetic_to_ecef(lon[g], lat[g], h[g])
-        v_gcp[ok] = np.einsum("nij,nj->ni", _enu(lon[g], lat[g]), d)
+        v_gcp[ok] = np.einsum("nij,nj->ni", frames.enu_basis(lon[g], lat[g]), d)
     # sigma0 and redundancy
     vpv = np.nansum((d_line / obs.sigma_px) ** 2 + (d_sample / obs.sigma_px) ** 2)
     n_rows = 2 * int(np.sum(np.isfinite(d_line)))
@@ -613,7 +664,9 @@ def _solve(
         n_rows += 3 * int(np.sum(gidx >= 0))
     if hidx.size:
         ok = hidx >= 0
-        vpv += float(np.sum(((obs.height_m[ok] - h[hidx[ok]]) / obs.height_sigma_m[ok]) ** 2))
+        offset = values[par_index[HEIGHT_OFFSET]] if HEIGHT_OFFSET in par_index else 0.0
+        v_h = obs.height_m[ok] - h[hidx[ok]] - offset
+        vpv += float(np.sum((v_h / obs.height_sigma_m[ok]) ** 2))
         n_rows += int(ok.sum())
     finite = np.isfinite(prior_sigma)
     vpv += float(np.sum(((values - prior_value)[finite] / prior_sigma[finite]) ** 2))
@@ -671,7 +724,7 @@ def _solve(
         converged=converged,
         history=tuple(history),
     )
-    return result, flagged
+    return result, flagged, (w_img, w_gcp)
 
 
 def _solve_reduced(

@@ -329,6 +329,11 @@ def cmd_adjust(args: argparse.Namespace) -> int:
         options["attitude_order"] = args.attitude_order
     if args.no_robust:
         options["robust"] = False
+    if args.dem_heights is not None:
+        options["tie_heights"] = args.dem_heights > 0
+        options["height_sigma_m"] = args.dem_heights
+    if args.dem_offset_sigma is not None:
+        options["height_offset_sigma_m"] = args.dem_offset_sigma
     report = adjust_product(
         args.source,
         args.out,
@@ -372,6 +377,8 @@ def _add_adjust(sub: argparse._SubParsersAction) -> None:
             "carto adjust scene1 --gcps 1 --out adj1",
             "carto adjust scene1 --gcps 1 --mode separate --out adj1-separate",
             "carto adjust pair.json --adjuster rpc-bias --out adj",
+            "carto adjust pair.json --adjuster rpc-bias --dem-heights 10 --dem-offset-sigma 4 "
+            "--out adj",
         ),
         formatter_class=_formatter,
     )
@@ -395,6 +402,20 @@ def _add_adjust(sub: argparse._SubParsersAction) -> None:
         default="auto",
         metavar="auto|none|FILE",
         help="tie points: automatic (default), none, or a CSV id,image,line,sample",
+    )
+    p.add_argument(
+        "--dem-heights",
+        type=float,
+        metavar="SIGMA_M",
+        help="constrain tie-point heights to the DEM with this sigma (0: never; default: "
+        "30 m when no GCP is used, else off)",
+    )
+    p.add_argument(
+        "--dem-offset-sigma",
+        type=float,
+        metavar="M",
+        help="a-priori sigma of one height offset common to all DEM constraints, estimated "
+        "(the DEM's absolute vertical error, e.g. 4 for SRTM)",
     )
     p.add_argument("--sensor", metavar="TYPE", help="sensor type of the product")
     p.add_argument("--no-robust", action="store_true", help="no outlier rejection")

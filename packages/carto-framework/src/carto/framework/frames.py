@@ -102,16 +102,15 @@ def ellipsoid_normal(lon_deg: ArrayLike, lat_deg: ArrayLike) -> FloatArray:
     )
 
 
-def enu_basis(lon_deg: float, lat_deg: float) -> FloatArray:
-    """Rows: the ECEF unit vectors east, north, up at a geodetic location, shape ``(3, 3)``."""
-    lon, lat = np.radians(lon_deg), np.radians(lat_deg)
-    return np.array(
-        [
-            [-np.sin(lon), np.cos(lon), 0.0],
-            [-np.sin(lat) * np.cos(lon), -np.sin(lat) * np.sin(lon), np.cos(lat)],
-            [np.cos(lat) * np.cos(lon), np.cos(lat) * np.sin(lon), np.sin(lat)],
-        ]
-    )
+def enu_basis(lon_deg: ArrayLike, lat_deg: ArrayLike) -> FloatArray:
+    """Rows: the ECEF unit vectors east, north, up at geodetic locations, shape ``(..., 3, 3)``
+    (``(3, 3)`` for scalars); ``d_enu = enu_basis @ d_ecef``."""
+    lon = np.radians(np.asarray(lon_deg, float))
+    lat = np.radians(np.asarray(lat_deg, float))
+    lon, lat = np.broadcast_arrays(lon, lat)
+    east = np.stack([-np.sin(lon), np.cos(lon), np.zeros_like(lon)], -1)
+    north = np.stack([-np.sin(lat) * np.cos(lon), -np.sin(lat) * np.sin(lon), np.cos(lat)], -1)
+    return np.stack([east, north, ellipsoid_normal(lon_deg, lat_deg)], axis=-2)
 
 
 # ----------------------------------------------------------------------------- time

@@ -29,6 +29,7 @@ constant period, piecewise linear for asynchronous imaging).
 from __future__ import annotations
 
 import json
+import math
 import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -328,6 +329,24 @@ def _focal_offset(
     return v[0] / v[2] - target
 
 
+@numba.njit(cache=True, nogil=True)
+def _camera_vectors(
+    x: FloatArray,
+    t_s: FloatArray,
+    node0: float,
+    spacing: float,
+    pos: FloatArray,
+    rot: FloatArray,
+) -> FloatArray:  # pragma: no cover - compiled
+    """Camera-frame vectors ``R_ecef_to_camera (X - P)`` at times ``t_s`` from the table,
+    ``(N, 3)``; NaN outside the table."""
+    out = np.full((x.shape[0], 3), np.nan)
+    one = np.zeros(1)
+    for i in range(x.shape[0]):
+        _focal_offset(x[i], t_s[i], node0, spacing, pos, rot, one, one, 0.0, 1.0, out[i])
+    return out
+
+
 def _solve_lines_py(
     x: FloatArray,
     guess: FloatArray,
@@ -487,6 +506,134 @@ class LineScanner(Sensor):
         )
         return attrs.evolve(self, trajectory=trajectory, camera=camera)
 
+    def _collinearity(
+        self,
+        line: FloatArray,
+        sample: FloatArray,
+        x_ecef: FloatArray,
+        pose: tuple[FloatArray, FloatArray] | None = None,
+    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """The collinearity condition at image point ``(line, sample)`` and ground ``x_ecef``:
+        ``F (N, 2)``, zero when the point images there (camera-frame ``x/z`` and ``y/z`` of the
+        ground direction minus the detector's ``tan psi``), and ``dF/dX (N, 2, 3)``, the
+        camera-frame vector ``v (N, 3)`` and ``R_camera_to_ecef (N, 3, 3)``. ``pose``: the
+        ``(P, R_camera_to_ecef)`` at ``line`` when already known."""
+        p, r_c2e = self.camera_to_ecef(line) if pose is None else pose
+        v = np.einsum("nji,nj->ni", r_c2e, x_ecef - p)
+        tx, ty = self.camera.tan_psi(sample + self.first_sample)
+        f = np.stack([v[:, 0] / v[:, 2] - tx, v[:, 1] / v[:, 2] - ty], -1)
+        # v = R^T (X - P): dv/dX = R^T, rows of R^T are the columns of R
+        v2 = v[:, 2:3]
+        df_dx = np.stack(
+            [
+                (r_c2e[:, :, 0] * v2 - v[:, 0:1] * r_c2e[:, :, 2]) / v2**2,
+                (r_c2e[:, :, 1] * v2 - v[:, 1:2] * r_c2e[:, :, 2]) / v2**2,
+            ],
+            axis=1,
+        )
+        return f, df_dx, v, r_c2e
+
+    def linearize(
+        self,
+        lon_deg: ArrayLike,
+        lat_deg: ArrayLike,
+        h_m: ArrayLike,
+        names: Sequence[str] | None = None,
+    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """``(line, sample, ground partials (N, 2, 3), parameter partials (N, 2, P))`` from
+        one projection (see :meth:`Sensor.linearize`).
+
+        The image point is defined implicitly by the collinearity condition
+        ``F(line, sample; X, p) = 0`` (:meth:`_collinearity`), so by the implicit function
+        theorem ``d(line, sample) = -(dF/d(line, sample))^-1 (dF/dX dX + dF/dp dp)``.
+        ``dF/dX`` is analytic, and so is ``dF/dp`` for the attitude corrections (a
+        correction angle rotates the body about an axis the trajectory gives:
+        :meth:`Trajectory.evaluate_with_axes`); ``dF/d(line, sample)`` and ``dF/dp`` of other
+        parameters (position, camera) are central differences of F at the fixed image
+        point, which evaluate the trajectory and camera but solve no projection. A correction
+        polynomial's coefficient ``c_k`` acts like ``c_0`` times ``tau^k`` at the imaging
+        time. Ground partials are w.r.t. local east, north, up displacements in metres.
+        """
+        lon, lat, h = (a.ravel() for a in as_float_arrays(lon_deg, lat_deg, h_m))
+        if names is None:
+            names = [p.name for p in self.parameters if p.free]
+        names = list(names)
+        line, sample, _ = self.project(lon, lat, h)
+        ok = np.isfinite(line) & np.isfinite(sample)
+        li = np.where(ok, line, 0.5 * self.n_lines)
+        sa = np.where(ok, sample, 0.5 * self.n_samples)
+        x = frames.geodetic_to_ecef(lon, lat, h)
+        t = self.timing.time(li)
+        p_e, r_b2e, axes = self.trajectory.evaluate_with_axes(t)
+        _, df_dx, v, _ = self._collinearity(li, sa, x, (p_e, r_b2e @ self.camera.camera_to_body()))
+        # dF/d(line, sample): (N, 2, 2); F is smooth along the line: a forward difference,
+        # with the camera state interpolated in the projection's table
+        jac = np.empty((lon.size, 2, 2))
+        step = 0.5
+        table = self._table
+        v_step = _camera_vectors(
+            np.ascontiguousarray(x),
+            np.ascontiguousarray(self.timing.time(li + step)),
+            table.node0,
+            table.spacing,
+            table.position,
+            table.rotation,
+        )
+        jac[:, 0, 0] = (v_step[:, 0] / v_step[:, 2] - v[:, 0] / v[:, 2]) / step
+        jac[:, 1, 0] = (v_step[:, 1] / v_step[:, 2] - v[:, 1] / v[:, 2]) / step
+        tx_p, ty_p = self.camera.tan_psi(sa + self.first_sample + step)
+        tx_m, ty_m = self.camera.tan_psi(sa + self.first_sample - step)
+        jac[:, 0, 1] = -(tx_p - tx_m) / (2 * step)
+        jac[:, 1, 1] = -(ty_p - ty_m) / (2 * step)
+        det = jac[:, 0, 0] * jac[:, 1, 1] - jac[:, 0, 1] * jac[:, 1, 0]
+        inv = (
+            np.stack(
+                [
+                    np.stack([jac[:, 1, 1], -jac[:, 0, 1]], -1),
+                    np.stack([-jac[:, 1, 0], jac[:, 0, 0]], -1),
+                ],
+                axis=1,
+            )
+            / det[:, None, None]
+        )
+        a_ground = -inv @ (df_dx @ np.swapaxes(frames.enu_basis(lon, lat), -1, -2))
+        # dF/dp at the fixed image point
+        a_param = np.empty((lon.size, 2, len(names)))
+        if names:
+            params = {p.name: p for p in self.parameters}
+            prefix = self.trajectory.prefix
+            base: dict[str, tuple[str, int]] = {}
+            for name in names:
+                rest = name[len(prefix) :] if name.startswith(prefix) else ""
+                group, _, power = rest.rpartition(".c")
+                if rest and power.isdigit() and group.split(".")[0] in ("attitude", "position"):
+                    base[name] = (group, int(power))
+            tau = (t - self.trajectory.t_mid_s) / self.trajectory.t_half_s
+            differenced: dict[str, FloatArray] = {}
+            for k, name in enumerate(names):
+                group, power = base.get(name, (name, 0))
+                if group not in differenced:
+                    kind, _, axis = group.partition(".")
+                    if name in base and kind == "attitude":
+                        # dR/d angle = [w]x R: dv = -R^T (w x (X - P)), dF = dF/dX (X - P) x w
+                        w = axes[:, ("roll", "pitch", "yaw").index(axis)]
+                        df = np.einsum("nij,nj->ni", df_dx, np.cross(x - p_e, w))
+                    else:
+                        target = f"{prefix}{group}.c0" if name in base else name
+                        p = params[target]
+                        d = 1e-3 * p.sigma if math.isfinite(p.sigma) else 1e-6
+                        plus = self.with_parameters({target: p.value + d})
+                        minus = self.with_parameters({target: p.value - d})
+                        df = (
+                            plus._collinearity(li, sa, x)[0] - minus._collinearity(li, sa, x)[0]
+                        ) / (2 * d)
+                    differenced[group] = -np.einsum("nij,nj->ni", inv, df)
+                a_param[:, :, k] = differenced[group] * (tau**power)[:, None]
+        bad = ~ok
+        a_ground[bad] = np.nan
+        a_param[bad] = np.nan
+        return line, sample, a_ground, a_param
+
     def parameter_partials(
         self,
         lon_deg: ArrayLike,
@@ -494,40 +641,14 @@ class LineScanner(Sensor):
         h_m: ArrayLike,
         names: Sequence[str] | None = None,
     ) -> FloatArray:
-        """Partials of ``(line, sample)`` w.r.t. parameters, ``(N, 2, P)``.
+        """Partials of ``(line, sample)`` w.r.t. parameters, ``(N, 2, P)`` (see
+        :meth:`linearize`)."""
+        return self.linearize(lon_deg, lat_deg, h_m, names)[3]
 
-        A correction polynomial's coefficient ``c_k`` moves the image point like ``c_0`` times
-        ``tau^k`` at the point's imaging time (the angle or offset added at that time is
-        ``sum_k c_k tau^k``), so only the ``c_0`` derivatives are taken numerically (central
-        differences, as the base class) and the others follow; camera parameters are
-        differentiated numerically.
-        """
-        lon, lat, h = (a.ravel() for a in as_float_arrays(lon_deg, lat_deg, h_m))
-        if names is None:
-            names = [p.name for p in self.parameters if p.free]
-        prefix = self.trajectory.prefix
-        base: dict[str, str] = {}
-        for name in names:
-            rest = name[len(prefix) :] if name.startswith(prefix) else ""
-            group, _, power = rest.rpartition(".c")
-            if rest and power.isdigit() and group.split(".")[0] in ("attitude", "position"):
-                base[name] = f"{prefix}{group}.c0"
-        numeric = list(dict.fromkeys([base.get(n, n) for n in names]))
-        d = super().parameter_partials(lon, lat, h, numeric)
-        col = {n: i for i, n in enumerate(numeric)}
-        out = np.empty((lon.size, 2, len(names)))
-        tau = None
-        for k, name in enumerate(names):
-            if name in base and name != base[name]:
-                if tau is None:
-                    line, _, _ = self.project(lon, lat, h)
-                    t = self.timing.time(line)
-                    tau = (t - self.trajectory.t_mid_s) / self.trajectory.t_half_s
-                power = int(name.rpartition(".c")[2])
-                out[:, :, k] = d[:, :, col[base[name]]] * (tau**power)[:, None]
-            else:
-                out[:, :, k] = d[:, :, col[name]]
-        return out
+    def ground_partials(self, lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike) -> FloatArray:
+        """Partials of ``(line, sample)`` w.r.t. local east, north, up displacements in
+        metres, ``(N, 2, 3)`` (see :meth:`linearize`)."""
+        return self.linearize(lon_deg, lat_deg, h_m, [])[2]
 
     def with_trajectory(self, trajectory: Trajectory) -> LineScanner:
         """The same image seen from another (e.g. adjusted, shared) trajectory."""

@@ -225,6 +225,26 @@ class Sensor(abc.ABC):
             out[:, 1, k] = (plus[1] - minus[1]) / 2.0
         return out
 
+    def linearize(
+        self,
+        lon_deg: ArrayLike,
+        lat_deg: ArrayLike,
+        h_m: ArrayLike,
+        names: Sequence[str] | None = None,
+    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """Everything an adjustment needs at ground points, in one call:
+        ``(line (N,), sample (N,), ground partials (N, 2, 3), parameter partials (N, 2, P))``
+        (see :meth:`project`, :meth:`ground_partials`, :meth:`parameter_partials`; ``names``
+        defaults to the free parameters). Models override it to share the work between the
+        three (one projection instead of many)."""
+        lon, lat, h = (a.ravel() for a in as_float_arrays(lon_deg, lat_deg, h_m))
+        line, sample, _ = self.project(lon, lat, h)
+        names = [p.name for p in self.parameters if p.free] if names is None else list(names)
+        a_param = (
+            self.parameter_partials(lon, lat, h, names) if names else np.zeros((lon.size, 2, 0))
+        )
+        return line, sample, self.ground_partials(lon, lat, h), a_param
+
 
 class SensorType(Component):
     """A kind of product that can be opened as a :class:`Sensor` (like a GDAL driver).

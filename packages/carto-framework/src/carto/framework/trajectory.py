@@ -396,6 +396,19 @@ class Trajectory:
         ``R_body_to_orbit = R_orbit_to_eci^T @ R_body_to_eci``), with the orbit frame of the
         corrected position ``P``.
         """
+        p, r, _ = self._evaluate(dt_s, axes=False)
+        return p, r
+
+    def evaluate_with_axes(self, dt_s: ArrayLike) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """:meth:`evaluate` plus the ECEF axes of the attitude corrections, ``(..., 3, 3)``
+        (rows: roll, pitch, yaw): increasing the correction angle of axis ``a`` by ``d``
+        (radians) rotates the body by ``d`` about ``axes[..., a, :]``, so
+        ``dR_body_to_ecef / d angle_a = [axis_a]x @ R_body_to_ecef`` (analytic partials)."""
+        return self._evaluate(dt_s, axes=True)
+
+    def _evaluate(
+        self, dt_s: ArrayLike, axes: bool
+    ) -> tuple[FloatArray, FloatArray, FloatArray | None]:
         t = np.asarray(dt_s, dtype=np.float64)
         p_eci, v_eci = self.state_eci(t)
         tau = (t - self.t_mid_s) / self.t_half_s
@@ -419,13 +432,28 @@ class Trajectory:
                 r_b2o = np.swapaxes(r_o2i, -1, -2) @ r_b2f
             else:
                 r_b2o = np.swapaxes(r_o2e, -1, -2) @ r_b2f
+        d = np.zeros((3, *t.shape))
         if self.attitude_correction_order >= 0:
             c = self._correction_coeffs("attitude", _ANGLE_NAMES, self.attitude_correction_order)
             if c.any():
                 d = npoly.polyval(tau, c)
                 r_b2o = frames.rpy_to_matrix(d[0], d[1], d[2]) @ r_b2o
         p_ecef = np.einsum("...ij,...j->...i", r_i2e, p_eci)
-        return p_ecef, r_o2e @ r_b2o
+        if not axes:
+            return p_ecef, r_o2e @ r_b2o, None
+        # R_correction = Rz(yaw) Ry(pitch) Rx(roll): d/d roll = [Rz Ry e_x]x R, d/d pitch =
+        # [Rz e_y]x R, d/d yaw = [e_z]x R (orbit frame), then into ECEF
+        cp, sp, cy, sy = np.cos(d[1]), np.sin(d[1]), np.cos(d[2]), np.sin(d[2])
+        zero, one = np.zeros_like(cp), np.ones_like(cp)
+        orbit_axes = np.stack(
+            [
+                np.stack([cy * cp, sy * cp, -sp], -1),
+                np.stack([-sy, cy, zero], -1),
+                np.stack([zero, zero, one], -1),
+            ],
+            axis=-2,
+        )
+        return p_ecef, r_o2e @ r_b2o, orbit_axes @ np.swapaxes(r_o2e, -1, -2)
 
     def position_velocity_ecef(self, dt_s: ArrayLike) -> tuple[FloatArray, FloatArray]:
         """Uncorrected Earth-fixed position (m) and velocity (m/s, relative to the Earth)."""

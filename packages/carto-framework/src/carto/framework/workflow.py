@@ -215,8 +215,9 @@ def adjust_product(
     # coarse DEM's errors, so by default it is used only without GCPs
     tie_heights = bool(options.pop("tie_heights", n_used == 0))
     height_sigma_m = float(options.pop("height_sigma_m", 30.0))
+    height_offset_sigma_m = float(options.pop("height_offset_sigma_m", 0.0))
     if dem is not None and tie_table is not None and tie_heights:
-        obs = _with_dem_heights(obs, sensors, dem, height_sigma_m)
+        obs = _with_dem_heights(obs, sensors, dem, height_sigma_m, height_offset_sigma_m)
     name = adjuster or _default_adjuster(sensors, platform)
     component = get_registry().get("adjuster", name)
     _progress(
@@ -293,24 +294,27 @@ def _jsonable(value: Any) -> Any:
 
 
 def _with_dem_heights(
-    obs: Observations, sensors: Mapping[str, Sensor], dem: Any, sigma_m: float
+    obs: Observations,
+    sensors: Mapping[str, Sensor],
+    dem: Any,
+    sigma_m: float,
+    offset_sigma_m: float = 0.0,
 ) -> Observations:
-    """Height constraints for tie points (not GCPs) from the DEM at their first location."""
+    """Height constraints for tie points (not GCPs) from the DEM at their first location
+    (independent sigma ``sigma_m`` each, common offset of a-priori sigma ``offset_sigma_m``)."""
     controls = set(obs.control_id.tolist())
-    ties = sorted(set(obs.point_id.tolist()) - controls)
-    if not ties:
+    _, first = np.unique(obs.point_id, return_index=True)
+    first = first[[p not in controls for p in obs.point_id[first]]]
+    if first.size == 0:
         return obs
-    first = {}
-    for pid, image, line, sample in zip(obs.point_id, obs.image, obs.line, obs.sample, strict=True):
-        first.setdefault(pid, (image, line, sample))
-    heights = []
-    for pid in ties:
-        image, line, sample = first[pid]
-        _, _, h = sensors[image].locate_on_dem(np.array([line]), np.array([sample]), dem)
-        heights.append(float(h[0]))
-    h = np.array(heights)
+    h = np.full(first.size, np.nan)
+    for image in np.unique(obs.image[first]):
+        rows = obs.image[first] == image
+        _, _, h[rows] = sensors[image].locate_on_dem(
+            obs.line[first[rows]], obs.sample[first[rows]], dem
+        )
     ok = np.isfinite(h)
-    return obs.with_heights(np.array(ties, object)[ok], h[ok], sigma_m)
+    return obs.with_heights(obs.point_id[first][ok], h[ok], sigma_m, offset_sigma_m)
 
 
 def _write_models(result: AdjustmentResult, out: Path) -> dict[str, Any]:
