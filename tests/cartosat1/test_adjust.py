@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
+from carto.cartosat1.adjust import prepare_sensors
 from carto.framework import get_registry
 from carto.framework.adjust import Observations
 from carto.framework.errors import InputError
@@ -35,9 +38,19 @@ def adjuster():
 
 def test_combined_shares_one_set_of_body_corrections(setup, adjuster):
     scene, obs, check = setup
-    result = adjuster.adjust(scene.sensors(), obs)
-    assert all(n.startswith("trajectory.attitude.") for n in result.parameters)
-    assert len(result.parameters) == 6  # roll, pitch, yaw x (bias, drift) for both cameras
+    sensors = scene.sensors()
+    result = adjuster.adjust(sensors, obs)
+    body = [n for n in result.parameters if n.startswith("trajectory.attitude.")]
+    assert len(body) == 6  # roll, pitch, yaw x (bias, drift) for both cameras
+    # plus the residual Fore/Aft relative alignment, weighted by what calibration leaves
+    align = set(result.parameters) - set(body)
+    assert align == {f"camera.aft.align.{a}" for a in ("roll", "pitch", "yaw")}
+    prepared = prepare_sensors(sensors)
+    priors = {p.name: p.sigma for s in prepared.values() for p in s.parameters if p.free}
+    t_half = sensors["fore"].trajectory.t_half_s
+    assert priors["trajectory.attitude.roll.c0"] == pytest.approx(math.radians(0.02))
+    assert priors["trajectory.attitude.roll.c1"] == pytest.approx(math.radians(2e-5) * t_half)
+    assert priors["camera.aft.align.pitch"] == pytest.approx(math.radians(0.002) * math.sqrt(2))
     acc = checkpoint_accuracy(result.sensors, check)
     assert acc["rmse_planimetric_m"] < 3.0
     # one realisation of the GCP error: the prediction is an expectation (the benchmark checks

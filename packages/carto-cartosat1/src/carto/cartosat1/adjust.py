@@ -8,23 +8,34 @@ image. A conjugate point is seen about 52 s apart in Fore and Aft, so it constra
 like two GCPs; a single GCP then fixes the absolute position (Radhadevi et al. 2010).
 
 Modes:
-    ``combined``: one shared set of body corrections (the default).
+    ``combined``: one shared set of body corrections (the default), plus the residual
+        relative alignment of the second camera (what in-flight calibration leaves, a-priori
+        ``sqrt(2) * RESIDUAL_ALIGNMENT_SIGMA_DEG`` per axis) as a weighted unknown.
     ``separate``: independent corrections per camera (the classical model, for comparison).
     ``calibration``: the shared body corrections plus the alignment of every camera but the
-        first relative to the body (in-flight calibration, needs many GCPs); the estimate is
-        folded into the cameras' calibrated alignment of the returned sensors.
+        first relative to the body, loosely weighted (in-flight calibration, needs many
+        GCPs); the estimate is folded into the cameras' calibrated alignment of the returned
+        sensors.
+
+The attitude corrections are weighted by the ancillary data's accuracy
+(:mod:`carto.cartosat1.constants`: bias 0.02 deg, drift 2e-5 deg/s per axis); options
+``bias_sigma_deg``, ``drift_sigma_deg_s`` and ``alignment_sigma_deg`` (per camera) override
+them.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from typing import Any
 
 import attrs
 
+from carto.cartosat1 import constants
 from carto.framework.adjust import (
     Adjuster,
     AdjustmentResult,
+    AttitudePrior,
     Observations,
     adjust_bundle,
     line_scanner_corrections,
@@ -41,12 +52,19 @@ def prepare_sensors(
     mode: str = "combined",
     attitude_order: int = 1,
     estimate_position: bool = False,
+    bias_sigma_deg: float = constants.ATTITUDE_BIAS_SIGMA_DEG,
+    drift_sigma_deg_s: float = constants.ATTITUDE_DRIFT_SIGMA_DEG_S,
+    alignment_sigma_deg: float = constants.RESIDUAL_ALIGNMENT_SIGMA_DEG,
 ) -> dict[str, LineScanner]:
     """The sensors with the free parameters of the chosen mode (see the module docstring)."""
     if mode not in MODES:
         raise InputError(
             f"cartosat1-combined: mode must be one of {', '.join(MODES)}, got {mode!r}"
         )
+    prior = AttitudePrior.from_degrees(bias_sigma_deg, drift_sigma_deg_s)
+    # the second camera's alignment relative to the first: residual (combined) or loose
+    # (calibration: the default sigma of the camera model)
+    relative = math.radians(alignment_sigma_deg) * math.sqrt(2.0)
     names = list(sensors)
     return {
         name: line_scanner_corrections(
@@ -56,7 +74,9 @@ def prepare_sensors(
             attitude_order=attitude_order,
             estimate_position=estimate_position,
             independent=mode == "separate",
-            free_camera=mode == "calibration" and name != names[0],
+            free_camera=mode in ("combined", "calibration") and name != names[0],
+            prior=prior,
+            alignment_sigma_rad=relative if mode == "combined" else None,
         )
         for name, sensor in sensors.items()
     }
@@ -77,6 +97,9 @@ class Cartosat1Adjuster(Adjuster):
             mode,
             int(options.pop("attitude_order", 1)),
             bool(options.pop("estimate_position", False)),
+            float(options.pop("bias_sigma_deg", constants.ATTITUDE_BIAS_SIGMA_DEG)),
+            float(options.pop("drift_sigma_deg_s", constants.ATTITUDE_DRIFT_SIGMA_DEG_S)),
+            float(options.pop("alignment_sigma_deg", constants.RESIDUAL_ALIGNMENT_SIGMA_DEG)),
         )
         result = adjust_bundle(prepared, observations, **options)
         if mode == "calibration":

@@ -20,3 +20,13 @@ LINE_PERIOD_S = 0.336e-3
 RADIOMETRIC_BITS = 10
 ANCILLARY_STEP_S = 0.125
 """Position, velocity and attitude are sampled every 125 ms."""
+
+# A-priori accuracy of the ancillary data (design brief section 4): the weights of the
+# ephemeris/attitude observations in the adjustment, so that few GCPs suffice.
+ATTITUDE_BIAS_SIGMA_DEG = 0.02
+"""Attitude bias per axis (about 200 m on the ground)."""
+ATTITUDE_DRIFT_SIGMA_DEG_S = 2e-5
+"""Attitude drift per axis."""
+RESIDUAL_ALIGNMENT_SIGMA_DEG = 0.002
+"""Residual alignment error of each camera after in-flight calibration, per axis; the
+Fore/Aft relative alignment is uncertain by sqrt(2) times this."""

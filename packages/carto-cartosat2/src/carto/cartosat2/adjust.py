@@ -19,9 +19,11 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
+from carto.cartosat2 import constants
 from carto.framework.adjust import (
     Adjuster,
     AdjustmentResult,
+    AttitudePrior,
     Observations,
     adjust_bundle,
     line_scanner_corrections,
@@ -29,11 +31,22 @@ from carto.framework.adjust import (
 from carto.framework.linescan import LineScanner
 from carto.framework.sensor import Sensor
 
+PRIOR = AttitudePrior.from_degrees(
+    constants.ATTITUDE_BIAS_SIGMA_DEG,
+    constants.ATTITUDE_DRIFT_SIGMA_DEG_S,
+    constants.ATTITUDE_SMOOTH_SIGMA_DEG,
+)
+"""A-priori attitude accuracy of Cartosat-2 products (bias, drift, smooth variation)."""
+
 
 def prepare_sensors(
-    sensors: Mapping[str, Sensor], attitude_order: int = 2, estimate_position: bool = False
+    sensors: Mapping[str, Sensor],
+    attitude_order: int = 2,
+    estimate_position: bool = False,
+    prior: AttitudePrior | None = None,
 ) -> dict[str, LineScanner]:
-    """Independent corrections per image (parameter names prefixed by the image name)."""
+    """Independent corrections per image (parameter names prefixed by the image name),
+    weighted by ``prior`` (default: the Cartosat-2 ancillary accuracy, :data:`PRIOR`)."""
     return {
         name: line_scanner_corrections(
             name,
@@ -42,6 +55,7 @@ def prepare_sensors(
             attitude_order=attitude_order,
             estimate_position=estimate_position,
             independent=True,
+            prior=PRIOR if prior is None else prior,
         )
         for name, sensor in sensors.items()
     }
@@ -56,10 +70,16 @@ class Cartosat2BlockAdjuster(Adjuster):
     def adjust(
         self, sensors: Mapping[str, Sensor], observations: Observations, **options: Any
     ) -> AdjustmentResult:
+        prior = AttitudePrior.from_degrees(
+            float(options.pop("bias_sigma_deg", constants.ATTITUDE_BIAS_SIGMA_DEG)),
+            float(options.pop("drift_sigma_deg_s", constants.ATTITUDE_DRIFT_SIGMA_DEG_S)),
+            float(options.pop("smooth_sigma_deg", constants.ATTITUDE_SMOOTH_SIGMA_DEG)),
+        )
         prepared = prepare_sensors(
             sensors,
             int(options.pop("attitude_order", 2)),
             bool(options.pop("estimate_position", False)),
+            prior,
         )
         options.pop("mode", None)
         return adjust_bundle(prepared, observations, **options)

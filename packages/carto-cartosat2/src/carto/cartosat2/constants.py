@@ -15,3 +15,12 @@ FOCAL_LENGTH_M = 5.6
 SWATH_M = 9.6e3
 RADIOMETRIC_BITS = 10
 ANCILLARY_STEP_S = 0.125
+
+# A-priori accuracy of the ancillary data (design brief section 4): the weights of the
+# attitude observations in the block adjustment.
+ATTITUDE_BIAS_SIGMA_DEG = 0.02
+"""Attitude bias per axis, per image."""
+ATTITUDE_DRIFT_SIGMA_DEG_S = 2e-5
+"""Attitude drift per axis."""
+ATTITUDE_SMOOTH_SIGMA_DEG = 0.002
+"""Smooth higher-order attitude variation over an agile segment (tau^2, tau^3 terms)."""

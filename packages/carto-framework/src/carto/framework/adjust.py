@@ -753,6 +753,44 @@ def _solve_reduced(
     return inv @ rhs, inv
 
 
+@attrs.frozen
+class AttitudePrior:
+    """A-priori accuracy of a platform's ancillary attitude, in physical units: the weights
+    with which attitude corrections enter an adjustment (one sigma each).
+
+    Attributes:
+        bias_rad: constant attitude error per axis (the ``c0`` corrections).
+        drift_rad_s: attitude drift per axis; the ``c1`` coefficient of normalised time gets
+            ``drift_rad_s * t_half_s`` of the trajectory.
+        higher_rad: amplitude of smooth higher-order variation over the segment (``c2``,
+            ``c3``).
+        alignment_rad: residual camera alignment error per axis, per camera (after in-flight
+            calibration); used for camera alignments an adjuster leaves free.
+    """
+
+    bias_rad: float
+    drift_rad_s: float
+    higher_rad: float = 1e-5
+    alignment_rad: float = 1e-4
+
+    @classmethod
+    def from_degrees(
+        cls,
+        bias_deg: float,
+        drift_deg_s: float,
+        higher_deg: float = math.degrees(1e-5),
+        alignment_deg: float = math.degrees(1e-4),
+    ) -> AttitudePrior:
+        r = math.radians
+        return cls(r(bias_deg), r(drift_deg_s), r(higher_deg), r(alignment_deg))
+
+    def __attrs_post_init__(self) -> None:
+        for name in ("bias_rad", "drift_rad_s", "higher_rad", "alignment_rad"):
+            value = getattr(self, name)
+            if not (value > 0 and math.isfinite(value)):
+                raise InputError(f"attitude prior: {name} must be > 0, got {value}")
+
+
 def line_scanner_corrections(
     name: str,
     sensor: Sensor,
@@ -762,11 +800,16 @@ def line_scanner_corrections(
     estimate_position: bool,
     independent: bool,
     free_camera: bool = False,
+    prior: AttitudePrior | None = None,
+    alignment_sigma_rad: float | None = None,
 ) -> Sensor:
     """A line scanner set up for an adjuster: attitude corrections of ``attitude_order``,
     optional position bias, parameter names prefixed by the image ``name`` when
     ``independent`` (otherwise sensors on one trajectory share them), camera alignment free
-    or fixed. Other sensors raise :class:`InputError` naming ``adjuster``."""
+    or fixed. ``prior`` sets the a-priori sigmas of the attitude corrections and of a free
+    camera alignment (``alignment_sigma_rad`` overrides the latter); without it the
+    trajectory's and camera's defaults stay. Other sensors raise :class:`InputError` naming
+    ``adjuster``."""
     from carto.framework.linescan import LineScanner
 
     if not 0 <= attitude_order <= 3:
@@ -781,9 +824,22 @@ def line_scanner_corrections(
     )
     if independent:
         traj = traj.with_prefix(f"{name}.trajectory.")
+    if prior is not None:
+        by_power = (prior.bias_rad, prior.drift_rad_s * traj.t_half_s, prior.higher_rad)
+        att = f"{traj.prefix}attitude."
+        traj = traj.with_parameters(
+            sigmas={
+                p.name: by_power[min(int(p.name.rpartition(".c")[2]), 2)]
+                for p in traj.parameters
+                if p.name.startswith(att)
+            }
+        )
     cam = sensor.camera.with_parameters(
         free={p.name: free_camera for p in sensor.camera.parameters}
     )
+    if free_camera and (alignment_sigma_rad is not None or prior is not None):
+        sigma = alignment_sigma_rad if alignment_sigma_rad is not None else prior.alignment_rad
+        cam = cam.with_parameters(sigmas={p.name: sigma for p in cam.parameters})
     return attrs.evolve(sensor, trajectory=traj, camera=cam)
 
 

@@ -827,28 +827,32 @@ class OrthoTiePointMatcher(Matcher):
         )
 
 
-def _footprint_box(sensor: Sensor, h_m: float) -> tuple[float, float, float, float]:
-    n_l, n_s = sensor.image_shape
-    line = np.array([0.0, 0.0, n_l, n_l])
-    sample = np.array([0.0, n_s, 0.0, n_s])
-    lon, lat = sensor.image_to_ground(line, sample, np.full(4, h_m))
-    return (
-        float(np.nanmin(lon)),
-        float(np.nanmin(lat)),
-        float(np.nanmax(lon)),
-        float(np.nanmax(lat)),
+def overlap_fraction(a: Sensor, b: Sensor, h_m: float = 0.0, n: int = 24) -> float:
+    """Fraction of image ``a``'s footprint (at height ``h_m``) that image ``b`` also sees:
+    an ``n x n`` grid of ``a``'s pixels located at ``h_m`` and projected into ``b``."""
+    n_l, n_s = a.image_shape
+    line, sample = np.meshgrid(
+        (np.arange(n) + 0.5) * n_l / n, (np.arange(n) + 0.5) * n_s / n, indexing="ij"
     )
+    lon, lat = a.image_to_ground(line.ravel(), sample.ravel(), np.full(n * n, h_m))
+    _, _, inside = b.project(lon, lat, np.full(n * n, h_m))
+    return float(np.mean(inside))
 
 
-def overlapping_pairs(sensors: Mapping[str, Sensor], h_m: float = 0.0) -> list[tuple[str, str]]:
-    """Pairs of images whose ground footprints (bounding boxes at ``h_m``) overlap."""
+def overlapping_pairs(
+    sensors: Mapping[str, Sensor], h_m: float = 0.0, min_fraction: float = 0.02
+) -> list[tuple[str, str]]:
+    """Pairs of images that see a common ground area (at height ``h_m``) of at least
+    ``min_fraction`` of either footprint (:func:`overlap_fraction`)."""
     names = list(sensors)
-    boxes = {n: _footprint_box(sensors[n], h_m) for n in names}
     pairs = []
     for i, a in enumerate(names):
         for b in names[i + 1 :]:
-            (w1, s1, e1, n1), (w2, s2, e2, n2) = boxes[a], boxes[b]
-            if w1 < e2 and w2 < e1 and s1 < n2 and s2 < n1:
+            f = max(
+                overlap_fraction(sensors[a], sensors[b], h_m),
+                overlap_fraction(sensors[b], sensors[a], h_m),
+            )
+            if f >= min_fraction:
                 pairs.append((a, b))
     return pairs
 
@@ -860,14 +864,20 @@ def block_tie_points(
     **options: Any,
 ) -> dict[str, NDArray]:
     """Tie points of a block whose images need not all overlap one reference (paint-brush
-    swaths, strips): when the first image's footprint overlaps every other, one multi-view
-    :func:`automatic_tie_points`; otherwise :func:`automatic_tie_points` on every overlapping
-    pair, with point ids prefixed by the pair so that they stay distinct."""
+    swaths, strips): when the first image shares at least half its footprint with every
+    other, one multi-view :func:`automatic_tie_points`; otherwise :func:`automatic_tie_points`
+    on every overlapping pair (:func:`overlapping_pairs`), with point ids prefixed by the pair
+    so that they stay distinct."""
     h_mid = float(np.nanmedian(dem.heights)) if hasattr(dem, "heights") else 0.0
-    pairs = overlapping_pairs(sensors, h_mid)
     names = list(sensors)
-    if len(names) <= 2 or all((names[0], n) in pairs for n in names[1:]):
+    if len(names) <= 2:
         return automatic_tie_points(rasters, sensors, dem, **options)
+    # one multi-view matching when the first image shares most of its area with every other
+    # (a triplet); otherwise pairwise (the narrow overlaps of adjacent swaths)
+    ref = sensors[names[0]]
+    if all(overlap_fraction(ref, sensors[n], h_mid) >= 0.5 for n in names[1:]):
+        return automatic_tie_points(rasters, sensors, dem, **options)
+    pairs = overlapping_pairs(sensors, h_mid)
     tables = []
     for a, b in pairs:
         t = automatic_tie_points(

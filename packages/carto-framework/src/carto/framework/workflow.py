@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from carto.framework import frames
 from carto.framework.adjust import AdjustmentResult, Observations
 from carto.framework.errors import InputError
 from carto.framework.linescan import LineScanner, write_json_atomic
@@ -30,6 +31,10 @@ from carto.framework.rpc import RPCSensor, fit_rpc, write_rpc_txt
 from carto.framework.sensor import Sensor, open_sensors
 
 Table = dict[str, NDArray]
+
+
+WEAK_INTERSECTION_DEG = 10.0
+"""Tie points whose rays meet at less than this get a DEM height constraint even with GCPs."""
 
 
 def select_gcps(table: Table, n: int | None) -> Table:
@@ -210,14 +215,22 @@ def adjust_product(
         tie_table = read_point_table(ties, numeric=("line", "sample"), text=("id", "image"))
     n_ties = len(set(tie_table["id"].tolist())) if tie_table is not None else 0
     obs = Observations.from_tables(gcps, tie_table)
-    # a DEM height on every tie point fixes what tie points cannot (a shift along the stereo
-    # parallax looks like a height change); with GCPs it would only pull the block towards the
-    # coarse DEM's errors, so by default it is used only without GCPs
-    tie_heights = bool(options.pop("tie_heights", n_used == 0))
+    # a DEM height on a tie point fixes what tie points cannot: a shift along the stereo
+    # parallax looks like a height change, and rays that meet at a small angle (the overlap
+    # of adjacent swaths) let the point slide along them. With GCPs, on well intersecting
+    # points, it would only pull the block towards the coarse DEM's errors. So by default
+    # ("auto"): every tie point without GCPs, else only those seen in an image without GCP
+    # or whose rays meet at less than WEAK_INTERSECTION_DEG; True: every one; False: none.
+    tie_heights = options.pop("tie_heights", "auto")
+    if tie_heights not in ("auto", True, False):
+        raise InputError(f"tie_heights must be 'auto', true or false, got {tie_heights!r}")
     height_sigma_m = float(options.pop("height_sigma_m", 30.0))
     height_offset_sigma_m = float(options.pop("height_offset_sigma_m", 0.0))
-    if dem is not None and tie_table is not None and tie_heights:
-        obs = _with_dem_heights(obs, sensors, dem, height_sigma_m, height_offset_sigma_m)
+    if dem is not None and tie_table is not None and tie_heights is not False:
+        weak = WEAK_INTERSECTION_DEG if (tie_heights == "auto" and n_used > 0) else None
+        obs = _with_dem_heights(
+            obs, sensors, dem, height_sigma_m, height_offset_sigma_m, below_angle_deg=weak
+        )
     name = adjuster or _default_adjuster(sensors, platform)
     component = get_registry().get("adjuster", name)
     _progress(
@@ -238,7 +251,12 @@ def adjust_product(
         "options": {k: v for k, v in options.items() if isinstance(v, str | int | float)},
         "gcps_used": n_used,
         "tie_points": n_ties,
+        "dem_height_constraints": int(obs.height_id.size),
         "sigma0": result.sigma0,
+        # sigma0 in pixels: the a-posteriori sigma of one image measurement
+        "sigma0_px": result.sigma0 * float(np.sqrt(np.mean(obs.sigma_px**2)))
+        if obs.sigma_px.size
+        else None,
         "outliers": list(result.outliers),
         "converged": result.converged,
         "iterations": result.iterations,
@@ -299,14 +317,30 @@ def _with_dem_heights(
     dem: Any,
     sigma_m: float,
     offset_sigma_m: float = 0.0,
+    below_angle_deg: float | None = None,
 ) -> Observations:
     """Height constraints for tie points (not GCPs) from the DEM at their first location
-    (independent sigma ``sigma_m`` each, common offset of a-priori sigma ``offset_sigma_m``)."""
+    (independent sigma ``sigma_m`` each, common offset of a-priori sigma ``offset_sigma_m``);
+    with ``below_angle_deg``, only for points seen in an image that no GCP is measured in, or
+    whose rays meet at a smaller angle."""
     controls = set(obs.control_id.tolist())
     _, first = np.unique(obs.point_id, return_index=True)
     first = first[[p not in controls for p in obs.point_id[first]]]
     if first.size == 0:
         return obs
+    if below_angle_deg is not None:
+        # points in images no GCP fixes (a shift along the parallax of a pair with such an
+        # image looks like a height change) or whose rays meet at a small angle
+        controlled = set(obs.image[np.isin(obs.point_id, obs.control_id)].tolist())
+        loose = {
+            p for p, image in zip(obs.point_id, obs.image, strict=True) if image not in controlled
+        }
+        angle = intersection_angles_deg(obs, sensors)
+        first = first[
+            [p in loose or angle.get(p, 0.0) < below_angle_deg for p in obs.point_id[first]]
+        ]
+        if first.size == 0:
+            return obs
     h = np.full(first.size, np.nan)
     for image in np.unique(obs.image[first]):
         rows = obs.image[first] == image
@@ -315,6 +349,28 @@ def _with_dem_heights(
         )
     ok = np.isfinite(h)
     return obs.with_heights(obs.point_id[first][ok], h[ok], sigma_m, offset_sigma_m)
+
+
+def intersection_angles_deg(obs: Observations, sensors: Mapping[str, Sensor]) -> dict[str, float]:
+    """Point id -> the largest angle, degrees, between the rays of its image measurements
+    (0 for a point seen in one image): the strength of its intersection."""
+    ids, inverse = np.unique(obs.point_id, return_inverse=True)
+    images = list(np.unique(obs.image))
+    rays = np.full((len(images), ids.size, 3), np.nan)
+    for k, image in enumerate(images):
+        rows = obs.image == image
+        ends = []
+        for h in (0.0, 1000.0):  # any sensor: the line of sight through two heights
+            lon, lat = sensors[image].image_to_ground(obs.line[rows], obs.sample[rows], h)
+            ends.append(frames.geodetic_to_ecef(lon, lat, np.full(lon.shape, h)))
+        u = ends[1] - ends[0]
+        rays[k, inverse[rows]] = u / np.linalg.norm(u, axis=-1, keepdims=True)
+    best = np.zeros(ids.size)
+    for i in range(len(images)):
+        for j in range(i + 1, len(images)):
+            cos = np.clip(np.einsum("nk,nk->n", rays[i], rays[j]), -1.0, 1.0)
+            best = np.fmax(best, np.degrees(np.arccos(cos)))
+    return dict(zip(ids.tolist(), best.tolist(), strict=True))
 
 
 def _write_models(result: AdjustmentResult, out: Path) -> dict[str, Any]:
@@ -349,8 +405,9 @@ def _bake_rpc(sensor: RPCSensor) -> Any:
 
 def _read_config(path: Path) -> tuple[dict[str, Sensor], dict[str, Path], Table | None, Any, str]:
     """A JSON configuration: ``{"images": {name: {"model": file, "raster": file,
-    "sensor": type}}, "gcps": csv, "dem": file, "geoid": gtx, "platform": text}``; paths
-    relative to the file."""
+    "sensor": type}}, "gcps": csv, "dem": file, "geoid": gtx, "platform": text}``, or
+    ``"height_m": number`` (ellipsoidal) for a flat DEM instead of ``"dem"``; paths relative
+    to the file."""
     from carto.framework.dem import DEM, Geoid
     from carto.framework.sensor import open_sensor
 
@@ -385,6 +442,11 @@ def _read_config(path: Path) -> tuple[dict[str, Sensor], dict[str, Path], Table 
     if doc.get("dem"):
         geoid = Geoid.open(base / doc["geoid"]) if doc.get("geoid") else None
         dem = DEM.open(base / doc["dem"], geoid=geoid)
+    elif doc.get("height_m") is not None:
+        h = doc["height_m"]
+        if isinstance(h, bool) or not isinstance(h, int | float) or not math.isfinite(h):
+            raise InputError(f"{path}: field 'height_m' must be a number, got {h!r}")
+        dem = DEM.constant(float(h))
     return sensors, rasters, gcps, dem, str(doc.get("platform", ""))
 
 
