@@ -81,11 +81,16 @@ class IORSettings:
             DEM is below this, ortho pixels ...
         min_improvement: ... or when it improved by less than this fraction over the previous
             iteration (what is left is matching noise).
-        window, levels, min_score: dense matching (:func:`dense_offsets`).
+        window, levels, min_score: dense matching (:func:`dense_offsets`); ``levels`` in the
+            first iteration (the starting DEM may be tens of metres off), ``refine_levels``
+            in the later ones (the offsets are then a few pixels: coarse levels of
+            low-contrast images would only add wrong guesses).
         smoothing_nodes: sigma of the Gaussian that regularises the height changes, nodes.
         outlier_m: a height change more than ``max(outlier_m, 4 NMAD)`` from the median of its
             5 x 5 neighbourhood is an outlier.
-        tile_nodes: tile side, DEM nodes (with ``overlap_nodes`` on each side).
+        tile_px, overlap_px: tile side and overlap on each side, ortho pixels (rounded to
+            whole DEM nodes): tiles large enough for the matching pyramid, overlaps wider
+            than its reach.
         crs: map CRS of the DEM and orthos (default: the UTM zone of the scene).
     """
 
@@ -94,13 +99,14 @@ class IORSettings:
     max_iterations: int = 6
     threshold_px: float = 0.1
     min_improvement: float = 0.05
-    window: int = 9
+    window: int = 11
     levels: int = 5
+    refine_levels: int = 2
     min_score: float = 0.5
     smoothing_nodes: float = 0.7
     outlier_m: float = 3.0
-    tile_nodes: int = 256
-    overlap_nodes: int = 8
+    tile_px: int = 2048
+    overlap_px: int = 128
     crs: Any = None
 
     def __attrs_post_init__(self) -> None:
@@ -262,6 +268,7 @@ def refine_tile(
     cols: slice,
     overlap: int,
     settings: IORSettings,
+    levels: int | None = None,
 ) -> TileResult:
     """One tile of one iteration: orthos on the current DEM, dense matching, intersection.
 
@@ -287,7 +294,7 @@ def refine_tile(
     field = dense_offsets(
         ortho[0],
         ortho[1],
-        levels=settings.levels,
+        levels=settings.levels if levels is None else levels,
         window=settings.window,
         min_score=settings.min_score,
     )
@@ -426,6 +433,8 @@ def refine_dem(
     c_lon, c_lat = dem_grid.lonlat(n_r / 2, n_c / 2)
     bh = b_over_h(left, right, float(c_lon), float(c_lat), float(np.nanmedian(heights)))
     run = scheduler or (lambda tasks: [task() for task in tasks])
+    tile_n = max(16, s.tile_px // k)
+    overlap_n = max(2, -(-s.overlap_px // k))
     reports: list[IterationReport] = []
     converged = False
     tiles: list[TileResult] = []
@@ -440,13 +449,14 @@ def refine_dem(
                 current,
                 dem_grid,
                 k,
-                slice(r, min(n_r, r + s.tile_nodes)),
-                slice(c, min(n_c, c + s.tile_nodes)),
-                s.overlap_nodes,
+                slice(r, min(n_r, r + tile_n)),
+                slice(c, min(n_c, c + tile_n)),
+                overlap_n,
                 s,
+                s.levels if iteration == 1 else s.refine_levels,
             )
-            for r in range(0, n_r, s.tile_nodes)
-            for c in range(0, n_c, s.tile_nodes)
+            for r in range(0, n_r, tile_n)
+            for c in range(0, n_c, tile_n)
         ]
         tiles = run(tasks)
         new = np.full(dem_grid.shape, np.nan)
