@@ -48,17 +48,18 @@ def run_scene(work: Path, seed: int, terrain: str, size: tuple[int, int]) -> dic
     scene_dir = work / f"{terrain}-{seed}"
     preset = get_registry().get("scene-preset", "cartosat1-pair")
     t0 = time.perf_counter()
-    preset.simulate(
-        scene_dir,
-        SimulationOptions(
-            seed=seed,
-            terrain=terrain,
-            size=(int(size[0]), int(size[1])),
-            n_gcps=3,
-            n_checkpoints=50,
-        ),
-        quiet=True,
-    )
+    if not (scene_dir / "scene.json").is_file():  # kept from an earlier run in --work
+        preset.simulate(
+            scene_dir,
+            SimulationOptions(
+                seed=seed,
+                terrain=terrain,
+                size=(int(size[0]), int(size[1])),
+                n_gcps=3,
+                n_checkpoints=50,
+            ),
+            quiet=True,
+        )
     scene = Scene.open(scene_dir)
     out: dict = {"seed": seed, "terrain": terrain, "simulate_s": round(time.perf_counter() - t0, 1)}
     out["system_level"] = _short(checkpoint_accuracy(scene.sensors(), scene.control("checkpoints")))

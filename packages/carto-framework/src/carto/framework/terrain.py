@@ -129,8 +129,8 @@ Bounds = tuple[float, float, float, float]
 
 MAX_GRID_SIDE_PX = 30000
 """Largest number of rows or columns of a grid (OpenCV's warps take at most 32767)."""
-MAX_GRID_PX = 200_000_000
-"""Largest number of pixels of a grid (a float32 texture of this size is 800 MB)."""
+MAX_GRID_PX = 400_000_000
+"""Largest number of pixels of a grid (a float32 texture of this size is 1.6 GB)."""
 
 _STRIP_ROWS = 256  # rows of the full-resolution texture computed at a time
 _COARSE = 4  # texture pixels per node of the coarse texture grid (shading, land use)

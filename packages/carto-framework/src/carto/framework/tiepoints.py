@@ -50,6 +50,7 @@ of the observations more than 1 px off), hence the affine model.
 from __future__ import annotations
 
 import inspect
+import math
 import warnings
 from collections.abc import Callable, Mapping
 from itertools import permutations
@@ -587,6 +588,7 @@ def automatic_tie_points(
     require_closure: bool = True,
     subpixel: str = "lsm-affine",
     forstner: Mapping[str, Any] | None = None,
+    min_points: int = 300,
 ) -> dict[str, NDArray]:
     """Tie points of ``sensors``' images, as a long table ``id, image, line, sample, score,
     sigma_px`` (raw image coordinates; one row per point and image).
@@ -600,7 +602,9 @@ def automatic_tie_points(
         dem: the coarse DEM to orthorectify on (ellipsoidal heights).
         reference: image whose ortho the others are matched against (default: the first).
         resolution_m: ortho resolution (default: the coarsest image's ground sampling).
-        spacing_px: cell size of the candidates and of the final selection, ortho pixels.
+        spacing_px: cell size of the candidates and of the final selection, ortho pixels;
+            when fewer than ``min_points`` points are kept (a small common area), the
+            matching is repeated with denser cells, down to :data:`MIN_SPACING_PX`.
         min_score: smallest accepted correlation (both directions, and the closures).
         sigma_px: a-priori standard deviation given to each measurement.
         points: candidate points on the reference ortho ``(N, 2)`` (row, col in ortho pixels,
@@ -620,7 +624,6 @@ def automatic_tie_points(
         (the reference row: the smallest of its images'). Ids are ``A`` and the candidate's
         index.
     """
-    from carto.framework.match import spread_order
 
     names = list(sensors)
     if len(names) < 2:
@@ -629,6 +632,64 @@ def automatic_tie_points(
     if ref not in sensors:
         raise InputError(f"tie points: reference {ref!r} is not one of {', '.join(names)}")
     grid, orthos = system_orthos(rasters, sensors, dem, resolution_m)
+    given = points
+    spacing = float(spacing_px)
+    while True:
+        table = _tie_points_on_orthos(
+            grid,
+            orthos,
+            sensors,
+            dem,
+            ref,
+            spacing,
+            given,
+            candidates,
+            forstner,
+            dict(
+                template=template,
+                search=search,
+                levels=levels,
+                min_score=min_score,
+                tolerance_px=tolerance_px,
+                closure_px=closure_px,
+                require_closure=require_closure,
+                subpixel=subpixel,
+            ),
+            per_cell,
+            min_views,
+            sigma_px,
+        )
+        n = len(set(table["id"].tolist()))
+        # a small common area (large system-level misregistration, partial overlap) leaves
+        # few cells: denser candidates, down to MIN_SPACING_PX, until min_points are kept
+        if given is not None or n >= min_points or spacing <= MIN_SPACING_PX:
+            return table
+        spacing = max(MIN_SPACING_PX, spacing * math.sqrt(max(n, 1) / min_points))
+
+
+MIN_SPACING_PX = 16.0
+"""Densest candidate spacing :func:`automatic_tie_points` goes to when too few points are kept."""
+
+
+def _tie_points_on_orthos(
+    grid: Any,
+    orthos: Mapping[str, NDArray],
+    sensors: Mapping[str, Sensor],
+    dem: Any,
+    ref: str,
+    spacing_px: float,
+    points: NDArray | None,
+    candidates: str,
+    forstner: Mapping[str, Any] | None,
+    matching: Mapping[str, Any],
+    per_cell: int,
+    min_views: int,
+    sigma_px: float,
+) -> dict[str, NDArray]:
+    """Candidates, multi-view matching and selection on system-level orthos (see
+    :func:`automatic_tie_points`)."""
+    from carto.framework.match import spread_order
+
     if points is None:
         points = candidate_points(
             orthos[ref], spacing_px, method=candidates, **dict(forstner or {})
@@ -640,14 +701,7 @@ def automatic_tie_points(
         orthos,
         ref,
         points,
-        template=template,
-        search=search,
-        levels=levels,
-        min_score=min_score,
-        tolerance_px=tolerance_px,
-        closure_px=closure_px,
-        require_closure=require_closure,
-        subpixel=subpixel,
+        **matching,
         parallax=ortho_parallax(grid, sensors, dem, ref),
     )
     # back to raw image coordinates, with the model that made each ortho
