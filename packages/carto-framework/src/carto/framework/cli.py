@@ -15,6 +15,7 @@ import textwrap
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any
 
 import attrs
 import numpy as np
@@ -467,6 +468,123 @@ def _add_demo(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(handler=cmd_demo)
 
 
+# --------------------------------------------------------------------------- evaluate
+def _fmt_m(value: float | None, signed: bool = False) -> str:
+    if value is None:
+        return "-"
+    return f"{value:+.3f}" if signed else f"{value:.3f}"
+
+
+def _accuracy_summary(report: dict[str, Any]) -> str:
+    """The readable summary of a :func:`~carto.framework.evaluate.dem_accuracy` report."""
+    completeness = report["completeness"]
+    lines = [
+        f"DEM {report['dem']} vs reference {report['reference']} "
+        f"(heights {report['vertical']}, d = DEM - reference)",
+        f"  {'pixels compared':17}{report['count']}",
+        f"  {'bias (mean)':17}{_fmt_m(report['bias_m'], signed=True)} m",
+        f"  {'median':17}{_fmt_m(report['median_m'], signed=True)} m",
+        f"  {'std':17}{_fmt_m(report['std_m'])} m",
+        f"  {'RMSE':17}{_fmt_m(report['rmse_m'])} m",
+        f"  {'NMAD':17}{_fmt_m(report['nmad_m'])} m",
+        f"  {'LE90':17}{_fmt_m(report['le90_m'])} m",
+        f"  {'max |d|':17}{_fmt_m(report['max_abs_m'])} m",
+        f"  {'completeness':17}"
+        + ("-" if completeness is None else f"{100.0 * completeness:.1f} %")
+        + f" of {report['reference_count']} valid reference pixels",
+        "",
+        "by slope class (slope of the reference):",
+    ]
+    rows = [
+        (
+            f"{c['slope_deg'][0]:g}-{c['slope_deg'][1]:g}",
+            str(c["count"]),
+            _fmt_m(c["bias_m"], signed=True),
+            _fmt_m(c["rmse_m"]),
+            _fmt_m(c["nmad_m"]),
+            _fmt_m(c["le90_m"]),
+        )
+        for c in report["by_slope"]
+    ]
+    header = ("SLOPE (deg)", "COUNT", "BIAS (m)", "RMSE (m)", "NMAD (m)", "LE90 (m)")
+    lines.append(textwrap.indent(_table(rows, header), "  "))
+    return "\n".join(lines)
+
+
+def cmd_evaluate(args: argparse.Namespace) -> int:
+    from carto.framework.atomic import atomic_output
+    from carto.framework.dem import DEM, Geoid
+    from carto.framework.evaluate import dem_difference, difference_accuracy
+
+    dem = DEM.open(args.dem)
+    reference = DEM.open(args.reference)
+    geoid = None if args.geoid is None else Geoid.open(args.geoid)
+    difference, slope, reference = dem_difference(dem, reference, geoid=geoid)
+    stats = difference_accuracy(difference, slope, np.isfinite(reference.heights))
+    report: dict[str, Any] = {
+        "dem": dem.name,
+        "reference": reference.name,
+        "vertical": reference.vertical,
+    }
+    report.update(stats)
+    print(_accuracy_summary(report))
+    outputs = []
+    if args.out:
+        try:
+            with atomic_output(args.out) as tmp:
+                tmp.write_text(json.dumps(report, indent=2) + "\n")
+        except OSError as exc:
+            raise InputError(f"cannot write report {args.out}: {exc.strerror or exc}") from exc
+        outputs.append(f"report {args.out}")
+    if args.plot or args.hillshade:
+        from carto.framework.quicklook import difference_png, hillshade_png
+
+        if args.plot:
+            title = f"{Path(dem.name).name} - {Path(reference.name).name}"
+            difference_png(difference, args.plot, title=title)
+            outputs.append(f"difference map {args.plot}")
+        if args.hillshade:
+            hillshade_png(dem, args.hillshade)
+            outputs.append(f"hillshade {args.hillshade}")
+    if outputs:
+        print()
+        print("wrote " + ", ".join(outputs))
+    return 0
+
+
+def _add_evaluate(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "evaluate",
+        help="accuracy of a DEM against a reference DEM (bias, RMSE, NMAD, LE90, by slope)",
+        description="Resample DEM bilinearly onto the grid of the reference DEM and summarise the "
+        "height\ndifferences d = DEM - reference where both are valid: bias (mean), median, std, "
+        "RMSE,\nNMAD (1.4826 median |d - median d|), LE90 (90th percentile of |d|), max |d|, "
+        "completeness\n(share of the valid reference pixels the DEM covers) and the same figures "
+        "by class of\nreference slope (0-10, 10-20, 20-30, 30-90 deg). Both DEMs must have the "
+        "same vertical\nreference; --geoid converts geoid heights when the other DEM is "
+        "ellipsoidal.",
+        epilog=_examples(
+            "carto evaluate out/dem.tif --reference scene1/truth/dem.tif",
+            "carto evaluate dem.tif --reference lidar.tif --out report.json --plot diff.png",
+            "carto evaluate dem.tif --reference srtm.hgt --geoid egm96_15.gtx --hillshade hs.png",
+        ),
+        formatter_class=_formatter,
+    )
+    p.add_argument("dem", metavar="DEM", help="the DEM to evaluate (GeoTIFF or any GDAL raster)")
+    p.add_argument(
+        "--reference", required=True, metavar="REF", help="reference DEM; its grid is used"
+    )
+    p.add_argument(
+        "--geoid",
+        metavar="GTX",
+        help="geoid grid (e.g. egm96_15.gtx) to compare geoid with ellipsoidal heights",
+    )
+    p.add_argument("--out", metavar="REPORT.json", help="write the figures as JSON")
+    p.add_argument("--plot", metavar="DIFF.png", help="write a map of the differences")
+    p.add_argument("--hillshade", metavar="HS.png", help="write a hillshade of DEM")
+    p.set_defaults(handler=cmd_evaluate, needs_registry=False)
+
+
 # --------------------------------------------------------------------------- the parser
 def build_parser() -> argparse.ArgumentParser:
     """The ``carto`` argument parser with every sub-command."""
@@ -492,6 +610,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_simulate(sub)
     _add_adjust(sub)
     _add_demo(sub)
+    _add_evaluate(sub)
     return parser
 
 
