@@ -426,7 +426,7 @@ def _add_adjust(sub: argparse._SubParsersAction) -> None:
 
 # --------------------------------------------------------------------------- demo
 def cmd_demo(args: argparse.Namespace) -> int:
-    from carto.framework.demo import format_table, run_demo
+    from carto.framework.demo import format_dem_table, format_table, run_demo
 
     report = run_demo(
         args.out,
@@ -436,6 +436,9 @@ def cmd_demo(args: argparse.Namespace) -> int:
         quiet=args.quiet,
     )
     print(format_table(report["title"], report["stages"]))
+    if report["dem"]:
+        print()
+        print(format_dem_table(report["dem"]))
     if report["stages_not_installed"]:
         print()
         print("not yet available: " + "; ".join(report["stages_not_installed"]))
@@ -586,6 +589,107 @@ def _add_evaluate(sub: argparse._SubParsersAction) -> None:
 
 
 # --------------------------------------------------------------------------- the parser
+# --------------------------------------------------------------------------- dem
+def cmd_dem(args: argparse.Namespace) -> int:
+    from carto.framework.dem_workflow import dem_product
+
+    options: dict[str, object] = {}
+    for key, value in (
+        ("posting_m", args.posting),
+        ("ortho_res_m", args.ortho_res),
+        ("crs", args.crs),
+        ("max_iterations", args.max_iterations),
+    ):
+        if value is not None:
+            options[key] = value
+    report = dem_product(
+        args.out,
+        args.scene,
+        left=args.left,
+        right=args.right,
+        left_model=args.left_model,
+        right_model=args.right_model,
+        sensor_type=args.sensor,
+        models=args.models,
+        pair=args.pair,
+        init_dem=args.init_dem,
+        geoid=args.geoid,
+        init_height_m=args.init_height,
+        generator=args.generator,
+        reference=args.reference,
+        options=options,
+        quiet=args.quiet,
+    )
+    last = report["iterations"][-1]
+    state = "converged" if report["converged"] else "stopped at the iteration limit"
+    print(
+        f"{report['generator']}: {len(report['iterations'])} iterations ({state}), median "
+        f"mismatch {last['median_abs_mismatch_px']:.3f} px, {last['matched_percent']:.1f} % "
+        f"matched, B/H {report['b_over_h']:.2f}"
+    )
+    grid = report["dem_grid"]
+    print(
+        f"DEM: {grid['shape'][1]} x {grid['shape'][0]} nodes at {grid['posting_m']:g} m, "
+        f"{grid['crs']}, ellipsoidal heights"
+    )
+    acc = report.get("accuracy")
+    if acc:
+        print(
+            f"against the reference ({acc['count']} pixels): median {acc['median_m']:.2f} m, "
+            f"NMAD {acc['nmad_m']:.2f} m, RMSE {acc['rmse_m']:.2f} m, LE90 {acc['le90_m']:.2f} "
+            f"m, completeness {100 * acc['completeness']:.1f} %"
+        )
+    print(f"outputs in {args.out}: {', '.join(report['files'].values())}, report.json")
+    return 0
+
+
+def _add_dem(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "dem",
+        help="DEM and ortho-images of a stereo pair (iterative ortho-image refinement)",
+        description=(
+            "Generate a DEM and ortho-images from a stereo pair: a scene folder (its first two "
+            "images,\nthe one closer to nadir as left, or --pair; with --models, the adjusted "
+            "models of\n'carto adjust --out DIR') or two images with their models "
+            "(--left/--right; the model\nbeside each image: RPC tags, .geom, _RPC.TXT, .RPB, "
+            "or --left-model). Starts from\n--init-dem (SRTM .hgt with --geoid for geoid "
+            "heights) or a constant --init-height;\na scene's init_dem.tif by default. Writes "
+            "dem.tif (float32, ellipsoidal heights,\nnodata, CRS), ortho_left.tif, "
+            "ortho_right.tif, quality.tif (score, mask),\ndem_hillshade.png and report.json "
+            "(one entry per iteration); with --reference,\nthe accuracy against it and "
+            "dem_difference.png."
+        ),
+        epilog=_examples(
+            "carto dem scene1 --models adj1 --posting 10 --out dem1",
+            "carto dem --left img_01.tif --right img_02.tif --init-height 2320 --posting 1 "
+            "--ortho-res 0.5 --out dem",
+            "carto dem --left left.tif --right right.tif --init-dem N44E005.hgt --geoid "
+            "egm96_15.gtx --out dem",
+        ),
+        formatter_class=_formatter,
+    )
+    p.add_argument("scene", nargs="?", metavar="SCENE", help="scene folder (carto simulate)")
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder")
+    p.add_argument("--left", metavar="IMAGE", help="left image (instead of a scene)")
+    p.add_argument("--right", metavar="IMAGE", help="right image")
+    p.add_argument("--left-model", metavar="FILE", help="model of the left image")
+    p.add_argument("--right-model", metavar="FILE", help="model of the right image")
+    p.add_argument("--sensor", metavar="TYPE", help="sensor type of the models (e.g. rpc)")
+    p.add_argument("--models", metavar="DIR", help="adjusted models (a carto adjust output)")
+    p.add_argument("--pair", nargs=2, metavar=("LEFT", "RIGHT"), help="image names of a scene")
+    p.add_argument("--init-dem", metavar="FILE", help="starting DEM (GeoTIFF, SRTM .hgt)")
+    p.add_argument("--geoid", metavar="GTX", help="geoid grid for geoid heights (EGM96)")
+    p.add_argument("--init-height", type=float, metavar="M", help="constant starting height")
+    p.add_argument("--posting", type=float, metavar="M", help="DEM posting (default 10 m)")
+    p.add_argument("--ortho-res", type=float, metavar="M", help="ortho pixel (default: GSD)")
+    p.add_argument("--crs", metavar="CRS", help="output CRS (default: the UTM zone)")
+    p.add_argument("--max-iterations", type=int, metavar="N", help="most DEM updates (6)")
+    p.add_argument("--generator", default="ior", metavar="NAME", help="DEM generator (ior)")
+    p.add_argument("--reference", metavar="DEM", help="reference DEM to evaluate against")
+    p.add_argument("--quiet", action="store_true", help="no progress messages")
+    p.set_defaults(handler=cmd_dem)
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The ``carto`` argument parser with every sub-command."""
     parser = argparse.ArgumentParser(
@@ -610,6 +714,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_simulate(sub)
     _add_adjust(sub)
     _add_demo(sub)
+    _add_dem(sub)
     _add_evaluate(sub)
     return parser
 

@@ -1,0 +1,103 @@
+"""``carto dem`` end to end on a small simulated scene, and its one-line errors."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import rasterio
+
+from carto.framework.dem import DEM
+from carto.framework.evaluate import dem_accuracy
+from tests.scenes import simulate
+
+
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory):
+    return simulate(
+        "cartosat1-pair",
+        tmp_path_factory.mktemp("demcli") / "scene",
+        seed=4,
+        size=(300, 400),
+        n_checkpoints=5,
+        terrain="hilly",
+    )
+
+
+def test_dem_from_a_scene_writes_every_product(run_carto, scene, tmp_path):
+    out = tmp_path / "dem"
+    truth = scene / "truth"
+    proc = run_carto(
+        [
+            "dem",
+            str(scene),
+            "--models",
+            str(truth),
+            "--posting",
+            "10",
+            "--out",
+            str(out),
+            "--reference",
+            str(truth / "dem.tif"),
+        ]
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert "iteration 1:" in proc.stderr  # progress per iteration
+    assert "against the reference" in proc.stdout
+    report = json.loads((out / "report.json").read_text())
+    assert report["iterations"]
+    assert report["iterations"][0]["iteration"] == 1
+    for key in ("median_abs_mismatch_px", "matched_percent", "median_abs_dem_change_m"):
+        assert key in report["iterations"][0]
+    assert report["settings"]["posting_m"] == 10.0
+    with rasterio.open(out / "dem.tif") as ds:
+        assert ds.dtypes[0] == "float32"
+        assert ds.crs.is_projected  # UTM chosen automatically
+        assert ds.res == pytest.approx((10.0, 10.0))
+        assert "ellipsoid" in ds.tags()["VERTICAL_REFERENCE"].lower()
+        assert np.isnan(ds.nodata)
+    with rasterio.open(out / "quality.tif") as ds:
+        assert ds.count == 2
+    for name in ("ortho_left.tif", "ortho_right.tif", "dem_hillshade.png", "dem_difference.png"):
+        assert (out / name).is_file(), name
+    # with the true models, better than the starting DEM (truth from the simulator)
+    ours = dem_accuracy(DEM.open(out / "dem.tif"), DEM.open(truth / "dem.tif"))
+    start = dem_accuracy(DEM.open(scene / "init_dem.tif"), DEM.open(truth / "dem.tif"))
+    assert ours["rmse_m"] < start["rmse_m"]
+    assert report["accuracy"]["nmad_m"] == pytest.approx(ours["nmad_m"], rel=0.05)
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        ([], "give a scene folder, or both --left and --right"),
+        (["--left", "nope.tif", "--right", "nope2.tif"], "no such image"),
+    ],
+)
+def test_dem_errors_are_one_line(run_carto, tmp_path, args, message):
+    proc = run_carto(["dem", *args, "--out", str(tmp_path / "x")], with_test_plugins=False)
+    assert proc.returncode == 1
+    assert message in proc.stderr
+    assert "Traceback" not in proc.stderr
+    assert len(proc.stderr.strip().splitlines()) == 1
+
+
+def test_dem_needs_a_starting_dem_for_loose_images(run_carto, scene, tmp_path):
+    proc = run_carto(
+        [
+            "dem",
+            "--left",
+            str(scene / "aft.tif"),
+            "--right",
+            str(scene / "fore.tif"),
+            "--left-model",
+            str(scene / "truth" / "aft.model.json"),
+            "--right-model",
+            str(scene / "truth" / "fore.model.json"),
+            "--out",
+            str(tmp_path / "x"),
+        ]
+    )
+    assert proc.returncode == 1
+    assert "initial DEM" in proc.stderr
