@@ -22,7 +22,8 @@ Robustness
     iteratively reweighted least squares (Huber weights on normalised residuals) and, after
     convergence, rejection of observations whose normalised residual exceeds
     ``outlier_threshold`` (a GCP whose ground or image residuals are too large is flagged by
-    its id), then a final unweighted solution without them.
+    its id, one at a time and only among at least :data:`MIN_GCPS_FOR_SNOOPING` GCPs), then
+    a new solution without them, from the previous one.
 Results
     a-posteriori sigma0, the parameter covariance (``sigma0^2 S^-1``), residuals of every
     observation, flagged outliers and a convergence report (:class:`AdjustmentResult`).
@@ -45,6 +46,9 @@ from carto.framework.errors import AdjustmentError, InputError
 from carto.framework.sensor import Parameter, Sensor
 
 FloatArray = NDArray[np.float64]
+
+#: Fewest GCPs among which a GCP can be rejected as a blunder (data snooping).
+MIN_GCPS_FOR_SNOOPING = 3
 
 #: Name of the unknown common offset of the height constraints (constraint minus adjusted
 #: height, metres), estimated when ``Observations.height_offset_sigma_m > 0``.
@@ -690,11 +694,14 @@ def _solve(
             for cid, v in zip(obs.control_id.tolist(), nrm.tolist(), strict=True):
                 worst[cid] = max(worst.get(cid, 0.0), v)
         controls = set(obs.control_id.tolist())
+        # a GCP blunder can only be told from the others when at least three remain to
+        # compare: with two, both show the same misfit and rejecting one would leave the
+        # datum to the other (GCPs are then kept whatever their residuals)
         bad_gcps = [(v, c) for c, v in worst.items() if c in controls and v > threshold]
-        if bad_gcps:
+        if bad_gcps and len(controls) >= MIN_GCPS_FOR_SNOOPING:
             flagged = [max(bad_gcps)[1]]
         else:
-            flagged = sorted(p for p, v in worst.items() if v > threshold)
+            flagged = sorted(p for p, v in worst.items() if v > threshold and p not in controls)
     points = {p: (float(lon[i]), float(lat[i]), float(h[i])) for i, p in enumerate(point_ids)}
     adjusted = {n: s for n, s in current_sensors().items()}
     result = AdjustmentResult(
