@@ -123,3 +123,24 @@ def test_generator_is_registered_and_checks_its_options(hilly):
         generator.generate(images[:1], sensors[:1], init_dem=DEM.constant(0.0))
     with pytest.raises(InputError, match="posting"):
         IORSettings(posting_m=-1.0)
+
+
+def test_tiles_on_dask_threads_give_the_dem_of_one_tile(hilly):
+    """The work of an iteration is split into tiles (with overlap) that a scheduler may run
+    anywhere: small tiles on dask threads agree with one big tile."""
+    from carto.framework.dem_workflow import tile_scheduler
+
+    truth = hilly.truth_sensors()
+    init = DEM.open(hilly.path("init_dem.tif"))
+    images = [prepared_image(read_raster(hilly.raster(n)), truth[n], init) for n in ("aft", "fore")]
+    args = (images[0], images[1], truth["aft"], truth["fore"], init)
+    one = refine_dem(*args, IORSettings(posting_m=10.0, max_iterations=2))
+    tiled = refine_dem(
+        *args,
+        IORSettings(posting_m=10.0, max_iterations=2, tile_px=256, overlap_px=96),
+        scheduler=tile_scheduler(2),
+    )
+    assert tiled.dem.heights.shape == one.dem.heights.shape
+    d = tiled.dem.heights - one.dem.heights
+    assert np.nanmedian(np.abs(d)) < 0.05
+    assert np.nanpercentile(np.abs(d), 99) < 1.0

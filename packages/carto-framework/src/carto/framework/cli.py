@@ -599,6 +599,7 @@ def cmd_dem(args: argparse.Namespace) -> int:
         ("ortho_res_m", args.ortho_res),
         ("crs", args.crs),
         ("max_iterations", args.max_iterations),
+        ("workers", args.workers),
     ):
         if value is not None:
             options[key] = value
@@ -684,6 +685,7 @@ def _add_dem(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--ortho-res", type=float, metavar="M", help="ortho pixel (default: GSD)")
     p.add_argument("--crs", metavar="CRS", help="output CRS (default: the UTM zone)")
     p.add_argument("--max-iterations", type=int, metavar="N", help="most DEM updates (6)")
+    p.add_argument("--workers", type=int, metavar="N", help="tiles processed in parallel (1)")
     p.add_argument("--generator", default="ior", metavar="NAME", help="DEM generator (ior)")
     p.add_argument("--reference", metavar="DEM", help="reference DEM to evaluate against")
     p.add_argument("--quiet", action="store_true", help="no progress messages")

@@ -141,6 +141,22 @@ def initial_dem(
     raise InputError("dem: give an initial DEM (--init-dem FILE [--geoid GTX]) or --init-height M")
 
 
+def tile_scheduler(workers: int) -> Any:
+    """A scheduler for tile tasks (callables without arguments) that runs them on ``workers``
+    dask threads (OpenCV, numba and NumPy release the GIL in the heavy parts); a distributed
+    dask client could be plugged in the same way."""
+    import dask
+
+    if workers < 1:
+        raise InputError(f"dem: workers must be >= 1, got {workers}")
+
+    def run(tasks: Sequence[Any]) -> list[Any]:
+        delayed = [dask.delayed(task)() for task in tasks]
+        return list(dask.compute(*delayed, scheduler="threads", num_workers=workers))
+
+    return run
+
+
 def _write_json(path: Path, doc: Mapping[str, Any]) -> None:
     with atomic_output(path) as tmp:
         Path(tmp).write_text(json.dumps(doc, indent=1, default=_jsonable) + "\n")
@@ -205,12 +221,17 @@ def dem_product(
         f"{settings.get('posting_m', 'default')} m",
         quiet,
     )
+    workers = int(settings.pop("workers", 1) or 1)
+    extra: dict[str, Any] = {}
+    if workers > 1:
+        extra["scheduler"] = tile_scheduler(workers)
     result = component.generate(
         images,
         [sensors[n] for n in names],
         init_dem=start,
         progress=None if quiet else (lambda line: _progress(line, False)),
         **settings,
+        **extra,
     )
     out.mkdir(parents=True, exist_ok=True)
     files = {
