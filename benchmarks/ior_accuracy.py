@@ -34,7 +34,7 @@ import numpy as np
 
 from carto.framework import get_registry
 from carto.framework.dem import DEM, Geoid
-from carto.framework.dem_workflow import dem_product
+from carto.framework.dem_workflow import StereoInputs, dem_product
 from carto.framework.evaluate import dem_accuracy
 from carto.framework.simulate import SimulationOptions
 from carto.framework.workflow import adjust_product
@@ -101,7 +101,9 @@ def simulated(work: Path, seed: int, size: tuple[int, int]) -> dict:
     }
     for label, models in (("adjusted_models", adj), ("true_models", scene / "truth")):
         dem_dir = work / f"hilly-{seed}-dem-{label}"
-        rep = dem_product(dem_dir, scene, models=models, options={"posting_m": 10.0}, quiet=True)
+        rep = dem_product(
+            dem_dir, StereoInputs(scene, models=models), options={"posting_m": 10.0}, quiet=True
+        )
         acc = _short(dem_accuracy(DEM.open(dem_dir / "dem.tif"), truth_dem))
         out[label] = {
             "dem": acc,
@@ -121,9 +123,7 @@ def reunion(data: Path, work: Path) -> dict:
     out = work / "reunion-dem"
     rep = dem_product(
         out,
-        left=d / "img_01.tif",
-        right=d / "img_02.tif",
-        sensor_type="rpc",
+        StereoInputs(left=d / "img_01.tif", right=d / "img_02.tif", sensor_type="rpc"),
         init_height_m=2320.0,
         reference=d / "reference_dsm.tif",
         options={"posting_m": 1.0, "ortho_res_m": 0.5, "crs": "EPSG:32740"},
@@ -155,9 +155,7 @@ def ventoux(data: Path, work: Path) -> dict:
     geoid = data / "geoid" / "egm96_15.gtx"
     rep = dem_product(
         out,
-        left=d / "left_image.tif",
-        right=d / "right_image.tif",
-        sensor_type="rpc",
+        StereoInputs(left=d / "left_image.tif", right=d / "right_image.tif", sensor_type="rpc"),
         init_dem=d / "N44E005.hgt",
         geoid=geoid,
         options={"posting_m": 1.0},

@@ -591,7 +591,7 @@ def _add_evaluate(sub: argparse._SubParsersAction) -> None:
 # --------------------------------------------------------------------------- the parser
 # --------------------------------------------------------------------------- dem
 def cmd_dem(args: argparse.Namespace) -> int:
-    from carto.framework.dem_workflow import dem_product
+    from carto.framework.dem_workflow import StereoInputs, dem_product
 
     options: dict[str, object] = {}
     for key, value in (
@@ -605,14 +605,16 @@ def cmd_dem(args: argparse.Namespace) -> int:
             options[key] = value
     report = dem_product(
         args.out,
-        args.scene,
-        left=args.left,
-        right=args.right,
-        left_model=args.left_model,
-        right_model=args.right_model,
-        sensor_type=args.sensor,
-        models=args.models,
-        pair=args.pair,
+        StereoInputs(
+            args.scene,
+            args.left,
+            args.right,
+            args.left_model,
+            args.right_model,
+            args.sensor,
+            args.models,
+            args.pair,
+        ),
         init_dem=args.init_dem,
         geoid=args.geoid,
         init_height_m=args.init_height,

@@ -16,6 +16,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+import attrs
 import numpy as np
 
 from carto.framework.atomic import atomic_output
@@ -24,7 +25,7 @@ from carto.framework.errors import InputError
 from carto.framework.plugins import get_registry
 from carto.framework.sensor import Sensor, open_sensor
 
-__all__ = ["dem_product", "open_pair"]
+__all__ = ["StereoInputs", "dem_product", "open_pair", "tile_scheduler"]
 
 
 def _progress(message: str, quiet: bool) -> None:
@@ -55,28 +56,40 @@ def _adjusted(models: Path | None, name: str, sensor: Sensor) -> Sensor:
     raise InputError(f"{models}: no adjusted model for image {name!r} ({name}.model.json)")
 
 
+@attrs.frozen
+class StereoInputs:
+    """Where the stereo pair of a DEM run comes from.
+
+    Attributes:
+        source: a scene folder (``carto simulate``); or None and ``left``/``right``.
+        left, right: image files (rasters) when there is no scene.
+        left_model, right_model: their model files (default: found beside each image).
+        sensor_type: force a sensor type for the models (``rpc`` ...).
+        models: a ``carto adjust`` output folder with adjusted models of the images.
+        pair: for a scene, the two image names (default: its first two, the one closer to
+            nadir as left).
+    """
+
+    source: str | os.PathLike[str] | None = None
+    left: str | os.PathLike[str] | None = None
+    right: str | os.PathLike[str] | None = None
+    left_model: str | os.PathLike[str] | None = None
+    right_model: str | os.PathLike[str] | None = None
+    sensor_type: str | None = None
+    models: str | os.PathLike[str] | None = None
+    pair: Sequence[str] | None = None
+
+
 def open_pair(
-    source: str | os.PathLike[str] | None = None,
-    *,
-    left: str | os.PathLike[str] | None = None,
-    right: str | os.PathLike[str] | None = None,
-    left_model: str | os.PathLike[str] | None = None,
-    right_model: str | os.PathLike[str] | None = None,
-    sensor_type: str | None = None,
-    models: str | os.PathLike[str] | None = None,
-    pair: Sequence[str] | None = None,
+    inputs: StereoInputs,
 ) -> tuple[dict[str, Path], dict[str, Sensor], DEM | None]:
     """The stereo pair to process: image name -> raster, image name -> model (left first),
-    and the scene's initial DEM (None for loose images).
-
-    From a scene folder (``source``): its images (``pair`` names two of them; default the
-    first two, the one closer to nadir first), the adjusted models of ``models`` (a ``carto
-    adjust`` output folder) when given. From images (``left``, ``right``): their models from
-    ``left_model``/``right_model`` or beside them; a crop's pixel offset in its
-    geotransform is applied to a full-scene RPC."""
+    and the scene's initial DEM (None for loose images); see :class:`StereoInputs`. A crop's
+    pixel offset in its geotransform is applied to a full-scene RPC."""
     from carto.framework.workflow import _crop_offset
 
-    models_dir = Path(models) if models is not None else None
+    source, pair, sensor_type = inputs.source, inputs.pair, inputs.sensor_type
+    models_dir = Path(inputs.models) if inputs.models is not None else None
     if source is not None:
         from carto.framework.scene import Scene
         from carto.framework.sensor import open_sensors
@@ -94,11 +107,14 @@ def open_pair(
         init = scene.manifest.get("init_dem")
         dem = DEM.open(scene.path(init)) if init else None
         return {n: scene.raster(n) for n in names}, chosen, dem
-    if left is None or right is None:
+    if inputs.left is None or inputs.right is None:
         raise InputError("dem: give a scene folder, or both --left and --right images")
     rasters: dict[str, Path] = {}
     sensors = {}
-    for key, image, model in (("left", left, left_model), ("right", right, right_model)):
+    for key, image, model in (
+        ("left", inputs.left, inputs.left_model),
+        ("right", inputs.right, inputs.right_model),
+    ):
         path = Path(image)
         if not path.is_file():
             raise InputError(f"{path}: no such image")
@@ -172,15 +188,8 @@ def _jsonable(value: Any) -> Any:
 
 def dem_product(
     out_dir: str | os.PathLike[str],
-    source: str | os.PathLike[str] | None = None,
+    inputs: StereoInputs,
     *,
-    left: str | os.PathLike[str] | None = None,
-    right: str | os.PathLike[str] | None = None,
-    left_model: str | os.PathLike[str] | None = None,
-    right_model: str | os.PathLike[str] | None = None,
-    sensor_type: str | None = None,
-    models: str | os.PathLike[str] | None = None,
-    pair: Sequence[str] | None = None,
     init_dem: str | os.PathLike[str] | None = None,
     geoid: str | os.PathLike[str] | None = None,
     init_height_m: float | None = None,
@@ -191,9 +200,10 @@ def dem_product(
 ) -> dict[str, Any]:
     """Generate a DEM and ortho-images and write them to ``out_dir``; return the report.
 
-    See :func:`open_pair` for the inputs and :func:`initial_dem` for the starting DEM;
+    See :class:`StereoInputs` for the inputs and :func:`initial_dem` for the starting DEM;
     ``options`` go to the generator (``posting_m``, ``ortho_res_m``, ``crs``,
-    ``max_iterations`` ...). With ``reference`` (a DEM file), the report gets its accuracy
+    ``max_iterations`` ...; ``workers``: tiles in parallel, :func:`tile_scheduler`). With
+    ``reference`` (a DEM file), the report gets its accuracy
     (:func:`carto.framework.evaluate.dem_accuracy`) and a difference map is drawn.
     """
     from carto.framework.ortho import write_ortho
@@ -201,16 +211,7 @@ def dem_product(
 
     t0 = time.perf_counter()
     out = Path(out_dir)
-    rasters, sensors, scene_dem = open_pair(
-        source,
-        left=left,
-        right=right,
-        left_model=left_model,
-        right_model=right_model,
-        sensor_type=sensor_type,
-        models=models,
-        pair=pair,
-    )
+    rasters, sensors, scene_dem = open_pair(inputs)
     start = initial_dem(init_dem, geoid, init_height_m, scene_dem)
     names = list(sensors)
     images = [prepared_image(read_raster(rasters[n]), sensors[n], start) for n in names]

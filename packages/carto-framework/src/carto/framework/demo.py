@@ -49,7 +49,7 @@ def _dem_stage(scene: Scene, out: Path, quiet: bool) -> list[dict[str, Any]]:
     """IOR DEM (10 m posting) from the scene's coarse DEM with the tied-adjustment models (or
     the delivered ones), both DEMs compared with the true terrain."""
     from carto.framework.dem import DEM
-    from carto.framework.dem_workflow import dem_product
+    from carto.framework.dem_workflow import StereoInputs, dem_product
     from carto.framework.evaluate import dem_accuracy
 
     truth = DEM.open(scene.path("truth/dem.tif"))
@@ -61,8 +61,7 @@ def _dem_stage(scene: Scene, out: Path, quiet: bool) -> list[dict[str, Any]]:
     t1 = time.perf_counter()
     rep = dem_product(
         out / "dem",
-        scene.root,
-        models=adjusted if (adjusted / "report.json").is_file() else None,
+        StereoInputs(scene.root, models=adjusted if (adjusted / "report.json").is_file() else None),
         options={"posting_m": 10.0},
         quiet=quiet,
     )
