@@ -20,6 +20,12 @@ def test_demo_runs_the_chain_and_reports_accuracy(run_carto, tmp_path):
     # the injected errors (~0.02 deg attitude bias, 15 m ephemeris) give ~100-1000 m
     assert 30.0 < system["rmse_planimetric_m"] < 2000.0
     assert (tmp_path / "d" / "scene" / "scene.json").is_file()
+    # the DEM stage: IOR improves on the SRTM-like starting DEM (truth: the simulator's DEM)
+    assert "DEM (vs true terrain)" in res.stdout
+    initial, ior = report["dem"]
+    assert ior["dem"].startswith("IOR")
+    assert ior["rmse_m"] < initial["rmse_m"]
+    assert report["stages_not_installed"] == []
 
 
 def test_scene_open_errors(tmp_path):

@@ -175,6 +175,59 @@ class Camera:
         cy = npoly.polyfit(u, np.tan(np.asarray(psi_y_rad, float)), degree)
         return cls(name, int(n_samples), cx, cy, 0.0, "single", mounting_rpy_rad, alignment_rpy_rad)
 
+    @classmethod
+    def from_detector_polynomials(
+        cls,
+        name: str,
+        n_samples: int,
+        tan_psi_x_coeffs: ArrayLike,
+        tan_psi_y_coeffs: ArrayLike,
+        *,
+        first_detector: float = 0.0,
+        mounting_rpy_rad: tuple[float, float, float] = (0.0, 0.0, 0.0),
+        alignment_rpy_rad: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    ) -> Camera:
+        """A camera whose look-direction tangents are polynomials in the raw detector index.
+
+        Vendors often give the line of sight of each detector as polynomials in the detector's
+        index ``k`` along the array (Pleiades and SPOT 6/7 DIMAP viewing directions, PeruSat,
+        ...). This converts them **exactly** (a polynomial of a linear map is a polynomial) into
+        the camera's polynomials in the normalised sample, with no fit.
+
+        Args:
+            name: camera name (parameter names).
+            n_samples: detectors of the line, i.e. image columns.
+            tan_psi_x_coeffs, tan_psi_y_coeffs: coefficients, increasing powers of ``k``, of the
+                along-track and across-track tangents of the look direction in the camera frame
+                (``u_cam = (tan psi_x, tan psi_y, 1)``, see the module docstring); dimensionless.
+            first_detector: the detector index ``k`` at the centre of the first image column:
+                ``k = first_detector + (s - 0.5)`` for the continuous sample ``s`` (first pixel
+                centre at 0.5). 0 for a polynomial that counts the detectors from 0 at the first
+                column, 1 for one that counts them from 1, ``c - 1`` when the image starts at
+                detector ``c`` of such an array.
+            mounting_rpy_rad, alignment_rpy_rad: as for :class:`Camera`.
+
+        Raises:
+            InputError: empty or non-finite coefficients, or an across-track tangent that does
+                not vary with the detector.
+        """
+        half = int(n_samples) / 2.0
+        # k = first_detector + (s - 0.5) with s = half * u + half
+        k_of_u = npoly.Polynomial([float(first_detector) + half - 0.5, half])
+        out = []
+        for what, coeffs in (("tan_psi_x", tan_psi_x_coeffs), ("tan_psi_y", tan_psi_y_coeffs)):
+            c = np.atleast_1d(np.asarray(coeffs, dtype=np.float64))
+            if c.ndim != 1 or c.size == 0 or not np.all(np.isfinite(c)):
+                raise InputError(
+                    f"camera {name}: {what} coefficients must be a non-empty list of finite "
+                    f"numbers, got {np.asarray(coeffs).tolist()!r}"
+                )
+            composed = npoly.Polynomial(c)(k_of_u).coef
+            out.append(np.pad(composed, (0, max(0, c.size - composed.size))))
+        return cls(
+            name, int(n_samples), out[0], out[1], 0.0, "single", mounting_rpy_rad, alignment_rpy_rad
+        )
+
     def with_array(self, array: ArrayName) -> Camera:
         """The same camera describing the ``"odd"`` or ``"even"`` array (or ``"single"``)."""
         return attrs.evolve(self, array=array)

@@ -54,8 +54,8 @@ def _dem_stage(scene: Scene, out: Path, quiet: bool) -> list[dict[str, Any]]:
 
     truth = DEM.open(scene.path("truth/dem.tif"))
     rows = [
-        {"dem": "initial (SRTM-like, 3 arc-seconds)", "seconds": 0.0}
-        | dem_accuracy(DEM.open(scene.path(scene.manifest["init_dem"])), truth)
+        dem_accuracy(DEM.open(scene.path(scene.manifest["init_dem"])), truth)
+        | {"dem": "initial (SRTM-like, 3 arc-seconds)", "seconds": 0.0}
     ]
     adjusted = out / "adjust-combined"
     t1 = time.perf_counter()
@@ -67,11 +67,11 @@ def _dem_stage(scene: Scene, out: Path, quiet: bool) -> list[dict[str, Any]]:
     )
     acc = dem_accuracy(DEM.open(out / "dem" / "dem.tif"), truth)
     rows.append(
-        {
+        acc
+        | {
             "dem": f"IOR, 10 m ({len(rep['iterations'])} iterations)",
             "seconds": round(time.perf_counter() - t1, 1),
         }
-        | acc
     )
     return rows
 
