@@ -279,6 +279,7 @@ def dem_product(
                 "median_abs_mismatch_px": r.median_abs_mismatch_px,
                 "matched_percent": r.matched_percent,
                 "median_abs_dem_change_m": r.median_abs_dem_change_m,
+                "median_across_base_px": r.median_across_base_px,
                 "seconds": r.seconds,
             }
             for r in result.iterations

@@ -130,11 +130,12 @@ class AttitudeSamples:
         Some products give the attitude not as samples but as polynomials of the four
         quaternion components in normalised time (Pleiades and SPOT 6/7 DIMAP, for instance):
         ``q_i(dt) = sum_k coeffs_wxyz[i][k] * tau**k`` with ``tau = (dt - dt_ref_s) / scale_s``.
-        This evaluates them at ``dt_s``, normalises each quaternion and makes the signs
-        continuous (``q`` and ``-q`` are one rotation), so a :class:`Trajectory` interpolates the
-        samples (``interpolation="lagrange"``: 4-point Lagrange on rotation vectors). Sampled a
-        few hundredths of a second apart, the interpolated attitude equals the polynomial one to
-        far below 1e-9 rad for a satellite's smooth motion (tested).
+        This evaluates them at ``dt_s`` and normalises each quaternion, so that a
+        :class:`Trajectory` interpolates the samples (``interpolation="lagrange"``: 4-point
+        Lagrange on rotation vectors). Sampled a few hundredths of a second apart, the
+        interpolated attitude equals the polynomial one to far below 1e-9 rad for a satellite's
+        smooth motion (tested). Sample the whole time range the sensor model evaluates (a line
+        scanner also projects half an image beyond each end).
 
         Args:
             coeffs_wxyz: shape ``(4, K)``: the coefficients of ``w, x, y, z`` (scalar first), in
@@ -165,11 +166,7 @@ class AttitudeSamples:
         norm = np.linalg.norm(q, axis=1)
         if not np.all(norm > 1e-6):
             raise InputError("attitude polynomials: the quaternion vanishes at some sample time")
-        q = q / norm[:, None]
-        # sign continuity: flip a sample that points away from its predecessor
-        flips = np.concatenate([[False], np.einsum("ij,ij->i", q[1:], q[:-1]) < 0])
-        q = np.where((np.cumsum(flips) % 2 == 1)[:, None], -q, q)
-        return cls(t, q, frame)
+        return cls(t, q / norm[:, None], frame)
 
 
 @attrs.frozen

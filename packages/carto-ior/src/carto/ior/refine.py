@@ -83,8 +83,10 @@ class IORSettings:
             iteration (what is left is matching noise).
         window, levels, min_score: dense matching (:func:`dense_offsets`); ``levels`` in the
             first iteration (the starting DEM may be tens of metres off), ``refine_levels``
-            in the later ones (the offsets are then a few pixels: coarse levels of
-            low-contrast images would only add wrong guesses).
+            in the later ones, searched around the previous iteration's median offset (what
+            is left is then a few pixels, plus any constant offset across the base that
+            the relative orientation leaves: coarse levels of low-contrast images would
+            only add wrong guesses).
         smoothing_nodes: sigma of the Gaussian that regularises the height changes, nodes.
         outlier_m: a height change more than ``max(outlier_m, 4 NMAD)`` from the median of its
             5 x 5 neighbourhood is an outlier.
@@ -101,7 +103,7 @@ class IORSettings:
     min_improvement: float = 0.05
     window: int = 11
     levels: int = 5
-    refine_levels: int = 2
+    refine_levels: int = 3
     min_score: float = 0.5
     smoothing_nodes: float = 0.7
     outlier_m: float = 3.0
@@ -128,14 +130,17 @@ class IORSettings:
 @attrs.frozen
 class IterationReport:
     """One iteration: the mismatch of the ortho-images on the DEM it started from, and the
-    update. ``median_abs_mismatch_px``: median length of the valid offsets, ortho pixels;
-    ``matched_percent``: nodes with a valid match among the nodes both images cover;
-    ``median_abs_dem_change_m``: median |height change| applied (0 when converged)."""
+    update. ``median_abs_mismatch_px``: median |offset along the base| of the valid matches
+    (what a height change removes), ortho pixels; ``matched_percent``: nodes with a valid
+    match among the nodes both images cover; ``median_abs_dem_change_m``: median |height
+    change| applied (0 when converged); ``median_across_base_px``: median offset across the
+    base (a relative orientation error: no height change removes it)."""
 
     iteration: int
     median_abs_mismatch_px: float
     matched_percent: float
     median_abs_dem_change_m: float
+    median_across_base_px: float
     seconds: float
 
 
@@ -215,19 +220,30 @@ def _dem_on(grid: OrthoGrid, heights: FloatArray) -> DEM:
     )
 
 
-def b_over_h(left: Sensor, right: Sensor, lon: float, lat: float, h: float) -> float:
-    """Base-to-height ratio at a ground point: the horizontal displacement between the two
-    lines of sight per metre of height (``|tan theta_L - tan theta_R|``, as vectors)."""
+def base_direction(
+    left: Sensor, right: Sensor, lon: float, lat: float, h: float
+) -> tuple[float, FloatArray]:
+    """``(B/H, unit (east, north))`` at a ground point: ``t_R - t_L``, the horizontal
+    displacement between the two lines of sight per metre of height (``t``: of length
+    ``tan theta``), its length and direction. A DEM too high shifts a detail in the right
+    ortho-image against the left one along this direction."""
     from carto.framework import frames
 
     e_n_u = frames.enu_basis(lon, lat)
-    shifts = []
+    t = []
     for s in (left, right):
         line, sample = s.ground_to_image(lon, lat, h)
         lo, la = s.image_to_ground(line, sample, h + 100.0)
         d = frames.geodetic_to_ecef(lo, la, h + 100.0) - frames.geodetic_to_ecef(lon, lat, h)
-        shifts.append((e_n_u @ np.ravel(d))[:2] / 100.0)
-    return float(np.linalg.norm(shifts[0] - shifts[1]))
+        t.append((e_n_u @ np.ravel(d))[:2] / 100.0)
+    base = t[1] - t[0]
+    length = float(np.linalg.norm(base))
+    return length, base / length
+
+
+def b_over_h(left: Sensor, right: Sensor, lon: float, lat: float, h: float) -> float:
+    """Base-to-height ratio at a ground point (:func:`base_direction`)."""
+    return base_direction(left, right, lon, lat, h)[0]
 
 
 def _block_mean(values: NDArray, k: int, shape: tuple[int, int]) -> FloatArray:
@@ -244,13 +260,15 @@ def _block_mean(values: NDArray, k: int, shape: tuple[int, int]) -> FloatArray:
 @attrs.frozen(eq=False)
 class TileResult:
     """What :func:`refine_tile` returns for its interior nodes: the height each matched node
-    should have (NaN: no valid match), the node mismatch (ortho pixels), whether both images
-    cover the node, and the ortho-images and matching layers of the tile interior."""
+    should have (NaN: no valid match), the node offsets right minus left (ortho pixels, rows
+    and columns), whether both images cover the node, and the ortho-images and matching
+    layers of the tile interior."""
 
     rows: slice
     cols: slice
     new_height: FloatArray
-    mismatch_px: FloatArray
+    d_row_px: FloatArray
+    d_col_px: FloatArray
     covered: NDArray[np.bool_]
     ortho_left: NDArray[np.float32]
     ortho_right: NDArray[np.float32]
@@ -269,6 +287,7 @@ def refine_tile(
     overlap: int,
     settings: IORSettings,
     levels: int | None = None,
+    guess: tuple[float, float] = (0.0, 0.0),
 ) -> TileResult:
     """One tile of one iteration: orthos on the current DEM, dense matching, intersection.
 
@@ -295,6 +314,7 @@ def refine_tile(
         ortho[0],
         ortho[1],
         levels=settings.levels if levels is None else levels,
+        guess=guess,
         window=settings.window,
         min_score=settings.min_score,
     )
@@ -335,7 +355,6 @@ def refine_tile(
     slope_y = -g_row[nr, nc] / py
     new = np.full(shape, np.nan)
     new[nr, nc] = h_p - slope_x * (x_p - x_n) - slope_y * (y_p - y_n)
-    mismatch = np.hypot(d_row, d_col)
     ir = slice(rows.start - r0, rows.stop - r0)
     ic = slice(cols.start - c0, cols.stop - c0)
     orr = slice(ir.start * k, ir.stop * k)
@@ -344,7 +363,8 @@ def refine_tile(
         rows,
         cols,
         new[ir, ic],
-        mismatch[ir, ic],
+        d_row[ir, ic],
+        d_col[ir, ic],
         covered[ir, ic],
         ortho[0][orr, occ],
         ortho[1][orr, occ],
@@ -431,13 +451,17 @@ def refine_dem(
     heights = _initial_heights(init_dem, dem_grid)
     n_r, n_c = dem_grid.shape
     c_lon, c_lat = dem_grid.lonlat(n_r / 2, n_c / 2)
-    bh = b_over_h(left, right, float(c_lon), float(c_lat), float(np.nanmedian(heights)))
+    bh, base_en = base_direction(
+        left, right, float(c_lon), float(c_lat), float(np.nanmedian(heights))
+    )
+    base_rc = np.array([-base_en[1], base_en[0]])  # (row, col) of the north-up grid
     run = scheduler or (lambda tasks: [task() for task in tasks])
     tile_n = max(16, s.tile_px // k)
     overlap_n = max(2, -(-s.overlap_px // k))
     reports: list[IterationReport] = []
     converged = False
     tiles: list[TileResult] = []
+    guess = (0.0, 0.0)
     for iteration in range(1, s.max_iterations + 2):
         t0 = time.perf_counter()
         current = heights.copy()
@@ -454,20 +478,30 @@ def refine_dem(
                 overlap_n,
                 s,
                 s.levels if iteration == 1 else s.refine_levels,
+                guess,
             )
             for r in range(0, n_r, tile_n)
             for c in range(0, n_c, tile_n)
         ]
         tiles = run(tasks)
         new = np.full(dem_grid.shape, np.nan)
-        mismatch = np.full(dem_grid.shape, np.nan)
+        d_row = np.full(dem_grid.shape, np.nan)
+        d_col = np.full(dem_grid.shape, np.nan)
         covered = np.zeros(dem_grid.shape, bool)
         for tile in tiles:
             new[tile.rows, tile.cols] = tile.new_height
-            mismatch[tile.rows, tile.cols] = tile.mismatch_px
+            d_row[tile.rows, tile.cols] = tile.d_row_px
+            d_col[tile.rows, tile.cols] = tile.d_col_px
             covered[tile.rows, tile.cols] = tile.covered
-        matched = np.isfinite(mismatch) & covered
-        med = float(np.median(mismatch[matched])) if matched.any() else float("nan")
+        matched = np.isfinite(d_row) & covered
+        # the mismatch a height change removes: along the base; across it, what the
+        # relative orientation leaves (reported, and the next search starts from it)
+        along = d_row * base_rc[0] + d_col * base_rc[1]
+        across = -d_row * base_rc[1] + d_col * base_rc[0]
+        med = float(np.median(np.abs(along[matched]))) if matched.any() else float("nan")
+        across_px = float(np.median(across[matched])) if matched.any() else float("nan")
+        if matched.any():
+            guess = (float(np.median(d_row[matched])), float(np.median(d_col[matched])))
         pct = 100.0 * float(matched.sum()) / max(int(covered.sum()), 1)
         # converged: the mismatch is below the threshold, or it no longer improves (what
         # is left is the matching noise, which no height change removes)
@@ -477,21 +511,25 @@ def refine_dem(
         done = bool(matched.any() and (med < s.threshold_px or stalled))
         if done or iteration > s.max_iterations:
             converged = done
-            reports.append(IterationReport(iteration, med, pct, 0.0, time.perf_counter() - t0))
+            reports.append(
+                IterationReport(iteration, med, pct, 0.0, across_px, time.perf_counter() - t0)
+            )
             if progress:
                 progress(
-                    f"iteration {iteration}: median mismatch {med:.3f} px, {pct:.1f} % matched"
-                    + (" (converged)" if done else " (last)")
+                    f"iteration {iteration}: median mismatch {med:.3f} px along the base, "
+                    f"{pct:.1f} % matched" + (" (converged)" if done else " (last)")
                 )
             break
         heights, _ = regularise(current, new, s)
         change = np.abs(heights - current)[covered]
         med_change = float(np.median(change)) if change.size else 0.0
-        reports.append(IterationReport(iteration, med, pct, med_change, time.perf_counter() - t0))
+        reports.append(
+            IterationReport(iteration, med, pct, med_change, across_px, time.perf_counter() - t0)
+        )
         if progress:
             progress(
-                f"iteration {iteration}: median mismatch {med:.3f} px, {pct:.1f} % matched, "
-                f"median DEM change {med_change:.2f} m"
+                f"iteration {iteration}: median mismatch {med:.3f} px along the base, "
+                f"{pct:.1f} % matched, median DEM change {med_change:.2f} m"
             )
     # assemble the last orthos (made on the final DEM) and quality layers
     shape = ortho_grid.shape
