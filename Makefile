@@ -8,6 +8,8 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.carto-installed
 PACKAGES := carto-framework carto-cartosat1 carto-cartosat2 carto-ior
+# Example third-party plugins (separate distributions on the public API), installed the same way.
+EXAMPLES := carto-pleiades
 TEST_PLUGINS := build/test-plugins
 TEST_PLUGINS_STAMP := $(TEST_PLUGINS)/.carto-installed
 PIP := $(BIN)/python -m pip --disable-pip-version-check
@@ -34,9 +36,11 @@ format: $(STAMP)
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
 
-$(STAMP): $(BIN)/python requirements.lock $(foreach p,$(PACKAGES),packages/$(p)/pyproject.toml)
+$(STAMP): $(BIN)/python requirements.lock $(foreach p,$(PACKAGES),packages/$(p)/pyproject.toml) \
+		$(foreach e,$(EXAMPLES),examples/$(e)/pyproject.toml)
 	$(PIP) install -q -r requirements.lock
-	$(PIP) install -q --no-deps --no-build-isolation $(foreach p,$(PACKAGES),-e packages/$(p))
+	$(PIP) install -q --no-deps --no-build-isolation $(foreach p,$(PACKAGES),-e packages/$(p)) \
+		$(foreach e,$(EXAMPLES),-e examples/$(e))
 	$(PIP) check
 	touch $@
 

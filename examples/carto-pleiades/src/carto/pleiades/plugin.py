@@ -1,0 +1,23 @@
+"""The ``carto`` entry point of carto-pleiades.
+
+``pyproject.toml`` declares this module in the ``carto`` entry-point group::
+
+    [project.entry-points.carto]
+    pleiades = "carto.pleiades.plugin"
+
+and the framework calls the hooks below through pluggy. Only public names of
+``carto.framework`` are used, as any third-party plugin would.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+from carto.framework import hookimpl
+from carto.framework.sensor import SensorType
+from carto.pleiades.sensor import PleiadesDimapType
+
+
+@hookimpl
+def carto_sensor_types() -> Sequence[SensorType]:
+    return [PleiadesDimapType()]
