@@ -83,10 +83,10 @@ class IORSettings:
             iteration (what is left is matching noise).
         window, levels, min_score: dense matching (:func:`dense_offsets`); ``levels`` in the
             first iteration (the starting DEM may be tens of metres off), ``refine_levels``
-            in the later ones, searched around the previous iteration's median offset (what
-            is left is then a few pixels, plus any constant offset across the base that
-            the relative orientation leaves: coarse levels of low-contrast images would
-            only add wrong guesses).
+            once the median mismatch is under 2 px, searched around the previous
+            iteration's offset across the base (what the relative orientation leaves; what
+            is left along the base is then a few pixels, and coarse levels of low-contrast
+            images would only add wrong guesses).
         smoothing_nodes: sigma of the Gaussian that regularises the height changes, nodes.
         outlier_m: a height change more than ``max(outlier_m, 4 NMAD)`` from the median of its
             5 x 5 neighbourhood is an outlier.
@@ -99,13 +99,13 @@ class IORSettings:
     posting_m: float = 10.0
     ortho_res_m: float | None = None
     max_iterations: int = 6
-    threshold_px: float = 0.1
+    threshold_px: float = 0.06
     min_improvement: float = 0.05
     window: int = 11
     levels: int = 5
     refine_levels: int = 3
     min_score: float = 0.5
-    smoothing_nodes: float = 0.7
+    smoothing_nodes: float = 1.0
     outlier_m: float = 3.0
     tile_px: int = 2048
     overlap_px: int = 128
@@ -477,7 +477,9 @@ def refine_dem(
                 slice(c, min(n_c, c + tile_n)),
                 overlap_n,
                 s,
-                s.levels if iteration == 1 else s.refine_levels,
+                s.refine_levels
+                if reports and reports[-1].median_abs_mismatch_px < 2.0
+                else s.levels,
                 guess,
             )
             for r in range(0, n_r, tile_n)
@@ -500,8 +502,8 @@ def refine_dem(
         across = -d_row * base_rc[1] + d_col * base_rc[0]
         med = float(np.median(np.abs(along[matched]))) if matched.any() else float("nan")
         across_px = float(np.median(across[matched])) if matched.any() else float("nan")
-        if matched.any():
-            guess = (float(np.median(d_row[matched])), float(np.median(d_col[matched])))
+        if matched.any():  # the across-base offset stays; the along-base one the DEM removes
+            guess = (-across_px * float(base_rc[1]), across_px * float(base_rc[0]))
         pct = 100.0 * float(matched.sum()) / max(int(covered.sum()), 1)
         # converged: the mismatch is below the threshold, or it no longer improves (what
         # is left is the matching noise, which no height change removes)
