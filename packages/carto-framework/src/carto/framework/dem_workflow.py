@@ -212,6 +212,12 @@ def dem_product(
     t0 = time.perf_counter()
     out = Path(out_dir)
     rasters, sensors, scene_dem = open_pair(inputs)
+    if inputs.source is not None and inputs.models is None:
+        _progress(
+            "no --models: using the scene's delivered (system-level) models; give a carto "
+            "adjust output folder for a DEM of the adjusted accuracy",
+            quiet,
+        )
     start = initial_dem(init_dem, geoid, init_height_m, scene_dem)
     names = list(sensors)
     images = [prepared_image(read_raster(rasters[n]), sensors[n], start) for n in names]
