@@ -304,3 +304,47 @@ def test_a_user_dem_becomes_the_terrain(tmp_path, cartosat1_scene):
     lon = np.linspace(west, east, 9)[1:-1]
     lat = np.linspace(south, north, 9)[1:-1]
     np.testing.assert_allclose(b.height(lon, lat), a.height(lon, lat), atol=0.5)
+
+
+def test_cli_error_size_and_platform_seed(run_carto, tmp_path):
+    """``--error-size`` switches single sources; ``--platform-seed`` gives two scenes of one
+    satellite the same camera misalignment while their other errors differ."""
+    drawn = {}
+    for seed in (3, 4):
+        out = tmp_path / f"s{seed}"
+        result = run_carto(
+            [
+                "simulate",
+                "cartosat1-pair",
+                "--out",
+                str(out),
+                "--seed",
+                str(seed),
+                "--size",
+                "60",
+                "60",
+                "--checkpoints",
+                "2",
+                "--platform-seed",
+                "11",
+                "--error-size",
+                "ephemeris_bias_m=0",
+                "--quiet",
+            ]
+        )
+        assert result.returncode == 0, result.stderr
+        drawn[seed] = json.loads((out / "truth/errors.json").read_text())
+        assert json.loads((out / "scene.json").read_text())["platform_seed"] == 11
+    mis = [d["drawn"]["camera_misalignment_rad"] for d in drawn.values()]
+    assert mis[0] == mis[1]
+    assert all(v != 0 for v in mis[0]["aft"])
+    segs = [d["drawn"]["segments"][0] for d in drawn.values()]
+    assert segs[0]["attitude_bias_rad"] != segs[1]["attitude_bias_rad"]
+    assert segs[0]["ephemeris_bias_m"] == [0.0, 0.0, 0.0]
+    assert drawn[3]["error_model"]["ephemeris_bias_m"] == 0.0
+    bad = run_carto(
+        ["simulate", "cartosat1-pair", "--out", str(tmp_path / "x"), "--error-size", "sun"]
+    )
+    assert bad.returncode != 0
+    assert "expected NAME=VALUE" in bad.stderr
+    assert "Traceback" not in bad.stderr

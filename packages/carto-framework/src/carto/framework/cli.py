@@ -243,6 +243,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         n_gcps=args.gcps,
         n_checkpoints=args.checkpoints,
         point_targets=args.point_targets,
+        error_sizes=tuple(args.error_size or ()),
+        platform_seed=args.platform_seed,
     )
     t0 = time.perf_counter()
     manifest = preset.simulate(args.out, options, quiet=args.quiet)
@@ -263,8 +265,8 @@ def _parse_error_size(text: str) -> tuple[str, float]:
             raise ValueError
         return name.strip(), float(value)
     except ValueError:
-        raise InputError(
-            f"--error-size {text!r}: expected NAME=VALUE, e.g. attitude_bias_deg=0.05"
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: expected NAME=VALUE, e.g. attitude_bias_deg=0.05"
         ) from None
 
 
@@ -307,6 +309,21 @@ def _add_simulate(sub: argparse._SubParsersAction) -> None:
         choices=("realistic", "none"),
         default="realistic",
         help="error sources of the product (default realistic)",
+    )
+    p.add_argument(
+        "--error-size",
+        action="append",
+        type=_parse_error_size,
+        metavar="NAME=VALUE",
+        help="override one error size (0 switches the source off), e.g. "
+        "attitude_drift_deg_s=4e-5; repeatable",
+    )
+    p.add_argument(
+        "--platform-seed",
+        type=int,
+        metavar="N",
+        help="draw the platform's residual camera misalignment from this seed, so that "
+        "scenes of one satellite share it (in-flight calibration); default: from --seed",
     )
     p.add_argument("--gcps", type=int, metavar="N", help="number of GCPs (preset default)")
     p.add_argument("--checkpoints", type=int, metavar="N", help="number of checkpoints")

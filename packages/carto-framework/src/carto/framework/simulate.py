@@ -205,6 +205,10 @@ class SimulationOptions:
     error_sizes: tuple[tuple[str, float], ...] = ()
     """Overrides of single error sizes on top of ``errors``, e.g. ``(("attitude_bias_deg",
     0.05),)``; 0 switches a source off."""
+    platform_seed: int | None = None
+    """Seed of the platform's residual camera misalignment (a property of the satellite,
+    the same in every scene it takes: scenes simulated with one ``platform_seed`` share it, as
+    an in-flight calibration needs); None: drawn from ``seed`` with the other errors."""
 
 
 def _progress(message: str) -> None:
@@ -513,6 +517,12 @@ def simulate_scene(
     p0, v0 = orbit.elements_to_state(plan.elements)
     cameras = sorted({v.camera.name for s in plan.segments for v in s.views})
     drawn = _draw_errors(errors, rng_err, len(plan.segments), cameras)
+    if options.platform_seed is not None:
+        platform_rng = np.random.default_rng(int(options.platform_seed))
+        drawn["camera_misalignment_rad"] = {
+            c: (platform_rng.normal(0.0, math.radians(errors.misalignment_deg), 3)).tolist()
+            for c in cameras
+        }
     out.mkdir(parents=True, exist_ok=True)
 
     for seg in plan.segments:
@@ -672,6 +682,7 @@ def simulate_scene(
         "preset": plan.preset,
         "platform": plan.platform,
         "seed": int(options.seed),
+        "platform_seed": None if options.platform_seed is None else int(options.platform_seed),
         "terrain": terrain_name,
         "size": [int(size[0]), int(size[1])],
         "errors": options.errors,
