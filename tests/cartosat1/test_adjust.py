@@ -42,8 +42,13 @@ def test_combined_shares_one_set_of_body_corrections(setup, adjuster):
     result = adjuster.adjust(sensors, obs)
     body = [n for n in result.parameters if n.startswith("trajectory.attitude.")]
     assert len(body) == 6  # roll, pitch, yaw x (bias, drift) for both cameras
+    # one position bias for both (a position error is not one rotation for both views)
+    position = [n for n in result.parameters if n.startswith("trajectory.position.")]
+    assert sorted(position) == [
+        f"trajectory.position.{a}.c0" for a in ("across", "along", "radial")
+    ]
     # plus the residual Fore/Aft relative alignment, weighted by what calibration leaves
-    align = set(result.parameters) - set(body)
+    align = set(result.parameters) - set(body) - set(position)
     assert align == {f"camera.aft.align.{a}" for a in ("roll", "pitch", "yaw")}
     prepared = prepare_sensors(sensors)
     priors = {p.name: p.sigma for s in prepared.values() for p in s.parameters if p.free}
@@ -51,6 +56,7 @@ def test_combined_shares_one_set_of_body_corrections(setup, adjuster):
     assert priors["trajectory.attitude.roll.c0"] == pytest.approx(math.radians(0.02))
     assert priors["trajectory.attitude.roll.c1"] == pytest.approx(math.radians(2e-5) * t_half)
     assert priors["camera.aft.align.pitch"] == pytest.approx(math.radians(0.002) * math.sqrt(2))
+    assert priors["trajectory.position.along.c0"] == 15.0
     acc = checkpoint_accuracy(result.sensors, check)
     assert acc["rmse_planimetric_m"] < 3.0
     # one realisation of the GCP error: the prediction is an expectation (the benchmark checks
@@ -62,7 +68,7 @@ def test_combined_shares_one_set_of_body_corrections(setup, adjuster):
 def test_separate_mode_has_one_set_per_camera(setup, adjuster):
     scene, obs, _ = setup
     result = adjuster.adjust(scene.sensors(), obs, mode="separate")
-    assert len(result.parameters) == 12
+    assert len(result.parameters) == 18  # attitude bias + drift, position bias
     assert {n.split(".")[0] for n in result.parameters} == {"fore", "aft"}
 
 

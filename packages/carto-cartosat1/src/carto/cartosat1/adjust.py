@@ -15,12 +15,20 @@ Modes:
     ``calibration``: the shared body corrections plus the alignment of every camera but the
         first relative to the body, loosely weighted (in-flight calibration, needs many
         GCPs); the estimate is folded into the cameras' calibrated alignment of the returned
-        sensors.
+        sensors and returned as the product ``calibration`` (``calibration.json``, see
+        :mod:`carto.cartosat1.calibration`).
 
-The attitude corrections are weighted by the ancillary data's accuracy
-(:mod:`carto.cartosat1.constants`: bias 0.02 deg, drift 2e-5 deg/s per axis); options
-``bias_sigma_deg``, ``drift_sigma_deg_s`` and ``alignment_sigma_deg`` (per camera) override
-them.
+Option ``calibration`` (a ``calibration.json``, an adjustment folder holding one, or a list of
+them, averaged) puts an earlier in-flight calibration of the same satellite into the cameras;
+the tied adjustment then weights the residual alignment by that calibration's sigma.
+
+The position bias is estimated too (``estimate_position``, default true): Fore and Aft see the
+ground from different distances, so a position error is not one rotation for both.
+
+The corrections are weighted by the ancillary data's accuracy
+(:mod:`carto.cartosat1.constants`: attitude bias 0.02 deg, drift 2e-5 deg/s, position 15 m per
+axis); options ``bias_sigma_deg``, ``drift_sigma_deg_s``, ``ephemeris_sigma_m`` and
+``alignment_sigma_deg`` (per camera) override them.
 """
 
 from __future__ import annotations
@@ -32,10 +40,11 @@ from typing import Any
 import attrs
 
 from carto.cartosat1 import constants
+from carto.cartosat1.calibration import AlignmentCalibration, load_calibration
 from carto.framework.adjust import (
     Adjuster,
     AdjustmentResult,
-    AttitudePrior,
+    AncillaryPrior,
     Observations,
     adjust_bundle,
     line_scanner_corrections,
@@ -51,22 +60,35 @@ def prepare_sensors(
     sensors: Mapping[str, Sensor],
     mode: str = "combined",
     attitude_order: int = 1,
-    estimate_position: bool = False,
+    estimate_position: bool = True,
     bias_sigma_deg: float = constants.ATTITUDE_BIAS_SIGMA_DEG,
     drift_sigma_deg_s: float = constants.ATTITUDE_DRIFT_SIGMA_DEG_S,
     alignment_sigma_deg: float = constants.RESIDUAL_ALIGNMENT_SIGMA_DEG,
+    ephemeris_sigma_m: float = constants.EPHEMERIS_BIAS_SIGMA_M,
+    calibration: AlignmentCalibration | None = None,
 ) -> dict[str, LineScanner]:
-    """The sensors with the free parameters of the chosen mode (see the module docstring)."""
+    """The sensors with the free parameters of the chosen mode (see the module docstring).
+
+    With a ``calibration`` (:mod:`carto.cartosat1.calibration`) the cameras get its
+    alignments, its reference camera stays fixed and, in ``combined`` mode, the others'
+    residual alignments are weighted by its sigmas."""
     if mode not in MODES:
         raise InputError(
             f"cartosat1-combined: mode must be one of {', '.join(MODES)}, got {mode!r}"
         )
-    prior = AttitudePrior.from_degrees(bias_sigma_deg, drift_sigma_deg_s)
-    # the second camera's alignment relative to the first: residual (combined) or loose
+    prior = AncillaryPrior.from_degrees(
+        bias_sigma_deg, drift_sigma_deg_s, ephemeris_bias_m=ephemeris_sigma_m
+    )
+    if calibration is not None:
+        sensors = calibration.apply(sensors)
+        reference = calibration.reference_camera
+    else:
+        first = next(iter(sensors.values()), None)
+        reference = first.camera.name if isinstance(first, LineScanner) else None
+    # the other cameras' alignment relative to the reference: residual (combined) or loose
     # (calibration: the default sigma of the camera model)
     relative = math.radians(alignment_sigma_deg) * math.sqrt(2.0)
-    names = list(sensors)
-    return {
+    prepared = {
         name: line_scanner_corrections(
             name,
             sensor,
@@ -74,12 +96,26 @@ def prepare_sensors(
             attitude_order=attitude_order,
             estimate_position=estimate_position,
             independent=mode == "separate",
-            free_camera=mode in ("combined", "calibration") and name != names[0],
+            free_camera=mode in ("combined", "calibration")
+            and isinstance(sensor, LineScanner)
+            and sensor.camera.name != reference,
             prior=prior,
             alignment_sigma_rad=relative if mode == "combined" else None,
         )
         for name, sensor in sensors.items()
     }
+    if calibration is not None and mode == "combined":
+        sigmas = calibration.alignment_sigmas()
+        prepared = {
+            n: attrs.evolve(
+                s,
+                camera=s.camera.with_parameters(
+                    sigmas={p.name: sigmas[p.name] for p in s.camera.parameters if p.name in sigmas}
+                ),
+            )
+            for n, s in prepared.items()
+        }
+    return prepared
 
 
 class Cartosat1Adjuster(Adjuster):
@@ -92,14 +128,17 @@ class Cartosat1Adjuster(Adjuster):
         self, sensors: Mapping[str, Sensor], observations: Observations, **options: Any
     ) -> AdjustmentResult:
         mode = options.pop("mode", "combined")
+        calibration = options.pop("calibration", None)
         prepared = prepare_sensors(
             sensors,
             mode,
             int(options.pop("attitude_order", 1)),
-            bool(options.pop("estimate_position", False)),
+            bool(options.pop("estimate_position", True)),
             float(options.pop("bias_sigma_deg", constants.ATTITUDE_BIAS_SIGMA_DEG)),
             float(options.pop("drift_sigma_deg_s", constants.ATTITUDE_DRIFT_SIGMA_DEG_S)),
             float(options.pop("alignment_sigma_deg", constants.RESIDUAL_ALIGNMENT_SIGMA_DEG)),
+            float(options.pop("ephemeris_sigma_m", constants.EPHEMERIS_BIAS_SIGMA_M)),
+            None if calibration is None else load_calibration(calibration),
         )
         result = adjust_bundle(prepared, observations, **options)
         if mode == "calibration":
@@ -108,4 +147,6 @@ class Cartosat1Adjuster(Adjuster):
                 for n, s in result.sensors.items()
             }
             result = attrs.evolve(result, sensors=calibrated)
+            cal = AlignmentCalibration.from_result(result, platform="Cartosat-1")
+            result = attrs.evolve(result, products={"calibration": cal.as_dict()})
         return result

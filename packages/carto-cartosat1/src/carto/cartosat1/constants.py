@@ -27,6 +27,11 @@ ATTITUDE_BIAS_SIGMA_DEG = 0.02
 """Attitude bias per axis (about 200 m on the ground)."""
 ATTITUDE_DRIFT_SIGMA_DEG_S = 2e-5
 """Attitude drift per axis."""
+EPHEMERIS_BIAS_SIGMA_M = 15.0
+"""Ephemeris (position) bias per axis. Fore and Aft look at the ground from different
+distances (slant ranges ~690 and ~620 km, along-track projection 1/cos^2 of the view angle), so
+a position bias is not the same rotation for both: with one set of body corrections for the
+pair it must be estimated itself, or the tie points bend the pair to absorb it."""
 RESIDUAL_ALIGNMENT_SIGMA_DEG = 0.002
 """Residual alignment error of each camera after in-flight calibration, per axis; the
 Fore/Aft relative alignment is uncertain by sqrt(2) times this."""

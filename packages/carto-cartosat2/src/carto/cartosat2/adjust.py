@@ -23,7 +23,7 @@ from carto.cartosat2 import constants
 from carto.framework.adjust import (
     Adjuster,
     AdjustmentResult,
-    AttitudePrior,
+    AncillaryPrior,
     Observations,
     adjust_bundle,
     line_scanner_corrections,
@@ -31,7 +31,7 @@ from carto.framework.adjust import (
 from carto.framework.linescan import LineScanner
 from carto.framework.sensor import Sensor
 
-PRIOR = AttitudePrior.from_degrees(
+PRIOR = AncillaryPrior.from_degrees(
     constants.ATTITUDE_BIAS_SIGMA_DEG,
     constants.ATTITUDE_DRIFT_SIGMA_DEG_S,
     constants.ATTITUDE_SMOOTH_SIGMA_DEG,
@@ -43,7 +43,7 @@ def prepare_sensors(
     sensors: Mapping[str, Sensor],
     attitude_order: int = 2,
     estimate_position: bool = False,
-    prior: AttitudePrior | None = None,
+    prior: AncillaryPrior | None = None,
 ) -> dict[str, LineScanner]:
     """Independent corrections per image (parameter names prefixed by the image name),
     weighted by ``prior`` (default: the Cartosat-2 ancillary accuracy, :data:`PRIOR`)."""
@@ -70,7 +70,7 @@ class Cartosat2BlockAdjuster(Adjuster):
     def adjust(
         self, sensors: Mapping[str, Sensor], observations: Observations, **options: Any
     ) -> AdjustmentResult:
-        prior = AttitudePrior.from_degrees(
+        prior = AncillaryPrior.from_degrees(
             float(options.pop("bias_sigma_deg", constants.ATTITUDE_BIAS_SIGMA_DEG)),
             float(options.pop("drift_sigma_deg_s", constants.ATTITUDE_DRIFT_SIGMA_DEG_S)),
             float(options.pop("smooth_sigma_deg", constants.ATTITUDE_SMOOTH_SIGMA_DEG)),

@@ -254,6 +254,8 @@ class AdjustmentResult:
             the last correction was below the tolerance.
         history: per iteration: max parameter correction in sigmas, max point move (m),
             weighted RMS of normalised residuals.
+        products: adjuster-specific JSON documents (name -> document), written beside the
+            adjusted models as ``<name>.json`` (e.g. an in-flight camera calibration).
     """
 
     sensors: dict[str, Sensor]
@@ -271,6 +273,7 @@ class AdjustmentResult:
     iterations: int
     converged: bool
     history: tuple[dict[str, float], ...]
+    products: dict[str, Any] = attrs.field(factory=dict)
 
     def summary(self) -> dict[str, Any]:
         """JSON-ready summary (for ``report.json``)."""
@@ -393,6 +396,7 @@ def adjust_bundle(
     robust: bool = True,
     outlier_threshold: float = 4.0,
     dem: Any = None,
+    **unknown: Any,
 ) -> AdjustmentResult:
     """Adjust ``sensors`` to ``obs`` (see the module docstring); return the result.
 
@@ -411,9 +415,14 @@ def adjust_bundle(
         AdjustmentError: the system is singular (names the undetermined parameters) or no
             point can be used.
     """
-    unknown = sorted(set(obs.image) - set(sensors))
     if unknown:
-        raise InputError(f"observations name images without a sensor: {', '.join(unknown)}")
+        raise InputError(
+            f"unknown adjuster option(s): {', '.join(sorted(unknown))} (known: "
+            "max_iterations, tolerance, robust, outlier_threshold and the adjuster's own)"
+        )
+    missing = sorted(set(obs.image) - set(sensors))
+    if missing:
+        raise InputError(f"observations name images without a sensor: {', '.join(missing)}")
     names, priors = free_parameters(sensors)
     if obs.height_offset_sigma_m > 0 and obs.height_id.size:
         names.append(HEIGHT_OFFSET)
@@ -761,9 +770,9 @@ def _solve_reduced(
 
 
 @attrs.frozen
-class AttitudePrior:
-    """A-priori accuracy of a platform's ancillary attitude, in physical units: the weights
-    with which attitude corrections enter an adjustment (one sigma each).
+class AncillaryPrior:
+    """A-priori accuracy of a platform's ancillary data (attitude and ephemeris), in physical
+    units: the weights with which their corrections enter an adjustment (one sigma each).
 
     Attributes:
         bias_rad: constant attitude error per axis (the ``c0`` corrections).
@@ -773,12 +782,15 @@ class AttitudePrior:
             ``c3``).
         alignment_rad: residual camera alignment error per axis, per camera (after in-flight
             calibration); used for camera alignments an adjuster leaves free.
+        ephemeris_bias_m: constant position error per axis (the position ``c0`` corrections,
+            when an adjuster estimates them).
     """
 
     bias_rad: float
     drift_rad_s: float
     higher_rad: float = 1e-5
     alignment_rad: float = 1e-4
+    ephemeris_bias_m: float = 30.0
 
     @classmethod
     def from_degrees(
@@ -787,12 +799,13 @@ class AttitudePrior:
         drift_deg_s: float,
         higher_deg: float = math.degrees(1e-5),
         alignment_deg: float = math.degrees(1e-4),
-    ) -> AttitudePrior:
+        ephemeris_bias_m: float = 30.0,
+    ) -> AncillaryPrior:
         r = math.radians
-        return cls(r(bias_deg), r(drift_deg_s), r(higher_deg), r(alignment_deg))
+        return cls(r(bias_deg), r(drift_deg_s), r(higher_deg), r(alignment_deg), ephemeris_bias_m)
 
     def __attrs_post_init__(self) -> None:
-        for name in ("bias_rad", "drift_rad_s", "higher_rad", "alignment_rad"):
+        for name in ("bias_rad", "drift_rad_s", "higher_rad", "alignment_rad", "ephemeris_bias_m"):
             value = getattr(self, name)
             if not (value > 0 and math.isfinite(value)):
                 raise InputError(f"attitude prior: {name} must be > 0, got {value}")
@@ -807,7 +820,7 @@ def line_scanner_corrections(
     estimate_position: bool,
     independent: bool,
     free_camera: bool = False,
-    prior: AttitudePrior | None = None,
+    prior: AncillaryPrior | None = None,
     alignment_sigma_rad: float | None = None,
 ) -> Sensor:
     """A line scanner set up for an adjuster: attitude corrections of ``attitude_order``,
@@ -834,12 +847,14 @@ def line_scanner_corrections(
     if prior is not None:
         by_power = (prior.bias_rad, prior.drift_rad_s * traj.t_half_s, prior.higher_rad)
         att = f"{traj.prefix}attitude."
+        pos = f"{traj.prefix}position."
         traj = traj.with_parameters(
             sigmas={
                 p.name: by_power[min(int(p.name.rpartition(".c")[2]), 2)]
                 for p in traj.parameters
                 if p.name.startswith(att)
             }
+            | {p.name: prior.ephemeris_bias_m for p in traj.parameters if p.name.startswith(pos)}
         )
     cam = sensor.camera.with_parameters(
         free={p.name: free_camera for p in sensor.camera.parameters}

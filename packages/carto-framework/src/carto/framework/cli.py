@@ -352,6 +352,8 @@ def cmd_adjust(args: argparse.Namespace) -> int:
         options["height_sigma_m"] = args.dem_heights
     if args.dem_offset_sigma is not None:
         options["height_offset_sigma_m"] = args.dem_offset_sigma
+    if args.calibration:
+        options["calibration"] = list(args.calibration)
     report = adjust_product(
         args.source,
         args.out,
@@ -375,7 +377,8 @@ def cmd_adjust(args: argparse.Namespace) -> int:
             f"{cp['rmse_height_m']:.2f} m; before: {before['rmse_planimetric_m']:.1f} m / "
             f"{before['rmse_height_m']:.1f} m"
         )
-    print(f"outputs in {args.out}: report.json, residuals.png, adjusted models and RPCs")
+    extra = "".join(f", {f}" for k, f in report["files"].items() if k == "calibration")
+    print(f"outputs in {args.out}: report.json, residuals.png, adjusted models and RPCs{extra}")
     return 0
 
 
@@ -394,6 +397,8 @@ def _add_adjust(sub: argparse._SubParsersAction) -> None:
         epilog=_examples(
             "carto adjust scene1 --gcps 1 --out adj1",
             "carto adjust scene1 --gcps 1 --mode separate --out adj1-separate",
+            "carto adjust calib-scene --mode calibration --out calib   # many GCPs",
+            "carto adjust scene2 --gcps 1 --calibration calib/calibration.json --out adj2",
             "carto adjust pair.json --adjuster rpc-bias --out adj",
             "carto adjust pair.json --adjuster rpc-bias --dem-heights 10 --dem-offset-sigma 4 "
             "--out adj",
@@ -434,6 +439,13 @@ def _add_adjust(sub: argparse._SubParsersAction) -> None:
         metavar="M",
         help="a-priori sigma of one height offset common to all DEM constraints, estimated "
         "(the DEM's absolute vertical error, e.g. 4 for SRTM)",
+    )
+    p.add_argument(
+        "--calibration",
+        nargs="+",
+        metavar="FILE",
+        help="in-flight camera calibration(s) of the same satellite (calibration.json written "
+        "by --mode calibration, or its folder); several are averaged",
     )
     p.add_argument("--sensor", metavar="TYPE", help="sensor type of the product")
     p.add_argument("--no-robust", action="store_true", help="no outlier rejection")

@@ -240,6 +240,8 @@ def adjust_product(
     # outputs
     out.mkdir(parents=True, exist_ok=True)
     files = _write_models(result, out)
+    for product, document in result.products.items():
+        files[product] = write_json_atomic(out / f"{product}.json", _jsonable(document)).name
     plot = residual_plot(
         result,
         out / "residuals.png",

@@ -1,0 +1,135 @@
+"""In-flight calibration of the Fore/Aft alignment, carried to another scene of the satellite.
+
+Truth: the simulator's camera misalignment (``truth/errors.json``); scenes simulated with one
+``platform_seed`` share it, as the scenes of one satellite do.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from carto.cartosat1.adjust import prepare_sensors
+from carto.cartosat1.calibration import (
+    AlignmentCalibration,
+    CameraAlignment,
+    load_calibration,
+)
+from carto.framework.errors import InputError
+from carto.framework.scene import Scene
+from carto.framework.workflow import adjust_product
+
+from ..scenes import simulate
+
+PLATFORM_SEED = 5
+
+
+@pytest.fixture(scope="module")
+def calibrated(tmp_path_factory):
+    """A calibration scene (many GCPs over a wide window) adjusted in calibration mode."""
+    root = tmp_path_factory.mktemp("calib")
+    scene = simulate(
+        "cartosat1-pair",
+        root / "scene",
+        seed=21,
+        size=(3000, 300),
+        n_gcps=30,
+        n_checkpoints=4,
+        platform_seed=PLATFORM_SEED,
+    )
+    report = adjust_product(
+        scene, root / "adj", ties="none", options={"mode": "calibration"}, quiet=True
+    )
+    return scene, root / "adj", report
+
+
+def _true_relative_misalignment(scene) -> np.ndarray:
+    drawn = json.loads((scene / "truth/errors.json").read_text())["drawn"]
+    mis = drawn["camera_misalignment_rad"]
+    return np.array(mis["aft"]) - np.array(mis["fore"])
+
+
+def test_calibration_recovers_the_relative_alignment(calibrated):
+    scene, adj, report = calibrated
+    assert report["files"]["calibration"] == "calibration.json"
+    cal = AlignmentCalibration.read(adj)  # the folder: its calibration.json
+    assert cal.reference_camera == "fore"
+    assert set(cal.cameras) == {"aft"}
+    aft = cal.cameras["aft"]
+    sigma = np.array(aft.sigma_rpy_rad)
+    # the GCPs determine it better than the loose prior of the calibration mode (1e-4 rad),
+    # but not beyond what one scene cannot separate from it: ~52 s of its attitude drift
+    # (2e-5 deg/s a priori), which differs from scene to scene (hence combine())
+    drift_52s = math.radians(2e-5) * 52.0
+    assert np.all(sigma < 1e-4)
+    assert np.all(sigma > 0.5 * drift_52s)
+    nominal = np.array(Scene.open(scene).sensors()["aft"].camera.alignment_rpy_rad)
+    estimate = np.array(aft.alignment_rpy_rad) - nominal
+    truth = _true_relative_misalignment(scene)
+    assert np.all(np.abs(estimate - truth) <= 3.0 * sigma), (estimate, truth, sigma)
+
+
+def test_a_calibration_carries_to_another_scene_of_the_satellite(calibrated, tmp_path):
+    scene, adj, _ = calibrated
+    other = simulate(
+        "cartosat1-pair",
+        tmp_path / "other",
+        seed=22,
+        size=(300, 300),
+        n_checkpoints=3,
+        platform_seed=PLATFORM_SEED,
+    )
+    # the same satellite: the same misalignment, other body errors
+    assert np.allclose(_true_relative_misalignment(other), _true_relative_misalignment(scene))
+    cal = load_calibration([adj / "calibration.json"])
+    sensors = Scene.open(other).sensors()
+    prepared = prepare_sensors(sensors, "combined", calibration=cal)
+    aft = prepared["aft"].camera
+    assert aft.alignment_rpy_rad == pytest.approx(cal.cameras["aft"].alignment_rpy_rad)
+    assert prepared["fore"].camera.alignment_rpy_rad == sensors["fore"].camera.alignment_rpy_rad
+    sig = {p.name: p.sigma for p in aft.parameters if p.free}
+    assert sig["camera.aft.align.pitch"] == pytest.approx(cal.cameras["aft"].sigma_rpy_rad[1])
+    assert not any(p.free for p in prepared["fore"].camera.parameters)
+
+
+def test_combine_is_the_inverse_variance_mean():
+    def one(roll: float, sigma: float) -> AlignmentCalibration:
+        return AlignmentCalibration(
+            "fore", {"aft": CameraAlignment((roll, 0.0, 0.0), (sigma, sigma, sigma))}, ("s",)
+        )
+
+    both = AlignmentCalibration.combine([one(1e-5, 1e-5), one(4e-5, 2e-5)])
+    # weights 4 : 1
+    assert both.cameras["aft"].alignment_rpy_rad[0] == pytest.approx((4 * 1e-5 + 4e-5) / 5)
+    assert both.cameras["aft"].sigma_rpy_rad[0] == pytest.approx(1e-5 / math.sqrt(1.25))
+    # chi2 = (1e-5 - 1.6e-5)^2 / 1e-10 + (4e-5 - 1.6e-5)^2 / 4e-10 (roll; the other axes
+    # agree) over 6 estimates - 3 means
+    assert both.consistency == pytest.approx((0.36 + 1.44) / 3)
+    other_ref = AlignmentCalibration(
+        "aft", {"fore": CameraAlignment((0.0, 0.0, 0.0), (1e-5, 1e-5, 1e-5))}
+    )
+    with pytest.raises(InputError, match="against 'aft'"):
+        AlignmentCalibration.combine([one(0, 1e-5), other_ref])
+
+
+def test_round_trip_and_bad_files(tmp_path):
+    cal = AlignmentCalibration(
+        "fore", {"aft": CameraAlignment((1e-5, -2e-5, 3e-5), (1e-6, 2e-6, 3e-6))}, ("a",)
+    )
+    back = AlignmentCalibration.read(cal.write(tmp_path / "c.json"))
+    assert back == cal
+    (tmp_path / "bad.json").write_text('{"format": "something-else"}')
+    with pytest.raises(InputError, match="not a camera calibration"):
+        AlignmentCalibration.read(tmp_path / "bad.json")
+    doc = cal.as_dict()
+    doc["cameras"]["aft"]["sigma_rpy_rad"] = [1e-6, "x", 1e-6]
+    (tmp_path / "worse.json").write_text(json.dumps(doc))
+    with pytest.raises(InputError, match=r"aft\.sigma_rpy_rad"):
+        AlignmentCalibration.read(tmp_path / "worse.json")
+    with pytest.raises(InputError, match="cannot read calibration"):
+        AlignmentCalibration.read(tmp_path / "missing.json")
+    with pytest.raises(InputError, match="is for cameras pan"):
+        AlignmentCalibration("pan", {}, ("x",)).apply({})
