@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 import math
 
+import attrs
 import numpy as np
 import pytest
 
@@ -85,6 +86,7 @@ def test_a_calibration_carries_to_another_scene_of_the_satellite(calibrated, tmp
     # the same satellite: the same misalignment, other body errors
     assert np.allclose(_true_relative_misalignment(other), _true_relative_misalignment(scene))
     cal = load_calibration([adj / "calibration.json"])
+    assert cal.sources == (str(scene),)  # the workflow records where it came from
     sensors = Scene.open(other).sensors()
     prepared = prepare_sensors(sensors, "combined", calibration=cal)
     aft = prepared["aft"].camera
@@ -93,31 +95,83 @@ def test_a_calibration_carries_to_another_scene_of_the_satellite(calibrated, tmp
     sig = {p.name: p.sigma for p in aft.parameters if p.free}
     assert sig["camera.aft.align.pitch"] == pytest.approx(cal.cameras["aft"].sigma_rpy_rad[1])
     assert not any(p.free for p in prepared["fore"].camera.parameters)
+    # the tied adjustment of the other scene starts from the calibrated alignment and keeps
+    # its residual within what the calibration allows; the result stays with the truth
+    report = adjust_product(
+        other,
+        tmp_path / "adj",
+        ties="none",
+        options={"calibration": str(adj / "calibration.json")},
+        quiet=True,
+    )
+    assert report["options"]["calibration"] == str(adj / "calibration.json")
+    params = report["adjustment"]["parameters"]
+    nominal = np.array(sensors["aft"].camera.alignment_rpy_rad)
+    final = np.array(cal.cameras["aft"].alignment_rpy_rad) + [
+        params[f"camera.aft.align.{a}"]["value"] for a in ("roll", "pitch", "yaw")
+    ]
+    sigma = np.array([params[f"camera.aft.align.{a}"]["sigma"] for a in ("roll", "pitch", "yaw")])
+    assert np.all(sigma <= np.array(cal.cameras["aft"].sigma_rpy_rad) * 1.0001)
+    truth = _true_relative_misalignment(other)
+    assert np.all(
+        np.abs(final - nominal - truth) <= 3.0 * np.array(cal.cameras["aft"].sigma_rpy_rad)
+    )
+    with pytest.raises(InputError, match="mode separate"):
+        prepare_sensors(sensors, "separate", calibration=cal)
+
+
+def test_a_calibration_for_other_camera_constants_is_refused(calibrated):
+    scene, adj, _ = calibrated
+    cal = AlignmentCalibration.read(adj / "calibration.json")
+    sensors = Scene.open(scene).sensors()
+    fore = sensors["fore"]
+    moved = attrs.evolve(fore.camera, alignment_rpy_rad=(1e-3, 0.0, 0.0))
+    sensors["fore"] = attrs.evolve(fore, camera=moved)
+    with pytest.raises(InputError, match="nominal alignment"):
+        cal.apply(sensors)
+    with pytest.raises(InputError, match="given twice"):
+        AlignmentCalibration.combine([cal, cal])
+
+
+ZERO = (0.0, 0.0, 0.0)
 
 
 def test_combine_is_the_inverse_variance_mean():
-    def one(roll: float, sigma: float) -> AlignmentCalibration:
+    def one(roll: float, sigma: float, source: str = "s") -> AlignmentCalibration:
         return AlignmentCalibration(
-            "fore", {"aft": CameraAlignment((roll, 0.0, 0.0), (sigma, sigma, sigma))}, ("s",)
+            "fore",
+            ZERO,
+            {"aft": CameraAlignment((roll, 0.0, 0.0), (sigma, sigma, sigma))},
+            (source,),
         )
 
-    both = AlignmentCalibration.combine([one(1e-5, 1e-5), one(4e-5, 2e-5)])
+    both = AlignmentCalibration.combine([one(1e-5, 1e-5, "a"), one(4e-5, 2e-5, "b")])
     # weights 4 : 1
     assert both.cameras["aft"].alignment_rpy_rad[0] == pytest.approx((4 * 1e-5 + 4e-5) / 5)
     assert both.cameras["aft"].sigma_rpy_rad[0] == pytest.approx(1e-5 / math.sqrt(1.25))
     # chi2 = (1e-5 - 1.6e-5)^2 / 1e-10 + (4e-5 - 1.6e-5)^2 / 4e-10 (roll; the other axes
     # agree) over 6 estimates - 3 means
     assert both.consistency == pytest.approx((0.36 + 1.44) / 3)
+    assert both.sources == ("a", "b")
+    # estimates that disagree beyond their sigmas widen the sigma by sqrt(chi2 / dof)
+    apart = AlignmentCalibration.combine([one(0.0, 1e-6, "a"), one(1e-5, 1e-6, "b")])
+    chi2_dof = 2 * (5e-6 / 1e-6) ** 2 / 3
+    assert apart.consistency == pytest.approx(chi2_dof)
+    assert apart.cameras["aft"].sigma_rpy_rad[0] == pytest.approx(
+        1e-6 / math.sqrt(2) * math.sqrt(chi2_dof)
+    )
     other_ref = AlignmentCalibration(
-        "aft", {"fore": CameraAlignment((0.0, 0.0, 0.0), (1e-5, 1e-5, 1e-5))}
+        "aft", ZERO, {"fore": CameraAlignment(ZERO, (1e-5, 1e-5, 1e-5))}, ("c",)
     )
     with pytest.raises(InputError, match="against 'aft'"):
         AlignmentCalibration.combine([one(0, 1e-5), other_ref])
+    with pytest.raises(InputError, match="cannot also be calibrated"):
+        AlignmentCalibration("aft", ZERO, {"aft": CameraAlignment(ZERO, (1.0, 1.0, 1.0))})
 
 
 def test_round_trip_and_bad_files(tmp_path):
     cal = AlignmentCalibration(
-        "fore", {"aft": CameraAlignment((1e-5, -2e-5, 3e-5), (1e-6, 2e-6, 3e-6))}, ("a",)
+        "fore", ZERO, {"aft": CameraAlignment((1e-5, -2e-5, 3e-5), (1e-6, 2e-6, 3e-6))}, ("a",)
     )
     back = AlignmentCalibration.read(cal.write(tmp_path / "c.json"))
     assert back == cal
@@ -131,5 +185,17 @@ def test_round_trip_and_bad_files(tmp_path):
         AlignmentCalibration.read(tmp_path / "worse.json")
     with pytest.raises(InputError, match="cannot read calibration"):
         AlignmentCalibration.read(tmp_path / "missing.json")
-    with pytest.raises(InputError, match="is for cameras pan"):
-        AlignmentCalibration("pan", {}, ("x",)).apply({})
+    doc = cal.as_dict()
+    doc["cameras"]["aft"]["sigma_rpy_rad"] = [1e-6, 0.0, 1e-6]
+    (tmp_path / "zero.json").write_text(json.dumps(doc))
+    with pytest.raises(InputError, match=r"zero\.json: aft\.sigma_rpy_rad must be > 0"):
+        AlignmentCalibration.read(tmp_path / "zero.json")
+    doc = cal.as_dict()
+    doc["cameras"] = ["aft"]
+    (tmp_path / "list.json").write_text(json.dumps(doc))
+    with pytest.raises(InputError, match="cameras must name at least one camera"):
+        AlignmentCalibration.read(tmp_path / "list.json")
+    with pytest.raises(InputError, match="is for cameras aft, fore, the scene has none"):
+        cal.apply({})
+    with pytest.raises(InputError, match="expected a calibration file"):
+        load_calibration(5)

@@ -71,7 +71,7 @@ def prepare_sensors(
 
     With a ``calibration`` (:mod:`carto.cartosat1.calibration`) the cameras get its
     alignments, its reference camera stays fixed and, in ``combined`` mode, the others'
-    residual alignments are weighted by its sigmas."""
+    residual alignments are weighted by its sigmas (instead of ``alignment_sigma_deg``)."""
     if mode not in MODES:
         raise InputError(
             f"cartosat1-combined: mode must be one of {', '.join(MODES)}, got {mode!r}"
@@ -79,6 +79,17 @@ def prepare_sensors(
     prior = AncillaryPrior.from_degrees(
         bias_sigma_deg, drift_sigma_deg_s, ephemeris_bias_m=ephemeris_sigma_m
     )
+    for name, sensor in sensors.items():
+        if not isinstance(sensor, LineScanner):
+            raise InputError(
+                f"cartosat1-combined adjusts rigorous line scanners; image {name!r} is "
+                f"{type(sensor).__name__} (use the rpc-bias adjuster)"
+            )
+    if calibration is not None and mode == "separate":
+        raise InputError(
+            "cartosat1-combined: a calibration ties the cameras; mode separate gives each its "
+            "own corrections, so it would have no effect (use mode combined)"
+        )
     if calibration is not None:
         sensors = calibration.apply(sensors)
         reference = calibration.reference_camera

@@ -15,7 +15,8 @@ calibrated payload -> body alignment (roll, pitch, yaw in radians, as
 the reference. What one scene cannot separate is 52 s of its attitude drift (it moves Aft
 against Fore like an alignment error); that part differs from scene to scene while the
 alignment is the satellite's, so :meth:`AlignmentCalibration.combine` averages several scenes'
-estimates (inverse-variance weights) and says how well they agree.
+estimates (inverse-variance weights), says how well they agree and widens the sigma when they
+scatter more than it says.
 """
 
 from __future__ import annotations
@@ -67,12 +68,18 @@ class CameraAlignment:
             raise InputError(f"calibration: sigmas must be > 0, got {self.sigma_rpy_rad}")
 
 
+TOLERANCE_RAD = 1e-12
+
+
 @attrs.frozen
 class AlignmentCalibration:
     """The relative camera alignment of one satellite from in-flight calibration.
 
     Attributes:
         reference_camera: the camera whose alignment stays nominal (the body absorbs it).
+        reference_alignment_rpy_rad: that nominal alignment; the calibrated alignments are
+            relative to it, so a scene whose reference camera has another nominal alignment
+            cannot use them.
         cameras: the other cameras' calibrated alignments, by camera name.
         sources: the scenes (or runs) it was estimated from.
         platform: platform name, for the user.
@@ -82,10 +89,18 @@ class AlignmentCalibration:
     """
 
     reference_camera: str
+    reference_alignment_rpy_rad: tuple[float, float, float]
     cameras: Mapping[str, CameraAlignment]
     sources: tuple[str, ...] = ()
     platform: str = ""
     consistency: float | None = None
+
+    def __attrs_post_init__(self) -> None:
+        if self.reference_camera in self.cameras:
+            raise InputError(
+                f"calibration: the reference camera {self.reference_camera!r} cannot also be "
+                "calibrated against itself"
+            )
 
     # ---------------------------------------------------------------- from an adjustment
     @classmethod
@@ -97,6 +112,7 @@ class AlignmentCalibration:
         sigma = dict(zip(result.parameters, result.sigmas.tolist(), strict=True))
         cameras: dict[str, CameraAlignment] = {}
         reference = None
+        reference_alignment = (0.0, 0.0, 0.0)
         for sensor in result.sensors.values():
             if not isinstance(sensor, LineScanner):
                 raise InputError("calibration: only line scanners carry a camera alignment")
@@ -109,12 +125,13 @@ class AlignmentCalibration:
                 )
             elif reference is None:
                 reference = cam.name
+                reference_alignment = _triple(cam.alignment_rpy_rad, "alignment")
         if reference is None or not cameras:
             raise InputError(
                 "calibration: the adjustment estimated no camera alignment against a fixed "
                 "reference camera (run cartosat1-combined in mode calibration)"
             )
-        return cls(reference, cameras, tuple(sources), platform)
+        return cls(reference, reference_alignment, cameras, tuple(sources), platform)
 
     # ---------------------------------------------------------------- several scenes
     @classmethod
@@ -124,13 +141,31 @@ class AlignmentCalibration:
         if not calibrations:
             raise InputError("calibration: nothing to combine")
         first = calibrations[0]
-        for c in calibrations[1:]:
-            if c.reference_camera != first.reference_camera or set(c.cameras) != set(first.cameras):
+        seen: set[str] = set()
+        for c in calibrations:
+            if (
+                c.reference_camera != first.reference_camera
+                or set(c.cameras) != set(first.cameras)
+                or not np.allclose(
+                    c.reference_alignment_rpy_rad,
+                    first.reference_alignment_rpy_rad,
+                    rtol=0.0,
+                    atol=TOLERANCE_RAD,
+                )
+            ):
                 raise InputError(
                     f"calibration: {', '.join(c.sources) or 'an estimate'} calibrates cameras "
-                    f"{sorted(c.cameras)} against {c.reference_camera!r}, the first "
-                    f"{sorted(first.cameras)} against {first.reference_camera!r}"
+                    f"{sorted(c.cameras)} against {c.reference_camera!r} "
+                    f"{c.reference_alignment_rpy_rad}, the first {sorted(first.cameras)} "
+                    f"against {first.reference_camera!r} {first.reference_alignment_rpy_rad}"
                 )
+            repeated = seen & set(c.sources)
+            if repeated:
+                raise InputError(
+                    f"calibration: {', '.join(sorted(repeated))} is given twice (directly or "
+                    "inside a combined calibration); each scene must count once"
+                )
+            seen |= set(c.sources)
         if len(calibrations) == 1:
             return first
         cameras = {}
@@ -145,8 +180,22 @@ class AlignmentCalibration:
             cameras[name] = CameraAlignment(
                 _triple(mean, "alignment"), _triple(1.0 / np.sqrt(w.sum(axis=0)), "sigma")
             )
+        consistency = chi2 / dof
+        # estimates that scatter more than their sigmas say widen the result (Birge ratio)
+        scale = max(1.0, math.sqrt(consistency))
+        cameras = {
+            n: attrs.evolve(c, sigma_rpy_rad=tuple(scale * v for v in c.sigma_rpy_rad))
+            for n, c in cameras.items()
+        }
         sources = tuple(s for c in calibrations for s in c.sources)
-        return cls(first.reference_camera, cameras, sources, first.platform, chi2 / dof)
+        return cls(
+            first.reference_camera,
+            first.reference_alignment_rpy_rad,
+            cameras,
+            sources,
+            first.platform,
+            consistency,
+        )
 
     # ---------------------------------------------------------------- use
     def apply(self, sensors: Mapping[str, Sensor]) -> dict[str, Sensor]:
@@ -158,6 +207,24 @@ class AlignmentCalibration:
                 f"calibration ({', '.join(self.sources) or 'file'}) is for cameras "
                 f"{', '.join(missing)}, the scene has {', '.join(sorted(present)) or 'none'}"
             )
+        for sensor in sensors.values():
+            cam = sensor.camera if isinstance(sensor, LineScanner) else None
+            if (
+                cam is not None
+                and cam.name == self.reference_camera
+                and not np.allclose(
+                    cam.alignment_rpy_rad,
+                    self.reference_alignment_rpy_rad,
+                    rtol=0.0,
+                    atol=TOLERANCE_RAD,
+                )
+            ):
+                raise InputError(
+                    f"calibration ({', '.join(self.sources) or 'file'}): camera "
+                    f"{cam.name}'s nominal alignment is {tuple(cam.alignment_rpy_rad)} rad "
+                    f"in this scene, {self.reference_alignment_rpy_rad} in the calibration: "
+                    "it was made for other camera constants"
+                )
         out: dict[str, Sensor] = {}
         for image, sensor in sensors.items():
             if isinstance(sensor, LineScanner) and sensor.camera.name in self.cameras:
@@ -183,6 +250,7 @@ class AlignmentCalibration:
             "version": CALIBRATION_VERSION,
             "platform": self.platform,
             "reference_camera": self.reference_camera,
+            "reference_alignment_rpy_rad": list(self.reference_alignment_rpy_rad),
             "cameras": {
                 n: {
                     "alignment_rpy_rad": list(c.alignment_rpy_rad),
@@ -218,25 +286,44 @@ class AlignmentCalibration:
                 f"{CALIBRATION_VERSION}"
             )
         try:
-            cameras = {
-                str(n): CameraAlignment(
-                    _triple(c["alignment_rpy_rad"], f"{p}: {n}.alignment_rpy_rad"),
-                    _triple(c["sigma_rpy_rad"], f"{p}: {n}.sigma_rpy_rad"),
-                )
-                for n, c in doc["cameras"].items()
-            }
+            raw = doc["cameras"]
             reference = str(doc["reference_camera"])
-        except (KeyError, TypeError, AttributeError) as exc:
+            reference_alignment = _triple(
+                doc["reference_alignment_rpy_rad"], f"{p}: reference_alignment_rpy_rad"
+            )
+        except KeyError as exc:
             raise InputError(f"{p}: calibration lacks field {exc}") from None
-        if not cameras:
-            raise InputError(f"{p}: calibration has no camera")
-        return cls(
-            reference,
-            cameras,
-            tuple(str(s) for s in doc.get("sources", [])) or (str(p),),
-            str(doc.get("platform", "")),
-            doc.get("consistency_chi2_per_dof"),
-        )
+        if not isinstance(raw, dict) or not raw:
+            raise InputError(f"{p}: calibration field cameras must name at least one camera")
+        cameras = {}
+        for name, cam in raw.items():
+            if not isinstance(cam, dict):
+                raise InputError(f"{p}: calibration camera {name!r} is not an object")
+            try:
+                alignment = _triple(cam["alignment_rpy_rad"], f"{p}: {name}.alignment_rpy_rad")
+                sigma = _triple(cam["sigma_rpy_rad"], f"{p}: {name}.sigma_rpy_rad")
+            except KeyError as exc:
+                raise InputError(f"{p}: calibration camera {name!r} lacks field {exc}") from None
+            if not all(v > 0 for v in sigma):
+                raise InputError(f"{p}: {name}.sigma_rpy_rad must be > 0, got {list(sigma)}")
+            cameras[str(name)] = CameraAlignment(alignment, sigma)
+        sources = doc.get("sources", [])
+        if not isinstance(sources, list) or not all(isinstance(x, str) for x in sources):
+            raise InputError(f"{p}: calibration field sources must be a list of text")
+        consistency = doc.get("consistency_chi2_per_dof")
+        if consistency is not None and not isinstance(consistency, int | float):
+            raise InputError(f"{p}: consistency_chi2_per_dof must be a number, got {consistency!r}")
+        try:
+            return cls(
+                reference,
+                reference_alignment,
+                cameras,
+                tuple(sources) or (str(p),),
+                str(doc.get("platform", "")),
+                None if consistency is None else float(consistency),
+            )
+        except InputError as exc:
+            raise InputError(f"{p}: {exc}") from None
 
 
 def load_calibration(
@@ -247,4 +334,8 @@ def load_calibration(
         return value
     if isinstance(value, str | os.PathLike):
         return AlignmentCalibration.read(value)
-    return AlignmentCalibration.combine([load_calibration(v) for v in value])
+    if isinstance(value, list | tuple):
+        return AlignmentCalibration.combine([load_calibration(v) for v in value])
+    raise InputError(
+        f"calibration: expected a calibration file, folder or a list of them, got {value!r}"
+    )

@@ -808,7 +808,7 @@ class AncillaryPrior:
         for name in ("bias_rad", "drift_rad_s", "higher_rad", "alignment_rad", "ephemeris_bias_m"):
             value = getattr(self, name)
             if not (value > 0 and math.isfinite(value)):
-                raise InputError(f"attitude prior: {name} must be > 0, got {value}")
+                raise InputError(f"ancillary prior: {name} must be > 0, got {value}")
 
 
 def line_scanner_corrections(

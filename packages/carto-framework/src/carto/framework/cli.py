@@ -442,10 +442,10 @@ def _add_adjust(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--calibration",
-        nargs="+",
+        action="append",
         metavar="FILE",
-        help="in-flight camera calibration(s) of the same satellite (calibration.json written "
-        "by --mode calibration, or its folder); several are averaged",
+        help="in-flight camera calibration of the same satellite (calibration.json written "
+        "by --mode calibration, or its folder); repeat it to average several",
     )
     p.add_argument("--sensor", metavar="TYPE", help="sensor type of the product")
     p.add_argument("--no-robust", action="store_true", help="no outlier rejection")

@@ -143,6 +143,10 @@ def _progress(message: str, quiet: bool) -> None:
         print(f"carto adjust: {message}", file=sys.stderr, flush=True)
 
 
+RESERVED_OUTPUTS = frozenset({"report", "models", "rpc", "residual_plot", "tie_points"})
+"""Names an adjuster's products cannot take (the workflow's own outputs)."""
+
+
 def adjust_product(
     source: str | os.PathLike[str],
     out_dir: str | os.PathLike[str],
@@ -241,6 +245,10 @@ def adjust_product(
     out.mkdir(parents=True, exist_ok=True)
     files = _write_models(result, out)
     for product, document in result.products.items():
+        if product in RESERVED_OUTPUTS or not product.isidentifier():
+            raise InputError(f"adjuster {name}: product name {product!r} is not allowed")
+        if isinstance(document, dict) and document.get("sources") == []:
+            document = document | {"sources": [str(src)]}  # what the adjuster did not know
         files[product] = write_json_atomic(out / f"{product}.json", _jsonable(document)).name
     plot = residual_plot(
         result,
@@ -250,7 +258,12 @@ def adjust_product(
     report: dict[str, Any] = {
         "source": str(src),
         "adjuster": name,
-        "options": {k: v for k, v in options.items() if isinstance(v, str | int | float)},
+        "options": {
+            k: v
+            for k, v in options.items()
+            if isinstance(v, str | int | float)
+            or (isinstance(v, list) and all(isinstance(x, str) for x in v))
+        },
         "gcps_used": n_used,
         "tie_points": n_ties,
         "dem_height_constraints": int(obs.height_id.size),
