@@ -77,21 +77,3 @@ def test_orbit_altitude_speed_and_period_agree_with_kepler(truth):
     h_vec = np.cross(p[4], v[4])
     incl = math.degrees(math.acos(h_vec[2] / np.linalg.norm(h_vec)))
     assert incl == pytest.approx(c.ORBIT_INCLINATION_DEG, abs=0.05)
-
-
-def test_a_window_longer_than_a_scene_is_cut_from_a_strip():
-    from carto.cartosat1.presets import Cartosat1PairPreset
-    from carto.framework.simulate import SimulationOptions
-
-    preset = Cartosat1PairPreset()
-    standard = preset.plan(SimulationOptions(size=(100, 100)))
-    assert [v.n_lines_full for v in standard.segments[0].views] == [c.N_DETECTORS] * 2
-    assert standard.segments[0].span_s == (-45.0, 45.0)
-    strip = preset.plan(SimulationOptions(size=(100, 60000)))
-    seg = strip.segments[0]
-    assert [v.n_lines_full for v in seg.views] == [60000, 60000]
-    # Fore and Aft see the strip's ends about 26 s before / after the overpass, +- half the
-    # strip's duration (60000 lines x 0.336 ms = 20.2 s): the ancillary data covers both
-    half_strip = 0.5 * 60000 * c.LINE_PERIOD_S
-    assert seg.span_s[1] >= 26.0 + half_strip + 5.0
-    assert seg.span_s[0] == -seg.span_s[1]
