@@ -183,7 +183,7 @@ def test_round_trip_and_bad_files(tmp_path):
     (tmp_path / "worse.json").write_text(json.dumps(doc))
     with pytest.raises(InputError, match=r"aft\.sigma_rpy_rad"):
         AlignmentCalibration.read(tmp_path / "worse.json")
-    with pytest.raises(InputError, match="cannot read calibration"):
+    with pytest.raises(InputError, match="cannot read camera calibration"):
         AlignmentCalibration.read(tmp_path / "missing.json")
     doc = cal.as_dict()
     doc["cameras"]["aft"]["sigma_rpy_rad"] = [1e-6, 0.0, 1e-6]

@@ -37,5 +37,5 @@ def test_scene_open_errors(tmp_path):
     with pytest.raises(InputError, match="cannot read scene manifest"):
         Scene.open(tmp_path)
     (tmp_path / "scene.json").write_text('{"format": "carto-scene", "version": 7}')
-    with pytest.raises(InputError, match="scene version 7 is not supported"):
+    with pytest.raises(InputError, match="scene manifest version 7 is not supported"):
         Scene.open(tmp_path)

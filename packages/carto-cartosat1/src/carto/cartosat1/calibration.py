@@ -21,7 +21,6 @@ scatter more than it says.
 
 from __future__ import annotations
 
-import json
 import math
 import os
 from collections.abc import Mapping, Sequence
@@ -32,8 +31,9 @@ import attrs
 import numpy as np
 
 from carto.framework.adjust import AdjustmentResult
+from carto.framework.documents import read_json_document, write_json_atomic
 from carto.framework.errors import InputError
-from carto.framework.linescan import LineScanner, write_json_atomic
+from carto.framework.linescan import LineScanner
 from carto.framework.sensor import Sensor
 
 CALIBRATION_FORMAT = "carto-camera-alignment-calibration"
@@ -272,19 +272,7 @@ class AlignmentCalibration:
         p = Path(path)
         if p.is_dir():
             p = p / "calibration.json"
-        try:
-            doc = json.loads(p.read_text())
-        except OSError as exc:
-            raise InputError(f"{p}: cannot read calibration: {exc.strerror}") from None
-        except ValueError as exc:
-            raise InputError(f"{p}: not a JSON calibration: {exc}") from None
-        if not isinstance(doc, dict) or doc.get("format") != CALIBRATION_FORMAT:
-            raise InputError(f"{p}: not a camera calibration (format {CALIBRATION_FORMAT!r})")
-        if doc.get("version") != CALIBRATION_VERSION:
-            raise InputError(
-                f"{p}: calibration version {doc.get('version')!r}, this Carto reads "
-                f"{CALIBRATION_VERSION}"
-            )
+        doc = read_json_document(p, CALIBRATION_FORMAT, CALIBRATION_VERSION, "camera calibration")
         try:
             raw = doc["cameras"]
             reference = str(doc["reference_camera"])

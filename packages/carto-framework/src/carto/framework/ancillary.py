@@ -21,8 +21,9 @@ import attrs
 
 from carto.framework import frames
 from carto.framework.camera import Camera
+from carto.framework.documents import write_json_atomic
 from carto.framework.errors import InputError
-from carto.framework.linescan import LineScanner, LineTiming, write_json_atomic
+from carto.framework.linescan import LineScanner, LineTiming
 from carto.framework.trajectory import (
     AttitudeSamples,
     EphemerisSamples,

@@ -14,8 +14,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+from carto.framework.documents import write_json_atomic
 from carto.framework.evaluate import checkpoint_accuracy
-from carto.framework.linescan import write_json_atomic
 from carto.framework.plugins import get_registry
 from carto.framework.scene import Scene
 from carto.framework.simulate import SimulationOptions

@@ -41,8 +41,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from carto.framework import frames
-from carto.framework.atomic import atomic_output
 from carto.framework.camera import Camera
+from carto.framework.documents import write_json_atomic
 from carto.framework.errors import InputError
 from carto.framework.sensor import Parameter, Sensor, SensorType, as_float_arrays
 from carto.framework.trajectory import Trajectory
@@ -801,15 +801,6 @@ class LineScanner(Sensor):
         if not isinstance(doc, dict):
             raise InputError(f"{path}: not a Carto model file (JSON object expected)")
         return cls.from_dict(doc, source=str(path))
-
-
-def write_json_atomic(path: str | os.PathLike[str], document: Any) -> Path:
-    """Write ``document`` as indented JSON to ``path`` through a temporary file and a rename."""
-    path = Path(path)
-    with atomic_output(path) as tmp, tmp.open("w") as fh:
-        json.dump(document, fh, indent=1)
-        fh.write("\n")
-    return path
 
 
 def intersect_ellipsoid_height(

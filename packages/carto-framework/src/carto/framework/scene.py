@@ -9,7 +9,6 @@ renders it with known truth.
 from __future__ import annotations
 
 import abc
-import json
 import os
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -17,6 +16,7 @@ from typing import TYPE_CHECKING, Any
 import attrs
 
 from carto.framework.component import Component
+from carto.framework.documents import read_json_document
 from carto.framework.errors import InputError
 from carto.framework.linescan import LineScanner
 
@@ -61,21 +61,7 @@ class Scene:
         """Open a scene folder (or its ``scene.json``); errors name the file and field."""
         path = Path(path)
         manifest_path = path / "scene.json" if path.is_dir() else path
-        try:
-            doc = json.loads(manifest_path.read_text())
-        except OSError as exc:
-            raise InputError(
-                f"{manifest_path}: cannot read scene manifest: {exc.strerror}"
-            ) from None
-        except ValueError as exc:
-            raise InputError(f"{manifest_path}: not a JSON scene manifest: {exc}") from None
-        if not isinstance(doc, dict) or doc.get("format") != SCENE_FORMAT:
-            raise InputError(f"{manifest_path}: field 'format' is not {SCENE_FORMAT!r}")
-        if doc.get("version") != SCENE_VERSION:
-            raise InputError(
-                f"{manifest_path}: scene version {doc.get('version')!r} is not "
-                f"supported (this Carto reads version {SCENE_VERSION})"
-            )
+        doc = read_json_document(manifest_path, SCENE_FORMAT, SCENE_VERSION, "scene manifest")
         for key in ("images", "gcps", "checkpoints"):
             if key not in doc:
                 raise InputError(f"{manifest_path}: missing field {key!r}")

@@ -39,8 +39,9 @@ from carto.framework import acquisition, frames, orbit
 from carto.framework.ancillary import Ancillary, CameraSpec, ImageSpec
 from carto.framework.atomic import atomic_output
 from carto.framework.camera import Camera
+from carto.framework.documents import write_json_atomic
 from carto.framework.errors import InputError
-from carto.framework.linescan import LineScanner, LineTiming, write_json_atomic
+from carto.framework.linescan import LineScanner, LineTiming
 from carto.framework.point_table import write_point_table
 from carto.framework.scene import SCENE_FORMAT, SCENE_VERSION
 from carto.framework.trajectory import AttitudeSamples, EphemerisSamples, Trajectory

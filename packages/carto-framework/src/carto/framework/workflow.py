@@ -23,8 +23,9 @@ from numpy.typing import NDArray
 
 from carto.framework import frames
 from carto.framework.adjust import AdjustmentResult, Observations
+from carto.framework.documents import write_json_atomic
 from carto.framework.errors import InputError
-from carto.framework.linescan import LineScanner, write_json_atomic
+from carto.framework.linescan import LineScanner
 from carto.framework.plugins import get_registry
 from carto.framework.point_table import read_point_table, write_point_table
 from carto.framework.rpc import RPCSensor, fit_rpc, write_rpc_txt

@@ -1,0 +1,54 @@
+"""Carto's versioned JSON documents (scene manifests, model files, calibrations ...).
+
+Every such file carries ``format`` and ``version`` first. :func:`read_json_document` reads one
+and checks both, with one-line :class:`~carto.framework.errors.InputError` causes that name the
+file; :func:`write_json_atomic` writes one through a temporary file and a rename, so that a
+crash never leaves a half-written document behind.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+from carto.framework.atomic import atomic_output
+from carto.framework.errors import InputError
+
+
+def read_json_document(
+    path: str | os.PathLike[str], fmt: str, version: int, what: str
+) -> dict[str, Any]:
+    """The JSON object in ``path`` after checking its ``format`` (``fmt``) and ``version``.
+
+    ``what`` names the document in the errors (e.g. ``"scene manifest"``).
+
+    Raises:
+        InputError: unreadable file, not JSON, not an object, another format or version.
+    """
+    p = Path(path)
+    try:
+        doc = json.loads(p.read_text())
+    except OSError as exc:
+        raise InputError(f"{p}: cannot read {what}: {exc.strerror}") from None
+    except ValueError as exc:
+        raise InputError(f"{p}: not a JSON {what}: {exc}") from None
+    if not isinstance(doc, dict) or doc.get("format") != fmt:
+        got = doc.get("format") if isinstance(doc, dict) else type(doc).__name__
+        raise InputError(f"{p}: not a {what}: field 'format' is {got!r}, expected {fmt!r}")
+    if doc.get("version") != version:
+        raise InputError(
+            f"{p}: {what} version {doc.get('version')!r} is not supported (this Carto reads "
+            f"version {version})"
+        )
+    return doc
+
+
+def write_json_atomic(path: str | os.PathLike[str], document: Any) -> Path:
+    """Write ``document`` as indented JSON to ``path`` through a temporary file and a rename."""
+    path = Path(path)
+    with atomic_output(path) as tmp, tmp.open("w") as fh:
+        json.dump(document, fh, indent=1)
+        fh.write("\n")
+    return path
