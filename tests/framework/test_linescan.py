@@ -148,7 +148,7 @@ def test_model_file_errors_are_one_line(tmp_path, cartosat1_pair):
     doc = cartosat1_pair["fore"].to_dict()
     bad = tmp_path / "bad.json"
     bad.write_text(json.dumps({**doc, "version": 99}))
-    with pytest.raises(InputError, match=r"bad.json: model version 99 is not supported"):
+    with pytest.raises(InputError, match=r"bad.json: model file version 99 is not supported"):
         LineScanner.load(bad)
     del doc["camera"]
     bad.write_text(json.dumps(doc))

@@ -10,7 +10,6 @@ agile Cartosat-2 acquisition is a file of its own. :func:`read_ancillary` turns 
 
 from __future__ import annotations
 
-import json
 import math
 import os
 from collections.abc import Mapping, Sequence
@@ -21,7 +20,7 @@ import attrs
 
 from carto.framework import frames
 from carto.framework.camera import Camera
-from carto.framework.documents import write_json_atomic
+from carto.framework.documents import read_json_document, write_json_atomic
 from carto.framework.errors import InputError
 from carto.framework.linescan import LineScanner, LineTiming
 from carto.framework.trajectory import (
@@ -264,13 +263,7 @@ def parse_ancillary(doc: Mapping[str, Any], source: str = "ancillary") -> Ancill
 
 def read_ancillary(path: str | os.PathLike[str]) -> Ancillary:
     """Read an ancillary file; :class:`InputError` names the file and the faulty field."""
-    path = Path(path)
-    try:
-        doc = json.loads(path.read_text())
-    except OSError as exc:
-        raise InputError(f"{path}: cannot read ancillary file: {exc.strerror}") from None
-    except ValueError as exc:
-        raise InputError(f"{path}: not a JSON ancillary file: {exc}") from None
+    doc = read_json_document(path, FORMAT, VERSION, "ancillary file")
     return parse_ancillary(doc, str(path))
 
 

@@ -28,7 +28,6 @@ constant period, piecewise linear for asynchronous imaging).
 
 from __future__ import annotations
 
-import json
 import math
 import os
 from collections.abc import Mapping, Sequence
@@ -42,7 +41,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from carto.framework import frames
 from carto.framework.camera import Camera
-from carto.framework.documents import write_json_atomic
+from carto.framework.documents import read_json_document, write_json_atomic
 from carto.framework.errors import InputError
 from carto.framework.sensor import Parameter, Sensor, SensorType, as_float_arrays
 from carto.framework.trajectory import Trajectory
@@ -791,16 +790,8 @@ class LineScanner(Sensor):
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> LineScanner:
         """Read a model file written by :meth:`save`."""
-        path = Path(path)
-        try:
-            doc = json.loads(path.read_text())
-        except OSError as exc:
-            raise InputError(f"{path}: cannot read model file: {exc.strerror}") from None
-        except ValueError as exc:
-            raise InputError(f"{path}: not a JSON model file: {exc}") from None
-        if not isinstance(doc, dict):
-            raise InputError(f"{path}: not a Carto model file (JSON object expected)")
-        return cls.from_dict(doc, source=str(path))
+        doc = read_json_document(path, MODEL_FORMAT, MODEL_VERSION, "model file")
+        return cls.from_dict(doc, source=str(Path(path)))
 
 
 def intersect_ellipsoid_height(
