@@ -71,6 +71,10 @@ class CameraAlignment:
 TOLERANCE_RAD = 1e-12
 
 
+def _same_angles(a: Sequence[float], b: Sequence[float]) -> bool:
+    return bool(np.allclose(a, b, rtol=0.0, atol=TOLERANCE_RAD))
+
+
 @attrs.frozen
 class AlignmentCalibration:
     """The relative camera alignment of one satellite from in-flight calibration.
@@ -146,11 +150,8 @@ class AlignmentCalibration:
             if (
                 c.reference_camera != first.reference_camera
                 or set(c.cameras) != set(first.cameras)
-                or not np.allclose(
-                    c.reference_alignment_rpy_rad,
-                    first.reference_alignment_rpy_rad,
-                    rtol=0.0,
-                    atol=TOLERANCE_RAD,
+                or not _same_angles(
+                    c.reference_alignment_rpy_rad, first.reference_alignment_rpy_rad
                 )
             ):
                 raise InputError(
@@ -212,12 +213,7 @@ class AlignmentCalibration:
             if (
                 cam is not None
                 and cam.name == self.reference_camera
-                and not np.allclose(
-                    cam.alignment_rpy_rad,
-                    self.reference_alignment_rpy_rad,
-                    rtol=0.0,
-                    atol=TOLERANCE_RAD,
-                )
+                and not _same_angles(cam.alignment_rpy_rad, self.reference_alignment_rpy_rad)
             ):
                 raise InputError(
                     f"calibration ({', '.join(self.sources) or 'file'}): camera "

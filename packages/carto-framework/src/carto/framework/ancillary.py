@@ -20,7 +20,7 @@ import attrs
 
 from carto.framework import frames
 from carto.framework.camera import Camera
-from carto.framework.documents import read_json_document, write_json_atomic
+from carto.framework.documents import check_document, read_json_document, write_json_atomic
 from carto.framework.errors import InputError
 from carto.framework.linescan import LineScanner, LineTiming
 from carto.framework.trajectory import (
@@ -187,14 +187,7 @@ def _get(d: Mapping[str, Any], key: str, source: str, where: str = "") -> Any:
 
 def parse_ancillary(doc: Mapping[str, Any], source: str = "ancillary") -> Ancillary:
     """Validate and convert a parsed ancillary document; errors name the field."""
-    if not isinstance(doc, Mapping) or doc.get("format") != FORMAT:
-        got = doc.get("format") if isinstance(doc, Mapping) else type(doc).__name__
-        raise InputError(f"{source}: field 'format' is {got!r}, expected {FORMAT!r}")
-    if doc.get("version") != VERSION:
-        raise InputError(
-            f"{source}: ancillary version {doc.get('version')!r} is not "
-            f"supported (this Carto reads version {VERSION})"
-        )
+    check_document(doc, FORMAT, VERSION, "ancillary file", source)
     try:
         eph = _get(doc, "ephemeris", source)
         ephemeris = EphemerisSamples(

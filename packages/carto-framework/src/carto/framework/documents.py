@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -34,15 +35,21 @@ def read_json_document(
         raise InputError(f"{p}: cannot read {what}: {exc.strerror}") from None
     except ValueError as exc:
         raise InputError(f"{p}: not a JSON {what}: {exc}") from None
-    if not isinstance(doc, dict) or doc.get("format") != fmt:
-        got = doc.get("format") if isinstance(doc, dict) else type(doc).__name__
-        raise InputError(f"{p}: not a {what}: field 'format' is {got!r}, expected {fmt!r}")
+    check_document(doc, fmt, version, what, str(p))
+    return doc
+
+
+def check_document(doc: Any, fmt: str, version: int, what: str, source: str) -> None:
+    """Raise :class:`InputError` (naming ``source``) unless ``doc`` is a JSON object of
+    format ``fmt`` and version ``version``."""
+    if not isinstance(doc, Mapping) or doc.get("format") != fmt:
+        got = doc.get("format") if isinstance(doc, Mapping) else type(doc).__name__
+        raise InputError(f"{source}: not a {what}: field 'format' is {got!r}, expected {fmt!r}")
     if doc.get("version") != version:
         raise InputError(
-            f"{p}: {what} version {doc.get('version')!r} is not supported (this Carto reads "
-            f"version {version})"
+            f"{source}: {what} version {doc.get('version')!r} is not supported (this Carto "
+            f"reads version {version})"
         )
-    return doc
 
 
 def write_json_atomic(path: str | os.PathLike[str], document: Any) -> Path:

@@ -41,7 +41,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from carto.framework import frames
 from carto.framework.camera import Camera
-from carto.framework.documents import read_json_document, write_json_atomic
+from carto.framework.documents import check_document, read_json_document, write_json_atomic
 from carto.framework.errors import InputError
 from carto.framework.sensor import Parameter, Sensor, SensorType, as_float_arrays
 from carto.framework.trajectory import Trajectory
@@ -757,15 +757,7 @@ class LineScanner(Sensor):
     @classmethod
     def from_dict(cls, d: Mapping[str, Any], source: str = "model") -> LineScanner:
         """Inverse of :meth:`to_dict`; ``source`` names the file in error messages."""
-        if d.get("format") != MODEL_FORMAT:
-            raise InputError(
-                f"{source}: field 'format' is {d.get('format')!r}, expected {MODEL_FORMAT!r}"
-            )
-        if d.get("version") != MODEL_VERSION:
-            raise InputError(
-                f"{source}: model version {d.get('version')!r} is not supported "
-                f"(this Carto reads version {MODEL_VERSION})"
-            )
+        check_document(d, MODEL_FORMAT, MODEL_VERSION, "model file", source)
         try:
             window = d.get("window", {})
             return cls(
