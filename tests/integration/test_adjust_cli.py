@@ -72,3 +72,36 @@ def test_adjust_errors_are_one_line(run_carto, tmp_path, cartosat1_scene):
     assert res.returncode == 1
     assert "unknown adjuster 'nope'" in res.stderr
     assert "Traceback" not in res.stderr
+
+
+def test_calibration_from_the_command_line(run_carto, tmp_path, cartosat1_scene):
+    """--mode calibration writes calibration.json; --calibration applies it to a scene; a
+    separate-mode run refuses it with a one-line error."""
+    calib = tmp_path / "calib"
+    base = ["adjust", str(cartosat1_scene), "--ties", "none", "--quiet"]
+    res = run_carto([*base, "--mode", "calibration", "--out", str(calib)], with_test_plugins=False)
+    assert res.returncode == 0, res.stderr
+    assert "calibration.json" in res.stdout
+    doc = json.loads((calib / "calibration.json").read_text())
+    assert doc["reference_camera"] == "fore"
+    assert set(doc["cameras"]) == {"aft"}
+    assert doc["sources"] == [str(cartosat1_scene)]
+    out = tmp_path / "adj"
+    res = run_carto(
+        [*base, "--calibration", str(calib / "calibration.json"), "--out", str(out)],
+        with_test_plugins=False,
+    )
+    assert res.returncode == 0, res.stderr
+    report = json.loads((out / "report.json").read_text())
+    assert report["options"]["calibration"] == [str(calib / "calibration.json")]
+    aft = LineScanner.load(out / "aft.model.json")
+    calibrated = doc["cameras"]["aft"]["alignment_rpy_rad"]
+    assert np.allclose(aft.camera.alignment_rpy_rad, calibrated, atol=1e-12)
+    res = run_carto(
+        [*base, "--mode", "separate", "--calibration", str(calib), "--out", str(tmp_path / "s")],
+        with_test_plugins=False,
+    )
+    assert res.returncode == 1
+    assert len(res.stderr.strip().splitlines()) == 1
+    assert "mode separate" in res.stderr
+    assert "Traceback" not in res.stderr
