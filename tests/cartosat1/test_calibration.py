@@ -176,7 +176,7 @@ def test_round_trip_and_bad_files(tmp_path):
     back = AlignmentCalibration.read(cal.write(tmp_path / "c.json"))
     assert back == cal
     (tmp_path / "bad.json").write_text('{"format": "something-else"}')
-    with pytest.raises(InputError, match="not a camera calibration"):
+    with pytest.raises(InputError, match="not a Carto camera calibration"):
         AlignmentCalibration.read(tmp_path / "bad.json")
     doc = cal.as_dict()
     doc["cameras"]["aft"]["sigma_rpy_rad"] = [1e-6, "x", 1e-6]

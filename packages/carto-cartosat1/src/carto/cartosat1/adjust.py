@@ -9,14 +9,15 @@ like two GCPs; a single GCP then fixes the absolute position (Radhadevi et al. 2
 
 Modes:
     ``combined``: one shared set of body corrections (the default), plus the residual
-        relative alignment of the second camera (what in-flight calibration leaves, a-priori
+        alignment of the other camera relative to the reference camera (the first image's, or
+        the calibration's; what in-flight calibration leaves, a-priori
         ``sqrt(2) * RESIDUAL_ALIGNMENT_SIGMA_DEG`` per axis) as a weighted unknown.
     ``separate``: independent corrections per camera (the classical model, for comparison).
     ``calibration``: the shared body corrections plus the alignment of every camera but the
-        first relative to the body, loosely weighted (in-flight calibration, needs many
-        GCPs); the estimate is folded into the cameras' calibrated alignment of the returned
-        sensors and returned as the product ``calibration`` (``calibration.json``, see
-        :mod:`carto.cartosat1.calibration`).
+        reference (the first image's) relative to the body, loosely weighted (in-flight
+        calibration, needs many GCPs); the estimate is folded into the cameras' calibrated
+        alignment of the returned sensors and returned as the product ``calibration``
+        (``calibration.json``, see :mod:`carto.cartosat1.calibration`).
 
 Option ``calibration`` (a ``calibration.json``, an adjustment folder holding one, or a list of
 them, averaged) puts an earlier in-flight calibration of the same satellite into the cameras;
@@ -90,6 +91,11 @@ def prepare_sensors(
             "cartosat1-combined: a calibration ties the cameras; mode separate gives each its "
             "own corrections, so it would have no effect (use mode combined)"
         )
+    if calibration is not None and mode == "calibration":
+        raise InputError(
+            "cartosat1-combined: mode calibration estimates the alignment afresh; combine "
+            "calibrations of several scenes with --calibration A --calibration B instead"
+        )
     if calibration is not None:
         sensors = calibration.apply(sensors)
         reference = calibration.reference_camera
@@ -130,10 +136,11 @@ def prepare_sensors(
 
 
 class Cartosat1Adjuster(Adjuster):
-    """Tied Fore/Aft adjustment with one set of body-attitude corrections (bias + drift)."""
+    """Tied Fore/Aft adjustment: one set of body corrections (attitude bias + drift, position
+    bias) for both cameras."""
 
     name = "cartosat1-combined"
-    description = "Cartosat-1 tied-camera adjustment: one body attitude correction for Fore+Aft"
+    description = "Cartosat-1 tied-camera adjustment: one body correction for Fore+Aft"
 
     def adjust(
         self, sensors: Mapping[str, Sensor], observations: Observations, **options: Any

@@ -826,9 +826,9 @@ def line_scanner_corrections(
     """A line scanner set up for an adjuster: attitude corrections of ``attitude_order``,
     optional position bias, parameter names prefixed by the image ``name`` when
     ``independent`` (otherwise sensors on one trajectory share them), camera alignment free
-    or fixed. ``prior`` sets the a-priori sigmas of the attitude corrections and of a free
-    camera alignment (``alignment_sigma_rad`` overrides the latter); without it the
-    trajectory's and camera's defaults stay. Other sensors raise :class:`InputError` naming
+    or fixed. ``prior`` sets the a-priori sigmas of the attitude and position corrections
+    and of a free camera alignment (``alignment_sigma_rad`` overrides the latter); without it
+    the trajectory's and camera's defaults stay. Other sensors raise :class:`InputError` naming
     ``adjuster``."""
     from carto.framework.linescan import LineScanner
 

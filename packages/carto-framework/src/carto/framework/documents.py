@@ -42,9 +42,13 @@ def read_json_document(
 def check_document(doc: Any, fmt: str, version: int, what: str, source: str) -> None:
     """Raise :class:`InputError` (naming ``source``) unless ``doc`` is a JSON object of
     format ``fmt`` and version ``version``."""
-    if not isinstance(doc, Mapping) or doc.get("format") != fmt:
-        got = doc.get("format") if isinstance(doc, Mapping) else type(doc).__name__
-        raise InputError(f"{source}: not a {what}: field 'format' is {got!r}, expected {fmt!r}")
+    if not isinstance(doc, Mapping):
+        raise InputError(f"{source}: not a Carto {what}: a JSON object expected")
+    if doc.get("format") != fmt:
+        raise InputError(
+            f"{source}: not a Carto {what}: field 'format' is {doc.get('format')!r}, "
+            f"expected {fmt!r}"
+        )
     if doc.get("version") != version:
         raise InputError(
             f"{source}: {what} version {doc.get('version')!r} is not supported (this Carto "
