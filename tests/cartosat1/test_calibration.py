@@ -118,6 +118,8 @@ def test_a_calibration_carries_to_another_scene_of_the_satellite(calibrated, tmp
     )
     with pytest.raises(InputError, match="mode separate"):
         prepare_sensors(sensors, "separate", calibration=cal)
+    with pytest.raises(InputError, match="estimates the alignment afresh"):
+        prepare_sensors(sensors, "calibration", calibration=cal)
 
 
 def test_a_calibration_for_other_camera_constants_is_refused(calibrated):
