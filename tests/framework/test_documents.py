@@ -23,3 +23,15 @@ def test_versioned_documents_are_checked(tmp_path):
         read_json_document(tmp_path / "e.json", "x", 2, "thing")
     with pytest.raises(InputError, match="cannot read thing"):
         read_json_document(tmp_path / "missing.json", "x", 2, "thing")
+
+
+def test_a_configuration_that_is_not_an_object_is_a_one_line_error(run_carto, tmp_path):
+    config = tmp_path / "pair.json"
+    config.write_text("[1, 2]")
+    res = run_carto(["adjust", str(config), "--out", str(tmp_path / "o"), "--quiet"])
+    assert res.returncode == 1
+    assert "a configuration is a JSON object, got list" in res.stderr
+    assert "Traceback" not in res.stderr
+    (tmp_path / "bad.json").write_text("{")
+    res = run_carto(["adjust", str(tmp_path / "bad.json"), "--out", str(tmp_path / "o")])
+    assert "not a JSON configuration" in res.stderr

@@ -28,15 +28,24 @@ def read_json_document(
     Raises:
         InputError: unreadable file, not JSON, not an object, another format or version.
     """
+    doc = read_json(path, what)
+    check_document(doc, fmt, version, what, str(Path(path)))
+    return doc
+
+
+def read_json(path: str | os.PathLike[str], what: str) -> Any:
+    """The parsed JSON in ``path``; ``what`` names it in the one-line errors.
+
+    Raises:
+        InputError: unreadable file or not JSON.
+    """
     p = Path(path)
     try:
-        doc = json.loads(p.read_text())
+        return json.loads(p.read_text())
     except OSError as exc:
         raise InputError(f"{p}: cannot read {what}: {exc.strerror}") from None
     except ValueError as exc:
         raise InputError(f"{p}: not a JSON {what}: {exc}") from None
-    check_document(doc, fmt, version, what, str(p))
-    return doc
 
 
 def check_document(doc: Any, fmt: str, version: int, what: str, source: str) -> None:

@@ -9,7 +9,6 @@ the sidecar of ``<image>.tif``), a residual plot (``residuals.png``) and ``repor
 
 from __future__ import annotations
 
-import json
 import math
 import os
 import sys
@@ -23,7 +22,7 @@ from numpy.typing import NDArray
 
 from carto.framework import frames
 from carto.framework.adjust import AdjustmentResult, Observations
-from carto.framework.documents import write_json_atomic
+from carto.framework.documents import read_json, write_json_atomic
 from carto.framework.errors import InputError
 from carto.framework.linescan import LineScanner
 from carto.framework.plugins import get_registry
@@ -427,12 +426,9 @@ def _read_config(path: Path) -> tuple[dict[str, Sensor], dict[str, Path], Table 
     from carto.framework.dem import DEM, Geoid
     from carto.framework.sensor import open_sensor
 
-    try:
-        doc = json.loads(path.read_text())
-    except OSError as exc:
-        raise InputError(f"{path}: cannot read configuration: {exc.strerror}") from None
-    except ValueError as exc:
-        raise InputError(f"{path}: not a JSON configuration: {exc}") from None
+    doc = read_json(path, "configuration")
+    if not isinstance(doc, dict):
+        raise InputError(f"{path}: a configuration is a JSON object, got {type(doc).__name__}")
     base = path.parent
     images = doc.get("images")
     if not isinstance(images, dict) or len(images) < 1:
