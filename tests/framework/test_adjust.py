@@ -125,3 +125,48 @@ def test_a_common_dem_height_offset_is_estimated_not_absorbed(scene):
     assert checkpoint_accuracy(result.sensors, check)["rmse_height_m"] < 3.0
     with pytest.raises(InputError, match="height_offset_sigma_m"):
         obs.with_heights(ties["id"][first], biased_h, 2.0, -1.0)
+
+
+def test_a_matched_offset_carries_the_gcp_parallax(scene):
+    """A GCP measured by hand 1.5 px off along track in Aft only: its wrong stereo parallax
+    moves the block by metres in height. The image offset that matching measures (here the
+    exact one, from the true image positions) carries the parallax instead; and it transfers
+    a GCP measured in Fore only into Aft."""
+    sensors = scene.sensors()
+    ties, check = _split(scene.control("checkpoints"))
+    gid = check["id"][0]
+    at = check["id"] == gid
+    gcp = {k: v[at] for k, v in check.items()}  # error-free ground coordinates
+    true = {
+        im: (li, sa) for im, li, sa in zip(gcp["image"], gcp["line"], gcp["sample"], strict=True)
+    }
+    gcp["line"] = np.where(gcp["image"] == "aft", gcp["line"] + 1.5, gcp["line"])
+    rest = {k: v[~at] for k, v in check.items()}
+    d_line, d_sample = (true["aft"][0] - true["fore"][0], true["aft"][1] - true["fore"][1])
+    obs = Observations.from_tables(gcp, ties)
+
+    plain = checkpoint_accuracy(adjust_bundle(sensors, obs).sensors, rest)
+    result = adjust_bundle(sensors, obs.with_offsets([gid], "fore", "aft", d_line, d_sample, 0.05))
+    fixed = checkpoint_accuracy(result.sensors, rest)
+    assert plain["rmse_height_m"] > 3.0
+    assert fixed["rmse_height_m"] < 0.3 * plain["rmse_height_m"]
+    assert fixed["rmse_height_m"] < 1.0
+    res = result.offset_residuals
+    assert res["point_id"].tolist() == [gid]
+    assert abs(res["d_line"][0]) < 0.05  # the hand measurements' parallax gives way
+    # a GCP measured in Fore only, transferred into Aft by the offset
+    fore_only = {k: v[gcp["image"] == "fore"] for k, v in gcp.items()}
+    alone = Observations.from_tables(fore_only, ties)
+    moved = adjust_bundle(sensors, alone.with_offsets([gid], "fore", "aft", d_line, d_sample, 0.05))
+    assert checkpoint_accuracy(moved.sensors, rest)["rmse_height_m"] < 1.0
+    # dropping the point drops its offsets; bad offsets are refused
+    assert (
+        obs.with_offsets([gid], "fore", "aft", 1.0, 1.0, 0.1).without_points([gid]).offset_id.size
+        == 0
+    )
+    with pytest.raises(InputError, match="between image 'fore' and itself"):
+        obs.with_offsets([gid], "fore", "fore", 1.0, 1.0, 0.1)
+    with pytest.raises(InputError, match="offset_sigma_px"):
+        obs.with_offsets([gid], "fore", "aft", 1.0, 1.0, 0.0)
+    with pytest.raises(InputError, match="without a sensor"):
+        adjust_bundle(sensors, obs.with_offsets([gid], "fore", "pan", 1.0, 1.0, 0.1))

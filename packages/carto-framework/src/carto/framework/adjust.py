@@ -8,10 +8,11 @@ Unknowns
     name, e.g. two cameras on one trajectory, share one unknown) and the ground coordinates of
     every observed point, as local east/north/up displacements in metres.
 Observations (each with its standard deviation)
-    image measurements ``(line, sample)`` of points in images (GCPs and tie points); ground
-    coordinates of GCPs (east, north, up); optional height constraints on tie points (e.g.
-    from a DEM); a-priori values of the parameters (ephemeris and attitude enter as weighted
-    observations, so few GCPs suffice).
+    image measurements ``(line, sample)`` of points in images (GCPs and tie points); image
+    offsets of a point between two images (what matching measures: a GCP measured by hand
+    in one image and matched into another); ground coordinates of GCPs (east, north, up);
+    optional height constraints on tie points (e.g. from a DEM); a-priori values of the
+    parameters (ephemeris and attitude enter as weighted observations, so few GCPs suffice).
 Solution
     Gauss-Newton. The normal equations are reduced to the parameters by eliminating the
     3 x 3 point blocks (Schur complement), so the cost grows linearly with the number of
@@ -80,6 +81,15 @@ class Observations:
         average out over many points). When > 0 the offset is estimated as the unknown
         :data:`HEIGHT_OFFSET` (constraint height minus adjusted height, metres); 0 treats the
         constraint errors as independent.
+    Image offsets (one row per point and image pair):
+        ``offset_id``, ``offset_image_a``, ``offset_image_b``, ``offset_d_line``,
+        ``offset_d_sample``: the point's position in image b minus its position in image a
+        (pixels), as image matching measures it; ``offset_sigma_px``: its standard deviation
+        per coordinate. An offset does not say where the point is, only how the two images
+        see it relative to each other: for a GCP measured by hand in both images it carries
+        the stereo parallax with the precision of matching instead of that of two
+        independent hand measurements (and it transfers a GCP measured in one image only).
+        The point must also be measured in an image or be a GCP.
     """
 
     point_id: NDArray = attrs.field(converter=_s)
@@ -99,6 +109,12 @@ class Observations:
     height_m: FloatArray = attrs.field(factory=lambda: np.array([]), converter=_f)
     height_sigma_m: FloatArray = attrs.field(factory=lambda: np.array([]), converter=_f)
     height_offset_sigma_m: float = attrs.field(default=0.0, converter=float)
+    offset_id: NDArray = attrs.field(factory=lambda: np.array([], object), converter=_s)
+    offset_image_a: NDArray = attrs.field(factory=lambda: np.array([], object), converter=_s)
+    offset_image_b: NDArray = attrs.field(factory=lambda: np.array([], object), converter=_s)
+    offset_d_line: FloatArray = attrs.field(factory=lambda: np.array([]), converter=_f)
+    offset_d_sample: FloatArray = attrs.field(factory=lambda: np.array([]), converter=_f)
+    offset_sigma_px: FloatArray = attrs.field(factory=lambda: np.array([]), converter=_f)
 
     def __attrs_post_init__(self) -> None:
         n = self.point_id.size
@@ -137,6 +153,28 @@ class Observations:
             raise InputError("observations: every sigma must be > 0")
         if not np.all(np.isfinite(self.line) & np.isfinite(self.sample)):
             raise InputError("observations: image coordinates contain NaN")
+        k = self.offset_id.size
+        for name in (
+            "offset_image_a",
+            "offset_image_b",
+            "offset_d_line",
+            "offset_d_sample",
+            "offset_sigma_px",
+        ):
+            if getattr(self, name).size != k:
+                raise InputError(
+                    f"observations: {name} has {getattr(self, name).size} rows, offset_id has {k}"
+                )
+        if np.any(~(self.offset_sigma_px > 0)):
+            raise InputError("observations: every offset_sigma_px must be > 0")
+        if not np.all(np.isfinite(self.offset_d_line) & np.isfinite(self.offset_d_sample)):
+            raise InputError("observations: image offsets contain NaN")
+        same = self.offset_image_a == self.offset_image_b
+        if np.any(same):
+            raise InputError(
+                f"observations: offset of point {self.offset_id[same][0]!r} is between image "
+                f"{self.offset_image_a[same][0]!r} and itself"
+            )
 
     @classmethod
     def from_tables(
@@ -205,29 +243,71 @@ class Observations:
             height_offset_sigma_m=offset_sigma_m,
         )
 
-    def without_points(self, ids: Sequence[str]) -> Observations:
-        """A copy without the image measurements, control and heights of ``ids``."""
-        drop = set(ids)
-        keep = np.array([p not in drop for p in self.point_id], bool)
-        keep_c = np.array([p not in drop for p in self.control_id], bool)
-        keep_h = np.array([p not in drop for p in self.height_id], bool)
-        return Observations(
-            self.point_id[keep],
-            self.image[keep],
-            self.line[keep],
-            self.sample[keep],
-            self.sigma_px[keep],
-            self.control_id[keep_c],
-            self.control_lon_deg[keep_c],
-            self.control_lat_deg[keep_c],
-            self.control_h_m[keep_c],
-            self.control_sigma_planimetric_m[keep_c],
-            self.control_sigma_h_m[keep_c],
-            self.height_id[keep_h],
-            self.height_m[keep_h],
-            self.height_sigma_m[keep_h],
-            self.height_offset_sigma_m,
+    def with_offsets(
+        self,
+        ids: Any,
+        image_a: Any,
+        image_b: Any,
+        d_line: Any,
+        d_sample: Any,
+        sigma_px: Any,
+    ) -> Observations:
+        """A copy with image offsets (position in ``image_b`` minus position in ``image_a``,
+        pixels, ``sigma_px`` per coordinate) of the points ``ids`` added to those it has."""
+        ids = _s(ids)
+
+        def cat(old: NDArray, new: Any, conv: Any) -> NDArray:
+            return np.concatenate([old, np.broadcast_to(conv(new), ids.shape)])
+
+        return attrs.evolve(
+            self,
+            offset_id=np.concatenate([self.offset_id, ids]),
+            offset_image_a=cat(self.offset_image_a, image_a, _s),
+            offset_image_b=cat(self.offset_image_b, image_b, _s),
+            offset_d_line=cat(self.offset_d_line, d_line, _f),
+            offset_d_sample=cat(self.offset_d_sample, d_sample, _f),
+            offset_sigma_px=cat(self.offset_sigma_px, sigma_px, _f),
         )
+
+    def without_points(self, ids: Sequence[str]) -> Observations:
+        """A copy without the image measurements, offsets, control and heights of ``ids``."""
+        drop = set(ids)
+
+        def keep(column: NDArray) -> NDArray[np.bool_]:
+            return np.array([p not in drop for p in column], bool)
+
+        k, k_c, k_h, k_o = (
+            keep(self.point_id),
+            keep(self.control_id),
+            keep(self.height_id),
+            keep(self.offset_id),
+        )
+        return attrs.evolve(
+            self,
+            **{n: getattr(self, n)[k] for n in ("point_id", "image", "line", "sample")},
+            sigma_px=self.sigma_px[k],
+            **{n: getattr(self, n)[k_c] for n in _CONTROL_FIELDS},
+            **{n: getattr(self, n)[k_h] for n in ("height_id", "height_m", "height_sigma_m")},
+            **{n: getattr(self, n)[k_o] for n in _OFFSET_FIELDS},
+        )
+
+
+_CONTROL_FIELDS = (
+    "control_id",
+    "control_lon_deg",
+    "control_lat_deg",
+    "control_h_m",
+    "control_sigma_planimetric_m",
+    "control_sigma_h_m",
+)
+_OFFSET_FIELDS = (
+    "offset_id",
+    "offset_image_a",
+    "offset_image_b",
+    "offset_d_line",
+    "offset_d_sample",
+    "offset_sigma_px",
+)
 
 
 @attrs.frozen(eq=False)
@@ -249,6 +329,8 @@ class AdjustmentResult:
             measured minus computed, pixels (NaN for rejected rows).
         control_residuals: per GCP ``(id, d_east_m, d_north_m, d_up_m)``, measured minus
             computed.
+        offset_residuals: per image offset ``(point_id, image_a, image_b, d_line,
+            d_sample)``, measured minus computed, pixels.
         outliers: ids of points rejected (GCP blunders, wrong tie points).
         iterations: Gauss-Newton iterations of the final solution; ``converged``: whether
             the last correction was below the tolerance.
@@ -274,6 +356,7 @@ class AdjustmentResult:
     converged: bool
     history: tuple[dict[str, float], ...]
     products: dict[str, Any] = attrs.field(factory=dict)
+    offset_residuals: dict[str, NDArray] = attrs.field(factory=dict)
 
     def summary(self) -> dict[str, Any]:
         """JSON-ready summary (for ``report.json``)."""
@@ -317,6 +400,87 @@ def _move(
 def _huber(v: FloatArray, k: float) -> FloatArray:
     a = np.abs(v)
     return np.where(a <= k, 1.0, k / np.maximum(a, 1e-300))
+
+
+def _add_rows(
+    normal: tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray],
+    pi: NDArray[np.intp],
+    idx: NDArray[np.intp],
+    a_p: FloatArray,
+    a_c: FloatArray,
+    r: FloatArray,
+    wsig: FloatArray,
+    ok: NDArray[np.bool_],
+) -> None:
+    """Add observation rows to the normal equations ``(N_cc, b_c, N_cp, N_pp, b_p)``.
+
+    Each row ``i`` is a 2-vector residual ``r[i]`` of point ``pi[i]`` with Jacobians ``a_p[i]``
+    (2 x 3, point east/north/up) and ``a_c[i]`` (2 x len(idx), parameters ``idx``), weighted
+    by ``wsig[i]`` (sqrt(weight) / sigma); rows not ``ok`` are left out."""
+    n_cc, b_c, n_cp, n_pp, b_p = normal
+    a_p = np.where(ok[:, None, None], a_p * wsig[:, None, None], 0.0)
+    rw = np.where(ok[:, None], r, 0.0) * wsig[:, None]
+    a_pt = np.swapaxes(a_p, 1, 2)
+    # a point is measured at most once per image as a rule: plain fancy-index adds
+    once = np.unique(pi).size == pi.size
+    add = _add_unique if once else np.add.at
+    add(n_pp, pi, a_pt @ a_p)
+    add(b_p, pi, (a_pt @ rw[:, :, None])[:, :, 0])
+    if idx.size == 0:
+        return
+    a_c = np.where(ok[:, None, None], a_c * wsig[:, None, None], 0.0)
+    flat = a_c.reshape(-1, idx.size)
+    n_cc[np.ix_(idx, idx)] += flat.T @ flat
+    b_c[idx] += flat.T @ rw.reshape(-1)
+    contrib = np.swapaxes(a_c, 1, 2) @ a_p  # (n, Pi, 3)
+    if once:
+        n_cp[pi[:, None], idx[None, :], :] += contrib
+    else:
+        tmp = np.zeros((pi.size, n_cc.shape[0], 3))
+        tmp[:, idx, :] = contrib
+        np.add.at(n_cp, pi, tmp)
+
+
+def _offset_rows(
+    sensors: Mapping[str, Sensor],
+    obs: Observations,
+    oidx: NDArray[np.intp],
+    names: list[str],
+    lon: FloatArray,
+    lat: FloatArray,
+    h: FloatArray,
+) -> list[tuple[NDArray[np.intp], NDArray[np.intp], FloatArray, FloatArray, FloatArray]]:
+    """Linearised image offsets, by image pair: ``(rows, idx, a_p, a_c, r)`` with the
+    residual ``r`` (measured minus computed offset, pixels) and its Jacobians (image b's
+    minus image a's) for the points and the parameters ``idx`` (indices into ``names``)."""
+    out = []
+    pairs = sorted(set(zip(obs.offset_image_a.tolist(), obs.offset_image_b.tolist(), strict=True)))
+    for a, b in pairs:
+        rows = np.flatnonzero((obs.offset_image_a == a) & (obs.offset_image_b == b) & (oidx >= 0))
+        if rows.size == 0:
+            continue
+        pi = oidx[rows]
+        own = {
+            n: [m for m in names if m in {p.name for p in sensors[n].parameters}] for n in (a, b)
+        }
+        union = [m for m in names if m in set(own[a]) | set(own[b])]
+        line_a, sample_a, ap_a, ac_a = sensors[a].linearize(lon[pi], lat[pi], h[pi], own[a])
+        line_b, sample_b, ap_b, ac_b = sensors[b].linearize(lon[pi], lat[pi], h[pi], own[b])
+        a_c = np.zeros((rows.size, 2, len(union)))
+        if own[b]:
+            a_c[:, :, [union.index(m) for m in own[b]]] += ac_b
+        if own[a]:
+            a_c[:, :, [union.index(m) for m in own[a]]] -= ac_a
+        r = np.stack(
+            [
+                obs.offset_d_line[rows] - (line_b - line_a),
+                obs.offset_d_sample[rows] - (sample_b - sample_a),
+            ],
+            -1,
+        )
+        idx = np.array([names.index(m) for m in union], dtype=np.intp)
+        out.append((rows, idx, ap_b - ap_a, a_c, r))
+    return out
 
 
 @attrs.define
@@ -420,7 +584,9 @@ def adjust_bundle(
             f"unknown adjuster option(s): {', '.join(sorted(unknown))} (known: "
             "max_iterations, tolerance, robust, outlier_threshold and the adjuster's own)"
         )
-    missing = sorted(set(obs.image) - set(sensors))
+    missing = sorted(
+        (set(obs.image) | set(obs.offset_image_a) | set(obs.offset_image_b)) - set(sensors)
+    )
     if missing:
         raise InputError(f"observations name images without a sensor: {', '.join(missing)}")
     names, priors = free_parameters(sensors)
@@ -494,6 +660,7 @@ def _solve(
     obs_point = np.array([pindex[p] for p in obs.point_id], dtype=np.intp)
     gidx = np.array([pindex.get(c, -1) for c in obs.control_id], dtype=np.intp)
     hidx = np.array([pindex.get(c, -1) for c in obs.height_id], dtype=np.intp)
+    oidx = np.array([pindex.get(c, -1) for c in obs.offset_id], dtype=np.intp)
     par_index = {n: i for i, n in enumerate(names)}
     prior_sigma = np.array([priors[n].sigma for n in names])
     prior_value = np.array([priors[n].value for n in names])
@@ -550,29 +717,16 @@ def _solve(
             new_w = _huber(np.nan_to_num(norm_img, nan=1e9), 2.0)
             weight_change = float(np.max(np.abs(new_w - w_img), initial=0.0))
             w_img = new_w
+        normal = (n_cc, b_c, n_cp, n_pp, b_p)
         for rows, pi, own, a_p, a_c, r, ok in linear.values():
+            idx = np.array([par_index[n] for n in own], dtype=np.intp)
             wsig = np.sqrt(w_img[rows]) / obs.sigma_px[rows]
-            a_p = np.where(ok[:, None, None], a_p * wsig[:, None, None], 0.0)
-            rw = np.where(ok[:, None], r, 0.0) * wsig[:, None]
-            a_pt = np.swapaxes(a_p, 1, 2)
-            # a point is measured at most once per image as a rule: plain fancy-index adds
-            once = np.unique(pi).size == pi.size
-            add = _add_unique if once else np.add.at
-            add(n_pp, pi, a_pt @ a_p)
-            add(b_p, pi, (a_pt @ rw[:, :, None])[:, :, 0])
-            if own:
-                idx = np.array([par_index[n] for n in own], dtype=np.intp)
-                a_c = np.where(ok[:, None, None], a_c * wsig[:, None, None], 0.0)
-                flat = a_c.reshape(-1, len(own))
-                n_cc[np.ix_(idx, idx)] += flat.T @ flat
-                b_c[idx] += flat.T @ rw.reshape(-1)
-                contrib = np.swapaxes(a_c, 1, 2) @ a_p  # (n, Pi, 3)
-                if once:
-                    n_cp[pi[:, None], idx[None, :], :] += contrib
-                else:
-                    tmp = np.zeros((rows.size, n_par, 3))
-                    tmp[:, idx, :] = contrib
-                    np.add.at(n_cp, pi, tmp)
+            _add_rows(normal, pi, idx, a_p, a_c, r, wsig, ok)
+        # image offsets (matching between two images)
+        for rows, idx, a_p, a_c, r in _offset_rows(cur, obs, oidx, names, lon, lat, h):
+            ok = np.all(np.isfinite(r), axis=1) & np.all(np.isfinite(a_p), axis=(1, 2))
+            ok &= np.all(np.isfinite(a_c), axis=(1, 2))
+            _add_rows(normal, oidx[rows], idx, a_p, a_c, r, 1.0 / obs.offset_sigma_px[rows], ok)
         # ground control (east, north, up)
         v_gcp = np.zeros((gidx.size, 3))
         if gidx.size:
@@ -668,9 +822,14 @@ def _solve(
             obs.control_lon_deg[ok], obs.control_lat_deg[ok], obs.control_h_m[ok]
         ) - frames.geodetic_to_ecef(lon[g], lat[g], h[g])
         v_gcp[ok] = np.einsum("nij,nj->ni", frames.enu_basis(lon[g], lat[g]), d)
+    v_off = np.full((oidx.size, 2), np.nan)
+    for rows, _idx, _a_p, _a_c, r in _offset_rows(cur, obs, oidx, names, lon, lat, h):
+        v_off[rows] = r
     # sigma0 and redundancy
     vpv = np.nansum((d_line / obs.sigma_px) ** 2 + (d_sample / obs.sigma_px) ** 2)
     n_rows = 2 * int(np.sum(np.isfinite(d_line)))
+    vpv += float(np.nansum((v_off / obs.offset_sigma_px[:, None]) ** 2))
+    n_rows += 2 * int(np.sum(np.isfinite(v_off[:, 0])))
     if gidx.size:
         sp = obs.control_sigma_planimetric_m / math.sqrt(2.0)
         vpv += float(np.sum((v_gcp / np.stack([sp, sp, obs.control_sigma_h_m], -1)) ** 2))
@@ -696,6 +855,9 @@ def _solve(
         norm_img = np.nan_to_num(np.hypot(d_line, d_sample) / obs.sigma_px, nan=0.0)
         worst = {}
         for pid, v in zip(obs.point_id.tolist(), norm_img.tolist(), strict=True):
+            worst[pid] = max(worst.get(pid, 0.0), v)
+        norm_off = np.nan_to_num(np.hypot(*v_off.T) / obs.offset_sigma_px, nan=0.0)
+        for pid, v in zip(obs.offset_id.tolist(), norm_off.tolist(), strict=True):
             worst[pid] = max(worst.get(pid, 0.0), v)
         if gidx.size:
             sp = obs.control_sigma_planimetric_m / math.sqrt(2.0)
@@ -739,6 +901,13 @@ def _solve(
         iterations=iterations,
         converged=converged,
         history=tuple(history),
+        offset_residuals={
+            "point_id": obs.offset_id,
+            "image_a": obs.offset_image_a,
+            "image_b": obs.offset_image_b,
+            "d_line": v_off[:, 0],
+            "d_sample": v_off[:, 1],
+        },
     )
     return result, flagged, (w_img, w_gcp)
 
