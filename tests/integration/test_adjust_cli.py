@@ -36,6 +36,15 @@ def test_adjust_a_scene_with_one_gcp_and_automatic_tie_points(run_carto, tmp_pat
     assert cp["rmse_height_m"] < 4.0
     assert report["checkpoints_before"]["rmse_planimetric_m"] > 50.0
     assert (out / "residuals.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # the GCP was matched between Fore and Aft (GCP transfer) and adjusted with its offset
+    assert report["gcp_offsets"]["count"] == 1
+    assert report["gcp_offsets"]["residual_rms_px"] < 0.5
+    assert (
+        (out / report["files"]["gcp_offsets"])
+        .read_text()
+        .startswith("id,image_a,image_b,d_line,d_sample,score,sigma_px")
+    )
+    assert "GCP transfer: 1 image offsets matched" in res.stdout
     # the adjusted model re-opens, and the corrected RPC agrees with it when GDAL reads it
     fore = LineScanner.load(out / "fore.model.json")
     rpc = read_rpc(out / "fore_RPC.TXT")
@@ -72,6 +81,13 @@ def test_adjust_errors_are_one_line(run_carto, tmp_path, cartosat1_scene):
     assert res.returncode == 1
     assert "unknown adjuster 'nope'" in res.stderr
     assert "Traceback" not in res.stderr
+    res = run_carto(
+        ["adjust", str(cartosat1_scene), "--gcp-offset-sigma", "0", "--out", str(tmp_path / "z")],
+        with_test_plugins=False,
+    )
+    assert res.returncode == 1
+    assert "gcp_offset_sigma_px must be > 0, got 0.0" in res.stderr
+    assert "Traceback" not in res.stderr
 
 
 def test_calibration_from_the_command_line(run_carto, tmp_path, cartosat1_scene):
@@ -79,9 +95,13 @@ def test_calibration_from_the_command_line(run_carto, tmp_path, cartosat1_scene)
     separate-mode run refuses it with a one-line error."""
     calib = tmp_path / "calib"
     base = ["adjust", str(cartosat1_scene), "--ties", "none", "--quiet"]
-    res = run_carto([*base, "--mode", "calibration", "--out", str(calib)], with_test_plugins=False)
+    res = run_carto(
+        [*base, "--mode", "calibration", "--no-gcp-transfer", "--out", str(calib)],
+        with_test_plugins=False,
+    )
     assert res.returncode == 0, res.stderr
     assert "calibration.json" in res.stdout
+    assert "gcp_offsets" not in json.loads((calib / "report.json").read_text())
     doc = json.loads((calib / "calibration.json").read_text())
     assert doc["reference_camera"] == "fore"
     assert set(doc["cameras"]) == {"aft"}

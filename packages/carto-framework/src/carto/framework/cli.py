@@ -354,6 +354,10 @@ def cmd_adjust(args: argparse.Namespace) -> int:
         options["height_offset_sigma_m"] = args.dem_offset_sigma
     if args.calibration:
         options["calibration"] = list(args.calibration)
+    if args.no_gcp_transfer:
+        options["gcp_transfer"] = False
+    if args.gcp_offset_sigma is not None:
+        options["gcp_offset_sigma_px"] = args.gcp_offset_sigma
     report = adjust_product(
         args.source,
         args.out,
@@ -368,6 +372,12 @@ def cmd_adjust(args: argparse.Namespace) -> int:
         f"{report['adjuster']}: {report['gcps_used']} GCPs, {report['tie_points']} tie points, "
         f"sigma0 {report['sigma0']:.3f}, outliers: {', '.join(report['outliers']) or 'none'}"
     )
+    transfer = report.get("gcp_offsets")
+    if transfer:
+        print(
+            f"GCP transfer: {transfer['count']} image offsets matched at the GCPs"
+            + (f", {len(transfer['not_kept'])} not kept" if transfer["not_kept"] else "")
+        )
     cp = report.get("checkpoints")
     if cp:
         before = report["checkpoints_before"]
@@ -446,6 +456,19 @@ def _add_adjust(sub: argparse._SubParsersAction) -> None:
         metavar="FILE",
         help="in-flight camera calibration of the same satellite (calibration.json written "
         "by --mode calibration, or its folder); repeat it to average several",
+    )
+    p.add_argument(
+        "--no-gcp-transfer",
+        action="store_true",
+        help="do not match the GCPs between images (by default each GCP's offset between "
+        "images is matched and adjusted with it: the stereo parallax at matching precision; "
+        "a GCP measured in one image is transferred into the others)",
+    )
+    p.add_argument(
+        "--gcp-offset-sigma",
+        type=float,
+        metavar="PX",
+        help="a-priori sigma of a matched GCP offset, pixels per coordinate (default 0.15)",
     )
     p.add_argument("--sensor", metavar="TYPE", help="sensor type of the product")
     p.add_argument("--no-robust", action="store_true", help="no outlier rejection")

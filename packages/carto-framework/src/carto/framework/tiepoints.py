@@ -943,3 +943,210 @@ def block_tie_points(
         raise InputError("tie points: no two images of the block overlap")
     keys = tables[0].keys()
     return {k: np.concatenate([t[k] for t in tables]) for k in keys}
+
+
+# ----------------------------------------------------------------------------- GCP transfer
+GCP_OFFSET_SIGMA_PX = 0.15
+"""A-priori standard deviation (pixels, per coordinate) of an image offset matched at a GCP.
+Against the simulator's truth, offsets matched on system-level orthos (lsm-affine) err by
+0.06-0.10 px RMS per coordinate on hilly Cartosat-1 pairs (``benchmarks/gcp_transfer.py``);
+real images are noisier."""
+
+GCP_OFFSET_COLUMNS = ("id", "image_a", "image_b", "d_line", "d_sample", "score", "sigma_px")
+"""Columns of :func:`gcp_offsets`' table: position in ``image_b`` minus in ``image_a``."""
+
+
+def _map_position(grid: Any, lon: NDArray, lat: NDArray) -> NDArray[np.float64]:
+    """``(N, 2)`` ortho positions (row, col; first pixel centre at 0.5) of lon/lat points."""
+    import pyproj
+
+    to_map = pyproj.Transformer.from_crs("EPSG:4326", grid.crs, always_xy=True)
+    x, y = (np.asarray(v, np.float64) for v in to_map.transform(lon, lat))
+    t = grid.transform
+    return np.stack([(y - t.f) / t.e, (x - t.c) / t.a], axis=1)
+
+
+def gcp_offsets(
+    gcps: Mapping[str, NDArray],
+    rasters: Mapping[str, Path | NDArray],
+    sensors: Mapping[str, Sensor],
+    dem: Any,
+    *,
+    chip_px: int = 192,
+    agree_px: float = 0.5,
+    hand_sigma_px: float = 0.3,
+    max_disagreement: float = 5.0,
+    sigma_px: float = GCP_OFFSET_SIGMA_PX,
+    **matching: Any,
+) -> tuple[dict[str, NDArray], list[dict[str, Any]]]:
+    """Image offsets of hand-measured GCPs, by matching (GCP transfer).
+
+    A GCP measured by hand in two images carries a stereo parallax with the error of two
+    independent measurements (0.3 px each: a height error of about 1.7 m on a Cartosat-1
+    pair, more than the GCP's own). Matching measures the offset of the same ground detail
+    between the two images to a tenth of a pixel. For each GCP measured in image ``a`` (the
+    first of ``sensors`` it is measured in), in every other image ``b`` that sees it:
+
+    1. both images are orthorectified with their models on a chip of ``2 chip_px`` ortho
+       pixels around the point (the tie points' grid and resolution, :func:`system_orthos`);
+    2. the hand position in ``a`` is matched into ``b`` (:func:`match_views`: pyramid,
+       least-squares matching, left-right check, ``matching`` options); when the GCP is
+       measured in ``b`` too, its position there is matched back into ``a``, and the two
+       offsets must agree within ``agree_px`` (their mean is kept);
+    3. the offset (position in ``b`` minus in ``a``, raw pixels) must agree with the hand
+       measurements' within ``max_disagreement`` sigmas (``hand_sigma_px`` each, ``sigma_px``
+       the offset's): a larger difference means a wrong match or a wrong hand measurement,
+       which the offset cannot tell apart.
+
+    ``sensors`` must agree to a few pixels (the models of a first adjustment: system-level
+    models can be hundreds of metres apart, beyond the chips); the offsets, raw image
+    positions of one ground detail, hold for any model, the a-priori ones included.
+
+    The adjustment takes the offsets as observations
+    (:meth:`~carto.framework.adjust.Observations.with_offsets`): the hand measurements then
+    fix where the point is, and the matching fixes the parallax; a GCP measured in one image
+    only is transferred into the others.
+
+    Returns:
+        ``(table, dropped)``: the offsets (columns :data:`GCP_OFFSET_COLUMNS`, one row per
+        GCP and image pair), and ``{"id", "image_a", "image_b", "reason"}`` for each pair
+        that was tried and not kept.
+    """
+    from carto.framework.ortho import OrthoGrid, orthorectify
+
+    options = dict(
+        template=15,
+        search=11,
+        levels=4,
+        min_score=0.7,
+        tolerance_px=0.5,
+        closure_px=0.5,
+        require_closure=True,
+        subpixel="lsm-affine",
+    )
+    unknown = set(matching) - set(options)
+    if unknown:
+        raise InputError(f"gcp_offsets: unknown option(s) {', '.join(sorted(unknown))}")
+    options.update(matching)
+    names = list(sensors)
+    table: dict[str, list] = {c: [] for c in GCP_OFFSET_COLUMNS}
+    dropped: list[dict[str, Any]] = []
+
+    def as_arrays() -> dict[str, NDArray]:
+        text = ("id", "image_a", "image_b")
+        return {c: np.array(v, object if c in text else float) for c, v in table.items()}
+
+    ids = list(dict.fromkeys(np.asarray(gcps["id"], object).tolist()))
+    rows_of = {
+        i: {
+            str(im): (float(li), float(sa))
+            for g, im, li, sa in zip(
+                gcps["id"], gcps["image"], gcps["line"], gcps["sample"], strict=True
+            )
+            if g == i and im in sensors
+        }
+        for i in ids
+    }
+    if not any(rows_of.values()) or len(names) < 2:
+        return as_arrays(), dropped
+    h_mid = float(np.nanmedian(dem.heights)) if hasattr(dem, "heights") else 0.0
+    res = max(ground_sampling_m(sensors[n], h_mid) for n in names)
+    full = OrthoGrid.covering([sensors[n] for n in names], dem, res)
+    prepared: dict[str, NDArray[np.float32]] = {}
+
+    def image(name: str) -> NDArray[np.float32]:
+        if name not in prepared:
+            raw = rasters[name]
+            raw = read_raster(Path(raw)) if not isinstance(raw, np.ndarray) else raw
+            prepared[name] = prepared_image(raw, sensors[name], dem)
+        return prepared[name]
+
+    def match(
+        grid: Any, chips: Mapping[str, NDArray], ref: str, other: str, pos: tuple[float, float]
+    ) -> tuple[NDArray | None, float]:
+        """Raw positions of the hand point of ``ref`` in (ref, other), and the score."""
+        lon, lat, _ = sensors[ref].locate_on_dem(np.array([pos[0]]), np.array([pos[1]]), dem)
+        if not (np.isfinite(lon[0]) and np.isfinite(lat[0])):
+            return None, math.nan
+        pair = {ref: sensors[ref], other: sensors[other]}
+        found = _tie_points_on_orthos(
+            grid,
+            {ref: chips[ref], other: chips[other]},
+            pair,
+            dem,
+            ref,
+            float(2 * chip_px),
+            _map_position(grid, lon, lat),
+            "grid",
+            None,
+            options,
+            0,
+            2,
+            sigma_px,
+        )
+        if found["id"].size < 2:
+            return None, math.nan
+        at = {im: k for k, im in enumerate(found["image"])}
+        xy = np.array([[found["line"][at[n]], found["sample"][at[n]]] for n in (ref, other)])
+        return xy, float(found["score"][at[other]])
+
+    for gid in ids:
+        hand = rows_of[gid]
+        if not hand:
+            continue
+        a = next(n for n in names if n in hand)
+
+        def drop(b: str, reason: str, gid: str = gid, a: str = a) -> None:
+            dropped.append({"id": gid, "image_a": a, "image_b": b, "reason": reason})
+
+        lon, lat, _ = sensors[a].locate_on_dem(np.array([hand[a][0]]), np.array([hand[a][1]]), dem)
+        if not np.isfinite(lon[0]):
+            drop("", "off the DEM")
+            continue
+        centre = _map_position(full, lon, lat)[0]
+        r0 = max(0, int(centre[0]) - chip_px)
+        c0 = max(0, int(centre[1]) - chip_px)
+        grid = full.window(
+            r0, c0, min(2 * chip_px, full.shape[0] - r0), min(2 * chip_px, full.shape[1] - c0)
+        )
+        chips: dict[str, NDArray] = {}
+        for b in names:
+            if b == a:
+                continue
+            line, sample = sensors[b].ground_to_image(lon, lat, dem.height(lon, lat))
+            n_l, n_s = sensors[b].image_shape
+            if not (0 <= line[0] < n_l and 0 <= sample[0] < n_s):
+                continue  # b does not see the point
+            for n in (a, b):
+                if n not in chips:
+                    chips[n] = orthorectify(image(n), sensors[n], grid, dem)
+            fwd, score = match(grid, chips, a, b, hand[a])
+            if fwd is None:
+                drop(b, "no match")
+                continue
+            offset = fwd[1] - fwd[0]
+            if b in hand:
+                back, score_b = match(grid, chips, b, a, hand[b])
+                if back is None:
+                    drop(b, "no match back")
+                    continue
+                offset_b = back[0] - back[1]
+                gap = float(np.hypot(*(offset - offset_b)))
+                if gap > agree_px:
+                    drop(b, f"forward and backward matches differ by {gap:.2f} px")
+                    continue
+                offset = 0.5 * (offset + offset_b)
+                score = min(score, score_b)
+                off_hand = float(np.max(np.abs(offset - np.subtract(hand[b], hand[a]))))
+                limit = max_disagreement * math.sqrt(2 * hand_sigma_px**2 + sigma_px**2)
+                if off_hand > limit:
+                    drop(
+                        b,
+                        f"matched offset differs from the hand measurements' by "
+                        f"{off_hand:.2f} px (> {limit:.2f})",
+                    )
+                    continue
+            row = (gid, a, b, float(offset[0]), float(offset[1]), score, float(sigma_px))
+            for c, v in zip(GCP_OFFSET_COLUMNS, row, strict=True):
+                table[c].append(v)
+    return as_arrays(), dropped

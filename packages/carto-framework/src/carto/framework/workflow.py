@@ -29,6 +29,7 @@ from carto.framework.plugins import get_registry
 from carto.framework.point_table import read_point_table, write_point_table
 from carto.framework.rpc import RPCSensor, fit_rpc, write_rpc_txt
 from carto.framework.sensor import Sensor, open_sensors
+from carto.framework.tiepoints import GCP_OFFSET_SIGMA_PX, gcp_offsets
 
 Table = dict[str, NDArray]
 
@@ -235,12 +236,43 @@ def adjust_product(
         obs = _with_dem_heights(
             obs, sensors, dem, height_sigma_m, height_offset_sigma_m, below_angle_deg=weak
         )
+    # GCP transfer: the offset of each hand-measured GCP between images, by matching,
+    # carries its stereo parallax at matching precision (see tiepoints.gcp_offsets)
+    gcp_transfer = options.pop("gcp_transfer", "auto")
+    if gcp_transfer not in ("auto", True, False):
+        raise InputError(f"gcp_transfer must be 'auto', true or false, got {gcp_transfer!r}")
+    offset_sigma_px = float(options.pop("gcp_offset_sigma_px", GCP_OFFSET_SIGMA_PX))
+    if not (math.isfinite(offset_sigma_px) and offset_sigma_px > 0):
+        raise InputError(f"gcp_offset_sigma_px must be > 0, got {offset_sigma_px}")
+    transfer = gcp_transfer is not False and gcps is not None and len(gcps["id"]) > 0
+    if transfer and (dem is None or not rasters):
+        if gcp_transfer is True:
+            raise InputError("gcp_transfer needs the images and a DEM")
+        transfer = False
     name = adjuster or _default_adjuster(sensors, platform)
     component = get_registry().get("adjuster", name)
     _progress(
         f"adjusting {len(sensors)} images with {name} ({n_used} GCPs, {n_ties} tie points)", quiet
     )
     result = component.adjust(sensors, obs, dem=dem, **options)
+    offsets = dropped_offsets = None
+    if transfer:
+        # matched on chips orthorectified with the adjusted models (the system-level ones
+        # may be hundreds of metres apart), then the adjustment again with the offsets
+        _progress("matching the GCPs between images (GCP transfer)", quiet)
+        offsets, dropped_offsets = gcp_offsets(
+            gcps, rasters, result.sensors, dem, sigma_px=offset_sigma_px
+        )
+        if offsets["id"].size:
+            obs = obs.with_offsets(
+                offsets["id"],
+                offsets["image_a"],
+                offsets["image_b"],
+                offsets["d_line"],
+                offsets["d_sample"],
+                offsets["sigma_px"],
+            )
+            result = component.adjust(sensors, obs, dem=dem, **options)
     # outputs
     out.mkdir(parents=True, exist_ok=True)
     files = _write_models(result, out)
@@ -310,6 +342,18 @@ def adjust_product(
     if tie_table is not None:
         write_point_table(out / "tie_points.csv", tie_table)
         report["files"]["tie_points"] = "tie_points.csv"
+    if offsets is not None:
+        res = result.offset_residuals
+        report["gcp_offsets"] = {
+            "count": int(offsets["id"].size),
+            "sigma_px": offset_sigma_px,
+            "residual_rms_px": float(np.sqrt(np.nanmean(res["d_line"] ** 2 + res["d_sample"] ** 2)))
+            if offsets["id"].size
+            else None,
+            "not_kept": dropped_offsets,
+        }
+        write_point_table(out / "gcp_offsets.csv", offsets)
+        report["files"]["gcp_offsets"] = "gcp_offsets.csv"
     write_json_atomic(out / "report.json", _jsonable(report))
     return report
 
