@@ -10,6 +10,8 @@ model's shared body attitude can) for every seed and terrain:
 * ``separate_1gcp``: the same tie points and GCP with independent parameters per camera;
 * ``combined_without_position_1gcp``: the tied model without the ephemeris bias unknown
   (the attitude corrections must absorb the position error), to show why it is estimated;
+* ``combined_without_gcp_transfer_1gcp``: the tied model with the GCP's hand measurements
+  alone (no matched Fore/Aft offset at the GCP), to show what the GCP transfer gives;
 
 with medians over all runs, and the ``blunder`` case (3 GCPs, one moved 50 m: flagged, accuracy
 within 10 % of the clean run). Real data: ``ventoux_rpc_bias``: RPC bias compensation of the
@@ -74,6 +76,8 @@ def run_scene(work: Path, seed: int, terrain: str, size: tuple[int, int]) -> dic
         ("separate_1gcp", {"mode": "separate"}),
         # ablation: the tied model without the ephemeris bias (attitude absorbs it)
         ("combined_without_position_1gcp", {"mode": "combined", "estimate_position": False}),
+        # ablation: the GCP's hand measurements alone carry its stereo parallax
+        ("combined_without_gcp_transfer_1gcp", {"mode": "combined", "gcp_transfer": False}),
     ):
         t0 = time.perf_counter()
         rep = adjust_product(
@@ -272,6 +276,7 @@ def main() -> int:
             "combined_1gcp",
             "separate_1gcp",
             "combined_without_position_1gcp",
+            "combined_without_gcp_transfer_1gcp",
         )
     }
     ratios = [
