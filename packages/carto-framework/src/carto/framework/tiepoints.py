@@ -948,9 +948,9 @@ def block_tie_points(
 # ----------------------------------------------------------------------------- GCP transfer
 GCP_OFFSET_SIGMA_PX = 0.15
 """A-priori standard deviation (pixels, per coordinate) of an image offset matched at a GCP.
-Against the simulator's truth, offsets matched on system-level orthos (lsm-affine) err by
-0.06-0.10 px RMS per coordinate on hilly Cartosat-1 pairs (``benchmarks/gcp_transfer.py``);
-real images are noisier."""
+Against the simulator's truth, offsets matched on ortho chips (lsm-affine) err by 0.07-0.12 px
+RMS along track and 0.05-0.08 px across on hilly Cartosat-1 pairs, against 0.37-0.50 px for
+two hand measurements of 0.3 px (``benchmarks/gcp_transfer.py``); real images are noisier."""
 
 GCP_OFFSET_COLUMNS = ("id", "image_a", "image_b", "d_line", "d_sample", "score", "sigma_px")
 """Columns of :func:`gcp_offsets`' table: position in ``image_b`` minus in ``image_a``."""
