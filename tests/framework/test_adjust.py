@@ -168,5 +168,7 @@ def test_a_matched_offset_carries_the_gcp_parallax(scene):
         obs.with_offsets([gid], "fore", "fore", 1.0, 1.0, 0.1)
     with pytest.raises(InputError, match="offset_sigma_px"):
         obs.with_offsets([gid], "fore", "aft", 1.0, 1.0, 0.0)
+    with pytest.raises(InputError, match="that no image measures"):
+        adjust_bundle(sensors, obs.with_offsets(["nowhere"], "fore", "aft", 1.0, 1.0, 0.1))
     with pytest.raises(InputError, match="without a sensor"):
         adjust_bundle(sensors, obs.with_offsets([gid], "fore", "pan", 1.0, 1.0, 0.1))

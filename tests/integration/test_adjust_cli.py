@@ -125,3 +125,24 @@ def test_calibration_from_the_command_line(run_carto, tmp_path, cartosat1_scene)
     assert len(res.stderr.strip().splitlines()) == 1
     assert "mode separate" in res.stderr
     assert "Traceback" not in res.stderr
+
+
+def test_auto_options_take_auto_or_a_boolean(tmp_path, cartosat1_scene):
+    import pytest
+
+    from carto.framework.errors import InputError
+    from carto.framework.workflow import adjust_product
+
+    for option in ("gcp_transfer", "tie_heights"):
+        with pytest.raises(InputError, match=f"{option} must be 'auto', true or false, got 0"):
+            adjust_product(
+                cartosat1_scene, tmp_path / option, ties="none", options={option: 0}, quiet=True
+            )
+    report = adjust_product(
+        cartosat1_scene,
+        tmp_path / "off",
+        ties="none",
+        options={"gcp_transfer": False},
+        quiet=True,
+    )
+    assert report["gcp_transfer"] == {"requested": False, "ran": False, "why_not": "turned off"}

@@ -89,7 +89,11 @@ class Observations:
         see it relative to each other: for a GCP measured by hand in both images it carries
         the stereo parallax with the precision of matching instead of that of two
         independent hand measurements (and it transfers a GCP measured in one image only).
-        The point must also be measured in an image or be a GCP.
+        The point must also be measured in an image. Offsets are weighted as given and not
+        tested for outliers (an offset more precise than the hand measurements it meets wins
+        any conflict with them): check them where they are made
+        (:func:`~carto.framework.tiepoints.gcp_offsets` compares them with the hand
+        measurements).
     """
 
     point_id: NDArray = attrs.field(converter=_s)
@@ -397,6 +401,15 @@ def _move(
     return frames.ecef_to_geodetic(x)
 
 
+def _height_targets(height_m: FloatArray, dem: Any, lon: FloatArray, lat: FloatArray) -> FloatArray:
+    """The heights constrained points are held to: the DEM's at their current position
+    (where it has one), else the given ones."""
+    if dem is None:
+        return height_m
+    at = dem.height(lon, lat)
+    return np.where(np.isfinite(at), at, height_m)
+
+
 def _huber(v: FloatArray, k: float) -> FloatArray:
     a = np.abs(v)
     return np.where(a <= k, 1.0, k / np.maximum(a, 1e-300))
@@ -589,6 +602,12 @@ def adjust_bundle(
     )
     if missing:
         raise InputError(f"observations name images without a sensor: {', '.join(missing)}")
+    unmeasured = sorted(set(obs.offset_id) - set(obs.point_id))
+    if unmeasured:
+        raise InputError(
+            f"image offsets of point(s) {', '.join(unmeasured[:5])} that no image measures "
+            "(an offset says how two images see a point, not where it is)"
+        )
     names, priors = free_parameters(sensors)
     if obs.height_offset_sigma_m > 0 and obs.height_id.size:
         names.append(HEIGHT_OFFSET)
@@ -747,11 +766,7 @@ def _solve(
         if hidx.size:
             ok = hidx >= 0
             hh = hidx[ok]
-            target = obs.height_m[ok]
-            if dem is not None:
-                target = np.where(
-                    np.isfinite(dem.height(lon[hh], lat[hh])), dem.height(lon[hh], lat[hh]), target
-                )
+            target = _height_targets(obs.height_m[ok], dem, lon[hh], lat[hh])
             wgt = 1.0 / obs.height_sigma_m[ok] ** 2
             offset = 0.0
             if HEIGHT_OFFSET in par_index:  # target = h + offset
@@ -837,7 +852,8 @@ def _solve(
     if hidx.size:
         ok = hidx >= 0
         offset = values[par_index[HEIGHT_OFFSET]] if HEIGHT_OFFSET in par_index else 0.0
-        v_h = obs.height_m[ok] - h[hidx[ok]] - offset
+        hh = hidx[ok]
+        v_h = _height_targets(obs.height_m[ok], dem, lon[hh], lat[hh]) - h[hh] - offset
         vpv += float(np.sum((v_h / obs.height_sigma_m[ok]) ** 2))
         n_rows += int(ok.sum())
     finite = np.isfinite(prior_sigma)
@@ -855,9 +871,6 @@ def _solve(
         norm_img = np.nan_to_num(np.hypot(d_line, d_sample) / obs.sigma_px, nan=0.0)
         worst = {}
         for pid, v in zip(obs.point_id.tolist(), norm_img.tolist(), strict=True):
-            worst[pid] = max(worst.get(pid, 0.0), v)
-        norm_off = np.nan_to_num(np.hypot(*v_off.T) / obs.offset_sigma_px, nan=0.0)
-        for pid, v in zip(obs.offset_id.tolist(), norm_off.tolist(), strict=True):
             worst[pid] = max(worst.get(pid, 0.0), v)
         if gidx.size:
             sp = obs.control_sigma_planimetric_m / math.sqrt(2.0)

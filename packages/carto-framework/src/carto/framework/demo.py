@@ -117,8 +117,8 @@ def run_demo(
 
         ties = None
         for label, mode in (
-            ("stagger + tied adjustment, 1 GCP", "combined"),
-            ("separate cameras, 1 GCP", "separate"),
+            ("stagger + tied adjustment, 1 GCP + GCP transfer", "combined"),
+            ("separate cameras, 1 GCP + GCP transfer", "separate"),
         ):
             t1 = time.perf_counter()
             rep = adjust_product(

@@ -303,6 +303,20 @@ class OrthoGrid:
         lon, lat = _lonlat_transformer(self.crs.to_wkt()).transform(x, y)
         return np.asarray(lon, np.float64), np.asarray(lat, np.float64)
 
+    def map_xy(self, lon: ArrayLike, lat: ArrayLike) -> tuple[FloatArray, FloatArray]:
+        """Map coordinates (CRS units) of WGS84 ``(lon_deg, lat_deg)`` points."""
+        x, y = _dem_transformer(self.crs.to_wkt()).transform(
+            np.asarray(lon, np.float64), np.asarray(lat, np.float64)
+        )
+        return np.asarray(x, np.float64), np.asarray(y, np.float64)
+
+    def rowcol(self, lon: ArrayLike, lat: ArrayLike) -> tuple[FloatArray, FloatArray]:
+        """Fractional 0-based ``(row, col)`` of WGS84 points (pixel centres at whole numbers:
+        the inverse of :meth:`lonlat`)."""
+        x, y = self.map_xy(lon, lat)
+        t = self.transform
+        return (y - t.f) / t.e - 0.5, (x - t.c) / t.a - 0.5
+
     def window(self, row0: int, col0: int, n_rows: int, n_cols: int) -> OrthoGrid:
         """The sub-grid of ``n_rows x n_cols`` pixels starting at pixel ``(row0, col0)``."""
         from affine import Affine

@@ -956,16 +956,6 @@ GCP_OFFSET_COLUMNS = ("id", "image_a", "image_b", "d_line", "d_sample", "score",
 """Columns of :func:`gcp_offsets`' table: position in ``image_b`` minus in ``image_a``."""
 
 
-def _map_position(grid: Any, lon: NDArray, lat: NDArray) -> NDArray[np.float64]:
-    """``(N, 2)`` ortho positions (row, col; first pixel centre at 0.5) of lon/lat points."""
-    import pyproj
-
-    to_map = pyproj.Transformer.from_crs("EPSG:4326", grid.crs, always_xy=True)
-    x, y = (np.asarray(v, np.float64) for v in to_map.transform(lon, lat))
-    t = grid.transform
-    return np.stack([(y - t.f) / t.e, (x - t.c) / t.a], axis=1)
-
-
 def gcp_offsets(
     gcps: Mapping[str, NDArray],
     rasters: Mapping[str, Path | NDArray],
@@ -975,7 +965,7 @@ def gcp_offsets(
     chip_px: int = 192,
     agree_px: float = 0.5,
     hand_sigma_px: float = 0.3,
-    max_disagreement: float = 5.0,
+    max_disagreement: float = 3.5,
     sigma_px: float = GCP_OFFSET_SIGMA_PX,
     **matching: Any,
 ) -> tuple[dict[str, NDArray], list[dict[str, Any]]]:
@@ -988,19 +978,22 @@ def gcp_offsets(
     first of ``sensors`` it is measured in), in every other image ``b`` that sees it:
 
     1. both images are orthorectified with their models on a chip of ``2 chip_px`` ortho
-       pixels around the point (the tie points' grid and resolution, :func:`system_orthos`);
+       pixels around the point (the tie points' resolution, :func:`system_orthos`);
     2. the hand position in ``a`` is matched into ``b`` (:func:`match_views`: pyramid,
        least-squares matching, left-right check, ``matching`` options); when the GCP is
-       measured in ``b`` too, its position there is matched back into ``a``, and the two
-       offsets must agree within ``agree_px`` (their mean is kept);
-    3. the offset (position in ``b`` minus in ``a``, raw pixels) must agree with the hand
-       measurements' within ``max_disagreement`` sigmas (``hand_sigma_px`` each, ``sigma_px``
-       the offset's): a larger difference means a wrong match or a wrong hand measurement,
+       measured in ``b`` too, its position there is matched back into ``a``, and when both
+       succeed the two offsets must agree within ``agree_px`` (their mean is kept);
+    3. the offset (position in ``b`` minus in ``a``, raw pixels) must agree within
+       ``max_disagreement`` sigmas with the hand measurements' (their ``sigma_px`` column,
+       default ``hand_sigma_px``) or, for a GCP measured in ``a`` only, with the offset its
+       ground coordinates project to (their ``sigma_h_m`` of height, default 1 m, moving it
+       along the parallax): a larger difference means a wrong match or a wrong measurement,
        which the offset cannot tell apart.
 
     ``sensors`` must agree to a few pixels (the models of a first adjustment: system-level
     models can be hundreds of metres apart, beyond the chips); the offsets, raw image
-    positions of one ground detail, hold for any model, the a-priori ones included.
+    positions of one ground detail, hold for any model, the a-priori ones included. Near an
+    image border (within about 40 px) the matching pyramid runs out of image: no offset.
 
     The adjustment takes the offsets as observations
     (:meth:`~carto.framework.adjust.Observations.with_offsets`): the hand measurements then
@@ -1029,6 +1022,9 @@ def gcp_offsets(
         raise InputError(f"gcp_offsets: unknown option(s) {', '.join(sorted(unknown))}")
     options.update(matching)
     names = list(sensors)
+    missing = [n for n in names if n not in rasters]
+    if missing:
+        raise InputError(f"GCP transfer: no raster for image(s) {', '.join(missing)}")
     table: dict[str, list] = {c: [] for c in GCP_OFFSET_COLUMNS}
     dropped: list[dict[str, Any]] = []
 
@@ -1036,18 +1032,26 @@ def gcp_offsets(
         text = ("id", "image_a", "image_b")
         return {c: np.array(v, object if c in text else float) for c, v in table.items()}
 
-    ids = list(dict.fromkeys(np.asarray(gcps["id"], object).tolist()))
-    rows_of = {
-        i: {
-            str(im): (float(li), float(sa))
-            for g, im, li, sa in zip(
-                gcps["id"], gcps["image"], gcps["line"], gcps["sample"], strict=True
+    def column(name: str, default: float) -> NDArray[np.float64]:
+        v = np.asarray(gcps.get(name, np.full(len(gcps["id"]), default)), np.float64)
+        return np.where(np.isfinite(v) & (v > 0), v, default)
+
+    hand_sigma = column("sigma_px", hand_sigma_px)
+    h_sigma = column("sigma_h_m", 1.0)
+    hand: dict[str, dict[str, tuple[float, float, float]]] = {}
+    ground: dict[str, tuple[float, float, float, float]] = {}
+    for k, (gid, im) in enumerate(zip(gcps["id"], gcps["image"], strict=True)):
+        if im in sensors:
+            li, sa = float(gcps["line"][k]), float(gcps["sample"][k])
+            hand.setdefault(str(gid), {})[str(im)] = (li, sa, float(hand_sigma[k]))
+        if "h_m" in gcps:
+            ground[str(gid)] = (
+                float(gcps["lon_deg"][k]),
+                float(gcps["lat_deg"][k]),
+                float(gcps["h_m"][k]),
+                float(h_sigma[k]),
             )
-            if g == i and im in sensors
-        }
-        for i in ids
-    }
-    if not any(rows_of.values()) or len(names) < 2:
+    if not hand or len(names) < 2:
         return as_arrays(), dropped
     h_mid = float(np.nanmedian(dem.heights)) if hasattr(dem, "heights") else 0.0
     res = max(ground_sampling_m(sensors[n], h_mid) for n in names)
@@ -1062,50 +1066,50 @@ def gcp_offsets(
         return prepared[name]
 
     def match(
-        grid: Any, chips: Mapping[str, NDArray], ref: str, other: str, pos: tuple[float, float]
-    ) -> tuple[NDArray | None, float]:
-        """Raw positions of the hand point of ``ref`` in (ref, other), and the score."""
+        grid: Any, chips: Mapping[str, NDArray], ref: str, other: str, pos: tuple[float, ...]
+    ) -> tuple[NDArray[np.float64], float] | None:
+        """The offset (other minus ref, raw pixels) of ``ref``'s hand point and the match's
+        score, or None."""
         lon, lat, _ = sensors[ref].locate_on_dem(np.array([pos[0]]), np.array([pos[1]]), dem)
         if not (np.isfinite(lon[0]) and np.isfinite(lat[0])):
-            return None, math.nan
-        pair = {ref: sensors[ref], other: sensors[other]}
+            return None
+        row, col = grid.rowcol(lon, lat)
         found = _tie_points_on_orthos(
             grid,
             {ref: chips[ref], other: chips[other]},
-            pair,
+            {ref: sensors[ref], other: sensors[other]},
             dem,
             ref,
-            float(2 * chip_px),
-            _map_position(grid, lon, lat),
-            "grid",
-            None,
-            options,
-            0,
-            2,
-            sigma_px,
+            spacing_px=float(2 * chip_px),
+            points=np.stack([row + 0.5, col + 0.5], axis=1),
+            candidates="grid",
+            forstner=None,
+            matching=options,
+            per_cell=0,
+            min_views=2,
+            sigma_px=sigma_px,
         )
         if found["id"].size < 2:
-            return None, math.nan
+            return None
         at = {im: k for k, im in enumerate(found["image"])}
-        xy = np.array([[found["line"][at[n]], found["sample"][at[n]]] for n in (ref, other)])
-        return xy, float(found["score"][at[other]])
+        return np.array(
+            [found[c][at[other]] - found[c][at[ref]] for c in ("line", "sample")]
+        ), float(found["score"][at[other]])
 
-    for gid in ids:
-        hand = rows_of[gid]
-        if not hand:
-            continue
-        a = next(n for n in names if n in hand)
+    for gid, measured in hand.items():
+        a = next(n for n in names if n in measured)
 
         def drop(b: str, reason: str, gid: str = gid, a: str = a) -> None:
             dropped.append({"id": gid, "image_a": a, "image_b": b, "reason": reason})
 
-        lon, lat, _ = sensors[a].locate_on_dem(np.array([hand[a][0]]), np.array([hand[a][1]]), dem)
+        lon, lat, _ = sensors[a].locate_on_dem(
+            np.array([measured[a][0]]), np.array([measured[a][1]]), dem
+        )
         if not np.isfinite(lon[0]):
             drop("", "off the DEM")
             continue
-        centre = _map_position(full, lon, lat)[0]
-        r0 = max(0, int(centre[0]) - chip_px)
-        c0 = max(0, int(centre[1]) - chip_px)
+        row, col = full.rowcol(lon, lat)
+        r0, c0 = max(0, int(row[0]) - chip_px), max(0, int(col[0]) - chip_px)
         grid = full.window(
             r0, c0, min(2 * chip_px, full.shape[0] - r0), min(2 * chip_px, full.shape[1] - c0)
         )
@@ -1116,37 +1120,49 @@ def gcp_offsets(
             line, sample = sensors[b].ground_to_image(lon, lat, dem.height(lon, lat))
             n_l, n_s = sensors[b].image_shape
             if not (0 <= line[0] < n_l and 0 <= sample[0] < n_s):
+                if b in measured:
+                    drop(b, "outside the image by its model")
                 continue  # b does not see the point
             for n in (a, b):
                 if n not in chips:
                     chips[n] = orthorectify(image(n), sensors[n], grid, dem)
-            fwd, score = match(grid, chips, a, b, hand[a])
-            if fwd is None:
+            found = [match(grid, chips, a, b, measured[a])]
+            if b in measured:
+                back = match(grid, chips, b, a, measured[b])
+                found.append(None if back is None else (-back[0], back[1]))
+            found = [f for f in found if f is not None]
+            if not found:
                 drop(b, "no match")
                 continue
-            offset = fwd[1] - fwd[0]
-            if b in hand:
-                back, score_b = match(grid, chips, b, a, hand[b])
-                if back is None:
-                    drop(b, "no match back")
-                    continue
-                offset_b = back[0] - back[1]
-                gap = float(np.hypot(*(offset - offset_b)))
+            if len(found) == 2:
+                gap = float(np.hypot(*(found[0][0] - found[1][0])))
                 if gap > agree_px:
                     drop(b, f"forward and backward matches differ by {gap:.2f} px")
                     continue
-                offset = 0.5 * (offset + offset_b)
-                score = min(score, score_b)
-                off_hand = float(np.max(np.abs(offset - np.subtract(hand[b], hand[a]))))
-                limit = max_disagreement * math.sqrt(2 * hand_sigma_px**2 + sigma_px**2)
-                if off_hand > limit:
-                    drop(
-                        b,
-                        f"matched offset differs from the hand measurements' by "
-                        f"{off_hand:.2f} px (> {limit:.2f})",
-                    )
-                    continue
-            row = (gid, a, b, float(offset[0]), float(offset[1]), score, float(sigma_px))
-            for c, v in zip(GCP_OFFSET_COLUMNS, row, strict=True):
+            offset = np.mean([f[0] for f in found], axis=0)
+            score = min(f[1] for f in found)
+            if b in measured:
+                expected = np.subtract(measured[b][:2], measured[a][:2])
+                spread = math.hypot(measured[a][2], measured[b][2])
+            elif gid in ground:
+                g_lon, g_lat, g_h, g_sigma = ground[gid]
+                proj = {
+                    n: np.array(
+                        [sensors[n].ground_to_image(g_lon, g_lat, h) for h in (g_h, g_h + g_sigma)]
+                    ).reshape(2, 2)
+                    for n in (a, b)
+                }
+                expected = proj[b][0] - proj[a][0]
+                spread = float(np.max(np.abs((proj[b][1] - proj[a][1]) - expected)))
+            else:
+                expected, spread = offset, 0.0
+            off = float(np.max(np.abs(offset - expected)))
+            limit = max_disagreement * math.hypot(spread, sigma_px)
+            if off > limit:
+                source = "hand measurements'" if b in measured else "GCP's projected"
+                drop(b, f"matched offset differs from the {source} by {off:.2f} px (> {limit:.2f})")
+                continue
+            row_ = (gid, a, b, float(offset[0]), float(offset[1]), score, float(sigma_px))
+            for c, v in zip(GCP_OFFSET_COLUMNS, row_, strict=True):
                 table[c].append(v)
     return as_arrays(), dropped

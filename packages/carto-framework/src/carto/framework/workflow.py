@@ -226,9 +226,7 @@ def adjust_product(
     # points, it would only pull the block towards the coarse DEM's errors. So by default
     # ("auto"): every tie point without GCPs, else only those seen in an image without GCP
     # or whose rays meet at less than WEAK_INTERSECTION_DEG; True: every one; False: none.
-    tie_heights = options.pop("tie_heights", "auto")
-    if tie_heights not in ("auto", True, False):
-        raise InputError(f"tie_heights must be 'auto', true or false, got {tie_heights!r}")
+    tie_heights = _auto_flag(options.pop("tie_heights", "auto"), "tie_heights")
     height_sigma_m = float(options.pop("height_sigma_m", 30.0))
     height_offset_sigma_m = float(options.pop("height_offset_sigma_m", 0.0))
     if dem is not None and tie_table is not None and tie_heights is not False:
@@ -238,17 +236,19 @@ def adjust_product(
         )
     # GCP transfer: the offset of each hand-measured GCP between images, by matching,
     # carries its stereo parallax at matching precision (see tiepoints.gcp_offsets)
-    gcp_transfer = options.pop("gcp_transfer", "auto")
-    if gcp_transfer not in ("auto", True, False):
-        raise InputError(f"gcp_transfer must be 'auto', true or false, got {gcp_transfer!r}")
+    gcp_transfer = _auto_flag(options.pop("gcp_transfer", "auto"), "gcp_transfer")
     offset_sigma_px = float(options.pop("gcp_offset_sigma_px", GCP_OFFSET_SIGMA_PX))
     if not (math.isfinite(offset_sigma_px) and offset_sigma_px > 0):
         raise InputError(f"gcp_offset_sigma_px must be > 0, got {offset_sigma_px}")
-    transfer = gcp_transfer is not False and gcps is not None and len(gcps["id"]) > 0
-    if transfer and (dem is None or not rasters):
+    transfer: dict[str, Any] = {"requested": gcp_transfer, "ran": False}
+    if gcp_transfer is False:
+        transfer["why_not"] = "turned off"
+    elif gcps is None or not len(gcps["id"]):
+        transfer["why_not"] = "no GCP"
+    elif dem is None or any(n not in rasters for n in sensors):
+        transfer["why_not"] = "it needs every image's raster and a DEM"
         if gcp_transfer is True:
-            raise InputError("gcp_transfer needs the images and a DEM")
-        transfer = False
+            raise InputError(f"gcp_transfer: {transfer['why_not']}")
     name = adjuster or _default_adjuster(sensors, platform)
     component = get_registry().get("adjuster", name)
     _progress(
@@ -256,14 +256,29 @@ def adjust_product(
     )
     result = component.adjust(sensors, obs, dem=dem, **options)
     offsets = dropped_offsets = None
-    if transfer:
+    if "why_not" not in transfer:
         # matched on chips orthorectified with the adjusted models (the system-level ones
-        # may be hundreds of metres apart), then the adjustment again with the offsets
+        # may be hundreds of metres apart), then the adjustment again with the offsets;
+        # GCPs the first adjustment rejected stay out
         _progress("matching the GCPs between images (GCP transfer)", quiet)
-        offsets, dropped_offsets = gcp_offsets(
-            gcps, rasters, result.sensors, dem, sigma_px=offset_sigma_px
-        )
-        if offsets["id"].size:
+        rejected = set(result.outliers)
+        kept = np.array([g not in rejected for g in gcps["id"]], bool)
+        try:
+            offsets, dropped_offsets = gcp_offsets(
+                {k: np.asarray(v)[kept] for k, v in gcps.items()},
+                rasters,
+                result.sensors,
+                dem,
+                sigma_px=offset_sigma_px,
+            )
+        except InputError as exc:
+            if gcp_transfer is True:
+                raise
+            transfer["why_not"] = str(exc)  # e.g. a raster that does not fit its model
+        if offsets is not None and not offsets["id"].size:
+            transfer["why_not"] = "no GCP could be matched"
+        if offsets is not None and offsets["id"].size:
+            transfer["ran"] = True
             obs = obs.with_offsets(
                 offsets["id"],
                 offsets["image_a"],
@@ -342,13 +357,19 @@ def adjust_product(
     if tie_table is not None:
         write_point_table(out / "tie_points.csv", tie_table)
         report["files"]["tie_points"] = "tie_points.csv"
+    report["gcp_transfer"] = transfer
     if offsets is not None:
         res = result.offset_residuals
+        used = np.isfinite(res["d_line"]) if res else np.zeros(0, bool)
         report["gcp_offsets"] = {
             "count": int(offsets["id"].size),
+            "used": int(used.sum()),
             "sigma_px": offset_sigma_px,
-            "residual_rms_px": float(np.sqrt(np.nanmean(res["d_line"] ** 2 + res["d_sample"] ** 2)))
-            if offsets["id"].size
+            # per coordinate, as sigma_px
+            "residual_rms_px": float(
+                np.sqrt(np.mean(np.r_[res["d_line"][used], res["d_sample"][used]] ** 2))
+            )
+            if used.any()
             else None,
             "not_kept": dropped_offsets,
         }
@@ -356,6 +377,13 @@ def adjust_product(
         report["files"]["gcp_offsets"] = "gcp_offsets.csv"
     write_json_atomic(out / "report.json", _jsonable(report))
     return report
+
+
+def _auto_flag(value: Any, name: str) -> str | bool:
+    """An ``"auto"``/true/false option, checked (0 and 1 are not booleans here)."""
+    if isinstance(value, bool) or value == "auto":
+        return value
+    raise InputError(f"{name} must be 'auto', true or false, got {value!r}")
 
 
 def _jsonable(value: Any) -> Any:

@@ -347,7 +347,7 @@ def refine_tile(
     lon_p, lat_p, h_p = inter.lon_deg, inter.lat_deg, inter.h_m
     # back to the node: the intersection lies on the left ray, a little off the node
     # (horizontally); remove the height change of that offset along the current surface
-    x_p, y_p = _to_map(sub, lon_p, lat_p)
+    x_p, y_p = sub.map_xy(lon_p, lat_p)
     x_n, y_n = sub.xy(nr, nc)
     g_row, g_col = np.gradient(heights[r0:r1, c0:c1])
     px, py = sub.resolution
@@ -371,14 +371,6 @@ def refine_tile(
         field.score[orr, occ],
         field.valid[orr, occ],
     )
-
-
-def _to_map(grid: OrthoGrid, lon: FloatArray, lat: FloatArray) -> tuple[FloatArray, FloatArray]:
-    import pyproj
-
-    tr = pyproj.Transformer.from_crs("EPSG:4326", grid.crs, always_xy=True)
-    x, y = tr.transform(lon, lat)
-    return np.asarray(x, np.float64), np.asarray(y, np.float64)
 
 
 def regularise(
