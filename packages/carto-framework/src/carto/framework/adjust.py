@@ -64,6 +64,24 @@ def _s(value: Any) -> NDArray[np.object_]:
     return np.atleast_1d(np.asarray(value, dtype=object)).astype(str).astype(object)
 
 
+_CONTROL_FIELDS = (
+    "control_id",
+    "control_lon_deg",
+    "control_lat_deg",
+    "control_h_m",
+    "control_sigma_planimetric_m",
+    "control_sigma_h_m",
+)
+_OFFSET_FIELDS = (
+    "offset_id",
+    "offset_image_a",
+    "offset_image_b",
+    "offset_d_line",
+    "offset_d_sample",
+    "offset_sigma_px",
+)
+
+
 @attrs.frozen(eq=False)
 class Observations:
     """What an adjustment is given, as aligned arrays.
@@ -121,24 +139,17 @@ class Observations:
     offset_sigma_px: FloatArray = attrs.field(factory=lambda: np.array([]), converter=_f)
 
     def __attrs_post_init__(self) -> None:
-        n = self.point_id.size
-        for name in ("image", "line", "sample", "sigma_px"):
-            if getattr(self, name).size != n:
-                raise InputError(
-                    f"observations: {name} has {getattr(self, name).size} rows, point_id has {n}"
-                )
-        g = self.control_id.size
-        for name in (
-            "control_lon_deg",
-            "control_lat_deg",
-            "control_h_m",
-            "control_sigma_planimetric_m",
-            "control_sigma_h_m",
+        for key, fields in (
+            ("point_id", ("image", "line", "sample", "sigma_px")),
+            ("control_id", _CONTROL_FIELDS[1:]),
+            ("offset_id", _OFFSET_FIELDS[1:]),
         ):
-            if getattr(self, name).size != g:
-                raise InputError(
-                    f"observations: {name} has {getattr(self, name).size} rows, control_id has {g}"
-                )
+            n = getattr(self, key).size
+            for name in fields:
+                if getattr(self, name).size != n:
+                    raise InputError(
+                        f"observations: {name} has {getattr(self, name).size} rows, {key} has {n}"
+                    )
         if self.height_m.size != self.height_id.size or (
             self.height_sigma_m.size != self.height_id.size
         ):
@@ -157,18 +168,6 @@ class Observations:
             raise InputError("observations: every sigma must be > 0")
         if not np.all(np.isfinite(self.line) & np.isfinite(self.sample)):
             raise InputError("observations: image coordinates contain NaN")
-        k = self.offset_id.size
-        for name in (
-            "offset_image_a",
-            "offset_image_b",
-            "offset_d_line",
-            "offset_d_sample",
-            "offset_sigma_px",
-        ):
-            if getattr(self, name).size != k:
-                raise InputError(
-                    f"observations: {name} has {getattr(self, name).size} rows, offset_id has {k}"
-                )
         if np.any(~(self.offset_sigma_px > 0)):
             raise InputError("observations: every offset_sigma_px must be > 0")
         if not np.all(np.isfinite(self.offset_d_line) & np.isfinite(self.offset_d_sample)):
@@ -294,24 +293,6 @@ class Observations:
             **{n: getattr(self, n)[k_h] for n in ("height_id", "height_m", "height_sigma_m")},
             **{n: getattr(self, n)[k_o] for n in _OFFSET_FIELDS},
         )
-
-
-_CONTROL_FIELDS = (
-    "control_id",
-    "control_lon_deg",
-    "control_lat_deg",
-    "control_h_m",
-    "control_sigma_planimetric_m",
-    "control_sigma_h_m",
-)
-_OFFSET_FIELDS = (
-    "offset_id",
-    "offset_image_a",
-    "offset_image_b",
-    "offset_d_line",
-    "offset_d_sample",
-    "offset_sigma_px",
-)
 
 
 @attrs.frozen(eq=False)
