@@ -185,6 +185,13 @@ def test_grid_from_bounds_is_snapped_outwards(hilly):
     sub = grid.window(10, 20, 5, 6)
     assert sub.xy(0, 0) == grid.xy(10, 20)
     assert sub.shape == (5, 6)
+    # rowcol inverts lonlat (fractional pixel indices, centres at whole numbers)
+    rows, cols = np.array([0.0, 10.25, 199.0]), np.array([0.0, 20.5, 99.75])
+    lon, lat = grid.lonlat(rows, cols)
+    back = grid.rowcol(lon, lat)
+    np.testing.assert_allclose(back, (rows, cols), atol=1e-6)
+    x, y = grid.map_xy(lon, lat)
+    np.testing.assert_allclose((x, y), grid.xy(rows, cols), atol=1e-6)
 
 
 # ----------------------------------------------------------------------------- mapping
