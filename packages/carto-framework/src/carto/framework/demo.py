@@ -117,8 +117,8 @@ def run_demo(
 
         ties = None
         for label, mode in (
-            ("stagger + tied adjustment, 1 GCP + GCP transfer", "combined"),
-            ("separate cameras, 1 GCP + GCP transfer", "separate"),
+            ("stagger + tied, 1 GCP transferred", "combined"),
+            ("separate, 1 GCP transferred", "separate"),
         ):
             t1 = time.perf_counter()
             rep = adjust_product(
