@@ -277,16 +277,10 @@ def adjust_product(
             transfer["why_not"] = str(exc)  # e.g. a raster that does not fit its model
         if offsets is not None and not offsets["id"].size:
             transfer["why_not"] = "no GCP could be matched"
-        if offsets is not None and offsets["id"].size:
+        elif offsets is not None:
             transfer["ran"] = True
-            obs = obs.with_offsets(
-                offsets["id"],
-                offsets["image_a"],
-                offsets["image_b"],
-                offsets["d_line"],
-                offsets["d_sample"],
-                offsets["sigma_px"],
-            )
+            columns = ("id", "image_a", "image_b", "d_line", "d_sample", "sigma_px")
+            obs = obs.with_offsets(*(offsets[c] for c in columns))
             result = component.adjust(sensors, obs, dem=dem, **options)
     # outputs
     out.mkdir(parents=True, exist_ok=True)
