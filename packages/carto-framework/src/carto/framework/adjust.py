@@ -64,6 +64,8 @@ def _s(value: Any) -> NDArray[np.object_]:
     return np.atleast_1d(np.asarray(value, dtype=object)).astype(str).astype(object)
 
 
+_IMAGE_FIELDS = ("point_id", "image", "line", "sample", "sigma_px")
+_HEIGHT_FIELDS = ("height_id", "height_m", "height_sigma_m")
 _CONTROL_FIELDS = (
     "control_id",
     "control_lon_deg",
@@ -140,7 +142,7 @@ class Observations:
 
     def __attrs_post_init__(self) -> None:
         for key, fields in (
-            ("point_id", ("image", "line", "sample", "sigma_px")),
+            ("point_id", _IMAGE_FIELDS[1:]),
             ("control_id", _CONTROL_FIELDS[1:]),
             ("offset_id", _OFFSET_FIELDS[1:]),
         ):
@@ -275,24 +277,11 @@ class Observations:
     def without_points(self, ids: Sequence[str]) -> Observations:
         """A copy without the image measurements, offsets, control and heights of ``ids``."""
         drop = set(ids)
-
-        def keep(column: NDArray) -> NDArray[np.bool_]:
-            return np.array([p not in drop for p in column], bool)
-
-        k, k_c, k_h, k_o = (
-            keep(self.point_id),
-            keep(self.control_id),
-            keep(self.height_id),
-            keep(self.offset_id),
-        )
-        return attrs.evolve(
-            self,
-            **{n: getattr(self, n)[k] for n in ("point_id", "image", "line", "sample")},
-            sigma_px=self.sigma_px[k],
-            **{n: getattr(self, n)[k_c] for n in _CONTROL_FIELDS},
-            **{n: getattr(self, n)[k_h] for n in ("height_id", "height_m", "height_sigma_m")},
-            **{n: getattr(self, n)[k_o] for n in _OFFSET_FIELDS},
-        )
+        changes = {}
+        for fields in (_IMAGE_FIELDS, _CONTROL_FIELDS, _HEIGHT_FIELDS, _OFFSET_FIELDS):
+            keep = np.array([p not in drop for p in getattr(self, fields[0])], bool)
+            changes |= {n: getattr(self, n)[keep] for n in fields}
+        return attrs.evolve(self, **changes)
 
 
 @attrs.frozen(eq=False)
