@@ -344,15 +344,18 @@ def test_bad_inputs_raise_input_error(pair):
 
 
 # ----------------------------------------------------------------------------- GCP transfer
-def _hand_measured(scene: Scene, sigma_px: float, seed: int = 0) -> tuple[dict, dict]:
-    """The checkpoints at least 40 px inside every image as GCPs measured by hand
+def _hand_measured(
+    scene: Scene, sigma_px: float, seed: int = 0, margin_px: float = 40.0
+) -> tuple[dict, dict]:
+    """The checkpoints at least ``margin_px`` inside every image as GCPs measured by hand
     (``sigma_px`` noise), and their exact image positions (the simulator's projection of the
-    true ground point). Nearer the border the matching's pyramid runs out of image."""
+    true ground point)."""
     check = scene.control("checkpoints")
     shape = {n: s.image_shape for n, s in scene.sensors().items()}
     inside = np.array(
         [
-            40 <= li <= shape[m][0] - 40 and 40 <= sa <= shape[m][1] - 40
+            margin_px <= li <= shape[m][0] - margin_px
+            and margin_px <= sa <= shape[m][1] - margin_px
             for m, li, sa in zip(check["image"], check["line"], check["sample"], strict=True)
         ]
     )
@@ -372,12 +375,14 @@ def _hand_measured(scene: Scene, sigma_px: float, seed: int = 0) -> tuple[dict, 
 
 
 def test_gcp_offsets_carry_the_parallax_better_than_hand_measurements(pair):
+    """Down to 25 px from the image borders (the pyramid's coarse windows run out of image
+    there; the match is tried again at full resolution)."""
     rasters, sensors, dem = inputs(pair)
-    hand, exact = _hand_measured(pair, 0.3)
+    hand, exact = _hand_measured(pair, 0.3, margin_px=25.0)
     table, dropped = gcp_offsets(hand, rasters, sensors, dem)
     assert tuple(table) == GCP_OFFSET_COLUMNS
     n_points = len(set(hand["id"].tolist()))
-    assert table["id"].size >= 0.9 * n_points
+    assert table["id"].size >= 0.95 * n_points
     assert set(table["image_a"]) == {"fore"}
     assert set(table["image_b"]) == {"aft"}
     truth = np.array([exact[(i, "aft")] - exact[(i, "fore")] for i in table["id"]])

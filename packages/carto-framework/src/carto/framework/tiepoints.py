@@ -952,6 +952,9 @@ Against the simulator's truth, offsets matched on ortho chips (lsm-affine) err b
 RMS along track and 0.05-0.08 px across on hilly Cartosat-1 pairs, against 0.37-0.50 px for
 two hand measurements of 0.3 px (``benchmarks/gcp_transfer.py``); real images are noisier."""
 
+BORDER_MATCHING = {"levels": 1, "search": 7}
+"""Matching options of :func:`gcp_offsets`' second try, where the pyramid found nothing."""
+
 GCP_OFFSET_COLUMNS = ("id", "image_a", "image_b", "d_line", "d_sample", "score", "sigma_px")
 """Columns of :func:`gcp_offsets`' table: position in ``image_b`` minus in ``image_a``."""
 
@@ -993,7 +996,8 @@ def gcp_offsets(
     ``sensors`` must agree to a few pixels (the models of a first adjustment: system-level
     models can be hundreds of metres apart, beyond the chips); the offsets, raw image
     positions of one ground detail, hold for any model, the a-priori ones included. Near an
-    image border (within about 40 px) the matching pyramid runs out of image: no offset.
+    image border the matching pyramid runs out of image: there the match is tried again at
+    full resolution in a small search (:data:`BORDER_MATCHING`).
 
     The adjustment takes the offsets as observations
     (:meth:`~carto.framework.adjust.Observations.with_offsets`): the hand measurements then
@@ -1074,22 +1078,27 @@ def gcp_offsets(
         if not (np.isfinite(lon[0]) and np.isfinite(lat[0])):
             return None
         row, col = grid.rowcol(lon, lat)
-        found = _tie_points_on_orthos(
-            grid,
-            {ref: chips[ref], other: chips[other]},
-            {ref: sensors[ref], other: sensors[other]},
-            dem,
-            ref,
-            spacing_px=float(2 * chip_px),
-            points=np.stack([row + 0.5, col + 0.5], axis=1),
-            candidates="grid",
-            forstner=None,
-            matching=options,
-            per_cell=0,
-            min_views=2,
-            sigma_px=sigma_px,
-        )
-        if found["id"].size < 2:
+        # near an image border the pyramid's coarse windows run out of image: then once more
+        # at full resolution in a small search (the models agree to a pixel or two)
+        for attempt in (options, options | BORDER_MATCHING):
+            found = _tie_points_on_orthos(
+                grid,
+                {ref: chips[ref], other: chips[other]},
+                {ref: sensors[ref], other: sensors[other]},
+                dem,
+                ref,
+                spacing_px=float(2 * chip_px),
+                points=np.stack([row + 0.5, col + 0.5], axis=1),
+                candidates="grid",
+                forstner=None,
+                matching=attempt,
+                per_cell=0,
+                min_views=2,
+                sigma_px=sigma_px,
+            )
+            if found["id"].size >= 2:
+                break
+        else:
             return None
         at = {im: k for k, im in enumerate(found["image"])}
         return np.array(
