@@ -1025,7 +1025,12 @@ class Adjuster(Component):
         self, sensors: Mapping[str, Sensor], observations: Observations, **options: Any
     ) -> AdjustmentResult:
         """Adjust ``sensors`` (image name -> sensor) to ``observations``; ``options`` are
-        adjuster specific (modes, correction orders, robust settings)."""
+        adjuster specific (modes, correction orders, robust settings).
+
+        ``observations`` may hold every kind :class:`Observations` has, image offsets
+        included (``carto adjust`` adds them for its GCP transfer); an adjuster built on
+        :func:`adjust_bundle` handles them all, one with its own solver must use them or
+        raise :class:`~carto.framework.errors.InputError`, never ignore them."""
 
 
 class RPCBiasAdjuster(Adjuster):
