@@ -10,8 +10,6 @@ reference coordinates show, which is what the adjustment needs.
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 from scipy import ndimage
@@ -22,12 +20,10 @@ from carto.framework.match import Matcher, global_shift, grid_points
 from carto.framework.ortho import orthorectify
 from carto.framework.scene import Scene
 from carto.framework.tiepoints import (
-    GCP_OFFSET_COLUMNS,
     TABLE_COLUMNS,
     OrthoTiePointMatcher,
     automatic_tie_points,
     candidate_points,
-    gcp_offsets,
     inconsistent_points,
     match_views,
     ortho_parallax,
@@ -36,27 +32,6 @@ from carto.framework.tiepoints import (
     system_orthos,
     tie_point_errors,
 )
-
-from ..scenes import simulate
-
-SIZE = 600  # px; the brief's expectation of >= 200 points on 2000 x 2000 scales to 18
-
-
-@pytest.fixture(scope="module")
-def triplet(tmp_path_factory) -> Scene:
-    """A Cartosat-2 agile triplet over hilly terrain with realistic errors (the system-level
-    models are some 600 m apart: their orthos overlap only in part)."""
-    out: Path = tmp_path_factory.mktemp("tp_c2")
-    simulate("cartosat2-triplet", out, seed=3, size=(SIZE, SIZE), terrain="hilly")
-    return Scene.open(out)
-
-
-@pytest.fixture(scope="module")
-def pair(tmp_path_factory) -> Scene:
-    """A Cartosat-1 Fore/Aft pair over hilly terrain with realistic errors."""
-    out: Path = tmp_path_factory.mktemp("tp_c1")
-    simulate("cartosat1-pair", out, seed=3, size=(SIZE, SIZE), terrain="hilly")
-    return Scene.open(out)
 
 
 def inputs(scene: Scene) -> tuple[dict, dict, DEM]:
@@ -341,107 +316,3 @@ def test_bad_inputs_raise_input_error(pair):
         with pytest.raises(InputError) as info:
             case()
         assert "\n" not in str(info.value)
-
-
-# ----------------------------------------------------------------------------- GCP transfer
-def _hand_measured(
-    scene: Scene, sigma_px: float, seed: int = 0, margin_px: float = 40.0
-) -> tuple[dict, dict]:
-    """The checkpoints at least ``margin_px`` inside every image as GCPs measured by hand
-    (``sigma_px`` noise), and their exact image positions (the simulator's projection of the
-    true ground point)."""
-    check = scene.control("checkpoints")
-    shape = {n: s.image_shape for n, s in scene.sensors().items()}
-    inside = np.array(
-        [
-            margin_px <= li <= shape[m][0] - margin_px
-            and margin_px <= sa <= shape[m][1] - margin_px
-            for m, li, sa in zip(check["image"], check["line"], check["sample"], strict=True)
-        ]
-    )
-    near_border = set(check["id"][~inside].tolist())
-    check = {k: v[[i not in near_border for i in check["id"]]] for k, v in check.items()}
-    rng = np.random.default_rng(seed)
-    hand = dict(check)
-    hand["line"] = check["line"] + rng.normal(0.0, sigma_px, check["line"].size)
-    hand["sample"] = check["sample"] + rng.normal(0.0, sigma_px, check["sample"].size)
-    exact = {
-        (i, m): np.array([li, sa])
-        for i, m, li, sa in zip(
-            check["id"], check["image"], check["line"], check["sample"], strict=True
-        )
-    }
-    return hand, exact
-
-
-def test_gcp_offsets_carry_the_parallax_better_than_hand_measurements(pair):
-    """Down to 25 px from the image borders (the pyramid's coarse windows run out of image
-    there; the match is tried again at full resolution)."""
-    rasters, sensors, dem = inputs(pair)
-    hand, exact = _hand_measured(pair, 0.3, margin_px=25.0)
-    table, dropped = gcp_offsets(hand, rasters, sensors, dem)
-    assert tuple(table) == GCP_OFFSET_COLUMNS
-    n_points = len(set(hand["id"].tolist()))
-    assert table["id"].size >= 0.95 * n_points
-    assert set(table["image_a"]) == {"fore"}
-    assert set(table["image_b"]) == {"aft"}
-    truth = np.array([exact[(i, "aft")] - exact[(i, "fore")] for i in table["id"]])
-    by_hand = np.array(
-        [
-            [
-                hand[c][(hand["id"] == i) & (hand["image"] == "aft")][0]
-                - hand[c][(hand["id"] == i) & (hand["image"] == "fore")][0]
-                for c in ("line", "sample")
-            ]
-            for i in table["id"]
-        ]
-    )
-    matched = np.stack([table["d_line"], table["d_sample"]], axis=1)
-    rms_matched = np.sqrt(np.mean((matched - truth) ** 2))
-    rms_hand = np.sqrt(np.mean((by_hand - truth) ** 2))
-    assert rms_matched < 0.15  # per coordinate
-    assert rms_matched < 0.4 * rms_hand
-    assert np.all(table["sigma_px"] == 0.15)
-    assert np.all(table["score"] >= 0.7)
-    assert all(d["reason"] for d in dropped)
-
-
-def test_gcp_offsets_transfer_one_image_and_refuse_a_hand_blunder(pair):
-    rasters, sensors, dem = inputs(pair)
-    hand, exact = _hand_measured(pair, 0.3, seed=1)
-    first, second = sorted(set(hand["id"].tolist()))[:2]
-    # the first measured in Fore only (transfer), the second 4 px off in Aft (blunder)
-    keep = ~((hand["id"] == first) & (hand["image"] == "aft"))
-    hand = {k: v[keep] for k, v in hand.items()}
-    hand["line"] = np.where(
-        (hand["id"] == second) & (hand["image"] == "aft"), hand["line"] + 4.0, hand["line"]
-    )
-    table, dropped = gcp_offsets(hand, rasters, sensors, dem)
-    row = table["id"] == first
-    assert row.sum() == 1
-    got = np.array([table["d_line"][row][0], table["d_sample"][row][0]])
-    np.testing.assert_allclose(got, exact[(first, "aft")] - exact[(first, "fore")], atol=0.5)
-    assert second not in table["id"]
-    (why,) = [d["reason"] for d in dropped if d["id"] == second]
-    assert "differs from the hand measurements'" in why
-    with pytest.raises(InputError, match="unknown option"):
-        gcp_offsets(hand, rasters, sensors, dem, templat=9)
-
-
-def test_gcp_offsets_reach_every_view_of_a_triplet(triplet):
-    """With models that agree (here the true ones; in the workflow the first adjustment's),
-    every GCP is matched from the first view into the two others."""
-    rasters, _, dem = inputs(triplet)
-    hand, exact = _hand_measured(triplet, 0.3, seed=2)
-    table, _ = gcp_offsets(hand, rasters, triplet.truth_sensors(), dem)
-    names = triplet.image_names
-    assert set(table["image_a"]) == {names[0]}
-    assert set(table["image_b"]) == set(names[1:])
-    truth = np.array(
-        [
-            exact[(i, b)] - exact[(i, a)]
-            for i, a, b in zip(table["id"], table["image_a"], table["image_b"], strict=True)
-        ]
-    )
-    matched = np.stack([table["d_line"], table["d_sample"]], axis=1)
-    assert np.sqrt(np.mean((matched - truth) ** 2)) < 0.2

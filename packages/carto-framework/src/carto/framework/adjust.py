@@ -112,7 +112,7 @@ class Observations:
         The point must also be measured in an image. Offsets are weighted as given and not
         tested for outliers (an offset more precise than the hand measurements it meets wins
         any conflict with them): check them where they are made
-        (:func:`~carto.framework.tiepoints.gcp_offsets` compares them with the hand
+        (:func:`~carto.framework.gcp_transfer.gcp_offsets` compares them with the hand
         measurements).
     """
 

@@ -635,7 +635,7 @@ def automatic_tie_points(
     given = points
     spacing = float(spacing_px)
     while True:
-        table = _tie_points_on_orthos(
+        table = tie_points_on_orthos(
             grid,
             orthos,
             sensors,
@@ -671,7 +671,7 @@ MIN_SPACING_PX = 16.0
 """Densest candidate spacing :func:`automatic_tie_points` goes to when too few points are kept."""
 
 
-def _tie_points_on_orthos(
+def tie_points_on_orthos(
     grid: Any,
     orthos: Mapping[str, NDArray],
     sensors: Mapping[str, Sensor],
@@ -686,8 +686,11 @@ def _tie_points_on_orthos(
     min_views: int,
     sigma_px: float,
 ) -> dict[str, NDArray]:
-    """Candidates, multi-view matching and selection on system-level orthos (see
-    :func:`automatic_tie_points`)."""
+    """Candidates, multi-view matching and selection on orthos already made on ``grid``
+    (steps 3-6 of the module docstring; arguments as :func:`automatic_tie_points`'s, with
+    ``matching`` the options of :func:`match_views`): the tie-point table, raw coordinates
+    computed with the very models that made the orthos. Also used on small ortho chips
+    (:mod:`~carto.framework.gcp_transfer`)."""
     from carto.framework.match import spread_order
 
     if points is None:
@@ -943,236 +946,3 @@ def block_tie_points(
         raise InputError("tie points: no two images of the block overlap")
     keys = tables[0].keys()
     return {k: np.concatenate([t[k] for t in tables]) for k in keys}
-
-
-# ----------------------------------------------------------------------------- GCP transfer
-GCP_OFFSET_SIGMA_PX = 0.15
-"""A-priori standard deviation (pixels, per coordinate) of an image offset matched at a GCP.
-Against the simulator's truth, offsets matched on ortho chips (lsm-affine) err by 0.07-0.12 px
-RMS along track and 0.05-0.08 px across on hilly Cartosat-1 pairs (97 % of the GCPs matched),
-against 0.36-0.49 px for two hand measurements of 0.3 px (``benchmarks/gcp_transfer.py``);
-real images are noisier."""
-
-BORDER_MATCHING = {"levels": 1, "search": 7}
-"""Matching options of :func:`gcp_offsets`' second try, where the pyramid found nothing."""
-
-GCP_OFFSET_COLUMNS = ("id", "image_a", "image_b", "d_line", "d_sample", "score", "sigma_px")
-"""Columns of :func:`gcp_offsets`' table: position in ``image_b`` minus in ``image_a``."""
-
-
-def gcp_offsets(
-    gcps: Mapping[str, NDArray],
-    rasters: Mapping[str, Path | NDArray],
-    sensors: Mapping[str, Sensor],
-    dem: Any,
-    *,
-    chip_px: int = 192,
-    agree_px: float = 0.5,
-    hand_sigma_px: float = 0.3,
-    max_disagreement: float = 3.5,
-    sigma_px: float = GCP_OFFSET_SIGMA_PX,
-    **matching: Any,
-) -> tuple[dict[str, NDArray], list[dict[str, Any]]]:
-    """Image offsets of hand-measured GCPs, by matching (GCP transfer).
-
-    A GCP measured by hand in two images carries a stereo parallax with the error of two
-    independent measurements (0.3 px each: a height error of about 1.7 m on a Cartosat-1
-    pair, more than the GCP's own). Matching measures the offset of the same ground detail
-    between the two images to a tenth of a pixel. For each GCP measured in image ``a`` (the
-    first of ``sensors`` it is measured in), in every other image ``b`` that sees it:
-
-    1. both images are orthorectified with their models on a chip of ``2 chip_px`` ortho
-       pixels around the point (the tie points' resolution, :func:`system_orthos`);
-    2. the hand position in ``a`` is matched into ``b`` (:func:`match_views`: pyramid,
-       least-squares matching, left-right check, ``matching`` options); when the GCP is
-       measured in ``b`` too, its position there is matched back into ``a``, and when both
-       succeed the two offsets must agree within ``agree_px`` (their mean is kept);
-    3. the offset (position in ``b`` minus in ``a``, raw pixels) must agree within
-       ``max_disagreement`` sigmas with the hand measurements' (their ``sigma_px`` column,
-       default ``hand_sigma_px``) or, for a GCP measured in ``a`` only, with the offset its
-       ground coordinates project to (their ``sigma_h_m`` of height, default 1 m, moving it
-       along the parallax): a larger difference means a wrong match or a wrong measurement,
-       which the offset cannot tell apart.
-
-    ``sensors`` must agree to a few pixels (the models of a first adjustment: system-level
-    models can be hundreds of metres apart, beyond the chips); the offsets, raw image
-    positions of one ground detail, hold for any model, the a-priori ones included. Near an
-    image border the matching pyramid runs out of image: there the match is tried again at
-    full resolution in a small search (:data:`BORDER_MATCHING`).
-
-    The adjustment takes the offsets as observations
-    (:meth:`~carto.framework.adjust.Observations.with_offsets`): the hand measurements then
-    fix where the point is, and the matching fixes the parallax; a GCP measured in one image
-    only is transferred into the others.
-
-    Returns:
-        ``(table, dropped)``: the offsets (columns :data:`GCP_OFFSET_COLUMNS`, one row per
-        GCP and image pair), and ``{"id", "image_a", "image_b", "reason"}`` for each pair
-        that was tried and not kept.
-    """
-    from carto.framework.ortho import OrthoGrid, orthorectify
-
-    options = dict(
-        template=15,
-        search=11,
-        levels=4,
-        min_score=0.7,
-        tolerance_px=0.5,
-        closure_px=0.5,
-        require_closure=True,
-        subpixel="lsm-affine",
-    )
-    unknown = set(matching) - set(options)
-    if unknown:
-        raise InputError(f"gcp_offsets: unknown option(s) {', '.join(sorted(unknown))}")
-    options.update(matching)
-    names = list(sensors)
-    missing = [n for n in names if n not in rasters]
-    if missing:
-        raise InputError(f"GCP transfer: no raster for image(s) {', '.join(missing)}")
-    table: dict[str, list] = {c: [] for c in GCP_OFFSET_COLUMNS}
-    dropped: list[dict[str, Any]] = []
-
-    def as_arrays() -> dict[str, NDArray]:
-        text = ("id", "image_a", "image_b")
-        return {c: np.array(v, object if c in text else float) for c, v in table.items()}
-
-    def column(name: str, default: float) -> NDArray[np.float64]:
-        v = np.asarray(gcps.get(name, np.full(len(gcps["id"]), default)), np.float64)
-        return np.where(np.isfinite(v) & (v > 0), v, default)
-
-    hand_sigma = column("sigma_px", hand_sigma_px)
-    h_sigma = column("sigma_h_m", 1.0)
-    hand: dict[str, dict[str, tuple[float, float, float]]] = {}
-    ground: dict[str, tuple[float, float, float, float]] = {}
-    for k, (gid, im) in enumerate(zip(gcps["id"], gcps["image"], strict=True)):
-        if im in sensors:
-            li, sa = float(gcps["line"][k]), float(gcps["sample"][k])
-            hand.setdefault(str(gid), {})[str(im)] = (li, sa, float(hand_sigma[k]))
-        if "h_m" in gcps:
-            ground[str(gid)] = (
-                float(gcps["lon_deg"][k]),
-                float(gcps["lat_deg"][k]),
-                float(gcps["h_m"][k]),
-                float(h_sigma[k]),
-            )
-    if not hand or len(names) < 2:
-        return as_arrays(), dropped
-    h_mid = float(np.nanmedian(dem.heights)) if hasattr(dem, "heights") else 0.0
-    res = max(ground_sampling_m(sensors[n], h_mid) for n in names)
-    full = OrthoGrid.covering([sensors[n] for n in names], dem, res)
-    prepared: dict[str, NDArray[np.float32]] = {}
-
-    def image(name: str) -> NDArray[np.float32]:
-        if name not in prepared:
-            raw = rasters[name]
-            raw = read_raster(Path(raw)) if not isinstance(raw, np.ndarray) else raw
-            prepared[name] = prepared_image(raw, sensors[name], dem)
-        return prepared[name]
-
-    def match(
-        grid: Any, chips: Mapping[str, NDArray], ref: str, other: str, pos: tuple[float, ...]
-    ) -> tuple[NDArray[np.float64], float] | None:
-        """The offset (other minus ref, raw pixels) of ``ref``'s hand point and the match's
-        score, or None."""
-        lon, lat, _ = sensors[ref].locate_on_dem(np.array([pos[0]]), np.array([pos[1]]), dem)
-        if not (np.isfinite(lon[0]) and np.isfinite(lat[0])):
-            return None
-        row, col = grid.rowcol(lon, lat)
-        # near an image border the pyramid's coarse windows run out of image: then once more
-        # at full resolution in a small search (the models agree to a pixel or two)
-        for attempt in (options, options | BORDER_MATCHING):
-            found = _tie_points_on_orthos(
-                grid,
-                {ref: chips[ref], other: chips[other]},
-                {ref: sensors[ref], other: sensors[other]},
-                dem,
-                ref,
-                spacing_px=float(2 * chip_px),
-                points=np.stack([row + 0.5, col + 0.5], axis=1),
-                candidates="grid",
-                forstner=None,
-                matching=attempt,
-                per_cell=0,
-                min_views=2,
-                sigma_px=sigma_px,
-            )
-            if found["id"].size >= 2:
-                break
-        else:
-            return None
-        at = {im: k for k, im in enumerate(found["image"])}
-        return np.array(
-            [found[c][at[other]] - found[c][at[ref]] for c in ("line", "sample")]
-        ), float(found["score"][at[other]])
-
-    for gid, measured in hand.items():
-        a = next(n for n in names if n in measured)
-
-        def drop(b: str, reason: str, gid: str = gid, a: str = a) -> None:
-            dropped.append({"id": gid, "image_a": a, "image_b": b, "reason": reason})
-
-        lon, lat, _ = sensors[a].locate_on_dem(
-            np.array([measured[a][0]]), np.array([measured[a][1]]), dem
-        )
-        if not np.isfinite(lon[0]):
-            drop("", "off the DEM")
-            continue
-        row, col = full.rowcol(lon, lat)
-        r0, c0 = max(0, int(row[0]) - chip_px), max(0, int(col[0]) - chip_px)
-        grid = full.window(
-            r0, c0, min(2 * chip_px, full.shape[0] - r0), min(2 * chip_px, full.shape[1] - c0)
-        )
-        chips: dict[str, NDArray] = {}
-        for b in names:
-            if b == a:
-                continue
-            line, sample = sensors[b].ground_to_image(lon, lat, dem.height(lon, lat))
-            n_l, n_s = sensors[b].image_shape
-            if not (0 <= line[0] < n_l and 0 <= sample[0] < n_s):
-                if b in measured:
-                    drop(b, "outside the image by its model")
-                continue  # b does not see the point
-            for n in (a, b):
-                if n not in chips:
-                    chips[n] = orthorectify(image(n), sensors[n], grid, dem)
-            found = [match(grid, chips, a, b, measured[a])]
-            if b in measured:
-                back = match(grid, chips, b, a, measured[b])
-                found.append(None if back is None else (-back[0], back[1]))
-            found = [f for f in found if f is not None]
-            if not found:
-                drop(b, "no match")
-                continue
-            if len(found) == 2:
-                gap = float(np.hypot(*(found[0][0] - found[1][0])))
-                if gap > agree_px:
-                    drop(b, f"forward and backward matches differ by {gap:.2f} px")
-                    continue
-            offset = np.mean([f[0] for f in found], axis=0)
-            score = min(f[1] for f in found)
-            if b in measured:
-                expected = np.subtract(measured[b][:2], measured[a][:2])
-                spread = math.hypot(measured[a][2], measured[b][2])
-            elif gid in ground:
-                g_lon, g_lat, g_h, g_sigma = ground[gid]
-                proj = {
-                    n: np.array(
-                        [sensors[n].ground_to_image(g_lon, g_lat, h) for h in (g_h, g_h + g_sigma)]
-                    ).reshape(2, 2)
-                    for n in (a, b)
-                }
-                expected = proj[b][0] - proj[a][0]
-                spread = float(np.max(np.abs((proj[b][1] - proj[a][1]) - expected)))
-            else:
-                expected, spread = offset, 0.0
-            off = float(np.max(np.abs(offset - expected)))
-            limit = max_disagreement * math.hypot(spread, sigma_px)
-            if off > limit:
-                source = "hand measurements'" if b in measured else "GCP's projected"
-                drop(b, f"matched offset differs from the {source} by {off:.2f} px (> {limit:.2f})")
-                continue
-            row_ = (gid, a, b, float(offset[0]), float(offset[1]), score, float(sigma_px))
-            for c, v in zip(GCP_OFFSET_COLUMNS, row_, strict=True):
-                table[c].append(v)
-    return as_arrays(), dropped

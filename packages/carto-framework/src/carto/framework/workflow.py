@@ -24,12 +24,12 @@ from carto.framework import frames
 from carto.framework.adjust import AdjustmentResult, Observations
 from carto.framework.documents import read_json, write_json_atomic
 from carto.framework.errors import InputError
+from carto.framework.gcp_transfer import GCP_OFFSET_SIGMA_PX, gcp_offsets
 from carto.framework.linescan import LineScanner
 from carto.framework.plugins import get_registry
 from carto.framework.point_table import read_point_table, write_point_table
 from carto.framework.rpc import RPCSensor, fit_rpc, write_rpc_txt
 from carto.framework.sensor import Sensor, open_sensors
-from carto.framework.tiepoints import GCP_OFFSET_SIGMA_PX, gcp_offsets
 
 Table = dict[str, NDArray]
 
@@ -235,7 +235,7 @@ def adjust_product(
             obs, sensors, dem, height_sigma_m, height_offset_sigma_m, below_angle_deg=weak
         )
     # GCP transfer: the offset of each hand-measured GCP between images, by matching,
-    # carries its stereo parallax at matching precision (see tiepoints.gcp_offsets)
+    # carries its stereo parallax at matching precision (see gcp_transfer.gcp_offsets)
     gcp_transfer = _auto_flag(options.pop("gcp_transfer", "auto"), "gcp_transfer")
     offset_sigma_px = float(options.pop("gcp_offset_sigma_px", GCP_OFFSET_SIGMA_PX))
     if not (math.isfinite(offset_sigma_px) and offset_sigma_px > 0):
