@@ -159,6 +159,8 @@ def test_a_matched_offset_carries_the_gcp_parallax(scene):
     alone = Observations.from_tables(fore_only, ties)
     moved = adjust_bundle(sensors, alone.with_offsets([gid], "fore", "aft", d_line, d_sample, 0.05))
     assert checkpoint_accuracy(moved.sensors, rest)["rmse_height_m"] < 1.0
+    # (one image and the prior alone cannot place the block in height)
+    assert checkpoint_accuracy(adjust_bundle(sensors, alone).sensors, rest)["rmse_height_m"] > 3.0
     # dropping the point drops its offsets; bad offsets are refused
     assert (
         obs.with_offsets([gid], "fore", "aft", 1.0, 1.0, 0.1).without_points([gid]).offset_id.size

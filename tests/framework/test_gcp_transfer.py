@@ -79,24 +79,32 @@ def test_gcp_offsets_carry_the_parallax_better_than_hand_measurements(pair):
     assert all(d["reason"] for d in dropped)
 
 
-def test_gcp_offsets_transfer_one_image_and_refuse_a_hand_blunder(pair):
-    rasters, sensors, dem = inputs(pair)
+def test_gcp_offsets_transfer_one_image_and_refuse_what_they_cannot_check(pair):
+    """Fore-only GCPs are transferred into Aft, checked against where their ground coordinates
+    project with models that agree (here the true ones; in the workflow the first
+    adjustment's); a 4 px hand blunder, a Fore-only GCP whose height is 30 m off, and one
+    without a height are refused, each with its reason."""
+    rasters, _, dem = inputs(pair)
+    sensors = pair.truth_sensors()
     hand, exact = _hand_measured(pair, 0.3, seed=1)
-    first, second = sorted(set(hand["id"].tolist()))[:2]
-    # the first measured in Fore only (transfer), the second 4 px off in Aft (blunder)
-    keep = ~((hand["id"] == first) & (hand["image"] == "aft"))
-    hand = {k: v[keep] for k, v in hand.items()}
+    first, second, third, fourth = sorted(set(hand["id"].tolist()))[:4]
+    fore_only = np.isin(hand["id"], [first, third, fourth])
+    hand = {k: v[~(fore_only & (hand["image"] == "aft"))] for k, v in hand.items()}
     hand["line"] = np.where(
         (hand["id"] == second) & (hand["image"] == "aft"), hand["line"] + 4.0, hand["line"]
     )
+    hand["h_m"] = np.where(hand["id"] == third, hand["h_m"] + 30.0, hand["h_m"])
+    hand["h_m"] = np.where(hand["id"] == fourth, np.nan, hand["h_m"])
     table, dropped = gcp_offsets(hand, rasters, sensors, dem)
     row = table["id"] == first
     assert row.sum() == 1
     got = np.array([table["d_line"][row][0], table["d_sample"][row][0]])
-    np.testing.assert_allclose(got, exact[(first, "aft")] - exact[(first, "fore")], atol=0.5)
-    assert second not in table["id"]
-    (why,) = [d["reason"] for d in dropped if d["id"] == second]
-    assert "differs from the hand measurements'" in why
+    np.testing.assert_allclose(got, exact[(first, "aft")] - exact[(first, "fore")], atol=0.3)
+    why = {d["id"]: d["reason"] for d in dropped}
+    assert not {second, third, fourth} & set(table["id"])
+    assert "differs from the hand measurements'" in why[second]
+    assert "differs from the GCP's projected" in why[third]
+    assert "do not project into both images" in why[fourth]
     with pytest.raises(InputError, match="unknown option"):
         gcp_offsets(hand, rasters, sensors, dem, templat=9)
 
@@ -108,6 +116,7 @@ def test_gcp_offsets_reach_every_view_of_a_triplet(triplet):
     hand, exact = _hand_measured(triplet, 0.3, seed=2)
     table, _ = gcp_offsets(hand, rasters, triplet.truth_sensors(), dem)
     names = triplet.image_names
+    assert table["id"].size >= 0.9 * 2 * len(set(hand["id"].tolist()))
     assert set(table["image_a"]) == {names[0]}
     assert set(table["image_b"]) == set(names[1:])
     truth = np.array(

@@ -37,7 +37,8 @@ def test_adjust_a_scene_with_one_gcp_and_automatic_tie_points(run_carto, tmp_pat
     assert report["checkpoints_before"]["rmse_planimetric_m"] > 50.0
     assert (out / "residuals.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     # the GCP was matched between Fore and Aft (GCP transfer) and adjusted with its offset
-    assert report["gcp_offsets"]["count"] == 1
+    assert report["gcp_transfer"] == {"requested": "auto", "ran": True}
+    assert report["gcp_offsets"]["count"] == report["gcp_offsets"]["used"] == 1
     assert report["gcp_offsets"]["residual_rms_px"] < 0.5
     assert (
         (out / report["files"]["gcp_offsets"])

@@ -22,6 +22,7 @@ import numpy as np
 
 from carto.framework import __version__
 from carto.framework.errors import CartoError, InputError, PluginError
+from carto.framework.gcp_transfer import GCP_OFFSET_SIGMA_PX
 from carto.framework.plugins import KINDS, ComponentInfo, Registry, get_registry
 
 PROG = "carto"
@@ -468,7 +469,8 @@ def _add_adjust(sub: argparse._SubParsersAction) -> None:
         "--gcp-offset-sigma",
         type=float,
         metavar="PX",
-        help="a-priori sigma of a matched GCP offset, pixels per coordinate (default 0.15)",
+        help="a-priori sigma of a matched GCP offset, pixels per coordinate (default "
+        f"{GCP_OFFSET_SIGMA_PX})",
     )
     p.add_argument("--sensor", metavar="TYPE", help="sensor type of the product")
     p.add_argument("--no-robust", action="store_true", help="no outlier rejection")

@@ -117,8 +117,8 @@ def run_demo(
 
         ties = None
         for label, mode in (
-            ("stagger + tied, 1 GCP transferred", "combined"),
-            ("separate, 1 GCP transferred", "separate"),
+            ("stagger + tied, 1 GCP, matched", "combined"),
+            ("separate, 1 GCP, matched", "separate"),
         ):
             t1 = time.perf_counter()
             rep = adjust_product(

@@ -37,7 +37,8 @@ against 0.36-0.49 px for two hand measurements of 0.3 px (``benchmarks/gcp_trans
 real images are noisier."""
 
 BORDER_MATCHING = {"levels": 1, "search": 7}
-"""Matching options of :func:`gcp_offsets`' second try, where the pyramid found nothing."""
+"""Matching options of :func:`gcp_offsets`' second try, where the pyramid found nothing (near
+an image border its coarse windows run out of image; the models agree to a pixel or two)."""
 
 GCP_OFFSET_COLUMNS = ("id", "image_a", "image_b", "d_line", "d_sample", "score", "sigma_px")
 """Columns of :func:`gcp_offsets`' table: position in ``image_b`` minus in ``image_a``."""
@@ -53,6 +54,7 @@ def gcp_offsets(
     agree_px: float = 0.5,
     hand_sigma_px: float = 0.3,
     max_disagreement: float = 3.5,
+    models_agree_px: float = 1.0,
     sigma_px: float = GCP_OFFSET_SIGMA_PX,
     **matching: Any,
 ) -> tuple[dict[str, NDArray], list[dict[str, Any]]]:
@@ -73,14 +75,15 @@ def gcp_offsets(
        ``max_disagreement`` sigmas with the hand measurements' (their ``sigma_px`` column,
        default ``hand_sigma_px``) or, for a GCP measured in ``a`` only, with the offset its
        ground coordinates project to (their ``sigma_h_m`` of height, default 1 m, moving it
-       along the parallax): a larger difference means a wrong match or a wrong measurement,
-       which the offset cannot tell apart.
+       along the parallax, and ``models_agree_px`` for the models' relative error): a larger
+       difference means a wrong match or a wrong measurement, which the offset cannot tell
+       apart.
 
     ``sensors`` must agree to a few pixels (the models of a first adjustment: system-level
     models can be hundreds of metres apart, beyond the chips); the offsets, raw image
-    positions of one ground detail, hold for any model, the a-priori ones included. Near an
-    image border the matching pyramid runs out of image: there the match is tried again at
-    full resolution in a small search (:data:`BORDER_MATCHING`).
+    positions of one ground detail, hold for any model, the a-priori ones included. Where
+    the matching pyramid finds nothing (near an image border it runs out of image), the match
+    is tried again at full resolution in a small search (:data:`BORDER_MATCHING`).
 
     The adjustment takes the offsets as observations
     (:meth:`~carto.framework.adjust.Observations.with_offsets`): the hand measurements then
@@ -131,7 +134,7 @@ def gcp_offsets(
         if im in sensors:
             li, sa = float(gcps["line"][k]), float(gcps["sample"][k])
             hand.setdefault(str(gid), {})[str(im)] = (li, sa, float(hand_sigma[k]))
-        if "h_m" in gcps:
+        if "h_m" in gcps and str(gid) not in ground:  # the first row, as the adjustment
             ground[str(gid)] = (
                 float(gcps["lon_deg"][k]),
                 float(gcps["lat_deg"][k]),
@@ -161,9 +164,10 @@ def gcp_offsets(
         if not (np.isfinite(lon[0]) and np.isfinite(lat[0])):
             return None
         row, col = grid.rowcol(lon, lat)
-        # near an image border the pyramid's coarse windows run out of image: then once more
-        # at full resolution in a small search (the models agree to a pixel or two)
-        for attempt in (options, options | BORDER_MATCHING):
+        # where the pyramid finds nothing (near an image border its coarse windows run out of
+        # image): once more at full resolution in a small search
+        attempts = [options] + ([options | BORDER_MATCHING] if options["levels"] > 1 else [])
+        for attempt in attempts:
             found = tie_points_on_orthos(
                 grid,
                 {ref: chips[ref], other: chips[other]},
@@ -245,11 +249,16 @@ def gcp_offsets(
                     for n in (a, b)
                 }
                 expected = proj[b][0] - proj[a][0]
-                spread = float(np.max(np.abs((proj[b][1] - proj[a][1]) - expected)))
+                along = float(np.max(np.abs((proj[b][1] - proj[a][1]) - expected)))
+                spread = math.hypot(along, models_agree_px)
             else:
-                expected, spread = offset, 0.0
+                drop(b, "no ground coordinates to check the transferred offset against")
+                continue
             off = float(np.max(np.abs(offset - expected)))
             limit = max_disagreement * math.hypot(spread, sigma_px)
+            if not (math.isfinite(off) and math.isfinite(limit)):
+                drop(b, "the GCP's ground coordinates do not project into both images")
+                continue
             if off > limit:
                 source = "hand measurements'" if b in measured else "GCP's projected"
                 drop(b, f"matched offset differs from the {source} by {off:.2f} px (> {limit:.2f})")

@@ -606,8 +606,6 @@ class OrthoMapper:
         the box of its border located at the DEM's lowest and highest heights (a line of sight
         meets the terrain between them), widened by two coarse steps."""
         if self._box is None:
-            import pyproj
-
             lo, hi = self.dem.height_range
             t = np.linspace(0.0, 1.0, 65)
             n_l, n_s = self._n_lines, self._n_samples
@@ -619,13 +617,7 @@ class OrthoMapper:
             ok = np.isfinite(lon) & np.isfinite(lat)
             box = (-math.inf, math.inf, -math.inf, math.inf)
             if ok.any():
-                to_map = pyproj.Transformer.from_crs(
-                    pyproj.CRS.from_epsg(4326), self.grid.crs, always_xy=True
-                )
-                x, y = (np.asarray(v, np.float64) for v in to_map.transform(lon[ok], lat[ok]))
-                inv = ~self.grid.transform
-                col = inv.a * x + inv.c - 0.5
-                row = inv.e * y + inv.f - 0.5
+                row, col = self.grid.rowcol(lon[ok], lat[ok])
                 m = 2.0 * self.coarse_step
                 if np.isfinite(row).all() and np.isfinite(col).all():
                     box = (row.min() - m, row.max() + m, col.min() - m, col.max() + m)

@@ -24,7 +24,7 @@ from carto.framework import frames
 from carto.framework.adjust import AdjustmentResult, Observations
 from carto.framework.documents import read_json, write_json_atomic
 from carto.framework.errors import InputError
-from carto.framework.gcp_transfer import GCP_OFFSET_SIGMA_PX, gcp_offsets
+from carto.framework.gcp_transfer import GCP_OFFSET_COLUMNS, GCP_OFFSET_SIGMA_PX, gcp_offsets
 from carto.framework.linescan import LineScanner
 from carto.framework.plugins import get_registry
 from carto.framework.point_table import read_point_table, write_point_table
@@ -144,7 +144,9 @@ def _progress(message: str, quiet: bool) -> None:
         print(f"carto adjust: {message}", file=sys.stderr, flush=True)
 
 
-RESERVED_OUTPUTS = frozenset({"report", "models", "rpc", "residual_plot", "tie_points"})
+RESERVED_OUTPUTS = frozenset(
+    {"report", "models", "rpc", "residual_plot", "tie_points", "gcp_offsets"}
+)
 """Names an adjuster's products cannot take (the workflow's own outputs)."""
 
 
@@ -182,6 +184,10 @@ def adjust_product(
     src = Path(source)
     out = Path(out_dir)
     options = dict(options or {})
+    gcp_transfer = _auto_flag(options.pop("gcp_transfer", "auto"), "gcp_transfer")
+    offset_sigma_px = float(options.pop("gcp_offset_sigma_px", GCP_OFFSET_SIGMA_PX))
+    if not (math.isfinite(offset_sigma_px) and offset_sigma_px > 0):
+        raise InputError(f"gcp_offset_sigma_px must be > 0, got {offset_sigma_px}")
     checkpoints = None
     dem = None
     rasters: dict[str, Path] = {}
@@ -236,10 +242,6 @@ def adjust_product(
         )
     # GCP transfer: the offset of each hand-measured GCP between images, by matching,
     # carries its stereo parallax at matching precision (see gcp_transfer.gcp_offsets)
-    gcp_transfer = _auto_flag(options.pop("gcp_transfer", "auto"), "gcp_transfer")
-    offset_sigma_px = float(options.pop("gcp_offset_sigma_px", GCP_OFFSET_SIGMA_PX))
-    if not (math.isfinite(offset_sigma_px) and offset_sigma_px > 0):
-        raise InputError(f"gcp_offset_sigma_px must be > 0, got {offset_sigma_px}")
     transfer: dict[str, Any] = {"requested": gcp_transfer, "ran": False}
     if gcp_transfer is False:
         transfer["why_not"] = "turned off"
@@ -279,8 +281,9 @@ def adjust_product(
             transfer["why_not"] = "no GCP could be matched"
         elif offsets is not None:
             transfer["ran"] = True
-            columns = ("id", "image_a", "image_b", "d_line", "d_sample", "sigma_px")
-            obs = obs.with_offsets(*(offsets[c] for c in columns))
+            obs = obs.with_offsets(
+                *(offsets[c] for c in GCP_OFFSET_COLUMNS if c != "score")  # as with_offsets
+            )
             result = component.adjust(sensors, obs, dem=dem, **options)
     # outputs
     out.mkdir(parents=True, exist_ok=True)
@@ -367,8 +370,9 @@ def adjust_product(
             else None,
             "not_kept": dropped_offsets,
         }
-        write_point_table(out / "gcp_offsets.csv", offsets)
-        report["files"]["gcp_offsets"] = "gcp_offsets.csv"
+        if offsets["id"].size:
+            write_point_table(out / "gcp_offsets.csv", offsets)
+            report["files"]["gcp_offsets"] = "gcp_offsets.csv"
     write_json_atomic(out / "report.json", _jsonable(report))
     return report
 
