@@ -22,12 +22,7 @@ from numpy.typing import NDArray
 
 from carto.framework.errors import InputError
 from carto.framework.sensor import Sensor
-from carto.framework.tiepoints import (
-    ground_sampling_m,
-    prepared_image,
-    read_raster,
-    tie_points_on_orthos,
-)
+from carto.framework.tiepoints import block_grid, prepared_raster, tie_points_on_orthos
 
 GCP_OFFSET_SIGMA_PX = 0.15
 """A-priori standard deviation (pixels, per coordinate) of an image offset matched at a GCP.
@@ -95,7 +90,7 @@ def gcp_offsets(
         GCP and image pair), and ``{"id", "image_a", "image_b", "reason"}`` for each pair
         that was tried and not kept.
     """
-    from carto.framework.ortho import OrthoGrid, orthorectify
+    from carto.framework.ortho import orthorectify
 
     options = dict(
         template=15,
@@ -112,9 +107,6 @@ def gcp_offsets(
         raise InputError(f"gcp_offsets: unknown option(s) {', '.join(sorted(unknown))}")
     options.update(matching)
     names = list(sensors)
-    missing = [n for n in names if n not in rasters]
-    if missing:
-        raise InputError(f"GCP transfer: no raster for image(s) {', '.join(missing)}")
     table: dict[str, list] = {c: [] for c in GCP_OFFSET_COLUMNS}
     dropped: list[dict[str, Any]] = []
 
@@ -143,16 +135,12 @@ def gcp_offsets(
             )
     if not hand or len(names) < 2:
         return as_arrays(), dropped
-    h_mid = float(np.nanmedian(dem.heights)) if hasattr(dem, "heights") else 0.0
-    res = max(ground_sampling_m(sensors[n], h_mid) for n in names)
-    full = OrthoGrid.covering([sensors[n] for n in names], dem, res)
+    full = block_grid(rasters, sensors, dem)
     prepared: dict[str, NDArray[np.float32]] = {}
 
     def image(name: str) -> NDArray[np.float32]:
         if name not in prepared:
-            raw = rasters[name]
-            raw = read_raster(Path(raw)) if not isinstance(raw, np.ndarray) else raw
-            prepared[name] = prepared_image(raw, sensors[name], dem)
+            prepared[name] = prepared_raster(rasters[name], sensors[name], dem)
         return prepared[name]
 
     def match(

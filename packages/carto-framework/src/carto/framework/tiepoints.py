@@ -134,22 +134,38 @@ def system_orthos(
         ``(grid, orthos)``: the :class:`~carto.framework.ortho.OrthoGrid` covering all
         footprints, and image name -> float32 ortho (NaN outside the image or the DEM).
     """
-    from carto.framework.ortho import OrthoGrid, orthorectify
+    from carto.framework.ortho import orthorectify
 
-    names = list(sensors)
-    missing = [n for n in names if n not in rasters]
-    if missing:
-        raise InputError(f"tie points: no raster for image(s) {', '.join(missing)}")
-    h_mid = float(np.nanmedian(dem.heights)) if hasattr(dem, "heights") else 0.0
-    res = resolution_m or max(ground_sampling_m(sensors[n], h_mid) for n in names)
-    grid = OrthoGrid.covering([sensors[n] for n in names], dem, res)
-    orthos = {}
-    for name in names:
-        raw = rasters[name]
-        raw = read_raster(Path(raw)) if not isinstance(raw, np.ndarray) else raw
-        image = prepared_image(raw, sensors[name], dem)
-        orthos[name] = orthorectify(image, sensors[name], grid, dem)
+    grid = block_grid(rasters, sensors, dem, resolution_m)
+    orthos = {
+        name: orthorectify(prepared_raster(rasters[name], sensor, dem), sensor, grid, dem)
+        for name, sensor in sensors.items()
+    }
     return grid, orthos
+
+
+def block_grid(
+    rasters: Mapping[str, Path | NDArray],
+    sensors: Mapping[str, Sensor],
+    dem: Any,
+    resolution_m: float | None = None,
+) -> Any:
+    """The ortho grid of :func:`system_orthos` (every image has a raster: checked)."""
+    from carto.framework.ortho import OrthoGrid
+
+    missing = [n for n in sensors if n not in rasters]
+    if missing:
+        raise InputError(f"no raster for image(s) {', '.join(missing)}")
+    h_mid = float(np.nanmedian(dem.heights)) if hasattr(dem, "heights") else 0.0
+    res = resolution_m or max(ground_sampling_m(s, h_mid) for s in sensors.values())
+    return OrthoGrid.covering(list(sensors.values()), dem, res)
+
+
+def prepared_raster(raster: Path | NDArray, sensor: Sensor, dem: Any) -> NDArray[np.float32]:
+    """A raw raster (file or array) read and prepared for orthorectification
+    (:func:`prepared_image`)."""
+    raw = read_raster(Path(raster)) if not isinstance(raster, np.ndarray) else raster
+    return prepared_image(raw, sensor, dem)
 
 
 # ----------------------------------------------------------------------------- candidates
