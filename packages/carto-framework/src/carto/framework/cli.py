@@ -408,6 +408,7 @@ def _add_adjust(sub: argparse._SubParsersAction) -> None:
         epilog=_examples(
             "carto adjust scene1 --gcps 1 --out adj1",
             "carto adjust scene1 --gcps 1 --mode separate --out adj1-separate",
+            "carto adjust scene1 --gcps 1 --no-gcp-transfer --out adj1-hand-only",
             "carto adjust calib-scene --mode calibration --out calib   # many GCPs",
             "carto adjust scene2 --gcps 1 --calibration calib/calibration.json --out adj2",
             "carto adjust pair.json --adjuster rpc-bias --out adj",
