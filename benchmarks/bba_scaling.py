@@ -23,13 +23,13 @@ from pathlib import Path
 import numpy as np
 
 from carto.framework import get_registry
-from carto.framework.adjust import Observations
-from carto.framework.dem import DEM
-from carto.framework.evaluate import checkpoint_accuracy
-from carto.framework.render import locate_pixels
-from carto.framework.scene import Scene
-from carto.framework.simulate import SimulationOptions
-from carto.framework.workflow import select_gcps
+from carto.framework.adjustment.observations import Observations
+from carto.framework.evaluation.checkpoints import checkpoint_accuracy
+from carto.framework.geometry.linescan_raycast import locate_pixels
+from carto.framework.products.scene import Scene
+from carto.framework.raster.dem import DEM
+from carto.framework.simulation.simulate import SimulationOptions
+from carto.framework.workflows.adjust import select_gcps
 
 
 def synthetic_ties(

@@ -37,11 +37,11 @@ from pathlib import Path
 import numpy as np
 
 from carto.framework import get_registry
-from carto.framework.adjust import HEIGHT_OFFSET
-from carto.framework.evaluate import checkpoint_accuracy
-from carto.framework.scene import Scene
-from carto.framework.simulate import SimulationOptions
-from carto.framework.workflow import adjust_product
+from carto.framework.adjustment.observations import HEIGHT_OFFSET
+from carto.framework.evaluation.checkpoints import checkpoint_accuracy
+from carto.framework.products.scene import Scene
+from carto.framework.simulation.simulate import SimulationOptions
+from carto.framework.workflows.adjust import adjust_product
 
 SRTM_OFFSET_SIGMA_M = 4.0
 KEYS = ("rmse_along_m", "rmse_across_m", "rmse_planimetric_m", "rmse_height_m")
@@ -109,7 +109,7 @@ def blunder_case(work: Path, seed: int, terrain: str) -> dict:
     # write a scene copy whose gcps.csv has the blunder (north + 50 m)
     import shutil
 
-    from carto.framework.point_table import write_point_table
+    from carto.framework.files.point_table import write_point_table
 
     copy = work / "blunder-scene"
     if copy.exists():
@@ -138,7 +138,7 @@ def blunder_case(work: Path, seed: int, terrain: str) -> dict:
 
 def ventoux(data: Path, work: Path) -> dict:
     """RPC bias compensation of the Ventoux pair (see the module docstring)."""
-    from carto.framework.sensor import open_sensor
+    from carto.framework.workflows.opening import open_sensor
 
     d = data / "pleiades-ventoux-pair"
 

@@ -36,9 +36,9 @@ import numpy as np
 
 from carto.cartosat1.calibration import AlignmentCalibration
 from carto.framework import get_registry
-from carto.framework.scene import Scene
-from carto.framework.simulate import SimulationOptions
-from carto.framework.workflow import adjust_product
+from carto.framework.products.scene import Scene
+from carto.framework.simulation.simulate import SimulationOptions
+from carto.framework.workflows.adjust import adjust_product
 
 PLATFORM_SEED = 2026
 SIZE = (12000, 1000)

@@ -6,7 +6,7 @@
   (planimetric, height) before and after, predicted sigma, sigma0, the tie points kept, how
   they spread (points per cell of a 3 x 3 grid over the nadir image) and how many of the kept
   image observations are wrong by more than 1 px against the simulator's truth
-  (:func:`carto.framework.tiepoints.tie_point_errors` with the true models and DEM).
+  (:func:`carto.framework.matching.tiepoints.tie_point_errors` with the true models and DEM).
 * ``paintbrush``: 3 adjacent swaths with 2 GCPs, per-swath monoplotting RMSE at the
   checkpoints (the middle swath has no GCP).
 * ``reunion``: the real Pleiades pair (RPC sensors) adjusted as a block (``rpc-bias``) from
@@ -30,12 +30,12 @@ from pathlib import Path
 import numpy as np
 
 from carto.framework import get_registry
-from carto.framework.dem import DEM
-from carto.framework.point_table import read_point_table
-from carto.framework.scene import Scene
-from carto.framework.simulate import SimulationOptions
-from carto.framework.tiepoints import tie_point_errors
-from carto.framework.workflow import adjust_product
+from carto.framework.files.point_table import read_point_table
+from carto.framework.matching.tiepoints import tie_point_errors
+from carto.framework.products.scene import Scene
+from carto.framework.raster.dem import DEM
+from carto.framework.simulation.simulate import SimulationOptions
+from carto.framework.workflows.adjust import adjust_product
 
 
 def _simulate(preset: str, folder: Path, seed: int, terrain: str, size: int) -> Path:

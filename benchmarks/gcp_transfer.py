@@ -2,8 +2,8 @@
 
 A GCP measured by hand in both images of a stereo pair carries the parallax of two
 independent measurements; ``carto adjust`` matches the GCP between the images
-(:func:`carto.framework.gcp_transfer.gcp_offsets`) and adjusts with that offset. This measures
-the matched offsets against the simulator's truth.
+(:func:`carto.framework.matching.gcp_transfer.gcp_offsets`) and adjusts with that offset. This
+measures the matched offsets against the simulator's truth.
 
 Simulated Cartosat-1 pairs (hilly terrain, realistic errors, 1000 x 4000 px, one per seed):
 the 50 checkpoints serve as GCPs measured by hand with 0.3 px noise (the design's GCP image
@@ -28,12 +28,12 @@ from pathlib import Path
 import numpy as np
 
 from carto.framework import get_registry
-from carto.framework.dem import DEM
-from carto.framework.gcp_transfer import gcp_offsets
-from carto.framework.linescan import LineScanner
-from carto.framework.scene import Scene
-from carto.framework.simulate import SimulationOptions
-from carto.framework.workflow import adjust_product
+from carto.framework.geometry.linescan import LineScanner
+from carto.framework.matching.gcp_transfer import gcp_offsets
+from carto.framework.products.scene import Scene
+from carto.framework.raster.dem import DEM
+from carto.framework.simulation.simulate import SimulationOptions
+from carto.framework.workflows.adjust import adjust_product
 
 HAND_SIGMA_PX = 0.3
 

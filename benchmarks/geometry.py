@@ -32,11 +32,11 @@ from rasterio.transform import RPCTransformer
 
 from carto.cartosat1 import constants as c1
 from carto.cartosat2 import constants as c2
-from carto.framework import acquisition
-from carto.framework.camera import Camera
-from carto.framework.linescan import LineScanner, LineTiming
-from carto.framework.rpc import RPCSensor, fit_rpc, read_rpc, write_geotiff_rpc
-from carto.framework.trajectory import Trajectory
+from carto.framework.geometry.camera import Camera
+from carto.framework.geometry.linescan import LineScanner, LineTiming
+from carto.framework.geometry.rpc import RPCSensor, fit_rpc, read_rpc, write_geotiff_rpc
+from carto.framework.geometry.trajectory import Trajectory
+from carto.framework.simulation import acquisition
 
 TARGET = (78.0, 20.0, 500.0)
 EPOCH = "2026-03-01T05:00:00Z"

@@ -34,11 +34,11 @@ from pathlib import Path
 import numpy as np
 
 from carto.framework import get_registry
-from carto.framework.dem import DEM, Geoid
-from carto.framework.dem_workflow import StereoInputs, dem_product
-from carto.framework.evaluate import dem_accuracy
-from carto.framework.simulate import SimulationOptions
-from carto.framework.workflow import adjust_product
+from carto.framework.evaluation.dem_accuracy import dem_accuracy
+from carto.framework.raster.dem import DEM, Geoid
+from carto.framework.simulation.simulate import SimulationOptions
+from carto.framework.workflows.adjust import adjust_product
+from carto.framework.workflows.dem import StereoInputs, dem_product
 
 KEYS = ("count", "median_m", "nmad_m", "rmse_m", "bias_m", "le90_m", "completeness")
 
@@ -52,7 +52,7 @@ def _ortho_error_px(out: Path, truth_ortho: Path) -> dict:
     import rasterio
     from rasterio.warp import Resampling, reproject
 
-    from carto.framework.disparity import dense_offsets
+    from carto.framework.matching.disparity import dense_offsets
 
     with rasterio.open(out / "ortho_left.tif") as ds:
         ours, transform, crs = ds.read(1), ds.transform, ds.crs
@@ -191,7 +191,7 @@ def _roughness(heights: np.ndarray) -> float:
 
 
 def ventoux(data: Path, work: Path) -> dict:
-    from carto.framework.quicklook import hillshade_png
+    from carto.framework.raster.quicklook import hillshade_png
 
     d = data / "pleiades-ventoux-pair"
     out = work / "ventoux-dem"

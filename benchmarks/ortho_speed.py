@@ -4,8 +4,8 @@ For each image size (default 2000 x 2000 and 4000 x 4000 px), a Cartosat-1 Fore 
 (26 deg forward, 2.5 m; the rigorous line-scanner model over an analytic sun-synchronous pass,
 without stagger), a synthetic ``hilly`` DEM (200-800 m, 5 m posting) over its footprint and a
 synthetic raw image (multi-scale texture, uint16) are built; then the image is orthorectified
-onto a 2.5 m UTM grid covering it (:func:`carto.framework.ortho.orthorectify`, cubic, tiles of
-1024 px). Each size runs in its own process so that peak memory figures do not mix.
+onto a 2.5 m UTM grid covering it (:func:`carto.framework.imaging.ortho.orthorectify`, cubic, tiles
+of 1024 px). Each size runs in its own process so that peak memory figures do not mix.
 
 Prints one JSON document, one entry per size:
 
@@ -21,7 +21,7 @@ Prints one JSON document, one entry per size:
 * ``mapping_error_px``: the interpolated mapping against the exact one (lon/lat by pyproj,
   height from the DEM, rigorous ground -> image at every pixel) on ``--sample`` random pixels
   per tile: max, RMS, 99.9th percentile; ``check``: what the mapper's own check found
-  (:class:`carto.framework.ortho.MappingStats`).
+  (:class:`carto.framework.imaging.ortho.MappingStats`).
 
 GDAL comparison (section ``gdal_comparison``, run by default; ``--no-gdal`` skips it)
     The same image, RPC, DEM file and output grid orthorectified by :func:`orthorectify` and
@@ -121,10 +121,10 @@ EXACT_SAMPLE = 200_000
 def fore_sensor(size: int):
     """Cartosat-1 Fore (single array), a ``size x size`` window centred on the target."""
     from carto.cartosat1 import constants as c1
-    from carto.framework import acquisition
-    from carto.framework.camera import Camera
-    from carto.framework.linescan import LineScanner, LineTiming
-    from carto.framework.trajectory import Trajectory
+    from carto.framework.geometry.camera import Camera
+    from carto.framework.geometry.linescan import LineScanner, LineTiming
+    from carto.framework.geometry.trajectory import Trajectory
+    from carto.framework.simulation import acquisition
 
     epoch, _, eph = acquisition.sun_synchronous_pass(
         TARGET[0], TARGET[1], EPOCH, c1.ORBIT_ALTITUDE_M, span_s=(-60, 60)
@@ -149,7 +149,7 @@ def fore_sensor(size: int):
 
 
 def setup(size: int):
-    from carto.framework import terrain
+    from carto.framework.simulation import terrain
 
     sensor = fore_sensor(size)
     n = size
@@ -175,7 +175,7 @@ def setup(size: int):
 
 
 def run_one(size: int, repeat: int, sample: int) -> dict:
-    from carto.framework.ortho import OrthoGrid, OrthoMapper, orthorectify
+    from carto.framework.imaging.ortho import OrthoGrid, OrthoMapper, orthorectify
 
     sensor, dem, raw = setup(size)
     grid = OrthoGrid.covering(sensor, dem, RESOLUTION_M)
@@ -261,7 +261,7 @@ def reunion_dem(sensor, path: Path) -> Path:
     import rasterio
     from affine import Affine
 
-    from carto.framework.dem import DEM
+    from carto.framework.raster.dem import DEM
 
     with rasterio.open(REUNION / "reference_dsm.tif") as ds:
         dsm = ds.read(1).astype(np.float32)
@@ -302,8 +302,8 @@ def gdal_case_inputs(name: str, folder: Path):
     import rasterio
     from rasterio.errors import NotGeoreferencedWarning
 
-    from carto.framework.rpc import write_geotiff_rpc
-    from carto.framework.sensor import open_sensor
+    from carto.framework.geometry.rpc import write_geotiff_rpc
+    from carto.framework.workflows.opening import open_sensor
 
     scale, _res = GDAL_CASES[name]
     image = REUNION / "img_01.tif"
@@ -434,9 +434,9 @@ def run_gdal_case(name: str, repeat: int) -> dict:
     """One case of the GDAL comparison (see the module docstring)."""
     import rasterio
 
-    from carto.framework.dem import DEM
-    from carto.framework.ortho import OrthoGrid, OrthoMapper, orthorectify
-    from carto.framework.sensor import open_sensor
+    from carto.framework.imaging.ortho import OrthoGrid, OrthoMapper, orthorectify
+    from carto.framework.raster.dem import DEM
+    from carto.framework.workflows.opening import open_sensor
 
     scale, resolution = GDAL_CASES[name]
     threads = os.cpu_count() or 1

@@ -28,8 +28,8 @@ from pathlib import Path
 import numpy as np
 import rasterio
 
-from carto.framework.rpc import RPCSensorType
-from carto.framework.sensor import open_sensor
+from carto.framework.geometry.rpc import RPCSensorType
+from carto.framework.workflows.opening import open_sensor
 
 FOLDER = "pleiades-dimap-algeria"
 DIMAP = "PHRDIMAP_P1BP--2018122638935449CP.XML"

@@ -2,7 +2,8 @@
 
 Prints one JSON document. For a simulated Cartosat-2 agile triplet (default 2000 x 2000 px,
 hilly terrain, realistic errors) and a Cartosat-1 Fore/Aft pair, tie points are computed
-with :func:`carto.framework.tiepoints.automatic_tie_points` from the delivered (system-level)
+with :func:`carto.framework.matching.tiepoints.automatic_tie_points` from the delivered
+(system-level)
 models on the scene's SRTM-like ``init_dem.tif``, for several configurations:
 
 * ``forstner``: the default (Forstner candidates, affine least-squares matching);
@@ -10,8 +11,8 @@ models on the scene's SRTM-like ``init_dem.tif``, for several configurations:
 * ``forstner_lsm``: Forstner candidates with translation-only least-squares matching.
 
 Each tie point is checked against independent truth
-(:func:`carto.framework.tiepoints.tie_point_errors` with the true models and DEM: the ground
-point the true reference model sees at the point's reference raw coordinates, projected into
+(:func:`carto.framework.matching.tiepoints.tie_point_errors` with the true models and DEM: the
+ground point the true reference model sees at the point's reference raw coordinates, projected into
 the other images by their true models). Reported per configuration:
 
 * ``points`` / ``observations``: tie points and their non-reference image rows;
@@ -41,11 +42,12 @@ from typing import Any
 import numpy as np
 
 from carto.framework import get_registry
-from carto.framework.dem import DEM
-from carto.framework.match import match_ncc
-from carto.framework.scene import Scene
-from carto.framework.simulate import SimulationOptions
-from carto.framework.tiepoints import automatic_tie_points, system_orthos, tie_point_errors
+from carto.framework.imaging.preparation import system_orthos
+from carto.framework.matching.ncc import match_ncc
+from carto.framework.matching.tiepoints import automatic_tie_points, tie_point_errors
+from carto.framework.products.scene import Scene
+from carto.framework.raster.dem import DEM
+from carto.framework.simulation.simulate import SimulationOptions
 
 CONFIGS: dict[str, dict[str, Any]] = {
     "forstner": {},

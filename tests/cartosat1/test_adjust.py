@@ -9,10 +9,13 @@ import pytest
 
 from carto.cartosat1.adjust import prepare_sensors
 from carto.framework import get_registry
-from carto.framework.adjust import Observations
+from carto.framework.adjustment.observations import Observations
 from carto.framework.errors import InputError
-from carto.framework.evaluate import checkpoint_accuracy, predicted_checkpoint_sigma
-from carto.framework.scene import Scene
+from carto.framework.evaluation.checkpoints import (
+    checkpoint_accuracy,
+    predicted_checkpoint_sigma,
+)
+from carto.framework.products.scene import Scene
 
 
 def _split(table):
@@ -94,8 +97,8 @@ def test_bad_options(setup, adjuster):
 
 def _ideal_ties(scene_dir, n: int, sigma_px: float, seed: int = 0) -> dict:
     """``n`` tie points projected with the true models over the true DEM, with image noise."""
-    from carto.framework.dem import DEM
-    from carto.framework.linescan import LineScanner
+    from carto.framework.geometry.linescan import LineScanner
+    from carto.framework.raster.dem import DEM
 
     truth = {n_: LineScanner.load(scene_dir / f"truth/{n_}.model.json") for n_ in ("fore", "aft")}
     rng = np.random.default_rng(seed)

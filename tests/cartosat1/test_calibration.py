@@ -20,8 +20,8 @@ from carto.cartosat1.calibration import (
     load_calibration,
 )
 from carto.framework.errors import InputError
-from carto.framework.scene import Scene
-from carto.framework.workflow import adjust_product
+from carto.framework.products.scene import Scene
+from carto.framework.workflows.adjust import adjust_product
 
 from ..scenes import simulate
 

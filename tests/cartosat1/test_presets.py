@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from carto.cartosat1 import constants as c
-from carto.framework import frames
-from carto.framework.linescan import LineScanner
+from carto.framework.geometry import frames
+from carto.framework.geometry.linescan import LineScanner
 
 
 @pytest.fixture(scope="module")

@@ -7,9 +7,9 @@ import pytest
 
 from carto.framework import get_registry
 from carto.framework.errors import InputError
-from carto.framework.linescan import LineScanner
-from carto.framework.rpc import RPCSensor, read_rpc, write_geotiff_rpc, write_rpc_txt
-from carto.framework.sensor import open_sensor
+from carto.framework.geometry.linescan import LineScanner
+from carto.framework.geometry.rpc import RPCSensor, read_rpc, write_geotiff_rpc, write_rpc_txt
+from carto.framework.workflows.opening import open_sensor
 
 
 @pytest.fixture(scope="module")

@@ -6,13 +6,13 @@ import numpy as np
 import pytest
 
 from carto.framework import get_registry
-from carto.framework.adjust import Observations
+from carto.framework.adjustment.observations import Observations
 from carto.framework.errors import InputError
-from carto.framework.evaluate import checkpoint_accuracy
-from carto.framework.linescan import LineScanner
-from carto.framework.scene import Scene
-from carto.framework.sensor import open_sensor, open_sensors
-from carto.framework.workflow import select_gcps
+from carto.framework.evaluation.checkpoints import checkpoint_accuracy
+from carto.framework.geometry.linescan import LineScanner
+from carto.framework.products.scene import Scene
+from carto.framework.workflows.adjust import select_gcps
+from carto.framework.workflows.opening import open_sensor, open_sensors
 
 
 def test_each_view_has_its_own_trajectory(cartosat2_triplet_scene):

@@ -4,7 +4,7 @@ independent checkpoints (truth from the simulator)."""
 
 from __future__ import annotations
 
-from carto.framework.workflow import adjust_product
+from carto.framework.workflows.adjust import adjust_product
 from tests.scenes import simulate
 
 

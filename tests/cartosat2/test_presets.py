@@ -9,8 +9,8 @@ import pytest
 
 from carto.cartosat2 import constants as c
 from carto.cartosat2.presets import LINE_PERIOD_S
-from carto.framework import frames
-from carto.framework.linescan import LineScanner
+from carto.framework.geometry import frames
+from carto.framework.geometry.linescan import LineScanner
 
 from ..scenes import simulate
 
@@ -98,9 +98,9 @@ def test_paintbrush_swaths_are_side_by_side_with_overlap(tmp_path):
 
 
 def test_paintbrush_block_pairs_and_per_swath_accuracy(tmp_path):
-    from carto.framework.evaluate import monoplot_accuracy
-    from carto.framework.scene import Scene
-    from carto.framework.tiepoints import overlapping_pairs
+    from carto.framework.evaluation.checkpoints import monoplot_accuracy
+    from carto.framework.matching.tiepoints import overlapping_pairs
+    from carto.framework.products.scene import Scene
 
     scene = Scene.open(
         simulate(

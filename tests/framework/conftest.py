@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from carto.framework.camera import Camera
-from carto.framework.linescan import LineScanner, LineTiming
-from carto.framework.scene import Scene
+from carto.framework.geometry.camera import Camera
+from carto.framework.geometry.linescan import LineScanner, LineTiming
+from carto.framework.products.scene import Scene
 
 from ..scenes import simulate
 from .geometry import cartosat1_camera, make_trajectory

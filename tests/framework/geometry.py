@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from carto.framework import frames
-from carto.framework.camera import Camera
-from carto.framework.trajectory import AttitudeSamples, EphemerisSamples, Trajectory
+from carto.framework.geometry import frames
+from carto.framework.geometry.camera import Camera
+from carto.framework.geometry.trajectory import AttitudeSamples, EphemerisSamples, Trajectory
 
 EPOCH = frames.utc_to_j2000_s("2026-03-01T05:00:00Z")
 

@@ -5,11 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from carto.framework import acquisition, frames
-from carto.framework.camera import Camera
 from carto.framework.errors import GeometryError, InputError
-from carto.framework.linescan import LineScanner
-from carto.framework.trajectory import Trajectory
+from carto.framework.geometry import frames
+from carto.framework.geometry.camera import Camera
+from carto.framework.geometry.linescan import LineScanner
+from carto.framework.geometry.trajectory import Trajectory
+from carto.framework.simulation import acquisition
 
 
 @pytest.fixture(scope="module")

@@ -8,10 +8,11 @@ import attrs
 import numpy as np
 import pytest
 
-from carto.framework.adjust import Observations, adjust_bundle
+from carto.framework.adjustment.bundle import adjust_bundle
+from carto.framework.adjustment.observations import Observations
 from carto.framework.errors import AdjustmentError, InputError
-from carto.framework.evaluate import checkpoint_accuracy
-from carto.framework.scene import Scene
+from carto.framework.evaluation.checkpoints import checkpoint_accuracy
+from carto.framework.products.scene import Scene
 
 
 def _split(table: dict, every: int = 2):
@@ -104,7 +105,7 @@ def test_observation_validation():
 def test_a_common_dem_height_offset_is_estimated_not_absorbed(scene):
     """Tie-point heights from a 'DEM' 8 m too high: as independent constraints they drag the
     block up; with a common offset unknown the offset is estimated and the block stays put."""
-    from carto.framework.adjust import HEIGHT_OFFSET
+    from carto.framework.adjustment.observations import HEIGHT_OFFSET
 
     sensors = scene.sensors()
     ties, check = _split(scene.control("checkpoints"))

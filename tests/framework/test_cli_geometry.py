@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from carto.framework.point_table import read_point_table, write_point_table
+from carto.framework.files.point_table import read_point_table, write_point_table
 
 
 @pytest.fixture

@@ -17,17 +17,18 @@ import pytest
 import rasterio
 from rasterio.transform import Affine
 
-from carto.framework.dem import (
+from carto.framework.arrays import as_float_arrays
+from carto.framework.errors import InputError
+from carto.framework.geometry.sensor import Sensor
+from carto.framework.geometry.surface import dem_surface_locate
+from carto.framework.raster.dem import (
     DEM,
     EGM96,
     ELLIPSOID,
     VERTICAL_TAG,
     Geoid,
-    dem_surface_locate,
     normalise_vertical,
 )
-from carto.framework.errors import InputError
-from carto.framework.sensor import Sensor, as_float_arrays
 
 # a 0.01-degree grid of 60 x 80 pixels whose first pixel corner is at (5.0E, 44.6N)
 GEO_TRANSFORM = Affine(0.01, 0.0, 5.0, 0.0, -0.01, 44.6)

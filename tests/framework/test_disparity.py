@@ -6,8 +6,8 @@ import cv2
 import numpy as np
 import pytest
 
-from carto.framework.disparity import dense_offsets
 from carto.framework.errors import InputError
+from carto.framework.matching.disparity import dense_offsets
 
 
 def _field(rows, cols):

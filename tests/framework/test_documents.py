@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from carto.framework.documents import read_json_document, write_json_atomic
 from carto.framework.errors import InputError
+from carto.framework.files.documents import read_json_document, write_json_atomic
 
 
 def test_versioned_documents_are_checked(tmp_path):

@@ -17,15 +17,15 @@ import pyproj
 import pytest
 from rasterio.transform import Affine
 
-from carto.framework.dem import DEM, Geoid
 from carto.framework.errors import InputError
-from carto.framework.evaluate import (
+from carto.framework.evaluation.dem_accuracy import (
     dem_accuracy,
     dem_difference,
     difference_accuracy,
-    slope_deg,
 )
-from carto.framework.quicklook import difference_png, hillshade, hillshade_png
+from carto.framework.raster.dem import DEM, Geoid
+from carto.framework.raster.dem_measures import slope_deg
+from carto.framework.raster.quicklook import difference_png, hillshade, hillshade_png
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from carto.framework import frames
 from carto.framework.errors import InputError
+from carto.framework.geometry import frames
 
 
 def test_gmst_matches_vallado_example():

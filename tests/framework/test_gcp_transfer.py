@@ -6,10 +6,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from carto.framework.dem import DEM
 from carto.framework.errors import InputError
-from carto.framework.gcp_transfer import GCP_OFFSET_COLUMNS, gcp_offsets
-from carto.framework.scene import Scene
+from carto.framework.matching.gcp_transfer import GCP_OFFSET_COLUMNS, gcp_offsets
+from carto.framework.products.scene import Scene
+from carto.framework.raster.dem import DEM
 
 
 def inputs(scene: Scene) -> tuple[dict, dict, DEM]:
@@ -139,7 +139,7 @@ def test_gcp_offsets_on_a_real_pleiades_pair(shared_data):
     import rasterio
     from scipy import ndimage
 
-    from carto.framework.sensor import open_sensor
+    from carto.framework.workflows.opening import open_sensor
 
     folder = shared_data / "pleiades-reunion-pair"
     names = ("img_01", "img_02")

@@ -14,21 +14,22 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
+from carto.framework.arrays import as_float_arrays
 from carto.framework.errors import GeometryError, InputError
-from carto.framework.frames import (
+from carto.framework.geometry.frames import (
     WGS84_A_M,
     WGS84_B_M,
     ecef_to_geodetic,
     ellipsoid_normal,
     geodetic_to_ecef,
 )
-from carto.framework.intersect import (
+from carto.framework.geometry.intersection import (
     IntersectionResult,
     intersect_rays,
     intersect_sensors,
     sensor_rays,
 )
-from carto.framework.sensor import Sensor, as_float_arrays
+from carto.framework.geometry.sensor import Sensor
 
 
 def _ground_points(rng: np.random.Generator, n: int) -> tuple[np.ndarray, ...]:

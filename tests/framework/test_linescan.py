@@ -7,10 +7,10 @@ import json
 import numpy as np
 import pytest
 
-from carto.framework import frames
-from carto.framework.camera import Camera
 from carto.framework.errors import InputError
-from carto.framework.linescan import LineScanner, LineScannerModelType, LineTiming
+from carto.framework.geometry import frames
+from carto.framework.geometry.camera import Camera
+from carto.framework.geometry.linescan import LineScanner, LineScannerModelType, LineTiming
 
 HEIGHTS = (-100.0, 9000.0)
 
@@ -193,7 +193,7 @@ def test_camera_look_angles_and_stagger():
 def test_locate_on_a_dem_lands_on_the_terrain_and_projects_back(cartosat1_pair):
     from affine import Affine
 
-    from carto.framework.dem import DEM
+    from carto.framework.raster.dem import DEM
 
     s = cartosat1_pair["fore"]
     lon0, lat0 = s.image_to_ground([6000.0], [6000.0], 0.0)
@@ -249,7 +249,7 @@ def test_a_window_is_the_full_image_shifted(cartosat1_pair, tmp_path):
 
 
 def test_polynomial_partials_match_numeric_differences(cartosat1_pair):
-    from carto.framework.sensor import Sensor
+    from carto.framework.geometry.sensor import Sensor
 
     s = cartosat1_pair["fore"]
     s = s.with_trajectory(s.trajectory.with_correction_orders(attitude=2, position=1))

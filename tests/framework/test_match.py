@@ -17,11 +17,10 @@ from scipy import ndimage
 from scipy.spatial import cKDTree
 
 from carto.framework import get_registry
-from carto.framework.dem import DEM
 from carto.framework.errors import InputError
-from carto.framework.match import (
-    Matcher,
-    Matches,
+from carto.framework.imaging.ortho import OrthoGrid, orthorectify
+from carto.framework.matching.base import Matcher, Matches
+from carto.framework.matching.ncc import (
     NCCMatcher,
     coarse_shift,
     forstner_measures,
@@ -34,9 +33,9 @@ from carto.framework.match import (
     pyramid_match,
     spread_order,
 )
-from carto.framework.ortho import OrthoGrid, orthorectify
-from carto.framework.scene import Scene
-from carto.framework.simulate import SimulationOptions, simulate_scene
+from carto.framework.products.scene import Scene
+from carto.framework.raster.dem import DEM
+from carto.framework.simulation.simulate import SimulationOptions, simulate_scene
 
 
 def texture(shape: tuple[int, int], seed: int, wrap: bool = False) -> np.ndarray:

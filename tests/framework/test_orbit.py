@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from carto.framework import frames, orbit
 from carto.framework.errors import InputError
+from carto.framework.geometry import frames, orbit
 
 EPOCH = frames.utc_to_j2000_s("2026-03-01T05:00:00Z")
 

@@ -23,18 +23,18 @@ from rasterio.errors import NotGeoreferencedWarning
 from scipy import ndimage
 
 from carto.framework import get_registry
-from carto.framework.dem import DEM
 from carto.framework.errors import InputError
-from carto.framework.ortho import (
+from carto.framework.geometry.sensor import Sensor
+from carto.framework.imaging.ortho import (
     OrthoGrid,
     OrthoMapper,
     ortho_mapping,
     orthorectify,
     write_ortho,
 )
-from carto.framework.scene import Scene
-from carto.framework.sensor import Sensor
-from carto.framework.simulate import SimulationOptions, simulate_scene
+from carto.framework.products.scene import Scene
+from carto.framework.raster.dem import DEM
+from carto.framework.simulation.simulate import SimulationOptions, simulate_scene
 
 
 def simulate_single_array(out: Path, **options) -> Scene:
@@ -87,7 +87,7 @@ def truth_grid(scene: Scene) -> tuple[OrthoGrid, np.ndarray]:
 
 
 def exact_mapping(sensor: Sensor, grid: OrthoGrid, dem: DEM) -> tuple[np.ndarray, np.ndarray]:
-    """Per-pixel reference, written independently of carto.framework.ortho."""
+    """Per-pixel reference, written independently of carto.framework.imaging.ortho."""
     rows, cols = np.mgrid[0 : grid.shape[0], 0 : grid.shape[1]]
     t = grid.transform
     x = t.c + t.a * (cols + 0.5)
@@ -99,7 +99,8 @@ def exact_mapping(sensor: Sensor, grid: OrthoGrid, dem: DEM) -> tuple[np.ndarray
 
 def lsm_shift(reference: np.ndarray, image: np.ndarray) -> np.ndarray:
     """``d`` (rows, cols) with ``image(x + d) = gain * reference(x) + offset``: least-squares
-    matching (Gauss-Newton, cubic-spline resampling), independent of carto.framework.match."""
+    matching (Gauss-Newton, cubic-spline resampling), independent of
+    carto.framework.matching.ncc."""
     d = np.zeros(2)
     rows, cols = np.mgrid[0 : image.shape[0], 0 : image.shape[1]].astype(float)
     inner = np.zeros(image.shape, bool)

@@ -23,9 +23,9 @@ from affine import Affine
 from rasterio.errors import NotGeoreferencedWarning
 from rasterio.warp import Resampling, reproject
 
-from carto.framework.dem import DEM
-from carto.framework.ortho import OrthoGrid, orthorectify
-from carto.framework.sensor import open_sensor
+from carto.framework.imaging.ortho import OrthoGrid, orthorectify
+from carto.framework.raster.dem import DEM
+from carto.framework.workflows.opening import open_sensor
 
 UTM_40S = "EPSG:32740"
 BORDER_PX = 2

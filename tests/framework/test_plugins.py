@@ -18,8 +18,8 @@ from carto.framework import (
     hookimpl,
     load_registry,
 )
-from carto.framework.match import Matcher, Matches
-from carto.framework.sensor import SensorType
+from carto.framework.geometry.sensor import SensorType
+from carto.framework.matching.base import Matcher, Matches
 
 BROKEN = {
     "broken-import": ("import", "ModuleNotFoundError", "carto_dependency_that_is_not_installed"),
@@ -125,7 +125,7 @@ def test_unknown_component_lists_the_names_that_exist(registry):
 
 
 def test_every_kind_has_a_documented_hook():
-    from carto.framework import hookspecs
+    from carto.framework.plugins import hookspecs
 
     for kind in KINDS.values():
         spec = getattr(hookspecs, kind.hook)

@@ -1,4 +1,5 @@
-"""The RPC sensor (:mod:`carto.framework.rpc`): evaluation, readers, writers, sensor, GDAL parity.
+"""The RPC sensor (:mod:`carto.framework.geometry.rpc`): evaluation, readers, writers, sensor, GDAL
+parity.
 
 GDAL is the reference: rasterio's ``RPCTransformer.rowcol(lon, lat, h, op=np.positive)`` (an
 identity ufunc, so no rounding) returns GDAL's continuous ``(row, col)`` with the centre of the
@@ -21,9 +22,9 @@ import pytest
 import rasterio
 from rasterio.transform import RPCTransformer
 
-from carto.framework import rpc as rpc_mod
 from carto.framework.errors import InputError
-from carto.framework.rpc import (
+from carto.framework.geometry import rpc as rpc_mod
+from carto.framework.geometry.rpc import (
     RPC00B_TERMS,
     RPCCoefficients,
     RPCSensor,
@@ -38,7 +39,7 @@ from carto.framework.rpc import (
     write_geotiff_rpc,
     write_rpc_txt,
 )
-from carto.framework.sensor import Sensor
+from carto.framework.geometry.sensor import Sensor
 
 RPC_FILES = "rpc-files"
 VENTOUX = "pleiades-ventoux-pair"

@@ -1,4 +1,5 @@
-"""RPC fitting (:func:`carto.framework.rpc.fit_rpc`): to RPC sensors and to a non-RPC sensor."""
+"""RPC fitting (:func:`carto.framework.geometry.rpc.fit_rpc`): to RPC sensors and to a non-RPC
+sensor."""
 
 from __future__ import annotations
 
@@ -10,9 +11,9 @@ import pytest
 import rasterio
 from numpy.typing import ArrayLike
 
-from carto.framework import frames
 from carto.framework.errors import InputError
-from carto.framework.rpc import (
+from carto.framework.geometry import frames
+from carto.framework.geometry.rpc import (
     FitReport,
     RPCSensor,
     RPCSensorType,
@@ -21,7 +22,7 @@ from carto.framework.rpc import (
     read_rpc,
     write_rpc_txt,
 )
-from carto.framework.sensor import Sensor
+from carto.framework.geometry.sensor import Sensor
 
 
 class StraightPushbroom(Sensor):

@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 import rasterio
 
-from carto.framework.ancillary import read_ancillary
-from carto.framework.dem import DEM
 from carto.framework.errors import InputError
-from carto.framework.linescan import LineScanner
-from carto.framework.point_table import read_point_table
+from carto.framework.files.point_table import read_point_table
+from carto.framework.geometry.linescan import LineScanner
+from carto.framework.products.ancillary import read_ancillary
+from carto.framework.raster.dem import DEM
 
 from ..scenes import simulate
 

@@ -1,4 +1,4 @@
-"""Stagger correction (carto.framework.stagger) against independent truth.
+"""Stagger correction (carto.framework.geometry.stagger) against independent truth.
 
 The truth is the renderer: the same true model, true DEM and ground texture rendered as the
 detectors record it (``stagger=True``: the even array sees the ground earlier) and as an ideal
@@ -18,12 +18,10 @@ import attrs
 import numpy as np
 import pytest
 
-from carto.framework.camera import Camera
-from carto.framework.dem import DEM
 from carto.framework.errors import InputError
-from carto.framework.linescan import LineScanner, LineTiming
-from carto.framework.render import render_reflectance
-from carto.framework.stagger import (
+from carto.framework.geometry.camera import Camera
+from carto.framework.geometry.linescan import LineScanner, LineTiming
+from carto.framework.geometry.stagger import (
     MergedImage,
     StaggerField,
     even_columns,
@@ -34,7 +32,9 @@ from carto.framework.stagger import (
     stagger_offsets,
     stagger_sign,
 )
-from carto.framework.terrain import make_texture
+from carto.framework.raster.dem import DEM
+from carto.framework.simulation.render import render_reflectance
+from carto.framework.simulation.terrain import make_texture
 
 from ..scenes import simulate
 

@@ -1,4 +1,4 @@
-"""Synthetic terrain and ground texture (``carto.framework.terrain``).
+"""Synthetic terrain and ground texture (``carto.framework.simulation.terrain``).
 
 Truth is independent of the code under test: ground distances from pyproj's geodesic on the
 WGS84 ellipsoid, slopes from ``numpy.gradient`` over those distances, flat areas from the raw
@@ -20,9 +20,9 @@ import pyproj
 import pytest
 from rasterio.transform import Affine
 
-from carto.framework.dem import DEM, EGM96
 from carto.framework.errors import InputError
-from carto.framework.terrain import (
+from carto.framework.raster.dem import DEM, EGM96
+from carto.framework.simulation.terrain import (
     TERRAINS,
     TerrainPreset,
     Texture,
@@ -155,7 +155,7 @@ def test_results_are_identical_across_processes():
     """Bit-identical heights and texture in a fresh interpreter (no hidden global state)."""
     code = (
         "import hashlib, sys\n"
-        "from carto.framework.terrain import make_terrain, make_texture\n"
+        "from carto.framework.simulation.terrain import make_terrain, make_texture\n"
         "dem = make_terrain('flat-coastal', (78.0, 20.0, 78.01, 20.01), 10.0, seed=7)\n"
         "tex = make_texture(dem, 2.5, seed=7)\n"
         "print(hashlib.sha256(dem.heights.tobytes()).hexdigest(),"

@@ -14,12 +14,12 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from carto.framework.dem import DEM
 from carto.framework.errors import InputError
-from carto.framework.match import Matcher, global_shift, grid_points
-from carto.framework.ortho import orthorectify
-from carto.framework.scene import Scene
-from carto.framework.tiepoints import (
+from carto.framework.imaging.ortho import orthorectify
+from carto.framework.imaging.preparation import prepared_image, system_orthos
+from carto.framework.matching.base import Matcher
+from carto.framework.matching.ncc import global_shift, grid_points
+from carto.framework.matching.tiepoints import (
     TABLE_COLUMNS,
     OrthoTiePointMatcher,
     automatic_tie_points,
@@ -27,11 +27,11 @@ from carto.framework.tiepoints import (
     inconsistent_points,
     match_views,
     ortho_parallax,
-    prepared_image,
-    read_raster,
-    system_orthos,
     tie_point_errors,
 )
+from carto.framework.products.scene import Scene
+from carto.framework.raster.dem import DEM
+from carto.framework.raster.images import read_raster
 
 
 def inputs(scene: Scene) -> tuple[dict, dict, DEM]:

@@ -5,13 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from carto.framework import frames
 from carto.framework.errors import InputError
-from carto.framework.trajectory import (
-    AttitudeSamples,
-    EphemerisSamples,
-    Trajectory,
-)
+from carto.framework.geometry import frames
+from carto.framework.geometry.trajectory import AttitudeSamples, EphemerisSamples, Trajectory
 
 from .geometry import EPOCH, circular_orbit, make_trajectory
 

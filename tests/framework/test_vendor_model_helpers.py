@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 from numpy.polynomial import polynomial as npoly
 
-from carto.framework import frames
-from carto.framework.camera import Camera
 from carto.framework.errors import InputError
-from carto.framework.linescan import LineScanner, LineTiming
-from carto.framework.trajectory import AttitudeSamples, EphemerisSamples, Trajectory
+from carto.framework.geometry import frames
+from carto.framework.geometry.camera import Camera
+from carto.framework.geometry.linescan import LineScanner, LineTiming
+from carto.framework.geometry.trajectory import AttitudeSamples, EphemerisSamples, Trajectory
 
 from .geometry import EPOCH, circular_orbit
 

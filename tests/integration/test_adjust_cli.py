@@ -7,8 +7,8 @@ import json
 import numpy as np
 from rasterio.transform import RPCTransformer
 
-from carto.framework.linescan import LineScanner
-from carto.framework.rpc import read_rpc
+from carto.framework.geometry.linescan import LineScanner
+from carto.framework.geometry.rpc import read_rpc
 
 
 def test_adjust_a_scene_with_one_gcp_and_automatic_tie_points(run_carto, tmp_path, cartosat1_scene):
@@ -132,7 +132,7 @@ def test_auto_options_take_auto_or_a_boolean(tmp_path, cartosat1_scene):
     import pytest
 
     from carto.framework.errors import InputError
-    from carto.framework.workflow import adjust_product
+    from carto.framework.workflows.adjust import adjust_product
 
     for option in ("gcp_transfer", "tie_heights"):
         with pytest.raises(InputError, match=f"{option} must be 'auto', true or false, got 0"):

@@ -32,7 +32,7 @@ def test_scene_open_errors(tmp_path):
     import pytest
 
     from carto.framework.errors import InputError
-    from carto.framework.scene import Scene
+    from carto.framework.products.scene import Scene
 
     with pytest.raises(InputError, match="cannot read scene manifest"):
         Scene.open(tmp_path)

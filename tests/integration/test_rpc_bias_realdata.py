@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from carto.framework.workflow import adjust_product
+from carto.framework.workflows.adjust import adjust_product
 
 
 def _config(tmp_path, data, right: str):

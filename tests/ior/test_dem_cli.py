@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 import rasterio
 
-from carto.framework.dem import DEM
-from carto.framework.evaluate import dem_accuracy
+from carto.framework.evaluation.dem_accuracy import dem_accuracy
+from carto.framework.raster.dem import DEM
 from tests.scenes import simulate
 
 

@@ -5,11 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from carto.framework import frames, get_registry
-from carto.framework.dem import DEM
+from carto.framework import get_registry
 from carto.framework.errors import InputError
-from carto.framework.scene import Scene
-from carto.framework.tiepoints import prepared_image, read_raster
+from carto.framework.geometry import frames
+from carto.framework.imaging.preparation import prepared_image
+from carto.framework.products.scene import Scene
+from carto.framework.raster.dem import DEM
+from carto.framework.raster.images import read_raster
 from carto.ior.refine import (
     IORSettings,
     b_over_h,
@@ -128,7 +130,7 @@ def test_generator_is_registered_and_checks_its_options(hilly):
 def test_tiles_on_dask_threads_give_the_dem_of_one_tile(hilly):
     """The work of an iteration is split into tiles (with overlap) that a scheduler may run
     anywhere: small tiles on dask threads agree with one big tile."""
-    from carto.framework.dem_workflow import tile_scheduler
+    from carto.framework.workflows.dem import tile_scheduler
 
     truth = hilly.truth_sensors()
     init = DEM.open(hilly.path("init_dem.tif"))

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from carto.framework.point_table import read_point_table, write_point_table
+from carto.framework.files.point_table import read_point_table, write_point_table
 
 from .conftest import DAMAGES, damaged_copy
 

@@ -10,9 +10,9 @@ import pytest
 
 import carto.pleiades
 from carto.framework import get_registry
-from carto.framework.linescan import LineScanner
-from carto.framework.rpc import RPCSensor
-from carto.framework.sensor import open_sensor
+from carto.framework.geometry.linescan import LineScanner
+from carto.framework.geometry.rpc import RPCSensor
+from carto.framework.workflows.opening import open_sensor
 from carto.pleiades.sensor import PleiadesDimapType
 
 PACKAGE = Path(carto.pleiades.__file__).parent

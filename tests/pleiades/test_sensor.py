@@ -9,9 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from carto.framework import frames
-from carto.framework.linescan import LineScanner
-from carto.framework.rpc import RPCSensorType
+from carto.framework.geometry import frames
+from carto.framework.geometry.linescan import LineScanner
+from carto.framework.geometry.rpc import RPCSensorType
 from carto.pleiades.dimap import read_dimap
 
 pytestmark = pytest.mark.realdata

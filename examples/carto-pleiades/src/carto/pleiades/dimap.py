@@ -49,8 +49,8 @@ import attrs
 import numpy as np
 from numpy.typing import NDArray
 
-from carto.framework import frames
 from carto.framework.errors import InputError
+from carto.framework.geometry import frames
 
 FloatArray = NDArray[np.float64]
 
@@ -87,7 +87,7 @@ class DimapSensorModel:
         n_rows, n_cols: image size (``Raster_Dimensions``).
         start_utc: ``UTC_Sensor_Model_Range/START`` as written: the time of row 1.
         epoch_j2000_s: the same instant in seconds since J2000 (UTC, as
-            :func:`carto.framework.frames.utc_to_j2000_s`).
+            :func:`carto.framework.geometry.frames.utc_to_j2000_s`).
         end_dt_s: ``END`` in seconds after ``START``.
         line_period_s: seconds per row.
         ephemeris_dt_s: ephemeris times, seconds after ``START``, shape ``(N,)``.

@@ -34,12 +34,12 @@ from pathlib import Path
 
 import numpy as np
 
-from carto.framework.camera import Camera
 from carto.framework.errors import InputError
-from carto.framework.linescan import TABLE_MARGIN_LINES, LineScanner, LineTiming
-from carto.framework.rpc import RPCSensorType
-from carto.framework.sensor import SensorType
-from carto.framework.trajectory import AttitudeSamples, EphemerisSamples, Trajectory
+from carto.framework.geometry.camera import Camera
+from carto.framework.geometry.linescan import TABLE_MARGIN_LINES, LineScanner, LineTiming
+from carto.framework.geometry.rpc import RPCSensorType
+from carto.framework.geometry.sensor import SensorType
+from carto.framework.geometry.trajectory import AttitudeSamples, EphemerisSamples, Trajectory
 from carto.pleiades.dimap import (
     EPHEMERIS_LAGRANGE_POINTS,
     DimapSensorModel,

@@ -42,17 +42,13 @@ import attrs
 
 from carto.cartosat1 import constants
 from carto.cartosat1.calibration import AlignmentCalibration, load_calibration
-from carto.framework.adjust import (
-    Adjuster,
-    AdjustmentResult,
-    AncillaryPrior,
-    Observations,
-    adjust_bundle,
-    line_scanner_corrections,
-)
+from carto.framework.adjustment.base import Adjuster, AdjustmentResult
+from carto.framework.adjustment.bundle import adjust_bundle
+from carto.framework.adjustment.observations import Observations
+from carto.framework.adjustment.priors import AncillaryPrior, line_scanner_corrections
 from carto.framework.errors import InputError
-from carto.framework.linescan import LineScanner
-from carto.framework.sensor import Sensor
+from carto.framework.geometry.linescan import LineScanner
+from carto.framework.geometry.sensor import Sensor
 
 MODES = ("combined", "separate", "calibration")
 

@@ -11,9 +11,9 @@ sigma instead of the a-priori ``RESIDUAL_ALIGNMENT_SIGMA_DEG``.
 The first camera of the calibration run is the reference: its alignment stays nominal and the
 body corrections of every scene absorb its error. The file holds, per other camera, the
 calibrated payload -> body alignment (roll, pitch, yaw in radians, as
-:attr:`carto.framework.camera.Camera.alignment_rpy_rad`) and its a-posteriori sigma relative to
-the reference. What one scene cannot separate is 52 s of its attitude drift (it moves Aft
-against Fore like an alignment error); that part differs from scene to scene while the
+:attr:`carto.framework.geometry.camera.Camera.alignment_rpy_rad`) and its a-posteriori sigma
+relative to the reference. What one scene cannot separate is 52 s of its attitude drift (it moves
+Aft against Fore like an alignment error); that part differs from scene to scene while the
 alignment is the satellite's, so :meth:`AlignmentCalibration.combine` averages several scenes'
 estimates (inverse-variance weights), says how well they agree and widens the sigma when they
 scatter more than it says.
@@ -30,11 +30,11 @@ from typing import Any
 import attrs
 import numpy as np
 
-from carto.framework.adjust import AdjustmentResult
-from carto.framework.documents import read_json_document, write_json_atomic
+from carto.framework.adjustment.base import AdjustmentResult
 from carto.framework.errors import InputError
-from carto.framework.linescan import LineScanner
-from carto.framework.sensor import Sensor
+from carto.framework.files.documents import read_json_document, write_json_atomic
+from carto.framework.geometry.linescan import LineScanner
+from carto.framework.geometry.sensor import Sensor
 
 CALIBRATION_FORMAT = "carto-camera-alignment-calibration"
 CALIBRATION_VERSION = 1

@@ -12,9 +12,9 @@ from carto.cartosat1.adjust import Cartosat1Adjuster
 from carto.cartosat1.presets import Cartosat1PairPreset
 from carto.cartosat1.sensor import Cartosat1SensorType
 from carto.framework import hookimpl
-from carto.framework.adjust import Adjuster
-from carto.framework.scene import ScenePreset
-from carto.framework.sensor import SensorType
+from carto.framework.adjustment.base import Adjuster
+from carto.framework.geometry.sensor import SensorType
+from carto.framework.simulation.preset import ScenePreset
 
 
 @hookimpl

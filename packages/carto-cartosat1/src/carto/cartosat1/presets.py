@@ -8,10 +8,15 @@ yaw-steered with zero roll and pitch; Fore (+26 deg) and Aft (-5 deg) image the 
 from __future__ import annotations
 
 from carto.cartosat1 import constants as c
-from carto.framework import acquisition
-from carto.framework.ancillary import CameraSpec
-from carto.framework.scene import ScenePreset
-from carto.framework.simulate import ScenePlan, SegmentPlan, SimulationOptions, ViewPlan
+from carto.framework.products.ancillary import CameraSpec
+from carto.framework.simulation import acquisition
+from carto.framework.simulation.preset import ScenePreset
+from carto.framework.simulation.simulate import (
+    ScenePlan,
+    SegmentPlan,
+    SimulationOptions,
+    ViewPlan,
+)
 
 DEFAULT_TARGET = (77.95, 30.30)
 """Near Dehradun, India: hilly terrain as in the paper's test sites."""

@@ -21,9 +21,9 @@ from pathlib import Path
 from typing import Any
 
 from carto.framework.errors import InputError
-from carto.framework.rpc import RPCSensor, read_rpc_txt
-from carto.framework.scene import Scene
-from carto.framework.sensor import Sensor, SensorType
+from carto.framework.geometry.rpc import RPCSensor, read_rpc_txt
+from carto.framework.geometry.sensor import Sensor, SensorType
+from carto.framework.products.scene import Scene
 
 _BAND = re.compile(r"(^band[af]|[_-][af])$", re.IGNORECASE)
 PLATFORM_PREFIX = "Cartosat-1"

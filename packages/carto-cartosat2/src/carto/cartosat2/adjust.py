@@ -5,7 +5,7 @@ together (Radhadevi et al. 2010, eq. 5-6): the unknowns are per-image correction
 imaging-event parameters (attitude polynomials of order 0-3 in normalised time, optionally a
 position bias) and the ground coordinates of every tie point; GCPs and the a-priori values of
 the parameters are weighted observations. The shared engine
-(:func:`carto.framework.adjust.adjust_bundle`) eliminates the 3 x 3 point blocks (Schur
+(:func:`carto.framework.adjustment.bundle.adjust_bundle`) eliminates the 3 x 3 point blocks (Schur
 complement), so the cost grows linearly with the number of tie points.
 
 The default attitude order is 2 (bias, drift and a quadratic term per image): the step-and-stare
@@ -20,16 +20,12 @@ from collections.abc import Mapping
 from typing import Any
 
 from carto.cartosat2 import constants
-from carto.framework.adjust import (
-    Adjuster,
-    AdjustmentResult,
-    AncillaryPrior,
-    Observations,
-    adjust_bundle,
-    line_scanner_corrections,
-)
-from carto.framework.linescan import LineScanner
-from carto.framework.sensor import Sensor
+from carto.framework.adjustment.base import Adjuster, AdjustmentResult
+from carto.framework.adjustment.bundle import adjust_bundle
+from carto.framework.adjustment.observations import Observations
+from carto.framework.adjustment.priors import AncillaryPrior, line_scanner_corrections
+from carto.framework.geometry.linescan import LineScanner
+from carto.framework.geometry.sensor import Sensor
 
 PRIOR = AncillaryPrior.from_degrees(
     constants.ATTITUDE_BIAS_SIGMA_DEG,

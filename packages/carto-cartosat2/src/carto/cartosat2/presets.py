@@ -13,10 +13,16 @@ from __future__ import annotations
 import numpy as np
 
 from carto.cartosat2 import constants as c
-from carto.framework import acquisition, frames, orbit
-from carto.framework.ancillary import CameraSpec
-from carto.framework.scene import ScenePreset
-from carto.framework.simulate import ScenePlan, SegmentPlan, SimulationOptions, ViewPlan
+from carto.framework.geometry import frames, orbit
+from carto.framework.products.ancillary import CameraSpec
+from carto.framework.simulation import acquisition
+from carto.framework.simulation.preset import ScenePreset
+from carto.framework.simulation.simulate import (
+    ScenePlan,
+    SegmentPlan,
+    SimulationOptions,
+    ViewPlan,
+)
 
 DEFAULT_TARGET = (77.95, 30.30)
 DEFAULT_DATE = "2026-03-01"

@@ -13,8 +13,8 @@ from pathlib import Path
 from typing import Any
 
 from carto.framework.errors import InputError
-from carto.framework.scene import Scene
-from carto.framework.sensor import Sensor, SensorType
+from carto.framework.geometry.sensor import Sensor, SensorType
+from carto.framework.products.scene import Scene
 
 PLATFORM_PREFIX = "Cartosat-2"
 

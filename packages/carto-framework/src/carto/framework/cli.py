@@ -22,8 +22,8 @@ import numpy as np
 
 from carto.framework import __version__
 from carto.framework.errors import CartoError, InputError, PluginError
-from carto.framework.gcp_transfer import GCP_OFFSET_SIGMA_PX
-from carto.framework.plugins import KINDS, ComponentInfo, Registry, get_registry
+from carto.framework.matching.gcp_transfer import GCP_OFFSET_SIGMA_PX
+from carto.framework.plugins.registry import KINDS, ComponentInfo, Registry, get_registry
 
 PROG = "carto"
 
@@ -137,8 +137,8 @@ def _transform_points(
     args: argparse.Namespace, inputs: tuple[str, str, str], outputs: tuple[str, str], forward: bool
 ) -> int:
     """Read a point table, project or locate it with the model, write it with new columns."""
-    from carto.framework.point_table import read_point_table, write_point_table
-    from carto.framework.sensor import open_sensor
+    from carto.framework.files.point_table import read_point_table, write_point_table
+    from carto.framework.workflows.opening import open_sensor
 
     sensor = open_sensor(args.model, args.sensor)
     source = args.ground if forward else args.image
@@ -226,7 +226,7 @@ def _add_project_locate(sub: argparse._SubParsersAction) -> None:
 
 # --------------------------------------------------------------------------- simulate
 def cmd_simulate(args: argparse.Namespace) -> int:
-    from carto.framework.simulate import SimulationOptions
+    from carto.framework.simulation.simulate import SimulationOptions
 
     preset = get_registry().get("scene-preset", args.preset)
     if args.terrain and args.dem:
@@ -339,7 +339,7 @@ def _add_simulate(sub: argparse._SubParsersAction) -> None:
 
 # --------------------------------------------------------------------------- adjust
 def cmd_adjust(args: argparse.Namespace) -> int:
-    from carto.framework.workflow import adjust_product
+    from carto.framework.workflows.adjust import adjust_product
 
     options: dict[str, object] = {}
     if args.mode:
@@ -481,7 +481,7 @@ def _add_adjust(sub: argparse._SubParsersAction) -> None:
 
 # --------------------------------------------------------------------------- demo
 def cmd_demo(args: argparse.Namespace) -> int:
-    from carto.framework.demo import format_dem_table, format_table, run_demo
+    from carto.framework.workflows.demo import format_dem_table, format_table, run_demo
 
     report = run_demo(
         args.out,
@@ -534,7 +534,8 @@ def _fmt_m(value: float | None, signed: bool = False) -> str:
 
 
 def _accuracy_summary(report: dict[str, Any]) -> str:
-    """The readable summary of a :func:`~carto.framework.evaluate.dem_accuracy` report."""
+    """The readable summary of a :func:`~carto.framework.evaluation.dem_accuracy.dem_accuracy`
+    report."""
     completeness = report["completeness"]
     lines = [
         f"DEM {report['dem']} vs reference {report['reference']} "
@@ -570,9 +571,9 @@ def _accuracy_summary(report: dict[str, Any]) -> str:
 
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
-    from carto.framework.atomic import atomic_output
-    from carto.framework.dem import DEM, Geoid
-    from carto.framework.evaluate import dem_difference, difference_accuracy
+    from carto.framework.evaluation.dem_accuracy import dem_difference, difference_accuracy
+    from carto.framework.files.atomic import atomic_output
+    from carto.framework.raster.dem import DEM, Geoid
 
     dem = DEM.open(args.dem)
     reference = DEM.open(args.reference)
@@ -595,7 +596,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
             raise InputError(f"cannot write report {args.out}: {exc.strerror or exc}") from exc
         outputs.append(f"report {args.out}")
     if args.plot or args.hillshade:
-        from carto.framework.quicklook import difference_png, hillshade_png
+        from carto.framework.raster.quicklook import difference_png, hillshade_png
 
         if args.plot:
             title = f"{Path(dem.name).name} - {Path(reference.name).name}"
@@ -646,7 +647,7 @@ def _add_evaluate(sub: argparse._SubParsersAction) -> None:
 # --------------------------------------------------------------------------- the parser
 # --------------------------------------------------------------------------- dem
 def cmd_dem(args: argparse.Namespace) -> int:
-    from carto.framework.dem_workflow import StereoInputs, dem_product
+    from carto.framework.workflows.dem import StereoInputs, dem_product
 
     options: dict[str, object] = {}
     for key, value in (

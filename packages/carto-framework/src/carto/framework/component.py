@@ -2,9 +2,9 @@
 
 A *component* is one thing a plugin adds to Carto: a sensor type, a trajectory model, an
 adjuster, a matcher, a DEM generator or a simulator scene preset. Each kind has its own abstract
-base class (:class:`carto.framework.sensor.SensorType`, :class:`carto.framework.match.Matcher`
-...) deriving from :class:`Component`; a plugin returns instances of them from the hooks in
-:mod:`carto.framework.hookspecs`.
+base class (:class:`carto.framework.geometry.sensor.SensorType`,
+:class:`carto.framework.matching.base.Matcher` ...) deriving from :class:`Component`; a plugin
+returns instances of them from the hooks in :mod:`carto.framework.plugins.hookspecs`.
 """
 
 from __future__ import annotations

@@ -8,9 +8,10 @@ from typing import Any
 import attrs
 import numpy as np
 
-from carto.framework.dem import DEM, DEMGenerator
+from carto.framework.dem_generation.base import DEMGenerator
 from carto.framework.errors import InputError
-from carto.framework.sensor import Sensor
+from carto.framework.geometry.sensor import Sensor
+from carto.framework.raster.dem import DEM
 from carto.ior.refine import IORResult, IORSettings, refine_dem
 
 _SETTINGS = {f.name for f in attrs.fields(IORSettings)}

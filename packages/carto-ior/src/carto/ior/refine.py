@@ -5,11 +5,11 @@ With exact orientation, the ortho-images of the left and right image made on the
 identical; where the DEM height is wrong by ``e`` they are shifted against each other along
 the stereo base. The loop:
 
-1. orthorectify both images on the current DEM (:func:`carto.framework.ortho.orthorectify`);
-2. match the two ortho-images densely (:func:`carto.framework.disparity.dense_offsets`:
+1. orthorectify both images on the current DEM (:func:`carto.framework.imaging.ortho.orthorectify`);
+2. match the two ortho-images densely (:func:`carto.framework.matching.disparity.dense_offsets`:
    pyramid, left-right check, sub-pixel, score and validity);
 3. turn each mismatch into a height by intersecting the two image rays at the matched points
-   (:func:`carto.framework.intersect.intersect_sensors`), carried back to the DEM node;
+   (:func:`carto.framework.geometry.intersection.intersect_sensors`), carried back to the DEM node;
 4. update the DEM with regularisation: outliers against the local median removed, holes and
    noise handled by a normalised Gaussian convolution of the height changes;
 5. repeat until the median mismatch is below a threshold or a number of iterations is reached.
@@ -46,10 +46,10 @@ import attrs
 import numpy as np
 from numpy.typing import NDArray
 
-from carto.framework.dem import DEM, ELLIPSOID
 from carto.framework.errors import InputError
-from carto.framework.ortho import OrthoGrid, orthorectify
-from carto.framework.sensor import Sensor
+from carto.framework.geometry.sensor import Sensor
+from carto.framework.imaging.ortho import OrthoGrid, orthorectify
+from carto.framework.raster.dem import DEM, ELLIPSOID
 
 FloatArray = NDArray[np.float64]
 
@@ -175,7 +175,7 @@ def _grids(
 ) -> tuple[OrthoGrid, OrthoGrid, int]:
     """DEM grid (posting) and ortho grid (``k`` ortho pixels per node), aligned, covering the
     area both images see."""
-    from carto.framework.tiepoints import ground_sampling_m
+    from carto.framework.imaging.preparation import ground_sampling_m
 
     h_mid = float(np.nanmedian(init_dem.heights))
     res = settings.ortho_res_m or max(ground_sampling_m(s, h_mid) for s in (left, right))
@@ -227,7 +227,7 @@ def base_direction(
     displacement between the two lines of sight per metre of height (``t``: of length
     ``tan theta``), its length and direction. A DEM too high shifts a detail in the right
     ortho-image against the left one along this direction."""
-    from carto.framework import frames
+    from carto.framework.geometry import frames
 
     e_n_u = frames.enu_basis(lon, lat)
     t = []
@@ -294,8 +294,8 @@ def refine_tile(
     ``heights`` is the whole current DEM grid (the tile reads its window plus ``overlap``
     nodes around it); the result covers ``rows, cols`` (DEM node slices) only.
     """
-    from carto.framework.disparity import dense_offsets
-    from carto.framework.intersect import intersect_sensors
+    from carto.framework.geometry.intersection import intersect_sensors
+    from carto.framework.matching.disparity import dense_offsets
 
     n_r, n_c = dem_grid.shape
     r0, r1 = max(0, rows.start - overlap), min(n_r, rows.stop + overlap)

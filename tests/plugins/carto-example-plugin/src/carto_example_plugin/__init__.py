@@ -19,8 +19,9 @@ from pathlib import Path
 import numpy as np
 
 from carto.framework import InputError, hookimpl
-from carto.framework.match import Matcher, Matches
-from carto.framework.sensor import Sensor, SensorType, as_float_arrays
+from carto.framework.arrays import as_float_arrays
+from carto.framework.geometry.sensor import Sensor, SensorType
+from carto.framework.matching.base import Matcher, Matches
 
 FORMAT = "carto-example-affine"
 

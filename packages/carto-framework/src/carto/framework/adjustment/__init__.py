@@ -1,0 +1,2 @@
+"""Adjustment: the adjuster interface, observations, the bundle engine, priors, RPC bias
+compensation."""

@@ -1,0 +1,109 @@
+"""The adjuster component kind and the result every adjuster returns.
+
+An :class:`Adjuster` estimates corrections to sensor parameters from :class:`Observations`
+and returns an :class:`AdjustmentResult` (adjusted sensors, residuals, sigma0, covariance,
+outliers).
+"""
+
+from __future__ import annotations
+
+import abc
+from collections.abc import Mapping
+from typing import Any
+
+import attrs
+import numpy as np
+from numpy.typing import NDArray
+
+from carto.framework.adjustment.observations import Observations
+from carto.framework.component import Component
+from carto.framework.geometry.sensor import Sensor
+
+FloatArray = NDArray[np.float64]
+
+
+@attrs.frozen(eq=False)
+class AdjustmentResult:
+    """The outcome of an adjustment.
+
+    Attributes:
+        sensors: the adjusted sensors (same keys as given).
+        parameters: names of the estimated (free) parameters, in covariance order.
+        values: their estimates; ``sigmas``: their a-posteriori standard deviations
+            (``sigma0 * sqrt(diag(S^-1))``).
+        covariance: a-posteriori covariance of the parameters (``sigma0^2 S^-1``).
+        covariance_unit: ``S^-1`` (covariance for sigma0 = 1).
+        sigma0: a-posteriori standard deviation of unit weight (1 when the a-priori sigmas
+            are right).
+        redundancy: number of observations minus number of unknowns.
+        points: point id -> estimated (lon_deg, lat_deg, h_m).
+        image_residuals: per image measurement ``(point_id, image, d_line, d_sample)``,
+            measured minus computed, pixels (NaN for rejected rows).
+        control_residuals: per GCP ``(id, d_east_m, d_north_m, d_up_m)``, measured minus
+            computed.
+        offset_residuals: per image offset ``(point_id, image_a, image_b, d_line,
+            d_sample)``, measured minus computed, pixels.
+        outliers: ids of points rejected (GCP blunders, wrong tie points).
+        iterations: Gauss-Newton iterations of the final solution; ``converged``: whether
+            the last correction was below the tolerance.
+        history: per iteration: max parameter correction in sigmas, max point move (m),
+            weighted RMS of normalised residuals.
+        products: adjuster-specific JSON documents (name -> document), written beside the
+            adjusted models as ``<name>.json`` (e.g. an in-flight camera calibration).
+    """
+
+    sensors: dict[str, Sensor]
+    parameters: tuple[str, ...]
+    values: FloatArray
+    sigmas: FloatArray
+    covariance: FloatArray
+    covariance_unit: FloatArray
+    sigma0: float
+    redundancy: int
+    points: dict[str, tuple[float, float, float]]
+    image_residuals: dict[str, NDArray]
+    control_residuals: dict[str, NDArray]
+    outliers: tuple[str, ...]
+    iterations: int
+    converged: bool
+    history: tuple[dict[str, float], ...]
+    products: dict[str, Any] = attrs.field(factory=dict)
+    offset_residuals: dict[str, NDArray] = attrs.field(factory=dict)
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-ready summary (for ``report.json``)."""
+        res = self.image_residuals
+        ok = np.isfinite(res["d_line"])
+        rms = (
+            float(np.sqrt(np.mean(res["d_line"][ok] ** 2 + res["d_sample"][ok] ** 2)))
+            if (ok.any())
+            else float("nan")
+        )
+        return {
+            "sigma0": self.sigma0,
+            "redundancy": self.redundancy,
+            "iterations": self.iterations,
+            "converged": self.converged,
+            "outliers": list(self.outliers),
+            "image_residual_rms_px": rms,
+            "parameters": {
+                n: {"value": float(v), "sigma": float(s)}
+                for n, v, s in zip(self.parameters, self.values, self.sigmas, strict=True)
+            },
+        }
+
+
+class Adjuster(Component):
+    """Estimates corrections to sensor parameters from ground control and tie points."""
+
+    @abc.abstractmethod
+    def adjust(
+        self, sensors: Mapping[str, Sensor], observations: Observations, **options: Any
+    ) -> AdjustmentResult:
+        """Adjust ``sensors`` (image name -> sensor) to ``observations``; ``options`` are
+        adjuster specific (modes, correction orders, robust settings).
+
+        ``observations`` may hold every kind :class:`Observations` has, image offsets
+        included (``carto adjust`` adds them for its GCP transfer); an adjuster built on
+        :func:`adjust_bundle` handles them all, one with its own solver must use them or
+        raise :class:`~carto.framework.errors.InputError`, never ignore them."""

@@ -1,0 +1,1 @@
+"""DEM generation: the DEM-generator interface and the product every generator returns."""

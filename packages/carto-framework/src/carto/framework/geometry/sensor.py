@@ -1,0 +1,275 @@
+"""Sensors: the geometric model of one image, and sensor types that open products as sensors.
+
+Conventions (see ``docs/conventions.md``):
+
+* Image coordinates are continuous ``(line, sample)`` in pixels, with the **centre of the first
+  pixel at (0.5, 0.5)** and its outer corner at (0, 0): the convention of GDAL's RPC transformer
+  and of rasterio. ``line`` grows down the image (along track, with time), ``sample`` across.
+* Ground coordinates are geodetic WGS84 longitude and latitude in degrees and height in metres
+  above the WGS84 **ellipsoid**.
+* Every method works on arrays of any shape that broadcast together, and returns arrays of the
+  broadcast shape. Points that cannot be computed (outside the model's domain) come back as NaN.
+"""
+
+from __future__ import annotations
+
+import abc
+import math
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import attrs
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from carto.framework.arrays import as_float_arrays
+from carto.framework.component import Component
+from carto.framework.errors import InputError
+
+FloatArray = NDArray[np.float64]
+
+
+@attrs.frozen
+class Parameter:
+    """One adjustable parameter of a sensor model (after CSM's ``RasterGM`` parameters).
+
+    Attributes:
+        name: unique within the sensor, dotted, e.g. ``"attitude.roll.c1"``.
+        value: current value, in ``units``. Zero is the a-priori value of every correction.
+        sigma: a-priori standard deviation of the value, in ``units``; ``math.inf`` when the
+            parameter has no prior (only observations determine it).
+        units: ``"rad"``, ``"rad/s"``, ``"m"``, ``"px"`` ... (for polynomial coefficients of
+            normalised time the units are those of the quantity: the time is dimensionless).
+        free: True when adjusters estimate it; False to hold it at ``value``.
+        description: one line for reports.
+    """
+
+    name: str
+    value: float = attrs.field(converter=float)
+    sigma: float = attrs.field(converter=float)
+    units: str
+    free: bool = True
+    description: str = ""
+
+    @sigma.validator
+    def _check_sigma(self, _attribute: attrs.Attribute, sigma: float) -> None:
+        if not sigma > 0:
+            raise InputError(f"parameter {self.name}: sigma must be > 0, got {sigma}")
+
+
+def replace_parameters(
+    parameters: Sequence[Parameter],
+    values: Mapping[str, float] | None = None,
+    free: Mapping[str, bool] | None = None,
+    sigmas: Mapping[str, float] | None = None,
+) -> tuple[Parameter, ...]:
+    """``parameters`` with some values, free flags or sigmas replaced (unknown names raise)."""
+    by_name = {p.name: p for p in parameters}
+    for mapping in (values, free, sigmas):
+        unknown = sorted(set(mapping or {}) - set(by_name))
+        if unknown:
+            raise InputError(
+                f"unknown sensor parameter(s) {', '.join(unknown)}; "
+                f"the model has: {', '.join(by_name) or 'none'}"
+            )
+    out = []
+    for p in parameters:
+        changes: dict[str, object] = {}
+        if values and p.name in values:
+            changes["value"] = float(values[p.name])
+        if free and p.name in free:
+            changes["free"] = bool(free[p.name])
+        if sigmas and p.name in sigmas:
+            changes["sigma"] = float(sigmas[p.name])
+        out.append(attrs.evolve(p, **changes) if changes else p)
+    return tuple(out)
+
+
+class Sensor(abc.ABC):
+    """The geometric model of one image: ground <-> image.
+
+    Implementations: the rigorous line scanner and the RPC model in the framework, and any sensor
+    a plugin adds.
+    """
+
+    @property
+    @abc.abstractmethod
+    def image_shape(self) -> tuple[int, int]:
+        """Image size as ``(n_lines, n_samples)``."""
+
+    @abc.abstractmethod
+    def ground_to_image(
+        self, lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike
+    ) -> tuple[FloatArray, FloatArray]:
+        """Project ground points into the image.
+
+        Args:
+            lon_deg, lat_deg: WGS84 geodetic longitude and latitude, degrees.
+            h_m: height above the WGS84 ellipsoid, metres.
+
+        Returns:
+            ``(line, sample)`` in pixels (first pixel centre at 0.5, 0.5); NaN where the point
+            has no image in the model's domain.
+        """
+
+    @abc.abstractmethod
+    def image_to_ground(
+        self, line: ArrayLike, sample: ArrayLike, h_m: ArrayLike
+    ) -> tuple[FloatArray, FloatArray]:
+        """Locate image points on the surface at ellipsoidal height ``h_m``.
+
+        Returns:
+            ``(lon_deg, lat_deg)``; NaN where the location cannot be computed.
+        """
+
+    def project(
+        self, lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike
+    ) -> tuple[FloatArray, FloatArray, NDArray[np.bool_]]:
+        """Ground -> image without clipping to the image: ``(line, sample, inside)``.
+
+        Models that can extrapolate beyond the image (the line scanner, RPCs) return the
+        extrapolated coordinates with ``inside`` False; adjustment and partial derivatives use
+        this, so points near the border keep their derivatives. The default is
+        :meth:`ground_to_image` with ``inside`` where it is finite.
+        """
+        line, sample = self.ground_to_image(lon_deg, lat_deg, h_m)
+        return line, sample, np.isfinite(line) & np.isfinite(sample)
+
+    def locate_on_dem(
+        self, line: ArrayLike, sample: ArrayLike, dem: Any, **options: Any
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Locate image points on a DEM surface: ``(lon_deg, lat_deg, h_m)``.
+
+        ``dem`` is a :class:`carto.framework.raster.dem.DEM` with ellipsoidal heights; the first
+        intersection of each line of sight with the terrain seen from the sensor is returned
+        (NaN where the ray leaves the DEM). ``options`` go to
+        :func:`carto.framework.geometry.surface.dem_surface_locate`.
+        """
+        from carto.framework.geometry.surface import dem_surface_locate
+
+        return dem_surface_locate(self, line, sample, dem, **options)
+
+    # ------------------------------------------------------------------ adjustable parameters
+    @property
+    def parameters(self) -> tuple[Parameter, ...]:
+        """The adjustable parameters, in a fixed order (none by default)."""
+        return ()
+
+    def with_parameters(
+        self,
+        values: Mapping[str, float] | None = None,
+        free: Mapping[str, bool] | None = None,
+        sigmas: Mapping[str, float] | None = None,
+    ) -> Sensor:
+        """A new sensor with some parameter values, free flags or sigmas replaced.
+
+        Sensors are immutable: this never changes ``self``. Unknown names raise
+        :class:`~carto.framework.errors.InputError`. The base implementation supports models
+        without parameters only.
+        """
+        replace_parameters(self.parameters, values, free, sigmas)  # validates names
+        if self.parameters:  # pragma: no cover - subclasses with parameters override this
+            raise NotImplementedError(f"{type(self).__name__} must implement with_parameters")
+        return self
+
+    def parameter_partials(
+        self,
+        lon_deg: ArrayLike,
+        lat_deg: ArrayLike,
+        h_m: ArrayLike,
+        names: Sequence[str] | None = None,
+    ) -> FloatArray:
+        """Partial derivatives of ``(line, sample)`` w.r.t. parameters, shape ``(N, 2, P)``.
+
+        ``names`` defaults to the free parameters. The base implementation takes central
+        differences with a step of ``1e-3`` sigma (or of ``1e-6`` for parameters without a
+        prior); models override it with analytic derivatives where they are cheap.
+        """
+        lon, lat, h = (a.ravel() for a in as_float_arrays(lon_deg, lat_deg, h_m))
+        params = {p.name: p for p in self.parameters}
+        if names is None:
+            names = [p.name for p in self.parameters if p.free]
+        out = np.empty((lon.size, 2, len(names)))
+        for k, name in enumerate(names):
+            p = params[name]
+            step = 1e-3 * p.sigma if math.isfinite(p.sigma) else 1e-6
+            plus = self.with_parameters({name: p.value + step}).project(lon, lat, h)
+            minus = self.with_parameters({name: p.value - step}).project(lon, lat, h)
+            out[:, 0, k] = (plus[0] - minus[0]) / (2 * step)
+            out[:, 1, k] = (plus[1] - minus[1]) / (2 * step)
+        return out
+
+    def ground_partials(self, lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike) -> FloatArray:
+        """Partials of ``(line, sample)`` w.r.t. local ground displacements, ``(N, 2, 3)``.
+
+        The ground displacements are east, north and up in metres at each point (a local
+        tangent frame, well scaled for adjustment). Central differences of 1 m by default.
+        """
+        lon, lat, h = (a.ravel() for a in as_float_arrays(lon_deg, lat_deg, h_m))
+        from carto.framework.geometry.frames import WGS84_A_M, WGS84_E2
+
+        phi = np.radians(lat)
+        w = np.sqrt(1.0 - WGS84_E2 * np.sin(phi) ** 2)
+        m_per_rad_lat = WGS84_A_M * (1 - WGS84_E2) / w**3 + h
+        m_per_rad_lon = (WGS84_A_M / w + h) * np.cos(phi)
+        steps = [
+            (np.degrees(1.0 / m_per_rad_lon), 0.0, 0.0),
+            (0.0, np.degrees(1.0 / m_per_rad_lat), 0.0),
+            (0.0, 0.0, 1.0),
+        ]
+        out = np.empty((lon.size, 2, 3))
+        for k, (dlon, dlat, dh) in enumerate(steps):
+            plus = self.project(lon + dlon, lat + dlat, h + dh)
+            minus = self.project(lon - dlon, lat - dlat, h - dh)
+            out[:, 0, k] = (plus[0] - minus[0]) / 2.0
+            out[:, 1, k] = (plus[1] - minus[1]) / 2.0
+        return out
+
+    def linearize(
+        self,
+        lon_deg: ArrayLike,
+        lat_deg: ArrayLike,
+        h_m: ArrayLike,
+        names: Sequence[str] | None = None,
+    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """Everything an adjustment needs at ground points, in one call:
+        ``(line (N,), sample (N,), ground partials (N, 2, 3), parameter partials (N, 2, P))``
+        (see :meth:`project`, :meth:`ground_partials`, :meth:`parameter_partials`; ``names``
+        defaults to the free parameters). Models override it to share the work between the
+        three (one projection instead of many)."""
+        lon, lat, h = (a.ravel() for a in as_float_arrays(lon_deg, lat_deg, h_m))
+        line, sample, _ = self.project(lon, lat, h)
+        names = [p.name for p in self.parameters if p.free] if names is None else list(names)
+        a_param = (
+            self.parameter_partials(lon, lat, h, names) if names else np.zeros((lon.size, 2, 0))
+        )
+        return line, sample, self.ground_partials(lon, lat, h), a_param
+
+
+class SensorType(Component):
+    """A kind of product that can be opened as a :class:`Sensor` (like a GDAL driver).
+
+    ``identify`` must be cheap and must not raise for foreign files: ``carto project MODEL``
+    asks every registered sensor type in turn which of them can open ``MODEL``; when several
+    can, the one with the highest ``priority`` wins (a specific format over a generic one, e.g.
+    a Cartosat orthokit product over a plain RPC file); a tie is an error that asks for
+    ``--sensor``.
+    """
+
+    priority: int = 0
+
+    @abc.abstractmethod
+    def identify(self, path: Path) -> bool:
+        """Return True if ``path`` looks like a product this sensor type opens."""
+
+    @abc.abstractmethod
+    def open(self, path: Path) -> Sensor:
+        """Open ``path`` as a sensor; raise :class:`carto.framework.errors.InputError` naming
+        the file and field when it is not a valid product of this type."""
+
+    def open_all(self, path: Path) -> dict[str, Sensor]:
+        """Open every image of a product (a stereo pair, a scene folder) as named sensors.
+
+        The default opens ``path`` as one image named after the file."""
+        return {Path(path).stem: self.open(path)}

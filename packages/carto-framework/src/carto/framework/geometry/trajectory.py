@@ -1,0 +1,653 @@
+"""Trajectories: position, velocity and attitude of a platform as functions of time.
+
+A :class:`Trajectory` is built from ephemeris samples (time, position, velocity) and attitude
+samples (time, quaternion) as a product delivers them (every 125 ms for Cartosat), either by a
+least-squares polynomial of order 1, 2 or 3 in normalised time per component (ISRO's practice,
+with the fit residuals reported) or by Lagrange interpolation. Corrections estimated by an
+adjustment are polynomials added on top:
+
+* attitude corrections ``(d_roll, d_pitch, d_yaw)(tau)`` in radians, applied as a rotation in the
+  **orbit frame**: ``R_body_to_orbit' = rpy_to_matrix(d_roll, d_pitch, d_yaw) @ R_body_to_orbit``
+  (so a roll correction always moves the line of sight across track, a pitch correction along
+  track, whatever the pointing);
+* position corrections ``(d_along, d_across, d_radial)(tau)`` in metres along the orbit frame
+  axes ``X_o, Y_o, -Z_o`` (radial is up).
+
+Times: ``dt_s`` is seconds since the trajectory's ``epoch_j2000_s`` (an absolute time in seconds
+since J2000, see :mod:`carto.framework.geometry.frames`). Working relative to an epoch keeps
+float64 time precision at the nanosecond level (absolute J2000 seconds would only resolve 0.1 us, a
+third of a Cartosat line). Normalised time is ``tau = (dt_s - t_mid_s) / t_half_s``, in [-1, 1]
+over the samples.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Literal
+
+import attrs
+import numpy as np
+from numpy.polynomial import polynomial as npoly
+from numpy.typing import ArrayLike, NDArray
+
+from carto.framework.errors import InputError
+from carto.framework.geometry import frames
+from carto.framework.geometry.sensor import Parameter, replace_parameters
+
+FloatArray = NDArray[np.float64]
+
+EphemerisFrame = Literal["eci", "ecef"]
+AttitudeFrame = Literal["orbit", "eci", "ecef"]
+Interpolation = Literal["polynomial", "lagrange"]
+
+_ANGLE_NAMES = ("roll", "pitch", "yaw")
+_POSITION_NAMES = ("along", "across", "radial")
+
+
+def _as_array(value: Any, shape_tail: tuple[int, ...], what: str) -> FloatArray:
+    arr = np.asarray(value, dtype=np.float64)
+    if arr.ndim != 1 + len(shape_tail) or arr.shape[1:] != shape_tail:
+        raise InputError(
+            f"{what}: expected shape (N, {', '.join(map(str, shape_tail))}), got {arr.shape}"
+            if shape_tail
+            else f"{what}: expected shape (N,), got {arr.shape}"
+        )
+    if not np.all(np.isfinite(arr)):
+        raise InputError(f"{what}: contains NaN or infinite values")
+    return arr
+
+
+@attrs.frozen
+class EphemerisSamples:
+    """Position and velocity samples of the platform.
+
+    Attributes:
+        dt_s: sample times, seconds since the epoch, strictly increasing, shape ``(N,)``.
+        position_m: positions, metres, shape ``(N, 3)``, in ``frame``.
+        velocity_m_s: velocities, m/s, shape ``(N, 3)``, in ``frame`` (Earth-fixed velocities
+            for ``"ecef"``, i.e. relative to the rotating Earth).
+        frame: ``"eci"`` (the GMST-rotated inertial frame of
+        :mod:`~carto.framework.geometry.frames`) or
+            ``"ecef"``.
+    """
+
+    dt_s: FloatArray = attrs.field(converter=lambda v: _as_array(v, (), "ephemeris dt_s"))
+    position_m: FloatArray = attrs.field(
+        converter=lambda v: _as_array(v, (3,), "ephemeris position_m")
+    )
+    velocity_m_s: FloatArray = attrs.field(
+        converter=lambda v: _as_array(v, (3,), "ephemeris velocity_m_s")
+    )
+    frame: EphemerisFrame = "eci"
+
+    def __attrs_post_init__(self) -> None:
+        n = self.dt_s.shape[0]
+        if self.position_m.shape[0] != n or self.velocity_m_s.shape[0] != n:
+            raise InputError("ephemeris: dt_s, position_m and velocity_m_s differ in length")
+        if n < 2 or np.any(np.diff(self.dt_s) <= 0):
+            raise InputError("ephemeris: need >= 2 samples with strictly increasing times")
+        if self.frame not in ("eci", "ecef"):
+            raise InputError(f"ephemeris: frame must be 'eci' or 'ecef', got {self.frame!r}")
+
+
+@attrs.frozen
+class AttitudeSamples:
+    """Attitude samples: the rotation from the body frame to ``frame``.
+
+    Attributes:
+        dt_s: sample times, seconds since the epoch, strictly increasing, ``(M,)``.
+        quaternion_wxyz: unit quaternions, scalar first, ``(M, 4)``: body -> ``frame``.
+        frame: ``"orbit"`` (roll/pitch/yaw w.r.t. the local orbital frame, Cartosat),
+            ``"eci"`` or ``"ecef"``.
+    """
+
+    dt_s: FloatArray = attrs.field(converter=lambda v: _as_array(v, (), "attitude dt_s"))
+    quaternion_wxyz: FloatArray = attrs.field(
+        converter=lambda v: _as_array(v, (4,), "attitude quaternion_wxyz")
+    )
+    frame: AttitudeFrame = "orbit"
+
+    def __attrs_post_init__(self) -> None:
+        if self.quaternion_wxyz.shape[0] != self.dt_s.shape[0]:
+            raise InputError("attitude: dt_s and quaternion_wxyz differ in length")
+        if self.dt_s.shape[0] < 2 or np.any(np.diff(self.dt_s) <= 0):
+            raise InputError("attitude: need >= 2 samples with strictly increasing times")
+        if self.frame not in ("orbit", "eci", "ecef"):
+            raise InputError(f"attitude: frame must be orbit, eci or ecef, got {self.frame!r}")
+
+    @classmethod
+    def from_quaternion_polynomials(
+        cls,
+        coeffs_wxyz: ArrayLike,
+        dt_s: ArrayLike,
+        *,
+        dt_ref_s: float,
+        scale_s: float,
+        frame: AttitudeFrame = "ecef",
+    ) -> AttitudeSamples:
+        """Attitude delivered as one polynomial per quaternion component, sampled at ``dt_s``.
+
+        Some products give the attitude not as samples but as polynomials of the four
+        quaternion components in normalised time (Pleiades and SPOT 6/7 DIMAP, for instance):
+        ``q_i(dt) = sum_k coeffs_wxyz[i][k] * tau**k`` with ``tau = (dt - dt_ref_s) / scale_s``.
+        This evaluates them at ``dt_s`` and normalises each quaternion, so that a
+        :class:`Trajectory` interpolates the samples (``interpolation="lagrange"``: 4-point
+        Lagrange on rotation vectors). Sampled a few hundredths of a second apart, the
+        interpolated attitude equals the polynomial one to far below 1e-9 rad for a satellite's
+        smooth motion (tested). Sample the whole time range the sensor model evaluates (a line
+        scanner also projects half an image beyond each end).
+
+        Args:
+            coeffs_wxyz: shape ``(4, K)``: the coefficients of ``w, x, y, z`` (scalar first), in
+                increasing powers of ``tau`` (pad a shorter polynomial with zeros).
+            dt_s: sample times, seconds since the trajectory epoch, strictly increasing.
+            dt_ref_s: time of ``tau = 0``, seconds since the same epoch.
+            scale_s: seconds per unit of ``tau`` (non-zero).
+            frame: the frame the quaternions rotate the body to (``"ecef"``, ``"eci"`` or
+                ``"orbit"``); the rotation is body -> ``frame``, as for the samples.
+
+        Raises:
+            InputError: malformed coefficients or times, a zero or non-finite scale, or a
+                polynomial quaternion of (nearly) zero norm.
+        """
+        c = np.asarray(coeffs_wxyz, dtype=np.float64)
+        if c.ndim != 2 or c.shape[0] != 4 or c.shape[1] < 1 or not np.all(np.isfinite(c)):
+            raise InputError(
+                "attitude polynomials: expected finite coefficients of shape (4, K), "
+                f"got shape {c.shape}"
+            )
+        if not (np.isfinite(scale_s) and scale_s != 0.0 and np.isfinite(dt_ref_s)):
+            raise InputError(
+                f"attitude polynomials: invalid time reference {dt_ref_s!r} s / scale {scale_s!r} s"
+            )
+        t = _as_array(dt_s, (), "attitude dt_s")
+        tau = (t - float(dt_ref_s)) / float(scale_s)
+        q = npoly.polyval(tau, c.T).T  # (N, 4)
+        norm = np.linalg.norm(q, axis=1)
+        if not np.all(norm > 1e-6):
+            raise InputError("attitude polynomials: the quaternion vanishes at some sample time")
+        return cls(t, q / norm[:, None], frame)
+
+
+@attrs.frozen
+class FitReport:
+    """Residuals of a trajectory fit at its samples, per component.
+
+    Attributes:
+        components: component names (``"x_m" ... "vz_m_s", "roll_rad" ...``).
+        rms: RMS residual per component, in its units.
+        max_abs: largest absolute residual per component.
+    """
+
+    components: tuple[str, ...]
+    rms: tuple[float, ...]
+    max_abs: tuple[float, ...]
+
+    def as_dict(self) -> dict[str, dict[str, float]]:
+        return {
+            c: {"rms": r, "max_abs": m}
+            for c, r, m in zip(self.components, self.rms, self.max_abs, strict=True)
+        }
+
+
+# ------------------------------------------------------------------------ interpolators
+@attrs.frozen(eq=False)
+class _Series:
+    """Vector-valued function of time: polynomial in normalised time, or Lagrange."""
+
+    kind: Interpolation
+    t_mid_s: float
+    t_half_s: float
+    coeffs: FloatArray | None = None  # (order+1, C): value = sum_k coeffs[k] * tau**k
+    samples_t: FloatArray | None = None  # (N,)
+    samples_v: FloatArray | None = None  # (N, C)
+    lagrange_points: int = 8
+
+    @classmethod
+    def fit(
+        cls,
+        t: FloatArray,
+        values: FloatArray,
+        kind: Interpolation,
+        order: int,
+        t_mid: float,
+        t_half: float,
+    ) -> _Series:
+        if kind == "polynomial":
+            if order not in (1, 2, 3):
+                raise InputError(f"polynomial order must be 1, 2 or 3, got {order}")
+            tau = (t - t_mid) / t_half
+            coeffs = npoly.polyfit(tau, values, order)
+            return cls("polynomial", t_mid, t_half, coeffs=np.atleast_2d(coeffs))
+        if kind == "lagrange":
+            points = min(order, t.shape[0])
+            return cls(
+                "lagrange", t_mid, t_half, samples_t=t, samples_v=values, lagrange_points=points
+            )
+        raise InputError(f"interpolation must be 'polynomial' or 'lagrange', got {kind!r}")
+
+    def __call__(self, t: FloatArray) -> FloatArray:
+        if self.kind == "polynomial":
+            tau = (t - self.t_mid_s) / self.t_half_s
+            out = np.zeros((*tau.shape, self.coeffs.shape[1]))
+            for k in range(self.coeffs.shape[0] - 1, -1, -1):  # Horner
+                out = out * tau[..., None] + self.coeffs[k]
+            return out
+        return _lagrange(self.samples_t, self.samples_v, t, self.lagrange_points)
+
+    def derivative(self, t: FloatArray) -> FloatArray:
+        """d value / d t (per second)."""
+        if self.kind == "polynomial":
+            tau = (t - self.t_mid_s) / self.t_half_s
+            order = self.coeffs.shape[0] - 1
+            out = np.zeros((*tau.shape, self.coeffs.shape[1]))
+            for k in range(order, 0, -1):
+                out = out * tau[..., None] + k * self.coeffs[k]
+            return out / self.t_half_s
+        h = 1e-3
+        return (self(t + h) - self(t - h)) / (2 * h)
+
+
+def _lagrange(ts: FloatArray, vs: FloatArray, t: FloatArray, points: int) -> FloatArray:
+    """Lagrange interpolation with ``points`` samples centred on each ``t`` (vectorised)."""
+    n = ts.shape[0]
+    points = min(points, n)
+    idx = np.searchsorted(ts, t) - points // 2
+    idx = np.clip(idx, 0, n - points)
+    window = idx[..., None] + np.arange(points)  # (..., P)
+    tw = ts[window]
+    out = np.zeros((*t.shape, vs.shape[1]))
+    for j in range(points):
+        w = np.ones(t.shape)
+        for m in range(points):
+            if m != j:
+                w = w * (t - tw[..., m]) / (tw[..., j] - tw[..., m])
+        out += w[..., None] * vs[window[..., j]]
+    return out
+
+
+# ------------------------------------------------------------------------ the trajectory
+@attrs.frozen(eq=False)
+class Trajectory:
+    """Position and attitude of a platform as continuous functions of time, with corrections.
+
+    Build it with :meth:`from_samples`. Immutable: :meth:`with_parameters` returns a new one.
+
+    Attributes:
+        epoch_j2000_s: absolute time of ``dt_s = 0``, seconds since J2000 (UTC).
+        attitude_frame: the frame the attitude samples refer to.
+        attitude_correction_order, position_correction_order: polynomial order of the
+            corrections (-1 = none), coefficients of normalised time ``tau``.
+        parameters: the correction parameters (see module docstring), prefixed ``prefix``.
+    """
+
+    epoch_j2000_s: float
+    attitude_frame: AttitudeFrame
+    _orbit: _Series  # 6 components: P_eci (m), V_eci (m/s)
+    _angles: _Series  # 3 components: roll, pitch, yaw (orbit frame) or rotvec w.r.t. _r_ref
+    _r_ref: FloatArray  # (3, 3) reference rotation for rotvec attitude
+    t_mid_s: float
+    t_half_s: float
+    parameters: tuple[Parameter, ...]
+    prefix: str
+    attitude_correction_order: int
+    position_correction_order: int
+    fit_report: FitReport | None = None
+    _gmst0_rad: float = attrs.field(init=False)
+    _gmst_rate: float = attrs.field(init=False)
+
+    def __attrs_post_init__(self) -> None:
+        object.__setattr__(self, "_gmst0_rad", float(frames.gmst_rad(self.epoch_j2000_s)))
+        object.__setattr__(self, "_gmst_rate", float(frames.gmst_rate_rad_s(self.epoch_j2000_s)))
+
+    # ---------------------------------------------------------------- construction
+    @classmethod
+    def from_samples(
+        cls,
+        epoch_j2000_s: float,
+        ephemeris: EphemerisSamples,
+        attitude: AttitudeSamples,
+        *,
+        interpolation: Interpolation = "polynomial",
+        order: int = 3,
+        lagrange_points: int = 8,
+        attitude_correction_order: int = 1,
+        position_correction_order: int = 0,
+        prefix: str = "trajectory.",
+        attitude_sigma_rad: tuple[float, ...] = (1e-3, 1e-4, 1e-5, 1e-5),
+        position_sigma_m: tuple[float, ...] = (30.0, 5.0),
+    ) -> Trajectory:
+        """Fit or interpolate the samples.
+
+        Args:
+            epoch_j2000_s: absolute time of ``dt_s = 0`` (seconds since J2000).
+            interpolation: ``"polynomial"`` (least squares, ``order`` 1-3, per component) or
+                ``"lagrange"`` (``lagrange_points`` samples around each time).
+            attitude_correction_order, position_correction_order: orders of the correction
+                polynomials, -1 for none (Cartosat-1: attitude bias + drift = 1).
+            attitude_sigma_rad, position_sigma_m: a-priori sigmas of the correction
+                coefficients by power of ``tau`` (default: ~0.06 deg bias, 30 m position).
+        """
+        if not -1 <= attitude_correction_order <= 3 or not -1 <= position_correction_order <= 3:
+            raise InputError("correction orders must be between -1 (none) and 3")
+        t_all = np.concatenate([ephemeris.dt_s, attitude.dt_s])
+        t_mid = 0.5 * (t_all.min() + t_all.max())
+        t_half = max(0.5 * (t_all.max() - t_all.min()), 1e-3)
+
+        # ephemeris in the inertial frame
+        if ephemeris.frame == "ecef":
+            gmst = (
+                frames.gmst_rad(epoch_j2000_s)
+                + frames.gmst_rate_rad_s(epoch_j2000_s) * ephemeris.dt_s
+            )
+            p_eci, v_eci = _ecef_to_eci_by_angle(gmst, ephemeris.position_m, ephemeris.velocity_m_s)
+        else:
+            p_eci, v_eci = ephemeris.position_m, ephemeris.velocity_m_s
+        orbit_values = np.concatenate([p_eci, v_eci], axis=1)
+        points = order if interpolation == "polynomial" else lagrange_points
+        orbit = _Series.fit(ephemeris.dt_s, orbit_values, interpolation, points, t_mid, t_half)
+
+        # attitude as three angles
+        r_att = frames.quat_to_matrix(attitude.quaternion_wxyz)
+        if attitude.frame == "orbit":
+            r_ref = np.eye(3)
+            angles = np.stack(frames.matrix_to_rpy(r_att), axis=-1)
+        else:
+            r_ref = r_att[attitude.dt_s.shape[0] // 2]
+            angles = frames.matrix_to_rotvec(r_ref.T @ r_att)
+        angles = np.unwrap(angles, axis=0)
+        att_points = min(order, 3) if interpolation == "polynomial" else min(lagrange_points, 4)
+        ang = _Series.fit(attitude.dt_s, angles, interpolation, att_points, t_mid, t_half)
+
+        report = FitReport(
+            ("x_m", "y_m", "z_m", "vx_m_s", "vy_m_s", "vz_m_s", "a1_rad", "a2_rad", "a3_rad"),
+            *_residuals(
+                np.concatenate([orbit(ephemeris.dt_s) - orbit_values], axis=1),
+                ang(attitude.dt_s) - angles,
+            ),
+        )
+        params = _correction_parameters(
+            prefix,
+            attitude_correction_order,
+            position_correction_order,
+            attitude_sigma_rad,
+            position_sigma_m,
+        )
+        return cls(
+            float(epoch_j2000_s),
+            attitude.frame,
+            orbit,
+            ang,
+            r_ref,
+            float(t_mid),
+            float(t_half),
+            tuple(params),
+            prefix,
+            attitude_correction_order,
+            position_correction_order,
+            report,
+        )
+
+    # ---------------------------------------------------------------- parameters
+    def with_parameters(
+        self,
+        values: dict[str, float] | None = None,
+        free: dict[str, bool] | None = None,
+        sigmas: dict[str, float] | None = None,
+    ) -> Trajectory:
+        """A new trajectory with some correction values / free flags / sigmas replaced."""
+        params = replace_parameters(self.parameters, values, free, sigmas)
+        return attrs.evolve(self, parameters=params)
+
+    def with_correction_orders(
+        self, attitude: int | None = None, position: int | None = None
+    ) -> Trajectory:
+        """The trajectory with correction polynomials of other orders (-1: none).
+
+        Coefficients that exist in both keep their value, sigma and free flag; new ones start
+        at zero with the default a-priori sigmas."""
+        att = self.attitude_correction_order if attitude is None else int(attitude)
+        pos = self.position_correction_order if position is None else int(position)
+        if not -1 <= att <= 3 or not -1 <= pos <= 3:
+            raise InputError("correction orders must be between -1 (none) and 3")
+        old = {p.name: p for p in self.parameters}
+        params = tuple(old.get(p.name, p) for p in _correction_parameters(self.prefix, att, pos))
+        return attrs.evolve(
+            self, parameters=params, attitude_correction_order=att, position_correction_order=pos
+        )
+
+    def with_prefix(self, prefix: str) -> Trajectory:
+        """The same trajectory whose parameter names start with ``prefix`` instead (so that
+        sensors sharing it can be given independent corrections)."""
+        n = len(self.prefix)
+        params = tuple(attrs.evolve(p, name=prefix + p.name[n:]) for p in self.parameters)
+        return attrs.evolve(self, parameters=params, prefix=prefix)
+
+    def _correction_coeffs(self, group: str, names: tuple[str, ...], order: int) -> FloatArray:
+        values = {p.name: p.value for p in self.parameters}
+        out = np.zeros((order + 1, 3))
+        for k in range(order + 1):
+            for i, name in enumerate(names):
+                out[k, i] = values[f"{self.prefix}{group}.{name}.c{k}"]
+        return out
+
+    # ---------------------------------------------------------------- evaluation
+    def gmst_rad(self, dt_s: ArrayLike) -> FloatArray:
+        """Sidereal angle at ``dt_s`` (linear from the epoch: exact to 1e-14 rad over hours)."""
+        return self._gmst0_rad + self._gmst_rate * np.asarray(dt_s, float)
+
+    def state_eci(self, dt_s: ArrayLike) -> tuple[FloatArray, FloatArray]:
+        """Uncorrected inertial position (m) and velocity (m/s), each ``(..., 3)``."""
+        values = self._orbit(np.asarray(dt_s, dtype=np.float64))
+        return values[..., :3], values[..., 3:]
+
+    def evaluate(self, dt_s: ArrayLike) -> tuple[FloatArray, FloatArray]:
+        """Corrected ``(P_ecef_m (..., 3), R_body_to_ecef (..., 3, 3))`` at ``dt_s``.
+
+        The rotation chain is ``R_body_to_ecef = R_eci_to_ecef(t) @ R_orbit_to_eci(P, V) @
+        R_correction(t) @ R_body_to_orbit(t)`` (for attitude given in eci/ecef,
+        ``R_body_to_orbit = R_orbit_to_eci^T @ R_body_to_eci``), with the orbit frame of the
+        corrected position ``P``.
+        """
+        p, r, _ = self._evaluate(dt_s, axes=False)
+        return p, r
+
+    def evaluate_with_axes(self, dt_s: ArrayLike) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """:meth:`evaluate` plus the ECEF axes of the attitude corrections, ``(..., 3, 3)``
+        (rows: roll, pitch, yaw): increasing the correction angle of axis ``a`` by ``d``
+        (radians) rotates the body by ``d`` about ``axes[..., a, :]``, so
+        ``dR_body_to_ecef / d angle_a = [axis_a]x @ R_body_to_ecef`` (analytic partials)."""
+        return self._evaluate(dt_s, axes=True)
+
+    def _evaluate(
+        self, dt_s: ArrayLike, axes: bool
+    ) -> tuple[FloatArray, FloatArray, FloatArray | None]:
+        t = np.asarray(dt_s, dtype=np.float64)
+        p_eci, v_eci = self.state_eci(t)
+        tau = (t - self.t_mid_s) / self.t_half_s
+        r_o2i = frames.orbit_to_eci_matrix(p_eci, v_eci)
+        if self.position_correction_order >= 0:
+            c = self._correction_coeffs("position", _POSITION_NAMES, self.position_correction_order)
+            if c.any():
+                d = npoly.polyval(tau, c)  # (3, ...): along, across, radial
+                d_orbit = np.stack([d[0], d[1], -d[2]], axis=-1)  # radial up = -Z_o
+                p_eci = p_eci + np.einsum("...ij,...j->...i", r_o2i, d_orbit)
+                # the orbit frame follows the corrected position (it is defined by it)
+                r_o2i = frames.orbit_to_eci_matrix(p_eci, v_eci)
+        r_i2e = frames.rot_z(-self.gmst_rad(t))
+        r_o2e = r_i2e @ r_o2i
+        a = self._angles(t)
+        if self.attitude_frame == "orbit":
+            r_b2o = frames.rpy_to_matrix(a[..., 0], a[..., 1], a[..., 2])
+        else:
+            r_b2f = self._r_ref @ frames.small_rotation(a[..., 0], a[..., 1], a[..., 2])
+            if self.attitude_frame == "eci":
+                r_b2o = np.swapaxes(r_o2i, -1, -2) @ r_b2f
+            else:
+                r_b2o = np.swapaxes(r_o2e, -1, -2) @ r_b2f
+        d = np.zeros((3, *t.shape))
+        if self.attitude_correction_order >= 0:
+            c = self._correction_coeffs("attitude", _ANGLE_NAMES, self.attitude_correction_order)
+            if c.any():
+                d = npoly.polyval(tau, c)
+                r_b2o = frames.rpy_to_matrix(d[0], d[1], d[2]) @ r_b2o
+        p_ecef = np.einsum("...ij,...j->...i", r_i2e, p_eci)
+        if not axes:
+            return p_ecef, r_o2e @ r_b2o, None
+        # R_correction = Rz(yaw) Ry(pitch) Rx(roll): d/d roll = [Rz Ry e_x]x R, d/d pitch =
+        # [Rz e_y]x R, d/d yaw = [e_z]x R (orbit frame), then into ECEF
+        cp, sp, cy, sy = np.cos(d[1]), np.sin(d[1]), np.cos(d[2]), np.sin(d[2])
+        zero, one = np.zeros_like(cp), np.ones_like(cp)
+        orbit_axes = np.stack(
+            [
+                np.stack([cy * cp, sy * cp, -sp], -1),
+                np.stack([-sy, cy, zero], -1),
+                np.stack([zero, zero, one], -1),
+            ],
+            axis=-2,
+        )
+        return p_ecef, r_o2e @ r_b2o, orbit_axes @ np.swapaxes(r_o2e, -1, -2)
+
+    def position_velocity_ecef(self, dt_s: ArrayLike) -> tuple[FloatArray, FloatArray]:
+        """Uncorrected Earth-fixed position (m) and velocity (m/s, relative to the Earth)."""
+        t = np.asarray(dt_s, dtype=np.float64)
+        p_eci, v_eci = self.state_eci(t)
+        gmst = self.gmst_rad(t)
+        r_i2e = frames.rot_z(-gmst)
+        p = np.einsum("...ij,...j->...i", r_i2e, p_eci)
+        v = np.einsum("...ij,...j->...i", r_i2e, v_eci) - np.cross([0.0, 0.0, self._gmst_rate], p)
+        return p, v
+
+    # ---------------------------------------------------------------- serialisation
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready state (exact: fitted coefficients or samples are stored as they are)."""
+
+        def series(s: _Series) -> dict[str, Any]:
+            d: dict[str, Any] = {"kind": s.kind, "t_mid_s": s.t_mid_s, "t_half_s": s.t_half_s}
+            if s.kind == "polynomial":
+                d["coeffs"] = s.coeffs.tolist()
+            else:
+                d["samples_t"] = s.samples_t.tolist()
+                d["samples_v"] = s.samples_v.tolist()
+                d["lagrange_points"] = s.lagrange_points
+            return d
+
+        return {
+            "epoch_j2000_s": self.epoch_j2000_s,
+            "epoch_utc": frames.j2000_s_to_utc(self.epoch_j2000_s),
+            "attitude_frame": self.attitude_frame,
+            "orbit": series(self._orbit),
+            "angles": series(self._angles),
+            "r_ref": self._r_ref.tolist(),
+            "t_mid_s": self.t_mid_s,
+            "t_half_s": self.t_half_s,
+            "prefix": self.prefix,
+            "attitude_correction_order": self.attitude_correction_order,
+            "position_correction_order": self.position_correction_order,
+            "parameters": [attrs.asdict(p) for p in self.parameters],
+            "fit_report": None
+            if self.fit_report is None
+            else {
+                "components": list(self.fit_report.components),
+                "rms": list(self.fit_report.rms),
+                "max_abs": list(self.fit_report.max_abs),
+            },
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> Trajectory:
+        """Inverse of :meth:`to_dict`; raises :class:`InputError` naming a missing field."""
+        try:
+
+            def series(s: dict[str, Any]) -> _Series:
+                if s["kind"] == "polynomial":
+                    return _Series(
+                        "polynomial",
+                        float(s["t_mid_s"]),
+                        float(s["t_half_s"]),
+                        coeffs=np.asarray(s["coeffs"], float),
+                    )
+                return _Series(
+                    "lagrange",
+                    float(s["t_mid_s"]),
+                    float(s["t_half_s"]),
+                    samples_t=np.asarray(s["samples_t"], float),
+                    samples_v=np.asarray(s["samples_v"], float),
+                    lagrange_points=int(s["lagrange_points"]),
+                )
+
+            fr = d.get("fit_report")
+            return cls(
+                float(d["epoch_j2000_s"]),
+                d["attitude_frame"],
+                series(d["orbit"]),
+                series(d["angles"]),
+                np.asarray(d["r_ref"], float),
+                float(d["t_mid_s"]),
+                float(d["t_half_s"]),
+                tuple(Parameter(**p) for p in d["parameters"]),
+                str(d["prefix"]),
+                int(d["attitude_correction_order"]),
+                int(d["position_correction_order"]),
+                None
+                if fr is None
+                else FitReport(tuple(fr["components"]), tuple(fr["rms"]), tuple(fr["max_abs"])),
+            )
+        except KeyError as exc:
+            raise InputError(f"trajectory: missing field {exc.args[0]!r}") from None
+        except (TypeError, ValueError) as exc:
+            raise InputError(f"trajectory: invalid value: {exc}") from None
+
+
+def _correction_parameters(
+    prefix: str,
+    attitude_order: int,
+    position_order: int,
+    attitude_sigma_rad: tuple[float, ...] = (1e-3, 1e-4, 1e-5, 1e-5),
+    position_sigma_m: tuple[float, ...] = (30.0, 5.0),
+) -> tuple[Parameter, ...]:
+    """The correction parameters of the given orders, zero, with a-priori sigmas by power."""
+    params: list[Parameter] = []
+    for k in range(attitude_order + 1):
+        sigma = attitude_sigma_rad[min(k, len(attitude_sigma_rad) - 1)]
+        for name in _ANGLE_NAMES:
+            params.append(
+                Parameter(
+                    f"{prefix}attitude.{name}.c{k}",
+                    0.0,
+                    sigma,
+                    "rad",
+                    description=f"{name} correction, coefficient of tau^{k} (orbit frame)",
+                )
+            )
+    for k in range(position_order + 1):
+        sigma = position_sigma_m[min(k, len(position_sigma_m) - 1)]
+        for name in _POSITION_NAMES:
+            what = "radial" if name == "radial" else f"{name}-track"
+            params.append(
+                Parameter(
+                    f"{prefix}position.{name}.c{k}",
+                    0.0,
+                    sigma,
+                    "m",
+                    description=f"{what} position correction, coefficient of tau^{k}",
+                )
+            )
+    return tuple(params)
+
+
+def _ecef_to_eci_by_angle(
+    gmst_rad: FloatArray, p_ecef: FloatArray, v_ecef: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    r_e2i = frames.rot_z(gmst_rad)
+    p = np.einsum("...ij,...j->...i", r_e2i, p_ecef)
+    v_abs = v_ecef + np.cross([0.0, 0.0, frames.OMEGA_EARTH_RAD_S], p_ecef)
+    return p, np.einsum("...ij,...j->...i", r_e2i, v_abs)
+
+
+def _residuals(orbit_res: FloatArray, angle_res: FloatArray) -> tuple[tuple[float, ...], ...]:
+    res = [orbit_res[:, i] for i in range(orbit_res.shape[1])] + [
+        angle_res[:, i] for i in range(angle_res.shape[1])
+    ]
+    rms = tuple(float(np.sqrt(np.mean(r**2))) for r in res)
+    mx = tuple(float(np.max(np.abs(r))) for r in res)
+    return rms, mx

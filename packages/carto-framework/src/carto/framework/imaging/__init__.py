@@ -1,0 +1,1 @@
+"""Images on the ground: ortho grids, orthorectification, raw images prepared for matching."""

@@ -1,0 +1,97 @@
+"""Raw images prepared for matching: staggered arrays merged, system-level ortho-images on one
+grid over the DEM, the ground sampling distance of a model.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from carto.framework.errors import InputError
+from carto.framework.geometry.linescan import LineScanner
+from carto.framework.geometry.sensor import Sensor
+from carto.framework.raster.images import read_raster
+
+
+def prepared_image(raw: NDArray, sensor: Sensor, dem: Any) -> NDArray[np.float32]:
+    """The raw image with staggered arrays merged onto the model's geometry (line scanners
+    of a staggered camera); other images as they are."""
+    if (
+        isinstance(sensor, LineScanner)
+        and sensor.camera.stagger_tan
+        and (sensor.camera.array == "odd")
+    ):
+        from carto.framework.geometry.stagger import merge_staggered
+
+        return merge_staggered(raw, sensor, dem, step=8).image
+    return np.asarray(raw, np.float32)
+
+
+def ground_sampling_m(sensor: Sensor, h_m: float = 0.0) -> float:
+    """The ground distance between neighbouring pixels at the image centre (mean of the two
+    directions), metres."""
+    from carto.framework.geometry import frames
+
+    n_l, n_s = sensor.image_shape
+    line = np.array([n_l / 2, n_l / 2 + 1, n_l / 2])
+    sample = np.array([n_s / 2, n_s / 2, n_s / 2 + 1])
+    lon, lat = sensor.image_to_ground(line, sample, h_m)
+    xyz = frames.geodetic_to_ecef(lon, lat, h_m)
+    return float(0.5 * (np.linalg.norm(xyz[1] - xyz[0]) + np.linalg.norm(xyz[2] - xyz[0])))
+
+
+def system_orthos(
+    rasters: Mapping[str, Path | NDArray],
+    sensors: Mapping[str, Sensor],
+    dem: Any,
+    resolution_m: float | None = None,
+) -> tuple[Any, dict[str, NDArray[np.float32]]]:
+    """Every image orthorectified with its (system-level) model on one grid over ``dem``.
+
+    Args:
+        rasters: image name -> raster file or array (raw, as recorded).
+        sensors: image name -> model of that image.
+        dem: DEM with ellipsoidal heights.
+        resolution_m: grid resolution (default: the coarsest image's ground sampling at the
+            DEM's median height).
+
+    Returns:
+        ``(grid, orthos)``: the :class:`~carto.framework.imaging.ortho.OrthoGrid` covering all
+        footprints, and image name -> float32 ortho (NaN outside the image or the DEM).
+    """
+    from carto.framework.imaging.ortho import orthorectify
+
+    grid = block_grid(rasters, sensors, dem, resolution_m)
+    orthos = {
+        name: orthorectify(prepared_raster(rasters[name], sensor, dem), sensor, grid, dem)
+        for name, sensor in sensors.items()
+    }
+    return grid, orthos
+
+
+def block_grid(
+    rasters: Mapping[str, Path | NDArray],
+    sensors: Mapping[str, Sensor],
+    dem: Any,
+    resolution_m: float | None = None,
+) -> Any:
+    """The ortho grid of :func:`system_orthos` (every image has a raster: checked)."""
+    from carto.framework.imaging.ortho import OrthoGrid
+
+    missing = [n for n in sensors if n not in rasters]
+    if missing:
+        raise InputError(f"no raster for image(s) {', '.join(missing)}")
+    h_mid = float(np.nanmedian(dem.heights)) if hasattr(dem, "heights") else 0.0
+    res = resolution_m or max(ground_sampling_m(s, h_mid) for s in sensors.values())
+    return OrthoGrid.covering(list(sensors.values()), dem, res)
+
+
+def prepared_raster(raster: Path | NDArray, sensor: Sensor, dem: Any) -> NDArray[np.float32]:
+    """A raw raster (file or array) read and prepared for orthorectification
+    (:func:`prepared_image`)."""
+    raw = read_raster(Path(raster)) if not isinstance(raster, np.ndarray) else raster
+    return prepared_image(raw, sensor, dem)

@@ -1,0 +1,2 @@
+"""Matching: the matcher interface, NCC/LSM, pyramids, interest points, dense offsets, tie points,
+GCP transfer."""

@@ -1,0 +1,1 @@
+"""Delivered products read as sensors and control: ancillary files, scene folders."""

@@ -1,0 +1,2 @@
+"""Rasters without sensors: DEMs and geoids, image reading, map projections, DEM measures, quick-
+look plots."""

@@ -1,0 +1,629 @@
+"""Digital elevation models: reading, bilinear sampling, geoid conversion, location on a DEM.
+
+Besides the :class:`DEMGenerator` component contract that plugins use to add DEM generators,
+this module holds the DEM that every other part of Carto samples:
+
+* :class:`DEM`: an immutable height grid with its affine transform and CRS (any CRS pyproj
+  knows; geographic WGS84 ``EPSG:4326`` is the common case, UTM the other one), read from a
+  GeoTIFF or an SRTM ``.hgt`` tile, sampled bilinearly at WGS84 longitudes and latitudes.
+* :class:`Geoid`: a geoid undulation grid (a GDAL ``.gtx`` file such as EGM96 15').
+* :func:`dem_surface_locate`: image point -> ground point on the DEM through any sensor.
+
+Conventions
+    * Longitudes and latitudes are WGS84 geodetic degrees; a DEM in another CRS is sampled by
+      converting them to its CRS with pyproj (``always_xy``: x = easting or longitude).
+    * Heights are metres. :attr:`DEM.vertical` says what they are above: ``"ellipsoid"`` (the
+      WGS84 ellipsoid, the Carto convention, what sensors take) or ``"geoid:<NAME>"`` (e.g.
+      ``"geoid:EGM96"`` for SRTM tiles: orthometric heights ``H``). The ellipsoidal height is
+      ``h = H + N`` with ``N`` the geoid undulation (:meth:`DEM.to_ellipsoid`).
+    * Pixel-is-area: the transform maps pixel *corners*; the value of pixel ``(row, col)``
+      stands at its centre ``(col + 0.5, row + 0.5)``. GDAL already shifts the transform of
+      pixel-is-point rasters (SRTM) by half a pixel, so their nodes land on pixel centres.
+    * Bilinear interpolation between the four surrounding pixel centres. Heights are defined on
+      the span of the pixel centres only (no extrapolation over the outer half pixel); outside
+      it, or where any of the four neighbours is nodata, the height is NaN.
+    * Nodata is NaN in memory; files are written as float32 GeoTIFF with NaN nodata and the
+      vertical reference in the tag ``VERTICAL_REFERENCE`` (``"ellipsoid WGS84"`` or
+      ``"geoid EGM96"``...).
+    * Bounds are ``(west, south, east, north)``.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import os
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import attrs
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from carto.framework.arrays import as_float_arrays
+from carto.framework.errors import InputError
+from carto.framework.files.atomic import atomic_output
+
+if TYPE_CHECKING:  # rasterio and pyproj are imported when a DEM is used, not at plugin discovery
+    import pyproj
+    from affine import Affine
+
+FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
+Bounds = tuple[float, float, float, float]
+
+ELLIPSOID = "ellipsoid"
+"""Vertical reference of ellipsoidal heights (WGS84): the Carto convention."""
+EGM96 = "geoid:EGM96"
+"""Vertical reference of EGM96 orthometric heights (SRTM)."""
+VERTICAL_TAG = "VERTICAL_REFERENCE"
+"""GeoTIFF metadata tag holding the vertical reference of a written DEM."""
+
+_EDGE_TOL_PX = 1e-9  # tolerance on "inside the span of pixel centres", in pixels
+
+
+# ----------------------------------------------------------------------------- helpers
+def normalise_vertical(value: str) -> str:
+    """Canonical vertical reference: ``"ellipsoid"`` or ``"geoid:<NAME>"`` (upper-case name).
+
+    Accepts ``"ellipsoid"``, ``"ellipsoid WGS84"``, ``"WGS84"``, ``"geoid:EGM96"``,
+    ``"geoid EGM96"``, ``"EGM96"``, ``"EGM2008"`` (case-insensitive).
+    """
+    words = str(value).replace(":", " ").split()
+    lowered = [w.lower() for w in words]
+    if lowered in (["ellipsoid"], ["ellipsoid", "wgs84"], ["wgs84"]):
+        return ELLIPSOID
+    if len(words) == 2 and lowered[0] == "geoid":
+        return f"geoid:{words[1].upper()}"
+    if len(words) == 1 and lowered[0].startswith("egm"):
+        return f"geoid:{words[0].upper()}"
+    raise InputError(
+        f"vertical reference {value!r} not understood; use 'ellipsoid' (WGS84) or "
+        "'geoid:<NAME>' such as 'geoid:EGM96'"
+    )
+
+
+def _vertical_tag(vertical: str) -> str:
+    return "ellipsoid WGS84" if vertical == ELLIPSOID else vertical.replace(":", " ")
+
+
+def to_affine(value: Any) -> Affine:
+    from rasterio.transform import Affine
+
+    if isinstance(value, Affine):
+        return value
+    coefficients = tuple(float(v) for v in value)
+    if len(coefficients) == 9:
+        coefficients = coefficients[:6]
+    if len(coefficients) != 6:
+        raise InputError(
+            f"DEM transform must be an Affine or its 6 coefficients (a, b, c, d, e, f), "
+            f"got {value!r}"
+        )
+    return Affine(*coefficients)
+
+
+def _to_crs(value: Any) -> pyproj.CRS:
+    import pyproj
+
+    try:
+        return pyproj.CRS.from_user_input(value)
+    except pyproj.exceptions.CRSError as exc:
+        raise InputError(f"crs {value!r} is not a CRS pyproj knows ({_first_line(exc)})") from exc
+
+
+def _to_horizontal_crs(value: Any) -> pyproj.CRS:
+    return _split_crs(_to_crs(value))[0]
+
+
+def _readonly(array: ArrayLike) -> FloatArray:
+    out = np.array(array, dtype=np.float64)  # always a copy
+    out.flags.writeable = False
+    return out
+
+
+def _is_wgs84_lonlat(crs: pyproj.CRS) -> bool:
+    return bool(crs.is_geographic and crs.equals("EPSG:4326", ignore_axis_order=True))
+
+
+@functools.lru_cache(maxsize=32)
+def _transformer(crs_wkt: str, forward: bool) -> Any:
+    """``EPSG:4326 -> crs`` (forward) or back, lon/lat order, cached per CRS."""
+    import pyproj
+
+    lonlat = pyproj.CRS.from_epsg(4326)
+    crs = pyproj.CRS.from_wkt(crs_wkt)
+    if forward:
+        return pyproj.Transformer.from_crs(lonlat, crs, always_xy=True)
+    return pyproj.Transformer.from_crs(crs, lonlat, always_xy=True)
+
+
+def _wrap_lon(lon: FloatArray, start: float) -> FloatArray:
+    """Longitudes shifted by multiples of 360 into ``[start, start + 360)`` (start - 1e-12)."""
+    start = start - 1e-12
+    return start + np.mod(lon - start, 360.0)
+
+
+def bilinear_sample(grid: FloatArray, row: FloatArray, col: FloatArray) -> FloatArray:
+    """Bilinear interpolation of ``grid`` at fractional centre indices (0 = first centre).
+
+    NaN outside ``[0, n-1]`` (with a 1e-9 px tolerance) and where a neighbour is NaN.
+    """
+    n_rows, n_cols = grid.shape
+    inside = (
+        (row >= -_EDGE_TOL_PX)
+        & (row <= n_rows - 1 + _EDGE_TOL_PX)
+        & (col >= -_EDGE_TOL_PX)
+        & (col <= n_cols - 1 + _EDGE_TOL_PX)
+    )
+    row = np.where(inside, row, 0.0)
+    col = np.where(inside, col, 0.0)
+    r0 = np.clip(np.floor(row), 0, max(n_rows - 2, 0)).astype(np.intp)
+    c0 = np.clip(np.floor(col), 0, max(n_cols - 2, 0)).astype(np.intp)
+    fr = np.clip(row - r0, 0.0, 1.0)
+    fc = np.clip(col - c0, 0.0, 1.0)
+    dr = 1 if n_rows > 1 else 0
+    dc = 1 if n_cols > 1 else 0
+    flat = grid.ravel()
+    index = r0 * n_cols + c0
+    v00 = flat[index]
+    v01 = flat[index + dc]
+    v10 = flat[index + dr * n_cols]
+    v11 = flat[index + dr * n_cols + dc]
+    top = v00 * (1.0 - fc) + v01 * fc
+    bottom = v10 * (1.0 - fc) + v11 * fc
+    out = top * (1.0 - fr) + bottom * fr
+    return np.where(inside, out, np.nan)
+
+
+def _fmt_bounds(bounds: Sequence[float]) -> str:
+    w, s, e, n = bounds
+    return f"lon {w:.6f}..{e:.6f}, lat {s:.6f}..{n:.6f}"
+
+
+def _first_line(exc: BaseException) -> str:
+    text = str(exc).strip()
+    return text.splitlines()[0] if text else type(exc).__name__
+
+
+# ----------------------------------------------------------------------------- geoid
+@attrs.frozen(eq=False)
+class Geoid:
+    """A geoid undulation grid ``N(lon, lat)`` in metres (``h_ellipsoid = H + N``).
+
+    Attributes:
+        undulations: ``(rows, cols)`` float64 grid, read-only; NaN = nodata.
+        transform: affine transform (pixel corners, pixel-is-area) in lon/lat degrees.
+        source: the file it was read from (for messages), or None.
+    """
+
+    undulations: FloatArray = attrs.field(converter=_readonly)
+    transform: Affine = attrs.field(converter=to_affine)
+    source: str | None = None
+    _global: bool = attrs.field(init=False, repr=False)
+    _padded: FloatArray = attrs.field(init=False, repr=False)
+
+    def __attrs_post_init__(self) -> None:
+        if self.undulations.ndim != 2 or min(self.undulations.shape) < 1:
+            raise InputError(f"geoid {self.source}: undulations must be a 2-D grid")
+        t = self.transform
+        if t.b != 0.0 or t.d != 0.0:
+            raise InputError(f"geoid {self.source}: rotated grids are not supported")
+        n_cols = self.undulations.shape[1]
+        is_global = math.isclose(abs(t.a) * n_cols, 360.0, rel_tol=1e-9)
+        padded = self.undulations
+        if is_global:  # repeat the first column after the last one: wrap-around interpolation
+            padded = np.concatenate([padded, padded[:, :1]], axis=1)
+            padded.flags.writeable = False
+        object.__setattr__(self, "_global", is_global)
+        object.__setattr__(self, "_padded", padded)
+
+    @classmethod
+    def open(cls, path: str | os.PathLike[str]) -> Geoid:
+        """Read a geoid grid (``.gtx`` or any geographic single-band raster GDAL reads).
+
+        Raises:
+            InputError: the file is missing, unreadable, or not a geographic grid.
+        """
+        import rasterio
+        from rasterio.errors import RasterioError
+
+        path = Path(path)
+        if not path.is_file():
+            raise InputError(f"geoid {path}: no such file")
+        try:
+            with rasterio.open(path) as ds:
+                if ds.crs is None or not ds.crs.is_geographic:
+                    raise InputError(f"geoid {path}: crs {ds.crs} is not geographic lon/lat")
+                if ds.transform.is_identity:
+                    raise InputError(f"geoid {path}: no georeferencing (field transform)")
+                grid = ds.read(1, masked=True).astype(np.float64).filled(np.nan)
+                transform = ds.transform
+        except RasterioError as exc:
+            raise InputError(f"geoid {path}: not a readable grid ({_first_line(exc)})") from exc
+        if not np.isfinite(grid).any():
+            raise InputError(f"geoid {path}: the grid holds no valid undulation")
+        return cls(grid, transform, source=str(path))
+
+    def undulation(self, lon_deg: ArrayLike, lat_deg: ArrayLike) -> FloatArray:
+        """Geoid undulation ``N`` in metres, bilinear; longitudes wrap around the globe.
+
+        NaN outside a regional grid and where a neighbouring node is nodata.
+        """
+        lon, lat = as_float_arrays(lon_deg, lat_deg)
+        inv = ~self.transform
+        if self._global:
+            lon = _wrap_lon(lon, self.transform.c + 0.5 * self.transform.a)
+        col = inv.a * lon + inv.b * lat + inv.c - 0.5
+        row = inv.d * lon + inv.e * lat + inv.f - 0.5
+        return bilinear_sample(self._padded, row, col)
+
+
+# ----------------------------------------------------------------------------- DEM
+@attrs.frozen(eq=False)
+class DEM:
+    """An immutable digital elevation model: heights on a regular grid, sampled bilinearly.
+
+    Build one with :meth:`open`, :meth:`constant` or :meth:`from_array`.
+
+    Attributes:
+        heights: ``(rows, cols)`` float64 heights in metres, read-only; NaN = nodata.
+        transform: affine transform of pixel corners into ``crs`` coordinates.
+        crs: the horizontal CRS (:class:`pyproj.CRS`).
+        vertical: ``"ellipsoid"`` or ``"geoid:<NAME>"`` (see module docstring).
+        source: the file it was read from (named in error messages), or None.
+    """
+
+    heights: FloatArray = attrs.field(converter=_readonly)
+    transform: Affine = attrs.field(converter=to_affine)
+    crs: pyproj.CRS = attrs.field(converter=_to_horizontal_crs)
+    vertical: str = attrs.field(default=ELLIPSOID, converter=normalise_vertical)
+    source: str | None = None
+    _crs_wkt: str = attrs.field(init=False, repr=False)
+    _native_lonlat: bool = attrs.field(init=False, repr=False)
+
+    def __attrs_post_init__(self) -> None:
+        if self.heights.ndim != 2 or min(self.heights.shape) < 1:
+            raise InputError(
+                f"DEM {self.name}: heights must be a non-empty 2-D grid, "
+                f"got shape {self.heights.shape}"
+            )
+        if not (self.crs.is_geographic or self.crs.is_projected):
+            raise InputError(f"DEM {self.name}: crs {self.crs.name} has no horizontal part")
+        if abs(self.transform.determinant) == 0.0:
+            raise InputError(f"DEM {self.name}: transform {tuple(self.transform)[:6]} is singular")
+        object.__setattr__(self, "_crs_wkt", self.crs.to_wkt())
+        object.__setattr__(self, "_native_lonlat", _is_wgs84_lonlat(self.crs))
+
+    # ------------------------------------------------------------------ constructors
+    @classmethod
+    def from_array(
+        cls,
+        heights: ArrayLike,
+        transform: Affine | Sequence[float],
+        crs: Any,
+        *,
+        vertical: str = ELLIPSOID,
+        nodata: float | None = None,
+        source: str | None = None,
+    ) -> DEM:
+        """A DEM from a height grid (copied), its transform and CRS.
+
+        Args:
+            heights: ``(rows, cols)`` heights in metres.
+            transform: :class:`affine.Affine` of pixel corners, or its 6 coefficients.
+            crs: anything :meth:`pyproj.CRS.from_user_input` takes (``"EPSG:32631"``...).
+            vertical: vertical reference of the heights.
+            nodata: a value of ``heights`` that means "no data" (NaN always does).
+        """
+        grid = np.array(heights, dtype=np.float64)
+        if nodata is not None and not math.isnan(nodata):
+            grid[grid == nodata] = np.nan
+        return cls(grid, transform, crs, vertical=vertical, source=source)
+
+    @classmethod
+    def constant(
+        cls,
+        h_m: float,
+        *,
+        bounds: Bounds = (-180.0, -90.0, 180.0, 90.0),
+        vertical: str = ELLIPSOID,
+    ) -> DEM:
+        """A flat DEM of height ``h_m`` over lon/lat ``bounds`` (the whole Earth by default).
+
+        It is a 2x2 grid in EPSG:4326 whose pixel centres are the corners of ``bounds``.
+        """
+        from rasterio.transform import Affine
+
+        west, south, east, north = (float(v) for v in bounds)
+        if not (west < east and south < north):
+            raise InputError(f"DEM.constant: bounds {bounds} must be (west, south, east, north)")
+        dx, dy = east - west, north - south
+        transform = Affine(dx, 0.0, west - dx / 2, 0.0, -dy, north + dy / 2)
+        return cls(np.full((2, 2), float(h_m)), transform, "EPSG:4326", vertical=vertical)
+
+    @classmethod
+    def open(
+        cls,
+        path: str | os.PathLike[str],
+        *,
+        geoid: Geoid | str | os.PathLike[str] | None = None,
+        bounds: Bounds | None = None,
+        vertical: str | None = None,
+        band: int = 1,
+    ) -> DEM:
+        """Read a DEM from a GeoTIFF, an SRTM ``.hgt`` tile or any raster GDAL reads.
+
+        Args:
+            path: the file.
+            geoid: a :class:`Geoid` or the path of a geoid grid (``egm96_15.gtx``). When given
+                and the DEM heights are geoid heights, they are converted to ellipsoidal
+                heights (``h = H + N``, ``N`` bilinear at every DEM node). Ellipsoidal DEMs are
+                returned unchanged.
+            bounds: ``(west, south, east, north)`` in WGS84 degrees: read only the window that
+                covers them (plus the pixels needed for bilinear sampling at their edges).
+            vertical: override the vertical reference of the file. Otherwise it is the
+                ``VERTICAL_REFERENCE`` tag, ``"geoid:EGM96"`` for SRTM ``.hgt`` tiles, the
+                vertical part of a compound CRS, else ``"ellipsoid"`` (the Carto convention).
+            band: the band holding the heights.
+
+        Raises:
+            InputError: missing or unreadable file, no CRS, or ``bounds`` not covered.
+        """
+        import rasterio
+        from rasterio.errors import RasterioError
+        from rasterio.transform import Affine
+        from rasterio.windows import Window
+
+        path = Path(path)
+        if not path.is_file():
+            raise InputError(f"DEM {path}: no such file")
+        try:
+            with rasterio.open(path) as ds:
+                if ds.crs is None:
+                    raise InputError(f"DEM {path}: no CRS (field crs)")
+                if ds.transform.is_identity:
+                    raise InputError(f"DEM {path}: no georeferencing (field transform)")
+                if not 1 <= band <= ds.count:
+                    raise InputError(f"DEM {path}: band {band} does not exist ({ds.count} bands)")
+                crs, file_vertical = _split_crs(_to_crs(ds.crs))
+                tag = ds.tags().get(VERTICAL_TAG)
+                if vertical is not None:
+                    vref = normalise_vertical(vertical)
+                elif tag:
+                    try:
+                        vref = normalise_vertical(tag)
+                    except InputError as exc:
+                        raise InputError(f"DEM {path}: tag {VERTICAL_TAG}: {exc}") from exc
+                elif ds.driver == "SRTMHGT":
+                    vref = EGM96
+                else:
+                    vref = file_vertical or ELLIPSOID
+                window = None
+                transform = ds.transform
+                if bounds is not None:
+                    full = cls(np.zeros((1, 1)), transform, crs, source=str(path))
+                    rows, cols = full._window_for(bounds, ds.height, ds.width)
+                    window = Window(cols[0], rows[0], cols[1] - cols[0], rows[1] - rows[0])
+                    transform = transform @ Affine.translation(cols[0], rows[0])
+                grid = ds.read(band, window=window, masked=True)
+                grid = grid.astype(np.float64).filled(np.nan)
+                scale, offset = ds.scales[band - 1], ds.offsets[band - 1]
+        except RasterioError as exc:
+            raise InputError(f"DEM {path}: not a readable raster ({_first_line(exc)})") from exc
+        if scale not in (None, 1.0) or offset not in (None, 0.0):
+            grid = grid * (1.0 if scale is None else scale) + (offset or 0.0)
+        dem = cls(grid, transform, crs, vertical=vref, source=str(path))
+        if geoid is not None:
+            dem = dem.to_ellipsoid(geoid)
+        return dem
+
+    # ------------------------------------------------------------------ properties
+    @property
+    def name(self) -> str:
+        """The source file, or ``"(in memory)"``: how error messages name this DEM."""
+        return self.source or "(in memory)"
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """``(rows, cols)`` of the grid."""
+        return self.heights.shape  # type: ignore[return-value]
+
+    @property
+    def is_ellipsoidal(self) -> bool:
+        """True when the heights are above the WGS84 ellipsoid (what sensors take)."""
+        return self.vertical == ELLIPSOID
+
+    @property
+    def height_range(self) -> tuple[float, float]:
+        """``(min, max)`` of the valid heights; InputError when there is none."""
+        valid = self.heights[np.isfinite(self.heights)]
+        if valid.size == 0:
+            raise InputError(f"DEM {self.name}: no valid height (all nodata)")
+        return float(valid.min()), float(valid.max())
+
+    @property
+    def bounds_lonlat(self) -> Bounds:
+        """``(west, south, east, north)`` WGS84 degrees of the area where heights are defined.
+
+        That is the span of the pixel centres; for a projected DEM, the lon/lat box that
+        encloses it (found along its densified edges).
+        """
+        n_rows, n_cols = self.shape
+        t = np.linspace(0.0, 1.0, 33)
+        one = np.ones_like(t)
+        rows = np.concatenate([t * (n_rows - 1), one * (n_rows - 1), t * (n_rows - 1), 0 * t])
+        cols = np.concatenate([0 * t, t * (n_cols - 1), one * (n_cols - 1), t * (n_cols - 1)])
+        lon, lat = self._pixel_to_lonlat(rows, cols)
+        return (float(lon.min()), float(lat.min()), float(lon.max()), float(lat.max()))
+
+    # ------------------------------------------------------------------ sampling
+    def height(self, lon_deg: ArrayLike, lat_deg: ArrayLike, *, strict: bool = False) -> FloatArray:
+        """Bilinear height in metres (in :attr:`vertical`) at WGS84 lon/lat (arrays broadcast).
+
+        NaN outside the span of the pixel centres and where one of the four neighbours is
+        nodata; with ``strict=True`` such points (with finite lon/lat) raise InputError
+        naming the DEM file and their lon/lat bounding box.
+        """
+        lon, lat = as_float_arrays(lon_deg, lat_deg)
+        row, col = self.lonlat_to_pixel(lon, lat)
+        out = bilinear_sample(self.heights, row, col)
+        if strict:
+            missing = np.isnan(out) & np.isfinite(lon) & np.isfinite(lat)
+            if missing.any():
+                box = (lon[missing].min(), lat[missing].min(), lon[missing].max())
+                box = (*box, lat[missing].max())
+                raise InputError(
+                    f"DEM {self.name} has no height for {int(missing.sum())} of {out.size} "
+                    f"points in {_fmt_bounds(box)} (outside or nodata); "
+                    f"it covers {_fmt_bounds(self.bounds_lonlat)}"
+                )
+        return out
+
+    def covers(self, lon_deg: ArrayLike, lat_deg: ArrayLike) -> BoolArray:
+        """True where :meth:`height` gives a height (inside the grid, neighbours not nodata)."""
+        return np.isfinite(self.height(lon_deg, lat_deg))
+
+    # ------------------------------------------------------------------ conversions
+    def to_ellipsoid(self, geoid: Geoid | str | os.PathLike[str]) -> DEM:
+        """This DEM with ellipsoidal heights ``h = H + N`` (``N`` bilinear at each node).
+
+        Returns ``self`` when the heights are already ellipsoidal. Raises InputError when the
+        geoid grid does not cover a valid node.
+        """
+        if self.is_ellipsoidal:
+            return self
+        if not isinstance(geoid, Geoid):
+            geoid = Geoid.open(geoid)
+        n_rows, n_cols = self.shape
+        rows, cols = np.meshgrid(
+            np.arange(n_rows, dtype=np.float64), np.arange(n_cols, dtype=np.float64), indexing="ij"
+        )
+        lon, lat = self._pixel_to_lonlat(rows, cols)
+        undulation = geoid.undulation(lon, lat)
+        uncovered = np.isfinite(self.heights) & ~np.isfinite(undulation)
+        if uncovered.any():
+            raise InputError(
+                f"geoid {geoid.source} does not cover DEM {self.name} at "
+                f"{int(uncovered.sum())} nodes (e.g. lon {lon[uncovered][0]:.6f}, "
+                f"lat {lat[uncovered][0]:.6f})"
+            )
+        return attrs.evolve(self, heights=self.heights + undulation, vertical=ELLIPSOID)
+
+    def write(self, path: str | os.PathLike[str]) -> Path:
+        """Write a float32 GeoTIFF (CRS, NaN nodata, ``VERTICAL_REFERENCE`` tag); return path.
+
+        The file is written under a temporary name in the same folder, then renamed, so a
+        reader never sees a partial file.
+        """
+        import rasterio
+        from rasterio.crs import CRS as RioCRS
+        from rasterio.errors import RasterioError
+
+        path = Path(path)
+        n_rows, n_cols = self.shape
+        profile: dict[str, Any] = {
+            "driver": "GTiff",
+            "height": n_rows,
+            "width": n_cols,
+            "count": 1,
+            "dtype": "float32",
+            "crs": RioCRS.from_wkt(self.crs.to_wkt()),
+            "transform": self.transform,
+            "nodata": np.nan,
+            "compress": "deflate",
+            "predictor": 3,
+        }
+        if n_rows >= 256 and n_cols >= 256:
+            profile.update(tiled=True, blockxsize=256, blockysize=256)
+        try:
+            with atomic_output(path) as tmp, rasterio.open(tmp, "w", **profile) as dst:
+                dst.write(self.heights.astype(np.float32), 1)
+                dst.update_tags(
+                    **{VERTICAL_TAG: _vertical_tag(self.vertical), "AREA_OR_POINT": "Area"}
+                )
+                dst.units = ("metre",)
+        except (RasterioError, OSError) as exc:
+            raise InputError(f"cannot write DEM to {path}: {_first_line(exc)}") from exc
+        return path
+
+    # ------------------------------------------------------------------ internals
+    def lonlat_to_pixel(self, lon: FloatArray, lat: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Fractional centre indices ``(row, col)`` (0 = first centre) of WGS84 lon/lat."""
+        if self._native_lonlat:
+            x, y = lon, lat
+        else:
+            x, y = _transformer(self._crs_wkt, True).transform(lon, lat)
+            x, y = np.asarray(x, np.float64), np.asarray(y, np.float64)
+        if self.crs.is_geographic:  # into the 360 degrees centred on the grid
+            t = self.transform
+            n_rows, n_cols = self.shape
+            x_mid = t.c + 0.5 * (t.a * n_cols + t.b * n_rows)
+            x = _wrap_lon(x, x_mid - 180.0)
+        inv = ~self.transform
+        col = inv.a * x + inv.b * y + inv.c - 0.5
+        row = inv.d * x + inv.e * y + inv.f - 0.5
+        return row, col
+
+    def _pixel_to_lonlat(self, row: FloatArray, col: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """WGS84 lon/lat of fractional centre indices."""
+        t = self.transform
+        x = t.a * (col + 0.5) + t.b * (row + 0.5) + t.c
+        y = t.d * (col + 0.5) + t.e * (row + 0.5) + t.f
+        if self._native_lonlat:
+            return x, y
+        lon, lat = _transformer(self._crs_wkt, False).transform(x, y)
+        return np.asarray(lon, np.float64), np.asarray(lat, np.float64)
+
+    def _window_for(
+        self, bounds: Bounds, n_rows: int, n_cols: int
+    ) -> tuple[tuple[int, int], tuple[int, int]]:
+        """Row and column ranges ``[start, stop)`` of a grid of ``n_rows x n_cols`` (with this
+        DEM's transform and CRS) that hold the lon/lat ``bounds``, or InputError."""
+        west, south, east, north = (float(v) for v in bounds)
+        if not (west <= east and south <= north) or not all(map(math.isfinite, bounds)):
+            raise InputError(
+                f"DEM {self.name}: bounds {tuple(bounds)} must be finite "
+                "(west, south, east, north) with west <= east, south <= north"
+            )
+        t = np.linspace(0.0, 1.0, 33)
+        lon = np.concatenate([west + t * (east - west), np.full_like(t, east)])
+        lon = np.concatenate([lon, west + t * (east - west), np.full_like(t, west)])
+        lat = np.concatenate([np.full_like(t, south), south + t * (north - south)])
+        lat = np.concatenate([lat, np.full_like(t, north), south + t * (north - south)])
+        row, col = self.lonlat_to_pixel(lon, lat)
+        r_min, r_max, c_min, c_max = row.min(), row.max(), col.min(), col.max()
+        tol = _EDGE_TOL_PX
+        if not (r_min >= -tol and c_min >= -tol and r_max <= n_rows - 1 + tol) or not (
+            c_max <= n_cols - 1 + tol
+        ):
+            grid = attrs.evolve(self, heights=np.zeros((n_rows, n_cols)))
+            raise InputError(
+                f"DEM {self.name} does not cover the requested bounds {_fmt_bounds(bounds)}; "
+                f"it covers {_fmt_bounds(grid.bounds_lonlat)}"
+            )
+        r0 = max(math.floor(r_min + tol), 0)
+        c0 = max(math.floor(c_min + tol), 0)
+        r1 = min(math.ceil(r_max - tol) + 1, n_rows)
+        c1 = min(math.ceil(c_max - tol) + 1, n_cols)
+        return (r0, max(r1, r0 + 1)), (c0, max(c1, c0 + 1))
+
+
+def _split_crs(crs: pyproj.CRS) -> tuple[pyproj.CRS, str | None]:
+    """Horizontal part of a CRS and the vertical reference of its vertical part, if any."""
+    vertical = None
+    if crs.is_compound:
+        horizontal = crs.sub_crs_list[0]
+        name = crs.sub_crs_list[1].name.upper().replace(" ", "")
+        for model in ("EGM2008", "EGM96", "EGM84"):
+            if model in name:
+                vertical = f"geoid:{model}"
+                break
+        return horizontal, vertical
+    if crs.is_geographic and len(crs.axis_info) == 3:  # e.g. EPSG:4979: ellipsoidal heights
+        return crs.geodetic_crs.to_2d() if crs.geodetic_crs else crs, ELLIPSOID
+    return crs, vertical
+
+
+# ----------------------------------------------------------------------------- location

@@ -1,0 +1,75 @@
+"""Measures of a DEM grid: ground pixel size, height gradient and slope (any CRS)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from carto.framework.raster.dem import DEM
+
+FloatArray = NDArray[np.float64]
+
+
+def dem_pixel_size_m(dem: DEM) -> tuple[FloatArray, FloatArray]:
+    """Ground size of the pixels of ``dem`` in metres: ``(along a row, along a column)``.
+
+    The first figure is the distance between the centres of two neighbouring columns (the
+    x step, ``hypot(a, d)`` of the transform), the second between two neighbouring rows. For a
+    projected CRS they are constants (in metres whatever the CRS unit; the map projection's
+    scale factor is ignored); for a geographic CRS the degrees are converted to metres on the
+    CRS ellipsoid at each pixel's latitude (meridian and prime-vertical radii of curvature).
+
+    Returns:
+        two float64 arrays that broadcast to the grid shape (0-d for a projected CRS).
+    """
+    t = dem.transform
+    if not dem.crs.is_geographic:
+        unit = dem.crs.axis_info[0].unit_conversion_factor if dem.crs.axis_info else 1.0
+        unit = float(unit or 1.0)
+        return np.asarray(math.hypot(t.a, t.d) * unit), np.asarray(math.hypot(t.b, t.e) * unit)
+    n_rows, n_cols = dem.shape
+    rows = np.arange(n_rows, dtype=np.float64)[:, None] + 0.5
+    cols = np.arange(n_cols, dtype=np.float64)[None, :] + 0.5
+    lat = np.radians(t.e * rows + t.f + (t.d * cols if t.d != 0.0 else 0.0))
+    ellipsoid = dem.crs.ellipsoid
+    a = float(ellipsoid.semi_major_metre) if ellipsoid is not None else 6378137.0
+    inv_f = float(ellipsoid.inverse_flattening) if ellipsoid is not None else 298.257223563
+    f = 1.0 / inv_f if inv_f else 0.0
+    e2 = f * (2.0 - f)
+    w = np.sqrt(1.0 - e2 * np.sin(lat) ** 2)
+    east_per_deg = np.radians(a / w * np.cos(lat))  # metres per degree of longitude
+    north_per_deg = np.radians(a * (1.0 - e2) / w**3)  # metres per degree of latitude
+    dx = np.hypot(t.a * east_per_deg, t.d * north_per_deg)
+    dy = np.hypot(t.b * east_per_deg, t.e * north_per_deg)
+    return dx, dy
+
+
+def height_gradient(
+    heights: FloatArray, dx_m: ArrayLike, dy_m: ArrayLike
+) -> tuple[FloatArray, FloatArray]:
+    """Height gradient of a grid along its columns and rows, metres per metre.
+
+    Central differences inside the grid, one-sided at its edges (:func:`numpy.gradient`);
+    zero along an axis of one pixel. NaN next to nodata.
+
+    Args:
+        heights: ``(rows, cols)`` heights in metres.
+        dx_m, dy_m: distance in metres between neighbouring columns / rows (scalars or arrays
+            that broadcast to the grid).
+
+    Returns:
+        ``(dz/dx, dz/dy)``: x along increasing column, y along increasing row.
+    """
+    h = np.asarray(heights, dtype=np.float64)
+    g_row = np.gradient(h, axis=0) if h.shape[0] > 1 else np.zeros_like(h)
+    g_col = np.gradient(h, axis=1) if h.shape[1] > 1 else np.zeros_like(h)
+    return g_col / np.asarray(dx_m, np.float64), g_row / np.asarray(dy_m, np.float64)
+
+
+def slope_deg(dem: DEM) -> FloatArray:
+    """Terrain slope of every pixel of ``dem`` in degrees (0 = flat); NaN next to nodata."""
+    dx, dy = dem_pixel_size_m(dem)
+    gx, gy = height_gradient(dem.heights, dx, dy)
+    return np.degrees(np.arctan(np.hypot(gx, gy)))

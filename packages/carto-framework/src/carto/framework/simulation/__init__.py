@@ -1,0 +1,2 @@
+"""The simulator: scene presets, acquisitions, procedural terrain and texture, rendering, scene
+folders with known truth."""

@@ -1,0 +1,909 @@
+"""The scene simulator: physically faithful pushbroom acquisitions with known truth.
+
+A plugin's scene preset describes an acquisition as a :class:`ScenePlan` (orbit, trajectory
+segments with their attitude laws, cameras, views); :func:`simulate_scene` renders it:
+
+1. the **true** platform motion: the orbit propagated with two-body + J2 and sampled densely
+   (every 25 ms), the attitude law plus optional jitter; Lagrange interpolation of these
+   samples is the true trajectory;
+2. terrain (a procedural preset or a user DEM) and a seeded ground texture covering the views;
+3. each view rendered through its true model as the detectors see it (odd/even arrays
+   staggered), blurred, with noise, quantised to 10 bits;
+4. the **product**: ancillary files with ephemeris and attitude every 125 ms *as measured*,
+   i.e. with the errors of :class:`ErrorModel` (ephemeris bias, attitude bias and drift, smooth
+   higher-order attitude error, camera misalignment), the nominal camera constants;
+5. control: GCPs (ground and image measurement noise) and independent checkpoints (true
+   coordinates), an SRTM-like initial DEM, and ``truth/`` (true DEM, true ortho-image, true
+   model files, the drawn errors).
+
+Every random draw comes from its own stream of ``numpy.random.SeedSequence(seed)``, so the same
+seed gives a byte-identical scene, and switching one error source off leaves the others' draws
+unchanged. The scene folder layout and file formats are in ``docs/formats.md``.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import attrs
+import numpy as np
+from numpy.typing import NDArray
+
+from carto.framework.errors import InputError
+from carto.framework.files.atomic import atomic_output
+from carto.framework.files.documents import write_json_atomic
+from carto.framework.files.point_table import write_point_table
+from carto.framework.geometry import frames, orbit
+from carto.framework.geometry.camera import Camera
+from carto.framework.geometry.linescan import LineScanner, LineTiming
+from carto.framework.geometry.trajectory import AttitudeSamples, EphemerisSamples, Trajectory
+from carto.framework.products.ancillary import Ancillary, CameraSpec, ImageSpec
+from carto.framework.products.scene import SCENE_FORMAT, SCENE_VERSION
+from carto.framework.raster.crs import utm_crs
+from carto.framework.simulation import acquisition
+
+FloatArray = NDArray[np.float64]
+TRUTH_STEP_S = 0.025
+"""Sampling of the true motion (40 Hz: resolves jitter up to ~10 Hz with Lagrange)."""
+DN_MAX = 1023
+
+
+# ----------------------------------------------------------------------------- errors
+@attrs.frozen
+class ErrorModel:
+    """Error sources of a simulated product (design brief section 4); 0 switches one off.
+
+    Attributes (one-sigma sizes; each drawn value is normal with that sigma):
+        ephemeris_bias_m: position bias per axis (along, across, radial), metres.
+        attitude_bias_deg: attitude bias per axis (roll, pitch, yaw).
+        attitude_drift_deg_s: attitude drift per axis.
+        attitude_smooth_deg: amplitude of the smooth higher-order (tau^2, tau^3) attitude
+            error over a segment (agile platforms).
+        jitter_deg: amplitude of attitude jitter (sinusoids at ``jitter_hz``) in the true
+            motion, which the 8 Hz attitude samples do not carry.
+        misalignment_deg: residual camera alignment error per axis (Fore/Aft relative).
+        gcp_planimetric_m: GCP ground error, planimetric RMS (east and north each
+            ``/sqrt(2)``).
+        gcp_height_m: GCP height error.
+        gcp_image_px: GCP image measurement error per image axis, pixels.
+    """
+
+    ephemeris_bias_m: float = 0.0
+    attitude_bias_deg: float = 0.0
+    attitude_drift_deg_s: float = 0.0
+    attitude_smooth_deg: float = 0.0
+    jitter_deg: float = 0.0
+    jitter_hz: tuple[float, ...] = (1.7, 4.3)
+    misalignment_deg: float = 0.0
+    gcp_planimetric_m: float = 0.0
+    gcp_height_m: float = 0.0
+    gcp_image_px: float = 0.0
+
+    @classmethod
+    def realistic(cls, *, agile: bool = False) -> ErrorModel:
+        """The sizes of the design brief, section 4 (``agile`` adds the Cartosat-2 terms)."""
+        return cls(
+            ephemeris_bias_m=15.0,
+            attitude_bias_deg=0.02,
+            attitude_drift_deg_s=2e-5,
+            attitude_smooth_deg=0.002 if agile else 0.0,
+            jitter_deg=2e-5 if agile else 0.0,
+            misalignment_deg=0.002,
+            gcp_planimetric_m=0.7,
+            gcp_height_m=1.0,
+            gcp_image_px=0.3,
+        )
+
+    @classmethod
+    def none(cls) -> ErrorModel:
+        """No errors: the product carries the true values."""
+        return cls()
+
+    def as_dict(self) -> dict[str, Any]:
+        return attrs.asdict(
+            self, value_serializer=lambda _i, _a, v: list(v) if isinstance(v, tuple) else v
+        )
+
+
+# ----------------------------------------------------------------------------- the plan
+@attrs.frozen
+class ViewPlan:
+    """One image of a segment.
+
+    Attributes:
+        name: image name (``"fore"``, ``"nadir"``, ``"swath2"`` ...).
+        camera: nominal camera constants (as the product states them).
+        n_lines_full: lines of the full acquisition (the window is cut from it).
+        period_s: line period, seconds (constant over the image).
+        centre_dt_s: time of the full image's middle line; None: the time at which the
+            camera sees the view's target (found on the true trajectory).
+        target: (lon_deg, lat_deg) the window is centred on; None: the scene target.
+    """
+
+    name: str
+    camera: CameraSpec
+    n_lines_full: int
+    period_s: float
+    centre_dt_s: float | None = None
+    target: tuple[float, float] | None = None
+
+
+@attrs.frozen
+class SegmentPlan:
+    """A trajectory segment (one ancillary file) and the views acquired during it.
+
+    Attributes:
+        name: segment name (file ``<name>.ancillary.json``).
+        span_s: time range of the ancillary samples (s since the epoch).
+        law: true attitude law (see :mod:`carto.framework.simulation.acquisition`).
+        views: the images of the segment.
+    """
+
+    name: str
+    span_s: tuple[float, float]
+    law: acquisition.OrbitAttitudeLaw
+    views: tuple[ViewPlan, ...]
+
+
+@attrs.frozen
+class ScenePlan:
+    """Everything a preset decides; :func:`simulate_scene` does the rest.
+
+    Attributes:
+        preset: preset name; platform: platform name (written in the products).
+        epoch_utc: the epoch (the platform is over the target then).
+        elements: orbit elements at the epoch.
+        target: (lon_deg, lat_deg) the views are centred on.
+        segments: trajectory segments.
+        gsd_m: nominal ground sampling distance (sets texture and DEM postings).
+        agile: the platform is agile (adds the agile error terms).
+        default_terrain: terrain preset used when none is given.
+        default_size: default window (width, height) in pixels.
+        default_gcps, default_checkpoints: default numbers of control points.
+        blur_sigma_px: optical blur (Gaussian sigma, in pixels of the nominal GSD) applied to
+            the ground texture before rendering, i.e. the point spread function projected on
+            the ground (blurring the raw image instead would mix the odd and even arrays,
+            which see the ground at different times); 0 for none.
+        noise_dn: read noise (one sigma) in digital numbers.
+        control_min_views: control points are placed where at least this many images see
+            them (None: all images; 1 for paint-brush swaths that only overlap pairwise).
+    """
+
+    preset: str
+    platform: str
+    epoch_utc: str
+    elements: orbit.OrbitElements
+    target: tuple[float, float]
+    segments: tuple[SegmentPlan, ...]
+    gsd_m: float
+    agile: bool = False
+    default_terrain: str = "hilly"
+    default_size: tuple[int, int] = (2000, 2000)
+    default_gcps: int = 1
+    default_checkpoints: int = 50
+    blur_sigma_px: float = 0.4
+    noise_dn: float = 1.5
+    control_min_views: int | None = None
+
+
+@attrs.frozen
+class SimulationOptions:
+    """User choices for :func:`simulate_scene` (``carto simulate`` options)."""
+
+    seed: int = 0
+    terrain: str | None = None
+    dem_path: Path | None = None
+    size: tuple[int, int] | None = None
+    errors: str = "realistic"
+    n_gcps: int | None = None
+    n_checkpoints: int | None = None
+    supersample: int = 2
+    point_targets: bool = False
+    error_sizes: tuple[tuple[str, float], ...] = ()
+    """Overrides of single error sizes on top of ``errors``, e.g. ``(("attitude_bias_deg",
+    0.05),)``; 0 switches a source off."""
+    platform_seed: int | None = None
+    """Seed of the platform's residual camera misalignment (a property of the satellite,
+    the same in every scene it takes: scenes simulated with one ``platform_seed`` share it, as
+    an in-flight calibration needs); None: drawn from ``seed`` with the other errors."""
+
+
+def _progress(message: str) -> None:
+    print(f"carto simulate: {message}", file=sys.stderr, flush=True)
+
+
+class _Stage:
+    def __init__(self, what: str, quiet: bool) -> None:
+        self.what, self.quiet = what, quiet
+
+    def __enter__(self) -> _Stage:
+        self.t0 = time.perf_counter()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if not self.quiet and exc[0] is None:
+            _progress(f"{self.what} ({time.perf_counter() - self.t0:.1f} s)")
+
+
+# ----------------------------------------------------------------------------- engine
+@attrs.frozen(eq=False)
+class _Truth:
+    """True trajectory of a segment and its dense ECI samples."""
+
+    trajectory: Trajectory
+    dt: FloatArray
+    p_eci: FloatArray
+    v_eci: FloatArray
+
+
+def _true_segment(
+    plan: ScenePlan,
+    seg: SegmentPlan,
+    errors: ErrorModel,
+    rng: np.random.Generator,
+    p0: FloatArray,
+    v0: FloatArray,
+) -> _Truth:
+    epoch = frames.utc_to_j2000_s(plan.epoch_utc)
+    lo, hi = seg.span_s
+    dt = np.arange(math.floor(lo / TRUTH_STEP_S) - 8, math.ceil(hi / TRUTH_STEP_S) + 9) * (
+        TRUTH_STEP_S
+    )
+    p, v = orbit.propagate(p0, v0, dt)
+    r = seg.law(dt, p, v)
+    if errors.jitter_deg > 0:
+        phases = rng.uniform(0, 2 * np.pi, (3, len(errors.jitter_hz)))
+        amps = np.radians(errors.jitter_deg) * rng.uniform(0.5, 1.0, (3, len(errors.jitter_hz)))
+        j = np.zeros((3, dt.size))
+        for k, f in enumerate(errors.jitter_hz):
+            j += amps[:, k, None] * np.sin(2 * np.pi * f * dt[None, :] + phases[:, k, None])
+        r = frames.rpy_to_matrix(j[0], j[1], j[2]) @ r
+    traj = Trajectory.from_samples(
+        epoch,
+        EphemerisSamples(dt, p, v, "eci"),
+        AttitudeSamples(dt, frames.matrix_to_quat(r), "orbit"),
+        interpolation="lagrange",
+        lagrange_points=8,
+    )
+    return _Truth(traj, dt, p, v)
+
+
+def _measured_ancillary(
+    plan: ScenePlan, seg: SegmentPlan, truth: _Truth, drawn: dict, images: Sequence[ImageSpec]
+) -> Ancillary:
+    """Ancillary samples every 125 ms as the platform measures them (with the errors)."""
+    epoch = frames.utc_to_j2000_s(plan.epoch_utc)
+    lo, hi = seg.span_s
+    step = acquisition.ANCILLARY_STEP_S
+    dt = np.arange(math.floor(lo / step), math.ceil(hi / step) + 1) * step
+    p_eci, v_eci = truth.trajectory.state_eci(dt)
+    r_true = seg.law(dt, p_eci, v_eci)  # the attitude sensors see the smooth motion
+    # attitude error e(t) in the orbit frame: measured = rpy(e)^T @ true, so that the
+    # correction rpy(e) @ measured restores the truth exactly
+    t_mid, t_half = 0.5 * (lo + hi), 0.5 * (hi - lo)
+    tau = (dt - t_mid) / t_half
+    e = (
+        np.asarray(drawn["attitude_bias_rad"])[:, None]
+        + np.asarray(drawn["attitude_drift_rad_s"])[:, None] * dt[None, :]
+        + np.asarray(drawn["attitude_tau2_rad"])[:, None] * tau[None, :] ** 2
+        + np.asarray(drawn["attitude_tau3_rad"])[:, None] * tau[None, :] ** 3
+    )
+    r_meas = np.swapaxes(frames.rpy_to_matrix(e[0], e[1], e[2]), -1, -2) @ r_true
+    # ephemeris bias along / across / radial: measured = true - R_orbit (along, across, -radial)
+    b = np.asarray(drawn["ephemeris_bias_m"])
+    r_o2i = frames.orbit_to_eci_matrix(p_eci, v_eci)
+    p_meas_eci = p_eci - np.einsum("nij,j->ni", r_o2i, np.array([b[0], b[1], -b[2]]))
+    p_ecef, v_ecef = frames.eci_to_ecef(epoch + dt, p_meas_eci, v_eci)
+    cams = {v.camera.name: v.camera for v in seg.views}
+    return Ancillary(
+        plan.platform,
+        plan.epoch_utc,
+        EphemerisSamples(dt, p_ecef, v_ecef, "ecef"),
+        AttitudeSamples(dt, frames.matrix_to_quat(r_meas), "orbit"),
+        cams,
+        {i.name: i for i in images},
+    )
+
+
+def _draw_errors(
+    errors: ErrorModel, rng: np.random.Generator, n_segments: int, cameras: Sequence[str]
+) -> dict[str, Any]:
+    def draw(sigma: float) -> list[float]:
+        """Three normal draws of ``sigma`` (none when the source is switched off)."""
+        return (rng.normal(0.0, sigma, 3) if sigma else np.zeros(3)).tolist()
+
+    deg = np.radians
+    eph = draw(errors.ephemeris_bias_m)
+    seg = [
+        {
+            "ephemeris_bias_m": eph,
+            "attitude_bias_rad": draw(deg(errors.attitude_bias_deg)),
+            "attitude_drift_rad_s": draw(deg(errors.attitude_drift_deg_s)),
+            "attitude_tau2_rad": draw(deg(errors.attitude_smooth_deg)),
+            "attitude_tau3_rad": draw(deg(errors.attitude_smooth_deg)),
+        }
+        for _ in range(n_segments)
+    ]
+    mis = {c: draw(deg(errors.misalignment_deg)) for c in cameras}
+    return {"segments": seg, "camera_misalignment_rad": mis}
+
+
+def _true_camera(spec: CameraSpec, misalignment_rad: Sequence[float]) -> Camera:
+    nominal = spec.camera("odd")
+    align = tuple(a + m for a, m in zip(nominal.alignment_rpy_rad, misalignment_rad, strict=True))
+    return attrs.evolve(nominal, alignment_rpy_rad=align)
+
+
+def _window(
+    view: ViewPlan, size: tuple[int, int], target_line: float, target_sample: float
+) -> tuple[int, int, int, int]:
+    """``(first_line, first_sample, height, width)``: the window of the full image centred on
+    the target's projection (at the terrain's middle height)."""
+    width, height = size
+    n_det = view.camera.n_detectors
+    if not (1 <= width <= n_det and 1 <= height <= view.n_lines_full):
+        raise InputError(
+            f"--size {width} {height}: must be within the full image "
+            f"{n_det} x {view.n_lines_full} of {view.name}"
+        )
+    c_s = target_sample if np.isfinite(target_sample) else n_det / 2.0
+    c_l = target_line if np.isfinite(target_line) else view.n_lines_full / 2.0
+    first_sample = int(np.clip(round(c_s - width / 2.0), 0, n_det - width))
+    first_line = int(np.clip(round(c_l - height / 2.0), 0, view.n_lines_full - height))
+    return first_line, first_sample, height, width
+
+
+def _footprint_bounds(
+    sensors: Sequence[LineScanner], h_range: tuple[float, float], margin_m: float
+) -> tuple[float, float, float, float]:
+    lons, lats = [], []
+    for s in sensors:
+        n_l, n_s = s.image_shape
+        line = np.array([0, 0, n_l, n_l, n_l / 2, 0, n_l / 2, n_l], float)
+        sample = np.array([0, n_s, 0, n_s, 0, n_s / 2, n_s, n_s / 2], float)
+        for h in h_range:
+            lon, lat = s.image_to_ground(line, sample, np.full(line.size, h))
+            lons.append(lon)
+            lats.append(lat)
+    lon = np.concatenate(lons)
+    lat = np.concatenate(lats)
+    m_lat = margin_m / 111_320.0
+    m_lon = m_lat / math.cos(math.radians(float(np.mean(lat))))
+    return (
+        float(lon.min() - m_lon),
+        float(lat.min() - m_lat),
+        float(lon.max() + m_lon),
+        float(lat.max() + m_lat),
+    )
+
+
+def _radiometry(
+    refl: NDArray[np.float32], plan: ScenePlan, rng: np.random.Generator
+) -> NDArray[np.uint16]:
+    """Reflectance -> 10-bit DN: gain/offset, shot and read noise, quantisation."""
+    img = np.nan_to_num(refl.astype(np.float32), nan=0.0)
+    dn = 40.0 + 900.0 * img
+    noise = rng.normal(0.0, 1.0, dn.shape).astype(np.float32)
+    dn = dn + noise * np.sqrt(plan.noise_dn**2 + 0.05 * dn)
+    return np.clip(np.rint(dn), 0, DN_MAX).astype(np.uint16)
+
+
+def _blurred(texture: Any, sigma_m: float) -> Any:
+    """The texture convolved with a Gaussian of ``sigma_m`` metres on the ground."""
+    import cv2
+
+    sigma_px = sigma_m / float(texture.posting_m)
+    values = cv2.GaussianBlur(
+        np.asarray(texture.reflectance, np.float32), (0, 0), sigma_px, borderType=cv2.BORDER_REFLECT
+    )
+    return attrs.evolve(texture, reflectance=values)
+
+
+def _write_raster(path: Path, data: NDArray, **profile: Any) -> Path:
+    """Tiled, compressed GeoTIFF written atomically (images without CRS are allowed)."""
+    import warnings
+
+    import rasterio
+    from rasterio.errors import NotGeoreferencedWarning
+
+    base = {
+        "driver": "GTiff",
+        "height": data.shape[0],
+        "width": data.shape[1],
+        "count": 1,
+        "dtype": data.dtype,
+        "compress": "deflate",
+        "tiled": True,
+        "blockxsize": 256,
+        "blockysize": 256,
+    }
+    base.update(profile)
+    tags = base.pop("tags", {})
+    with atomic_output(path) as tmp, warnings.catch_warnings():
+        warnings.simplefilter("ignore", NotGeoreferencedWarning)
+        with rasterio.open(tmp, "w", **base) as dst:
+            dst.write(data, 1)
+            if tags:
+                dst.update_tags(**tags)
+    return path
+
+
+def _select_points(
+    pool_lon: FloatArray,
+    pool_lat: FloatArray,
+    n: int,
+    rng: np.random.Generator,
+    exclude: NDArray[np.bool_] | None = None,
+) -> NDArray[np.intp]:
+    """Indices of ``n`` well-distributed pool points: 1 -> nearest the centre, 2 -> opposite
+    corners, more -> one random point in each cell of a near-square grid over the pool."""
+    ok = np.ones(pool_lon.size, bool) if exclude is None else ~exclude
+    idx = np.flatnonzero(ok)
+    if n <= 0:
+        return np.array([], dtype=np.intp)
+    if idx.size < n:
+        raise InputError(f"only {idx.size} candidate points in the common footprint, {n} requested")
+    x = (pool_lon[idx] - pool_lon[idx].min()) / max(np.ptp(pool_lon[idx]), 1e-12)
+    y = (pool_lat[idx] - pool_lat[idx].min()) / max(np.ptp(pool_lat[idx]), 1e-12)
+    if n == 1:
+        return idx[[int(np.argmin((x - 0.5) ** 2 + (y - 0.5) ** 2))]]
+    if n == 2:
+        a = int(np.argmin((x - 0.2) ** 2 + (y - 0.2) ** 2))
+        b = int(np.argmin((x - 0.8) ** 2 + (y - 0.8) ** 2))
+        return idx[[a, b]]
+    k = math.ceil(math.sqrt(n))
+    cell = np.minimum((x * k).astype(int), k - 1) * k + np.minimum((y * k).astype(int), k - 1)
+    chosen: list[int] = []
+    for c in rng.permutation(k * k):
+        members = np.flatnonzero(cell == c)
+        if members.size:
+            chosen.append(int(rng.choice(members)))
+        if len(chosen) == n:
+            break
+    rest = np.setdiff1d(np.arange(idx.size), chosen)
+    if len(chosen) < n:
+        chosen.extend(rng.choice(rest, n - len(chosen), replace=False).tolist())
+    return idx[np.asarray(chosen, dtype=np.intp)]
+
+
+def simulate_scene(
+    plan: ScenePlan,
+    out_dir: str | os.PathLike[str],
+    options: SimulationOptions = SimulationOptions(),
+    *,
+    quiet: bool = False,
+) -> Path:
+    """Render ``plan`` into the scene folder ``out_dir``; return the path of ``scene.json``."""
+    from carto.framework.raster.dem import DEM
+    from carto.framework.simulation import terrain as terrain_mod
+    from carto.framework.simulation.render import render_reflectance
+
+    out = Path(out_dir)
+    if options.errors not in ("realistic", "none"):
+        raise InputError(f"--errors must be 'realistic' or 'none', got {options.errors!r}")
+    terrain_name = options.terrain or plan.default_terrain
+    if options.dem_path is None and terrain_name not in terrain_mod.TERRAINS:
+        raise InputError(
+            f"unknown terrain {terrain_name!r}; available: {', '.join(terrain_mod.TERRAINS)}"
+        )
+    size = options.size or plan.default_size
+    n_gcps = plan.default_gcps if options.n_gcps is None else options.n_gcps
+    n_check = plan.default_checkpoints if options.n_checkpoints is None else options.n_checkpoints
+    if n_gcps < 0 or n_check < 0:
+        raise InputError("--gcps and --checkpoints must be >= 0")
+    errors = (
+        ErrorModel.realistic(agile=plan.agile)
+        if options.errors == "realistic"
+        else ErrorModel.none()
+    )
+    if options.error_sizes:
+        known = {f.name for f in attrs.fields(ErrorModel) if f.name != "jitter_hz"}
+        for name, value in options.error_sizes:
+            if name not in known:
+                raise InputError(
+                    f"unknown error source {name!r}; known: {', '.join(sorted(known))}"
+                )
+            if not (math.isfinite(value) and value >= 0):
+                raise InputError(f"error size {name}={value}: must be a number >= 0")
+        errors = attrs.evolve(errors, **dict(options.error_sizes))
+    streams = np.random.SeedSequence(int(options.seed)).spawn(8)
+    rng_err, rng_jit, rng_terrain, rng_tex, rng_ctl, rng_noise, rng_init = (
+        np.random.default_rng(s) for s in streams[:7]
+    )
+    epoch = frames.utc_to_j2000_s(plan.epoch_utc)
+    p0, v0 = orbit.elements_to_state(plan.elements)
+    cameras = sorted({v.camera.name for s in plan.segments for v in s.views})
+    drawn = _draw_errors(errors, rng_err, len(plan.segments), cameras)
+    if options.platform_seed is not None:
+        platform_rng = np.random.default_rng(int(options.platform_seed))
+        drawn["camera_misalignment_rad"] = {
+            c: (platform_rng.normal(0.0, math.radians(errors.misalignment_deg), 3)).tolist()
+            for c in cameras
+        }
+    out.mkdir(parents=True, exist_ok=True)
+
+    for seg in plan.segments:
+        for view in seg.views:
+            if not (size[0] <= view.camera.n_detectors and size[1] <= view.n_lines_full):
+                raise InputError(
+                    f"--size {size[0]} {size[1]}: must be within the full image "
+                    f"{view.camera.n_detectors} x {view.n_lines_full} of {view.name}"
+                )
+
+    # --- true geometry: full images, then windows centred on the target
+    h_range = _terrain_range(terrain_name, options.dem_path)
+    h_mid = 0.5 * sum(h_range)
+    with _Stage("true trajectories", quiet):
+        truths, full_sensors, views = [], {}, {}
+        for seg in plan.segments:
+            truth = _true_segment(plan, seg, errors, rng_jit, p0, v0)
+            truths.append(truth)
+            for view in seg.views:
+                cam = _true_camera(view.camera, drawn["camera_misalignment_rad"][view.camera.name])
+                if view.centre_dt_s is None:
+                    t_c = acquisition.crossing_time(
+                        truth.trajectory,
+                        cam,
+                        *(view.target or plan.target),
+                        h_mid,
+                        t_range_s=seg.span_s,
+                    )
+                else:
+                    t_c = view.centre_dt_s
+                timing = LineTiming.constant(
+                    t_c - (view.n_lines_full / 2.0 - 0.5) * view.period_s, view.period_s
+                )
+                full_sensors[view.name] = LineScanner(
+                    view.name, view.n_lines_full, timing, cam, truth.trajectory
+                )
+                views[view.name] = view
+
+    def place(h_target: float) -> dict[str, LineScanner]:
+        """Windows centred on the target seen at height ``h_target``."""
+        placed = {}
+        for name, full in full_sensors.items():
+            t_line, t_sample, _ = full.project(*(views[name].target or plan.target), h_target)
+            first_line, first_sample, height, width = _window(
+                views[name], size, float(t_line), float(t_sample)
+            )
+            timing = LineTiming.constant(
+                float(full.timing.time(first_line + 0.5)), views[name].period_s
+            )
+            placed[name] = LineScanner(
+                name,
+                height,
+                timing,
+                full.camera,
+                full.trajectory,
+                first_sample=first_sample,
+                width=width,
+                first_line=first_line,
+            )
+        return placed
+
+    # the terrain must cover the windows wherever the target's true height puts them
+    candidates = [place(h) for h in h_range]
+    sensors_all = [s for c in candidates for s in c.values()]
+    bounds = _footprint_bounds(sensors_all, h_range, margin_m=20 * plan.gsd_m)
+    dem_posting = max(2.0 * plan.gsd_m, 1.0)
+    with _Stage(f"terrain {terrain_name if options.dem_path is None else options.dem_path}", quiet):
+        if options.dem_path is not None:
+            dem = terrain_mod.terrain_from_dem(DEM.open(options.dem_path), bounds, dem_posting)
+            terrain_name = f"file:{Path(options.dem_path).name}"
+        else:
+            dem = terrain_mod.make_terrain(
+                terrain_name, bounds, dem_posting, int(rng_terrain.integers(2**31))
+            )
+    h_target = float(dem.height(*plan.target))
+    true_sensors = place(h_target if np.isfinite(h_target) else h_mid)
+    if any(v.target is not None for v in views.values()):
+        true_sensors = place(h_mid)  # several targets: centre on the middle height
+    specs = {
+        name: ImageSpec(
+            name,
+            views[name].camera.name,
+            f"{name}.tif",
+            s.n_lines,
+            s.n_samples,
+            s.first_line,
+            s.first_sample,
+            s.timing,
+        )
+        for name, s in true_sensors.items()
+    }
+    with _Stage("ground texture", quiet):
+        texture = terrain_mod.make_texture(dem, 0.5 * plan.gsd_m, int(rng_tex.integers(2**31)))
+
+    # --- control points (before rendering: point targets may mark them)
+    with _Stage("control points", quiet):
+        gcp_rows, check_rows, targets = _control_points(
+            true_sensors, dem, n_gcps, n_check, errors, rng_ctl, plan.control_min_views
+        )
+    if options.point_targets and targets[0].size:
+        texture = terrain_mod.add_point_targets(
+            texture, targets[0], targets[1], radius_m=2.5 * plan.gsd_m, contrast=0.8
+        )
+
+    if plan.blur_sigma_px > 0:
+        texture = _blurred(texture, plan.blur_sigma_px * plan.gsd_m)
+
+    # --- render
+    for name, sensor in true_sensors.items():
+        with _Stage(
+            f"rendered {name} ({sensor.image_shape[1]} x {sensor.image_shape[0]} px)", quiet
+        ):
+            refl = render_reflectance(sensor, dem, texture, supersample=options.supersample)
+            dn = _radiometry(refl, plan, rng_noise)
+            _write_raster(
+                out / specs[name].raster,
+                dn,
+                tags={
+                    "NBITS_USED": "10",
+                    "CARTO_IMAGE": name,
+                    "CARTO_ARRAYS": "odd/even staggered (raw)",
+                },
+            )
+
+    # --- products
+    with _Stage("ancillary, control, initial DEM and truth", quiet):
+        anc_files = {}
+        for seg, truth, seg_err in zip(plan.segments, truths, drawn["segments"], strict=True):
+            anc = _measured_ancillary(plan, seg, truth, seg_err, [specs[v.name] for v in seg.views])
+            path = anc.write(out / f"{seg.name}.ancillary.json")
+            for v in seg.views:
+                anc_files[v.name] = path.name
+        write_point_table(out / "gcps.csv", gcp_rows, precision=15)
+        write_point_table(out / "checkpoints.csv", check_rows, precision=15)
+        _write_init_dem(out / "init_dem.tif", dem, rng_init)
+        truth_dir = out / "truth"
+        truth_dir.mkdir(parents=True, exist_ok=True)
+        dem.write(truth_dir / "dem.tif")
+        models = {}
+        for name, sensor in true_sensors.items():
+            models[name] = sensor.save(truth_dir / f"{name}.model.json").relative_to(out)
+        ortho = _write_true_ortho(truth_dir / "ortho.tif", texture, dem, plan.gsd_m)
+        write_json_atomic(
+            truth_dir / "errors.json",
+            {
+                "error_model": errors.as_dict(),
+                "drawn": drawn,
+                "note": "attitude errors: measured R_body_to_orbit = rpy(e)^T @ true, with "
+                "e = bias + drift * dt_s + tau2 * tau^2 + tau3 * tau^3 (tau over the "
+                "ancillary samples of the segment); ephemeris: measured = true - "
+                "R_orbit_to_ecef @ (along, across, -radial)",
+            },
+        )
+    manifest = {
+        "format": SCENE_FORMAT,
+        "version": SCENE_VERSION,
+        "preset": plan.preset,
+        "platform": plan.platform,
+        "seed": int(options.seed),
+        "platform_seed": None if options.platform_seed is None else int(options.platform_seed),
+        "terrain": terrain_name,
+        "size": [int(size[0]), int(size[1])],
+        "errors": options.errors,
+        "error_model": errors.as_dict(),
+        "epoch_utc": plan.epoch_utc,
+        "target": {"lon_deg": plan.target[0], "lat_deg": plan.target[1]},
+        "images": {
+            n: {
+                "raster": specs[n].raster,
+                "ancillary": anc_files[n],
+                "camera": specs[n].camera,
+                "array": "odd",
+                "truth_model": str(models[n]),
+            }
+            for n in true_sensors
+        },
+        "gcps": "gcps.csv",
+        "checkpoints": "checkpoints.csv",
+        "init_dem": "init_dem.tif",
+        "truth": {
+            "dem": "truth/dem.tif",
+            "ortho": str(ortho.relative_to(out)),
+            "errors": "truth/errors.json",
+        },
+        "vertical_reference": "ellipsoid WGS84",
+        "pixel_convention": "first pixel centre at (0.5, 0.5); image coordinates of "
+        "control points refer to the odd-array model",
+        "counts": {"gcps": n_gcps, "checkpoints": n_check},
+        "epoch_j2000_s": epoch,
+    }
+    return write_json_atomic(out / "scene.json", manifest)
+
+
+def _terrain_range(name: str, dem_path: Path | None) -> tuple[float, float]:
+    from carto.framework.raster.dem import DEM
+    from carto.framework.simulation import terrain as terrain_mod
+
+    if dem_path is not None:
+        lo, hi = DEM.open(dem_path).height_range
+        return float(lo), float(hi)
+    preset = terrain_mod.TERRAINS[name]
+    return float(preset.h_min_m), float(preset.h_max_m)
+
+
+def _control_points(
+    sensors: dict[str, LineScanner],
+    dem: Any,
+    n_gcps: int,
+    n_check: int,
+    errors: ErrorModel,
+    rng: np.random.Generator,
+    min_views: int | None = None,
+) -> tuple[dict[str, list], dict[str, list], tuple[FloatArray, FloatArray]]:
+    """GCP and checkpoint observation rows (long format) and their ground positions.
+
+    Points are chosen where at least ``min_views`` images (None: all) see them; each gets a
+    row for every image that sees it."""
+    west, south, east, north = dem.bounds_lonlat
+    n = 160
+    gx, gy = np.meshgrid(np.linspace(west, east, n), np.linspace(south, north, n))
+    lon, lat = gx.ravel(), gy.ravel()
+    h = dem.height(lon, lat)
+    proj, seen_by = {}, {}
+    for name, s in sensors.items():
+        line, sample = s.ground_to_image(lon, lat, np.nan_to_num(h))
+        n_l, n_s = s.image_shape
+        margin = 16.0
+        seen_by[name] = (
+            np.isfinite(h)
+            & np.isfinite(line)
+            & (line > margin)
+            & (line < n_l - margin)
+            & (sample > margin)
+            & (sample < n_s - margin)
+        )
+        proj[name] = (line, sample)
+    n_seen = np.sum(list(seen_by.values()), axis=0)
+    inside = n_seen >= (len(sensors) if min_views is None else min_views)
+    gcp_idx = _select_points(lon, lat, n_gcps, rng, exclude=~inside)
+    taken = ~inside
+    taken[gcp_idx] = True
+    check_idx = _select_points(lon, lat, n_check, rng, exclude=taken)
+    # exact projections of the chosen points (refined ground -> image, true models)
+    cols = (
+        "id",
+        "lon_deg",
+        "lat_deg",
+        "h_m",
+        "image",
+        "line",
+        "sample",
+        "sigma_planimetric_m",
+        "sigma_h_m",
+        "sigma_px",
+    )
+
+    def rows(indices: NDArray[np.intp], prefix: str, noisy: bool) -> dict[str, list]:
+        table: dict[str, list] = {c: [] for c in cols}
+        plan_sigma = errors.gcp_planimetric_m / math.sqrt(2.0)
+        for k, i in enumerate(indices):
+            lo_, la_, hh = lon[i], lat[i], h[i]
+            if noisy:
+                m_lat = 111_320.0
+                m_lon = m_lat * math.cos(math.radians(la_))
+                de, dn = rng.normal(0.0, plan_sigma, 2) if plan_sigma else (0.0, 0.0)
+                lo_m, la_m = lo_ + de / m_lon, la_ + dn / m_lat
+                hh_m = hh + (rng.normal(0.0, errors.gcp_height_m) if errors.gcp_height_m else 0)
+            else:
+                lo_m, la_m, hh_m = lo_, la_, hh
+            for name in sensors:
+                if not seen_by[name][i]:
+                    continue
+                line, sample = proj[name][0][i], proj[name][1][i]
+                if noisy and errors.gcp_image_px:
+                    line += rng.normal(0.0, errors.gcp_image_px)
+                    sample += rng.normal(0.0, errors.gcp_image_px)
+                for c, value in zip(
+                    cols,
+                    (
+                        f"{prefix}{k + 1:03d}",
+                        lo_m,
+                        la_m,
+                        hh_m,
+                        name,
+                        line,
+                        sample,
+                        errors.gcp_planimetric_m if noisy else 0.0,
+                        errors.gcp_height_m if noisy else 0.0,
+                        errors.gcp_image_px if noisy else 0.0,
+                    ),
+                    strict=True,
+                ):
+                    table[c].append(value)
+        return table
+
+    all_idx = np.concatenate([gcp_idx, check_idx])
+    return (rows(gcp_idx, "G", True), rows(check_idx, "C", False), (lon[all_idx], lat[all_idx]))
+
+
+def _write_init_dem(path: Path, dem: Any, rng: np.random.Generator) -> Path:
+    """SRTM-like coarse DEM: the truth averaged to 3 arc-seconds (~90 m), plus a bias and
+    correlated noise; ellipsoidal heights (as the truth)."""
+    import cv2
+    from affine import Affine
+
+    from carto.framework.raster.dem import DEM
+
+    west, south, east, north = dem.bounds_lonlat
+    step = 3.0 / 3600.0
+    # one cell beyond the truth on every side, so bilinear sampling covers all of it
+    x0 = (math.floor(west / step) - 1) * step
+    y0 = (math.ceil(north / step) + 1) * step
+    nx = math.ceil((east - x0) / step) + 1
+    ny = math.ceil((y0 - south) / step) + 1
+    # block average of the truth: sample it on a fine sub-grid of each 3" cell
+    k = 9
+    sub = (np.arange(k) + 0.5) / k
+    xs = x0 + (np.arange(nx)[:, None] + sub[None, :]).ravel() * step
+    ys = y0 - (np.arange(ny)[:, None] + sub[None, :]).ravel() * step
+    gx, gy = np.meshgrid(xs, ys)
+    fine = dem.height(gx.ravel(), gy.ravel()).reshape(ny * k, nx * k)
+    blocks = fine.reshape(ny, k, nx, k)
+    valid = np.isfinite(blocks).sum(axis=(1, 3))
+    coarse = np.where(valid > 0, np.nansum(blocks, axis=(1, 3)) / np.maximum(valid, 1), np.nan)
+    if np.isnan(coarse).any():  # cells beyond the truth: nearest valid cell (SRTM covers all)
+        from scipy import ndimage
+
+        _, (iy, ix) = ndimage.distance_transform_edt(np.isnan(coarse), return_indices=True)
+        coarse = coarse[iy, ix]
+    noise = cv2.GaussianBlur(rng.normal(0.0, 1.0, coarse.shape).astype(np.float32), (0, 0), 1.0)
+    noise *= 2.5 / max(float(noise.std()), 1e-6)
+    bias = float(rng.normal(0.0, 4.0))
+    heights = coarse + bias + noise.astype(np.float64)
+    init = DEM.from_array(
+        heights, Affine(step, 0.0, x0, 0.0, -step, y0), "EPSG:4326", vertical="ellipsoid"
+    )
+    return init.write(path)
+
+
+def _write_true_ortho(path: Path, texture: Any, dem: Any, gsd_m: float) -> Path:
+    """The texture (reflectance) resampled to a UTM grid at the GSD over the common footprint."""
+    import pyproj
+    from affine import Affine
+    from rasterio.warp import Resampling, reproject
+
+    west, south, east, north = dem.bounds_lonlat
+    lon_c, lat_c = 0.5 * (west + east), 0.5 * (south + north)
+    crs = utm_crs(lon_c, lat_c)
+    to_utm = pyproj.Transformer.from_crs("EPSG:4326", crs, always_xy=True)
+    xs, ys = to_utm.transform([west, east, west, east], [south, south, north, north])
+    x0 = math.floor(min(xs) / gsd_m) * gsd_m
+    y1 = math.ceil(max(ys) / gsd_m) * gsd_m
+    nx = math.ceil((max(xs) - x0) / gsd_m)
+    ny = math.ceil((y1 - min(ys)) / gsd_m)
+    dst_transform = Affine(gsd_m, 0.0, x0, 0.0, -gsd_m, y1)
+    data = np.full((ny, nx), np.nan, np.float32)
+    values = getattr(texture, "reflectance", None)
+    if values is None:
+        values = texture.values
+    reproject(
+        np.asarray(values, np.float32),
+        data,
+        src_transform=texture.transform,
+        src_crs="EPSG:4326",
+        dst_transform=dst_transform,
+        dst_crs=crs.to_wkt(),
+        resampling=Resampling.average,
+        src_nodata=np.nan,
+        dst_nodata=np.nan,
+    )
+    return _write_raster(
+        path,
+        data,
+        crs=crs.to_wkt(),
+        transform=dst_transform,
+        nodata=np.nan,
+        tags={
+            "CARTO_CONTENT": "true ground reflectance (no terrain shading "
+            "beyond the texture's), ortho on truth"
+        },
+    )

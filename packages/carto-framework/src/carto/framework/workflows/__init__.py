@@ -1,0 +1,1 @@
+"""Workflows behind the commands: opening products, adjust, dem, demo."""

@@ -1,0 +1,569 @@
+"""Workflows behind the commands: the steps ``carto adjust`` chains, with their outputs.
+
+``adjust_product`` opens a scene (or a configuration file naming images, models, GCPs and tie
+points), selects GCPs, finds tie points automatically when asked, runs an adjuster from the
+registry and writes: the adjusted model files (rigorous models) or corrected RPC files,
+corrected RPCs fitted to every adjusted rigorous model (``<image>_RPC.TXT``, which GDAL reads as
+the sidecar of ``<image>.tif``), a residual plot (``residuals.png``) and ``report.json``.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import sys
+import time
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from carto.framework.adjustment.base import AdjustmentResult
+from carto.framework.adjustment.observations import Observations
+from carto.framework.errors import InputError
+from carto.framework.files.documents import read_json, write_json_atomic
+from carto.framework.files.point_table import read_point_table, write_point_table
+from carto.framework.geometry import frames
+from carto.framework.geometry.linescan import LineScanner
+from carto.framework.geometry.rpc import RPCSensor, fit_rpc, write_rpc_txt
+from carto.framework.geometry.sensor import Sensor
+from carto.framework.matching.gcp_transfer import (
+    GCP_OFFSET_COLUMNS,
+    GCP_OFFSET_SIGMA_PX,
+    gcp_offsets,
+)
+from carto.framework.plugins.registry import get_registry
+from carto.framework.workflows.opening import open_sensors
+
+Table = dict[str, NDArray]
+
+
+WEAK_INTERSECTION_DEG = 10.0
+"""Tie points whose rays meet at less than this get a DEM height constraint even with GCPs."""
+
+
+def select_gcps(table: Table, n: int | None) -> Table:
+    """``n`` GCPs of a long-format table (all when ``n`` is None): one -> the one nearest the
+    centroid of all; more -> the first ``n`` ids in file order (the simulator lists them
+    spread over the scene)."""
+    ids = list(dict.fromkeys(table["id"].tolist()))
+    if n is None or n >= len(ids):
+        if n is not None and n > len(ids):
+            raise InputError(f"--gcps {n}: the product has only {len(ids)} GCPs")
+        return table
+    if n < 0:
+        raise InputError(f"--gcps must be >= 0, got {n}")
+    if n == 0:
+        return {k: v[:0] for k, v in table.items()}
+    if n == 1:
+        lon = np.array([table["lon_deg"][table["id"] == i][0] for i in ids])
+        lat = np.array([table["lat_deg"][table["id"] == i][0] for i in ids])
+        keep = {ids[int(np.argmin((lon - lon.mean()) ** 2 + (lat - lat.mean()) ** 2))]}
+    else:
+        keep = set(ids[:n])
+    m = np.array([i in keep for i in table["id"]])
+    return {k: v[m] for k, v in table.items()}
+
+
+def _default_adjuster(sensors: Mapping[str, Sensor], platform: str) -> str:
+    if all(isinstance(s, RPCSensor) for s in sensors.values()):
+        return "rpc-bias"
+    if platform.startswith("Cartosat-1"):
+        return "cartosat1-combined"
+    if platform.startswith("Cartosat-2"):
+        return "cartosat2-bba"
+    raise InputError("no default adjuster for this product; name one with --adjuster")
+
+
+def residual_plot(result: AdjustmentResult, path: Path, title: str) -> Path:
+    """Image residual vectors per image (scaled) and GCP ground residuals, as a PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from carto.framework.files.atomic import atomic_output
+
+    res = result.image_residuals
+    images = list(result.sensors)
+    fig, axes = plt.subplots(1, len(images) + 1, figsize=(4.2 * (len(images) + 1), 4.2))
+    for ax, name in zip(axes, images, strict=False):
+        m = (res["image"] == name) & np.isfinite(res["d_line"])
+        n_l, n_s = result.sensors[name].image_shape
+        pts = np.array([p for p in res["point_id"][m]])
+        lines = np.array([result.points.get(p, (np.nan,) * 3) for p in pts])
+        if lines.size:
+            line_px, sample_px, _ = result.sensors[name].project(
+                lines[:, 0], lines[:, 1], lines[:, 2]
+            )
+            scale = (
+                0.05
+                * max(n_l, n_s)
+                / max(float(np.nanmax(np.hypot(res["d_line"][m], res["d_sample"][m]))), 1e-9)
+            )
+            ax.quiver(
+                sample_px,
+                line_px,
+                res["d_sample"][m] * scale,
+                -res["d_line"][m] * scale,
+                angles="xy",
+                scale_units="xy",
+                scale=1,
+                width=0.004,
+            )
+        else:
+            scale = float("nan")
+        ax.set_xlim(0, n_s)
+        ax.set_ylim(n_l, 0)
+        ax.set_aspect("equal")
+        rms = (
+            float(np.sqrt(np.nanmean(res["d_line"][m] ** 2 + res["d_sample"][m] ** 2)))
+            if (m.any())
+            else float("nan")
+        )
+        ax.set_title(f"{name}: {m.sum()} obs, RMS {rms:.2f} px (arrows x{scale:.0f})", fontsize=9)
+        ax.set_xlabel("sample (px)")
+        ax.set_ylabel("line (px)")
+    ax = axes[-1]
+    cr = result.control_residuals
+    if len(cr["id"]):
+        ax.scatter(cr["d_east_m"], cr["d_north_m"], c=cr["d_up_m"], cmap="coolwarm")
+        for i, cid in enumerate(cr["id"]):
+            ax.annotate(str(cid), (cr["d_east_m"][i], cr["d_north_m"][i]), fontsize=7)
+        ax.axhline(0, color="grey", lw=0.5)
+        ax.axvline(0, color="grey", lw=0.5)
+    ax.set_title("GCP residuals (m; colour: up)", fontsize=9)
+    ax.set_xlabel("east (m)")
+    ax.set_ylabel("north (m)")
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    with atomic_output(path) as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
+    plt.close(fig)
+    return path
+
+
+def _progress(message: str, quiet: bool) -> None:
+    if not quiet:
+        print(f"carto adjust: {message}", file=sys.stderr, flush=True)
+
+
+RESERVED_OUTPUTS = frozenset(
+    {"report", "models", "rpc", "residual_plot", "tie_points", "gcp_offsets"}
+)
+"""Names an adjuster's products cannot take (the workflow's own outputs)."""
+
+
+def adjust_product(
+    source: str | os.PathLike[str],
+    out_dir: str | os.PathLike[str],
+    *,
+    n_gcps: int | None = None,
+    adjuster: str | None = None,
+    ties: str = "auto",
+    options: Mapping[str, Any] | None = None,
+    sensor_type: str | None = None,
+    quiet: bool = False,
+) -> dict[str, Any]:
+    """Adjust a scene or configured product and write the outputs; return the report.
+
+    Args:
+        source: a scene folder (``carto simulate``) or a JSON configuration (see
+            ``carto adjust --help``).
+        out_dir: output folder.
+        n_gcps: number of GCPs to use (None: all that the product has).
+        adjuster: adjuster name (default from the platform).
+        ties: ``"auto"`` (automatic tie points), ``"none"``, or a CSV file
+            (``id,image,line,sample[,sigma_px]``).
+        options: adjuster options (mode, attitude_order ...).
+    """
+    from carto.framework.evaluation.checkpoints import (
+        checkpoint_accuracy,
+        monoplot_accuracy,
+        predicted_checkpoint_sigma,
+    )
+    from carto.framework.products.scene import Scene
+
+    t0 = time.perf_counter()
+    src = Path(source)
+    out = Path(out_dir)
+    options = dict(options or {})
+    gcp_transfer = _auto_flag(options.pop("gcp_transfer", "auto"), "gcp_transfer")
+    offset_sigma_px = float(options.pop("gcp_offset_sigma_px", GCP_OFFSET_SIGMA_PX))
+    if not (math.isfinite(offset_sigma_px) and offset_sigma_px > 0):
+        raise InputError(f"gcp_offset_sigma_px must be > 0, got {offset_sigma_px}")
+    checkpoints = None
+    dem = None
+    rasters: dict[str, Path] = {}
+    if src.is_dir() or src.name == "scene.json":
+        scene = Scene.open(src)
+        sensors = open_sensors(scene.root, sensor_type)
+        gcps = scene.control("gcps")
+        checkpoints = scene.control("checkpoints")
+        platform = str(scene.manifest.get("platform", ""))
+        rasters = {n: scene.raster(n) for n in scene.image_names}
+        init = scene.manifest.get("init_dem")
+        if init:
+            from carto.framework.raster.dem import DEM
+
+            dem = DEM.open(scene.path(init))
+    elif src.suffix.lower() == ".json":
+        config = _read_config(src)
+        sensors, rasters, gcps, dem, platform = config
+    else:
+        raise InputError(f"{src}: expected a scene folder or a JSON configuration file")
+    gcps = select_gcps(gcps, n_gcps) if gcps is not None else None
+    n_used = len(set(gcps["id"].tolist())) if gcps is not None else 0
+    # tie points
+    tie_table: Table | None = None
+    if ties == "auto":
+        from carto.framework.matching.tiepoints import block_tie_points
+
+        if dem is None:
+            raise InputError(
+                "automatic tie points need a DEM (the scene's init_dem.tif or "
+                '"dem" in the configuration)'
+            )
+        _progress("matching tie points on system-level ortho-images", quiet)
+        tie_table = block_tie_points(rasters, sensors, dem)
+    elif ties != "none":
+        tie_table = read_point_table(ties, numeric=("line", "sample"), text=("id", "image"))
+    n_ties = len(set(tie_table["id"].tolist())) if tie_table is not None else 0
+    obs = Observations.from_tables(gcps, tie_table)
+    # a DEM height on a tie point fixes what tie points cannot: a shift along the stereo
+    # parallax looks like a height change, and rays that meet at a small angle (the overlap
+    # of adjacent swaths) let the point slide along them. With GCPs, on well intersecting
+    # points, it would only pull the block towards the coarse DEM's errors. So by default
+    # ("auto"): every tie point without GCPs, else only those seen in an image without GCP
+    # or whose rays meet at less than WEAK_INTERSECTION_DEG; True: every one; False: none.
+    tie_heights = _auto_flag(options.pop("tie_heights", "auto"), "tie_heights")
+    height_sigma_m = float(options.pop("height_sigma_m", 30.0))
+    height_offset_sigma_m = float(options.pop("height_offset_sigma_m", 0.0))
+    if dem is not None and tie_table is not None and tie_heights is not False:
+        weak = WEAK_INTERSECTION_DEG if (tie_heights == "auto" and n_used > 0) else None
+        obs = _with_dem_heights(
+            obs, sensors, dem, height_sigma_m, height_offset_sigma_m, below_angle_deg=weak
+        )
+    # GCP transfer: the offset of each hand-measured GCP between images, by matching,
+    # carries its stereo parallax at matching precision (see gcp_transfer.gcp_offsets)
+    transfer: dict[str, Any] = {"requested": gcp_transfer, "ran": False}
+    if gcp_transfer is False:
+        transfer["why_not"] = "turned off"
+    elif gcps is None or not len(gcps["id"]):
+        transfer["why_not"] = "no GCP"
+    elif dem is None or any(n not in rasters for n in sensors):
+        transfer["why_not"] = "it needs every image's raster and a DEM"
+        if gcp_transfer is True:
+            raise InputError(f"gcp_transfer: {transfer['why_not']}")
+    name = adjuster or _default_adjuster(sensors, platform)
+    component = get_registry().get("adjuster", name)
+    _progress(
+        f"adjusting {len(sensors)} images with {name} ({n_used} GCPs, {n_ties} tie points)", quiet
+    )
+    result = component.adjust(sensors, obs, dem=dem, **options)
+    offsets = dropped_offsets = None
+    if "why_not" not in transfer:
+        # matched on chips orthorectified with the adjusted models (the system-level ones
+        # may be hundreds of metres apart), then the adjustment again with the offsets;
+        # GCPs the first adjustment rejected stay out
+        _progress("matching the GCPs between images (GCP transfer)", quiet)
+        rejected = set(result.outliers)
+        kept = np.array([g not in rejected for g in gcps["id"]], bool)
+        try:
+            offsets, dropped_offsets = gcp_offsets(
+                {k: np.asarray(v)[kept] for k, v in gcps.items()},
+                rasters,
+                result.sensors,
+                dem,
+                sigma_px=offset_sigma_px,
+            )
+        except InputError as exc:
+            if gcp_transfer is True:
+                raise
+            transfer["why_not"] = str(exc)  # e.g. a raster that does not fit its model
+        if offsets is not None and not offsets["id"].size:
+            transfer["why_not"] = "no GCP could be matched"
+        elif offsets is not None:
+            transfer["ran"] = True
+            obs = obs.with_offsets(
+                *(offsets[c] for c in GCP_OFFSET_COLUMNS if c != "score")  # as with_offsets
+            )
+            result = component.adjust(sensors, obs, dem=dem, **options)
+    # outputs
+    out.mkdir(parents=True, exist_ok=True)
+    files = _write_models(result, out)
+    for product, document in result.products.items():
+        if product in RESERVED_OUTPUTS or not product.isidentifier():
+            raise InputError(f"adjuster {name}: product name {product!r} is not allowed")
+        if isinstance(document, dict) and document.get("sources") == []:
+            document = document | {"sources": [str(src)]}  # what the adjuster did not know
+        files[product] = write_json_atomic(out / f"{product}.json", _jsonable(document)).name
+    plot = residual_plot(
+        result,
+        out / "residuals.png",
+        f"{name}: {n_used} GCPs, {n_ties} tie points, sigma0 {result.sigma0:.2f}",
+    )
+    report: dict[str, Any] = {
+        "source": str(src),
+        "adjuster": name,
+        "options": {
+            k: v
+            for k, v in options.items()
+            if isinstance(v, str | int | float)
+            or (isinstance(v, list) and all(isinstance(x, str) for x in v))
+        },
+        "gcps_used": n_used,
+        "tie_points": n_ties,
+        "dem_height_constraints": int(obs.height_id.size),
+        "sigma0": result.sigma0,
+        # sigma0 in pixels: the a-posteriori sigma of one image measurement
+        "sigma0_px": result.sigma0 * float(np.sqrt(np.mean(obs.sigma_px**2)))
+        if obs.sigma_px.size
+        else None,
+        "outliers": list(result.outliers),
+        "converged": result.converged,
+        "iterations": result.iterations,
+        "adjustment": result.summary(),
+        "files": {**files, "residual_plot": plot.name},
+        "seconds": round(time.perf_counter() - t0, 1),
+    }
+    if checkpoints is not None and len(checkpoints["id"]):
+        report["checkpoints_per_image"] = monoplot_accuracy(result.sensors, checkpoints)
+        acc = checkpoint_accuracy(result.sensors, checkpoints)
+        pred = predicted_checkpoint_sigma(result, checkpoints)
+        before = checkpoint_accuracy(sensors, checkpoints)
+        report["checkpoints"] = {
+            k: acc[k]
+            for k in (
+                "count",
+                "rmse_along_m",
+                "rmse_across_m",
+                "rmse_planimetric_m",
+                "rmse_height_m",
+            )
+        } | {
+            "predicted_sigma_planimetric_m": pred["predicted_sigma_planimetric_m"],
+            "predicted_sigma_height_m": pred["predicted_sigma_height_m"],
+        }
+        report["checkpoints_before"] = {
+            k: before[k]
+            for k in (
+                "count",
+                "rmse_along_m",
+                "rmse_across_m",
+                "rmse_planimetric_m",
+                "rmse_height_m",
+            )
+        }
+    if tie_table is not None:
+        write_point_table(out / "tie_points.csv", tie_table)
+        report["files"]["tie_points"] = "tie_points.csv"
+    report["gcp_transfer"] = transfer
+    if offsets is not None:
+        res = result.offset_residuals
+        used = np.isfinite(res["d_line"]) if res else np.zeros(0, bool)
+        report["gcp_offsets"] = {
+            "count": int(offsets["id"].size),
+            "used": int(used.sum()),
+            "sigma_px": offset_sigma_px,
+            # per coordinate, as sigma_px
+            "residual_rms_px": float(
+                np.sqrt(np.mean(np.r_[res["d_line"][used], res["d_sample"][used]] ** 2))
+            )
+            if used.any()
+            else None,
+            "not_kept": dropped_offsets,
+        }
+        if offsets["id"].size:
+            write_point_table(out / "gcp_offsets.csv", offsets)
+            report["files"]["gcp_offsets"] = "gcp_offsets.csv"
+    write_json_atomic(out / "report.json", _jsonable(report))
+    return report
+
+
+def _auto_flag(value: Any, name: str) -> str | bool:
+    """An ``"auto"``/true/false option, checked (0 and 1 are not booleans here)."""
+    if isinstance(value, bool) or value == "auto":
+        return value
+    raise InputError(f"{name} must be 'auto', true or false, got {value!r}")
+
+
+def _jsonable(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def _with_dem_heights(
+    obs: Observations,
+    sensors: Mapping[str, Sensor],
+    dem: Any,
+    sigma_m: float,
+    offset_sigma_m: float = 0.0,
+    below_angle_deg: float | None = None,
+) -> Observations:
+    """Height constraints for tie points (not GCPs) from the DEM at their first location
+    (independent sigma ``sigma_m`` each, common offset of a-priori sigma ``offset_sigma_m``);
+    with ``below_angle_deg``, only for points seen in an image that no GCP is measured in, or
+    whose rays meet at a smaller angle."""
+    controls = set(obs.control_id.tolist())
+    _, first = np.unique(obs.point_id, return_index=True)
+    first = first[[p not in controls for p in obs.point_id[first]]]
+    if first.size == 0:
+        return obs
+    if below_angle_deg is not None:
+        # points in images no GCP fixes (a shift along the parallax of a pair with such an
+        # image looks like a height change) or whose rays meet at a small angle
+        controlled = set(obs.image[np.isin(obs.point_id, obs.control_id)].tolist())
+        loose = {
+            p for p, image in zip(obs.point_id, obs.image, strict=True) if image not in controlled
+        }
+        angle = intersection_angles_deg(obs, sensors)
+        first = first[
+            [p in loose or angle.get(p, 0.0) < below_angle_deg for p in obs.point_id[first]]
+        ]
+        if first.size == 0:
+            return obs
+    h = np.full(first.size, np.nan)
+    for image in np.unique(obs.image[first]):
+        rows = obs.image[first] == image
+        _, _, h[rows] = sensors[image].locate_on_dem(
+            obs.line[first[rows]], obs.sample[first[rows]], dem
+        )
+    ok = np.isfinite(h)
+    return obs.with_heights(obs.point_id[first][ok], h[ok], sigma_m, offset_sigma_m)
+
+
+def intersection_angles_deg(obs: Observations, sensors: Mapping[str, Sensor]) -> dict[str, float]:
+    """Point id -> the largest angle, degrees, between the rays of its image measurements
+    (0 for a point seen in one image): the strength of its intersection."""
+    ids, inverse = np.unique(obs.point_id, return_inverse=True)
+    images = list(np.unique(obs.image))
+    rays = np.full((len(images), ids.size, 3), np.nan)
+    for k, image in enumerate(images):
+        rows = obs.image == image
+        ends = []
+        for h in (0.0, 1000.0):  # any sensor: the line of sight through two heights
+            lon, lat = sensors[image].image_to_ground(obs.line[rows], obs.sample[rows], h)
+            ends.append(frames.geodetic_to_ecef(lon, lat, np.full(lon.shape, h)))
+        u = ends[1] - ends[0]
+        rays[k, inverse[rows]] = u / np.linalg.norm(u, axis=-1, keepdims=True)
+    best = np.zeros(ids.size)
+    for i in range(len(images)):
+        for j in range(i + 1, len(images)):
+            cos = np.clip(np.einsum("nk,nk->n", rays[i], rays[j]), -1.0, 1.0)
+            best = np.fmax(best, np.degrees(np.arccos(cos)))
+    return dict(zip(ids.tolist(), best.tolist(), strict=True))
+
+
+def _write_models(result: AdjustmentResult, out: Path) -> dict[str, Any]:
+    files: dict[str, Any] = {"models": {}, "rpc": {}}
+    for name, sensor in result.sensors.items():
+        if isinstance(sensor, LineScanner):
+            files["models"][name] = sensor.save(out / f"{name}.model.json").name
+            rpc, report = fit_rpc(sensor, h_range=_height_range(result))
+            files["rpc"][name] = {
+                "file": write_rpc_txt(rpc, out / f"{name}_RPC.TXT").name,
+                "fit_check_max_px": report.check_max_px,
+            }
+        elif isinstance(sensor, RPCSensor):
+            corrected = _bake_rpc(sensor)
+            files["rpc"][name] = {"file": write_rpc_txt(corrected, out / f"{name}_RPC.TXT").name}
+    return files
+
+
+def _height_range(result: AdjustmentResult) -> tuple[float, float]:
+    h = np.array([p[2] for p in result.points.values()]) if result.points else np.array([0.0])
+    lo, hi = float(np.nanmin(h)), float(np.nanmax(h))
+    pad = max(200.0, 0.5 * (hi - lo))
+    return lo - pad, hi + pad
+
+
+def _bake_rpc(sensor: RPCSensor) -> Any:
+    """An RPC that includes the sensor's image-space correction (refitted on a 3-D grid)."""
+    h0, hs = sensor.rpc.height_off, abs(sensor.rpc.height_scale)
+    rpc, _ = fit_rpc(sensor, h_range=(h0 - hs, h0 + hs))
+    return rpc
+
+
+def _read_config(path: Path) -> tuple[dict[str, Sensor], dict[str, Path], Table | None, Any, str]:
+    """A JSON configuration: ``{"images": {name: {"model": file, "raster": file,
+    "sensor": type}}, "gcps": csv, "dem": file, "geoid": gtx, "platform": text}``, or
+    ``"height_m": number`` (ellipsoidal) for a flat DEM instead of ``"dem"``; paths relative
+    to the file."""
+    from carto.framework.raster.dem import DEM, Geoid
+    from carto.framework.workflows.opening import open_sensor
+
+    doc = read_json(path, "configuration")
+    if not isinstance(doc, dict):
+        raise InputError(f"{path}: a configuration is a JSON object, got {type(doc).__name__}")
+    base = path.parent
+    images = doc.get("images")
+    if not isinstance(images, dict) or len(images) < 1:
+        raise InputError(f"{path}: field 'images' must map image names to models")
+    sensors: dict[str, Sensor] = {}
+    rasters: dict[str, Path] = {}
+    for name, spec in images.items():
+        if "model" not in spec:
+            raise InputError(f"{path}: images.{name} has no 'model'")
+        sensor = open_sensor(base / spec["model"], spec.get("sensor"))
+        if "raster" in spec:
+            rasters[name] = base / spec["raster"]
+            sensor = _crop_offset(sensor, rasters[name])
+        sensors[name] = sensor
+    gcps = None
+    if doc.get("gcps"):
+        gcps = read_point_table(
+            base / doc["gcps"],
+            numeric=("lon_deg", "lat_deg", "h_m", "line", "sample"),
+            text=("id", "image"),
+        )
+    dem = None
+    if doc.get("dem"):
+        geoid = Geoid.open(base / doc["geoid"]) if doc.get("geoid") else None
+        dem = DEM.open(base / doc["dem"], geoid=geoid)
+    elif doc.get("height_m") is not None:
+        h = doc["height_m"]
+        if isinstance(h, bool) or not isinstance(h, int | float) or not math.isfinite(h):
+            raise InputError(f"{path}: field 'height_m' must be a number, got {h!r}")
+        dem = DEM.constant(float(h))
+    return sensors, rasters, gcps, dem, str(doc.get("platform", ""))
+
+
+def _crop_offset(sensor: Sensor, raster: Path) -> Sensor:
+    """An RPC sensor of a full scene, restricted to a crop whose pixel offset is in the crop's
+    (non-georeferenced) geotransform, as in CNES's test data."""
+    import warnings
+
+    import attrs
+    import rasterio
+
+    if not isinstance(sensor, RPCSensor):
+        return sensor
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        with rasterio.open(raster) as ds:
+            t, crs, shape = ds.transform, ds.crs, (ds.height, ds.width)
+    if crs is not None or t.b != 0 or t.d != 0 or t.a != 1 or abs(t.e) != 1:
+        return sensor
+    col_off, row_off = t.c, t.f if t.e > 0 else -t.f
+    if col_off == 0 and row_off == 0 and shape == sensor.image_shape:
+        return sensor
+    rpc = attrs.evolve(
+        sensor.rpc, line_off=sensor.rpc.line_off - row_off, samp_off=sensor.rpc.samp_off - col_off
+    )
+    return RPCSensor(
+        rpc,
+        shape,
+        parameters=sensor.parameters,
+        source=f"{sensor.source} (crop at row {row_off:g}, column {col_off:g})",
+        prefix=sensor.prefix,
+    )

@@ -1,0 +1,308 @@
+"""The DEM workflow behind ``carto dem``: a stereo pair (two images with models, or a scene
+folder with its adjusted models) -> a DEM generator (default ``ior``) -> ``dem.tif``,
+``ortho_left.tif``, ``ortho_right.tif``, ``quality.tif``, ``report.json`` and a hillshade
+(and, against a reference DEM, the accuracy and a difference map).
+
+Every file is written to a temporary name and renamed when complete.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+import time
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import attrs
+import numpy as np
+
+from carto.framework.errors import InputError
+from carto.framework.files.atomic import atomic_output
+from carto.framework.geometry.sensor import Sensor
+from carto.framework.plugins.registry import get_registry
+from carto.framework.raster.dem import DEM, ELLIPSOID, Geoid
+from carto.framework.workflows.opening import open_sensor
+
+__all__ = ["StereoInputs", "dem_product", "open_pair", "tile_scheduler"]
+
+
+def _progress(message: str, quiet: bool) -> None:
+    if not quiet:
+        print(f"carto dem: {message}", file=sys.stderr, flush=True)
+
+
+def _model_beside(image: Path) -> Path:
+    """The model file of an image: a sidecar ``.geom``/``_RPC.TXT``/``.RPB`` if there is
+    one, else the image itself (RPC tags in a GeoTIFF)."""
+    for candidate in (
+        image.with_suffix(".geom"),
+        image.with_name(image.stem + "_RPC.TXT"),
+        image.with_suffix(".RPB"),
+    ):
+        if candidate.is_file():
+            return candidate
+    return image
+
+
+def _adjusted(models: Path | None, name: str, sensor: Sensor) -> Sensor:
+    """The adjusted model of image ``name`` from a ``carto adjust`` output folder, if any."""
+    if models is None:
+        return sensor
+    for candidate in (models / f"{name}.model.json", models / f"{name}_RPC.TXT"):
+        if candidate.is_file():
+            return open_sensor(candidate)
+    raise InputError(f"{models}: no adjusted model for image {name!r} ({name}.model.json)")
+
+
+@attrs.frozen
+class StereoInputs:
+    """Where the stereo pair of a DEM run comes from.
+
+    Attributes:
+        source: a scene folder (``carto simulate``); or None and ``left``/``right``.
+        left, right: image files (rasters) when there is no scene.
+        left_model, right_model: their model files (default: found beside each image).
+        sensor_type: force a sensor type for the models (``rpc`` ...).
+        models: a ``carto adjust`` output folder with adjusted models of the images.
+        pair: for a scene, the two image names (default: its first two, the one closer to
+            nadir as left).
+    """
+
+    source: str | os.PathLike[str] | None = None
+    left: str | os.PathLike[str] | None = None
+    right: str | os.PathLike[str] | None = None
+    left_model: str | os.PathLike[str] | None = None
+    right_model: str | os.PathLike[str] | None = None
+    sensor_type: str | None = None
+    models: str | os.PathLike[str] | None = None
+    pair: Sequence[str] | None = None
+
+
+def open_pair(
+    inputs: StereoInputs,
+) -> tuple[dict[str, Path], dict[str, Sensor], DEM | None]:
+    """The stereo pair to process: image name -> raster, image name -> model (left first),
+    and the scene's initial DEM (None for loose images); see :class:`StereoInputs`. A crop's
+    pixel offset in its geotransform is applied to a full-scene RPC."""
+    from carto.framework.workflows.adjust import _crop_offset
+
+    source, pair, sensor_type = inputs.source, inputs.pair, inputs.sensor_type
+    models_dir = Path(inputs.models) if inputs.models is not None else None
+    if source is not None:
+        from carto.framework.products.scene import Scene
+        from carto.framework.workflows.opening import open_sensors
+
+        scene = Scene.open(source)
+        sensors = open_sensors(scene.root, sensor_type)
+        names = list(pair) if pair else list(sensors)[:2]
+        if len(names) != 2 or any(n not in sensors for n in names):
+            raise InputError(
+                f"{source}: --pair must name two of the images {', '.join(sensors)}, got {names}"
+            )
+        if not pair:
+            names.sort(key=lambda n: _off_nadir_deg(sensors[n]))
+        chosen = {n: _adjusted(models_dir, n, sensors[n]) for n in names}
+        init = scene.manifest.get("init_dem")
+        dem = DEM.open(scene.path(init)) if init else None
+        return {n: scene.raster(n) for n in names}, chosen, dem
+    if inputs.left is None or inputs.right is None:
+        raise InputError("dem: give a scene folder, or both --left and --right images")
+    rasters: dict[str, Path] = {}
+    sensors = {}
+    for key, image, model in (
+        ("left", inputs.left, inputs.left_model),
+        ("right", inputs.right, inputs.right_model),
+    ):
+        path = Path(image)
+        if not path.is_file():
+            raise InputError(f"{path}: no such image")
+        sensor = open_sensor(Path(model) if model else _model_beside(path), sensor_type)
+        sensors[key] = _adjusted(models_dir, key, _crop_offset(sensor, path))
+        rasters[key] = path
+    return rasters, sensors, None
+
+
+def _off_nadir_deg(sensor: Sensor) -> float:
+    """Off-nadir angle of the line of sight at the image centre, degrees."""
+    from carto.framework.geometry import frames
+
+    n_l, n_s = sensor.image_shape
+    lon, lat = sensor.image_to_ground(n_l / 2, n_s / 2, 0.0)
+    lo2, la2 = sensor.image_to_ground(n_l / 2, n_s / 2, 1000.0)
+    d = frames.geodetic_to_ecef(lo2, la2, 1000.0) - frames.geodetic_to_ecef(lon, lat, 0.0)
+    up = frames.ellipsoid_normal(lon, lat)
+    return float(np.degrees(np.arccos(np.clip(np.dot(np.ravel(d), up) / np.linalg.norm(d), -1, 1))))
+
+
+def initial_dem(
+    init_dem: str | os.PathLike[str] | None,
+    geoid: str | os.PathLike[str] | None,
+    init_height_m: float | None,
+    scene_dem: DEM | None,
+) -> DEM:
+    """The starting DEM: a file (with a geoid for orthometric heights such as SRTM), a
+    constant ellipsoidal height, or the scene's initial DEM."""
+    if init_dem is not None and init_height_m is not None:
+        raise InputError("dem: give --init-dem or --init-height, not both")
+    if init_dem is not None:
+        return DEM.open(init_dem, geoid=Geoid.open(geoid) if geoid else None)
+    if init_height_m is not None:
+        if not np.isfinite(init_height_m):
+            raise InputError(f"dem: --init-height must be a number, got {init_height_m}")
+        return DEM.constant(float(init_height_m))
+    if scene_dem is not None:
+        return scene_dem
+    raise InputError("dem: give an initial DEM (--init-dem FILE [--geoid GTX]) or --init-height M")
+
+
+def tile_scheduler(workers: int) -> Any:
+    """A scheduler for tile tasks (callables without arguments) that runs them on ``workers``
+    dask threads (OpenCV, numba and NumPy release the GIL in the heavy parts); a distributed
+    dask client could be plugged in the same way."""
+    import dask
+
+    if workers < 1:
+        raise InputError(f"dem: workers must be >= 1, got {workers}")
+
+    def run(tasks: Sequence[Any]) -> list[Any]:
+        delayed = [dask.delayed(task)() for task in tasks]
+        return list(dask.compute(*delayed, scheduler="threads", num_workers=workers))
+
+    return run
+
+
+def _write_json(path: Path, doc: Mapping[str, Any]) -> None:
+    with atomic_output(path) as tmp:
+        Path(tmp).write_text(json.dumps(doc, indent=1, default=_jsonable) + "\n")
+
+
+def _jsonable(value: Any) -> Any:
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, float) and not np.isfinite(value):
+        return None
+    return str(value)
+
+
+def dem_product(
+    out_dir: str | os.PathLike[str],
+    inputs: StereoInputs,
+    *,
+    init_dem: str | os.PathLike[str] | None = None,
+    geoid: str | os.PathLike[str] | None = None,
+    init_height_m: float | None = None,
+    generator: str = "ior",
+    reference: str | os.PathLike[str] | None = None,
+    options: Mapping[str, Any] | None = None,
+    quiet: bool = False,
+) -> dict[str, Any]:
+    """Generate a DEM and ortho-images and write them to ``out_dir``; return the report.
+
+    See :class:`StereoInputs` for the inputs and :func:`initial_dem` for the starting DEM;
+    ``options`` go to the generator (``posting_m``, ``ortho_res_m``, ``crs``,
+    ``max_iterations`` ...; ``workers``: tiles in parallel, :func:`tile_scheduler`). With
+    ``reference`` (a DEM file), the report gets its accuracy
+    (:func:`carto.framework.evaluation.dem_accuracy.dem_accuracy`) and a difference map is drawn.
+    """
+    from carto.framework.imaging.ortho import write_ortho
+    from carto.framework.imaging.preparation import prepared_image
+    from carto.framework.raster.images import read_raster
+
+    t0 = time.perf_counter()
+    out = Path(out_dir)
+    rasters, sensors, scene_dem = open_pair(inputs)
+    if inputs.source is not None and inputs.models is None:
+        _progress(
+            "no --models: using the scene's delivered (system-level) models; give a carto "
+            "adjust output folder for a DEM of the adjusted accuracy",
+            quiet,
+        )
+    start = initial_dem(init_dem, geoid, init_height_m, scene_dem)
+    names = list(sensors)
+    images = [prepared_image(read_raster(rasters[n]), sensors[n], start) for n in names]
+    component = get_registry().get("dem-generator", generator)
+    settings = dict(options or {})
+    _progress(
+        f"{generator}: {names[0]} (left) and {names[1]} (right), posting "
+        f"{settings.get('posting_m', 'default')} m",
+        quiet,
+    )
+    workers = int(settings.pop("workers", 1) or 1)
+    extra: dict[str, Any] = {}
+    if workers > 1:
+        extra["scheduler"] = tile_scheduler(workers)
+    result = component.generate(
+        images,
+        [sensors[n] for n in names],
+        init_dem=start,
+        progress=None if quiet else (lambda line: _progress(line, False)),
+        **settings,
+        **extra,
+    )
+    out.mkdir(parents=True, exist_ok=True)
+    files = {
+        "dem": write_ortho(
+            out / "dem.tif",
+            result.dem.heights.astype(np.float32),
+            result.dem_grid,
+            vertical=ELLIPSOID,
+            tags={"CARTO_PRODUCT": "dem", "CARTO_GENERATOR": generator},
+        ).name,
+        "ortho_left": write_ortho(
+            out / "ortho_left.tif", result.ortho_left, result.ortho_grid
+        ).name,
+        "ortho_right": write_ortho(
+            out / "ortho_right.tif", result.ortho_right, result.ortho_grid
+        ).name,
+        "quality": write_ortho(
+            out / "quality.tif",
+            np.stack([result.score, result.valid.astype(np.float32)]),
+            result.ortho_grid,
+            tags={"BAND_1": "correlation score", "BAND_2": "valid match (1) or not (0)"},
+        ).name,
+    }
+    from carto.framework.raster.quicklook import difference_png, hillshade_png
+
+    files["hillshade"] = hillshade_png(out / "dem.tif", out / "dem_hillshade.png", "DEM").name
+    report: dict[str, Any] = {
+        "generator": generator,
+        "images": {n: str(rasters[n]) for n in names},
+        "settings": {k: v for k, v in settings.items() if isinstance(v, str | int | float)},
+        "initial_dem": start.name,
+        "dem_grid": {
+            "crs": result.dem_grid.crs.to_string(),
+            "posting_m": result.dem_grid.resolution[0],
+            "shape": list(result.dem_grid.shape),
+        },
+        "ortho_resolution_m": result.ortho_grid.resolution[0],
+        "vertical_reference": "ellipsoid WGS84",
+        "b_over_h": result.b_over_h,
+        "converged": result.converged,
+        "iterations": [
+            {
+                "iteration": r.iteration,
+                "median_abs_mismatch_px": r.median_abs_mismatch_px,
+                "matched_percent": r.matched_percent,
+                "median_abs_dem_change_m": r.median_abs_dem_change_m,
+                "median_across_base_px": r.median_across_base_px,
+                "seconds": r.seconds,
+            }
+            for r in result.iterations
+        ],
+        "files": files,
+    }
+    if reference is not None:
+        from carto.framework.evaluation.dem_accuracy import dem_accuracy, dem_difference
+
+        ref = DEM.open(reference, geoid=Geoid.open(geoid) if geoid else None)
+        report["accuracy"] = dem_accuracy(result.dem, ref)
+        diff, _, _ = dem_difference(result.dem, ref)
+        files["difference"] = difference_png(
+            diff, out / "dem_difference.png", f"DEM - {Path(reference).name}"
+        ).name
+    report["seconds"] = time.perf_counter() - t0
+    _write_json(out / "report.json", report)
+    return report
