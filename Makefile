@@ -1,6 +1,6 @@
 # Carto: the two commands.
 #   make demo   set up .venv if needed, then run the whole chain on the embedded simulated scene
-#   make test   set up .venv if needed, then ruff and the test suite
+#   make test   set up .venv if needed, then ruff, the import contracts and the test suite
 # Both build .venv from `python3` and requirements.lock; they are quick when nothing changed.
 
 PYTHON ?= python3
@@ -20,14 +20,14 @@ DEMO_OUT ?= demo-out
 demo: $(STAMP)
 	$(BIN)/carto demo --out $(DEMO_OUT)
 
-test: $(STAMP) $(TEST_PLUGINS_STAMP)
-	$(BIN)/ruff check .
-	$(BIN)/ruff format --check .
+test: lint $(TEST_PLUGINS_STAMP)
 	$(BIN)/python -m pytest -n 2
 
+# ruff, and the architecture contracts of .importlinter (layers, no cycles, no plugin names)
 lint: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
+	$(BIN)/lint-imports --no-cache
 
 format: $(STAMP)
 	$(BIN)/ruff check --fix .

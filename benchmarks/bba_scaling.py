@@ -28,7 +28,7 @@ from carto.framework.evaluation.checkpoints import checkpoint_accuracy
 from carto.framework.geometry.linescan_raycast import locate_pixels
 from carto.framework.products.scene import Scene
 from carto.framework.raster.dem import DEM
-from carto.framework.simulation.simulate import SimulationOptions
+from carto.framework.simulation.plan import SimulationOptions
 from carto.framework.workflows.adjust import select_gcps
 
 

@@ -40,7 +40,7 @@ from carto.framework import get_registry
 from carto.framework.adjustment.observations import HEIGHT_OFFSET
 from carto.framework.evaluation.checkpoints import checkpoint_accuracy
 from carto.framework.products.scene import Scene
-from carto.framework.simulation.simulate import SimulationOptions
+from carto.framework.simulation.plan import SimulationOptions
 from carto.framework.workflows.adjust import adjust_product
 
 SRTM_OFFSET_SIGMA_M = 4.0

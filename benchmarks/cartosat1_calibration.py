@@ -37,7 +37,7 @@ import numpy as np
 from carto.cartosat1.calibration import AlignmentCalibration
 from carto.framework import get_registry
 from carto.framework.products.scene import Scene
-from carto.framework.simulation.simulate import SimulationOptions
+from carto.framework.simulation.plan import SimulationOptions
 from carto.framework.workflows.adjust import adjust_product
 
 PLATFORM_SEED = 2026

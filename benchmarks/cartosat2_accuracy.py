@@ -34,7 +34,7 @@ from carto.framework.files.point_table import read_point_table
 from carto.framework.matching.tiepoints import tie_point_errors
 from carto.framework.products.scene import Scene
 from carto.framework.raster.dem import DEM
-from carto.framework.simulation.simulate import SimulationOptions
+from carto.framework.simulation.plan import SimulationOptions
 from carto.framework.workflows.adjust import adjust_product
 
 

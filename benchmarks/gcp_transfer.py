@@ -32,7 +32,7 @@ from carto.framework.geometry.linescan import LineScanner
 from carto.framework.matching.gcp_transfer import gcp_offsets
 from carto.framework.products.scene import Scene
 from carto.framework.raster.dem import DEM
-from carto.framework.simulation.simulate import SimulationOptions
+from carto.framework.simulation.plan import SimulationOptions
 from carto.framework.workflows.adjust import adjust_product
 
 HAND_SIGMA_PX = 0.3

@@ -36,7 +36,7 @@ import numpy as np
 from carto.framework import get_registry
 from carto.framework.evaluation.dem_accuracy import dem_accuracy
 from carto.framework.raster.dem import DEM, Geoid
-from carto.framework.simulation.simulate import SimulationOptions
+from carto.framework.simulation.plan import SimulationOptions
 from carto.framework.workflows.adjust import adjust_product
 from carto.framework.workflows.dem import StereoInputs, dem_product
 

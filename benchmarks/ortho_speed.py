@@ -122,7 +122,8 @@ def fore_sensor(size: int):
     """Cartosat-1 Fore (single array), a ``size x size`` window centred on the target."""
     from carto.cartosat1 import constants as c1
     from carto.framework.geometry.camera import Camera
-    from carto.framework.geometry.linescan import LineScanner, LineTiming
+    from carto.framework.geometry.linescan import LineScanner
+    from carto.framework.geometry.linescan_timing import LineTiming
     from carto.framework.geometry.trajectory import Trajectory
     from carto.framework.simulation import acquisition
 
@@ -175,7 +176,8 @@ def setup(size: int):
 
 
 def run_one(size: int, repeat: int, sample: int) -> dict:
-    from carto.framework.imaging.ortho import OrthoGrid, OrthoMapper, orthorectify
+    from carto.framework.imaging.ortho import OrthoMapper, orthorectify
+    from carto.framework.imaging.ortho_grid import OrthoGrid
 
     sensor, dem, raw = setup(size)
     grid = OrthoGrid.covering(sensor, dem, RESOLUTION_M)
@@ -302,7 +304,7 @@ def gdal_case_inputs(name: str, folder: Path):
     import rasterio
     from rasterio.errors import NotGeoreferencedWarning
 
-    from carto.framework.geometry.rpc import write_geotiff_rpc
+    from carto.framework.geometry.rpc_writers import write_geotiff_rpc
     from carto.framework.workflows.opening import open_sensor
 
     scale, _res = GDAL_CASES[name]
@@ -434,7 +436,8 @@ def run_gdal_case(name: str, repeat: int) -> dict:
     """One case of the GDAL comparison (see the module docstring)."""
     import rasterio
 
-    from carto.framework.imaging.ortho import OrthoGrid, OrthoMapper, orthorectify
+    from carto.framework.imaging.ortho import OrthoMapper, orthorectify
+    from carto.framework.imaging.ortho_grid import OrthoGrid
     from carto.framework.raster.dem import DEM
     from carto.framework.workflows.opening import open_sensor
 

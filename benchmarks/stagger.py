@@ -33,7 +33,8 @@ import numba
 import numpy as np
 
 from carto.framework import get_registry
-from carto.framework.geometry.linescan import LineScanner, LineTiming
+from carto.framework.geometry.linescan import LineScanner
+from carto.framework.geometry.linescan_timing import LineTiming
 from carto.framework.geometry.stagger import (
     even_columns,
     measure_line_shifts,
@@ -42,9 +43,10 @@ from carto.framework.geometry.stagger import (
     stagger_offsets,
 )
 from carto.framework.raster.dem import DEM
+from carto.framework.simulation.plan import SimulationOptions
 from carto.framework.simulation.render import render_reflectance
-from carto.framework.simulation.simulate import SimulationOptions
-from carto.framework.simulation.terrain import TERRAINS, make_terrain, make_texture
+from carto.framework.simulation.terrain import TERRAINS, make_terrain
+from carto.framework.simulation.texture import make_texture
 
 VIEWS = (
     ("cartosat1-pair", "fore", "cartosat1_fore"),

@@ -47,7 +47,7 @@ from carto.framework.matching.ncc import match_ncc
 from carto.framework.matching.tiepoints import automatic_tie_points, tie_point_errors
 from carto.framework.products.scene import Scene
 from carto.framework.raster.dem import DEM
-from carto.framework.simulation.simulate import SimulationOptions
+from carto.framework.simulation.plan import SimulationOptions
 
 CONFIGS: dict[str, dict[str, Any]] = {
     "forstner": {},

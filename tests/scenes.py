@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from carto.framework import get_registry
-from carto.framework.simulation.simulate import SimulationOptions
+from carto.framework.simulation.plan import SimulationOptions
 
 
 def simulate(preset: str, out: Path, **options) -> Path:

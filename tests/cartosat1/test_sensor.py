@@ -8,7 +8,9 @@ import pytest
 from carto.framework import get_registry
 from carto.framework.errors import InputError
 from carto.framework.geometry.linescan import LineScanner
-from carto.framework.geometry.rpc import RPCSensor, read_rpc, write_geotiff_rpc, write_rpc_txt
+from carto.framework.geometry.rpc_readers import read_rpc
+from carto.framework.geometry.rpc_sensor import RPCSensor
+from carto.framework.geometry.rpc_writers import write_geotiff_rpc, write_rpc_txt
 from carto.framework.workflows.opening import open_sensor
 
 

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from carto.framework.geometry.camera import Camera
-from carto.framework.geometry.linescan import LineScanner, LineTiming
+from carto.framework.geometry.linescan import LineScanner
+from carto.framework.geometry.linescan_timing import LineTiming
 from carto.framework.products.scene import Scene
 
 from ..scenes import simulate

@@ -18,24 +18,19 @@ from scipy.spatial import cKDTree
 
 from carto.framework import get_registry
 from carto.framework.errors import InputError
-from carto.framework.imaging.ortho import OrthoGrid, orthorectify
+from carto.framework.imaging.ortho import orthorectify
+from carto.framework.imaging.ortho_grid import OrthoGrid
 from carto.framework.matching.base import Matcher, Matches
-from carto.framework.matching.ncc import (
-    NCCMatcher,
-    coarse_shift,
-    forstner_measures,
-    forstner_points,
-    global_shift,
-    grid_points,
-    masked_ncc,
-    match_bidirectional,
-    match_ncc,
-    pyramid_match,
-    spread_order,
-)
+from carto.framework.matching.candidates import grid_points
+from carto.framework.matching.forstner import forstner_measures, forstner_points, spread_order
+from carto.framework.matching.ncc import match_bidirectional, match_ncc
+from carto.framework.matching.ncc_matcher import NCCMatcher
+from carto.framework.matching.pyramid import pyramid_match
+from carto.framework.matching.shifts import coarse_shift, global_shift, masked_ncc
 from carto.framework.products.scene import Scene
 from carto.framework.raster.dem import DEM
-from carto.framework.simulation.simulate import SimulationOptions, simulate_scene
+from carto.framework.simulation.plan import SimulationOptions
+from carto.framework.simulation.simulate import simulate_scene
 
 
 def texture(shape: tuple[int, int], seed: int, wrap: bool = False) -> np.ndarray:

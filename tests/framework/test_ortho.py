@@ -25,16 +25,12 @@ from scipy import ndimage
 from carto.framework import get_registry
 from carto.framework.errors import InputError
 from carto.framework.geometry.sensor import Sensor
-from carto.framework.imaging.ortho import (
-    OrthoGrid,
-    OrthoMapper,
-    ortho_mapping,
-    orthorectify,
-    write_ortho,
-)
+from carto.framework.imaging.ortho import OrthoMapper, ortho_mapping, orthorectify, write_ortho
+from carto.framework.imaging.ortho_grid import OrthoGrid
 from carto.framework.products.scene import Scene
 from carto.framework.raster.dem import DEM
-from carto.framework.simulation.simulate import SimulationOptions, simulate_scene
+from carto.framework.simulation.plan import SimulationOptions
+from carto.framework.simulation.simulate import simulate_scene
 
 
 def simulate_single_array(out: Path, **options) -> Scene:
@@ -100,7 +96,7 @@ def exact_mapping(sensor: Sensor, grid: OrthoGrid, dem: DEM) -> tuple[np.ndarray
 def lsm_shift(reference: np.ndarray, image: np.ndarray) -> np.ndarray:
     """``d`` (rows, cols) with ``image(x + d) = gain * reference(x) + offset``: least-squares
     matching (Gauss-Newton, cubic-spline resampling), independent of
-    carto.framework.matching.ncc."""
+    carto.framework.matching.lsm."""
     d = np.zeros(2)
     rows, cols = np.mgrid[0 : image.shape[0], 0 : image.shape[1]].astype(float)
     inner = np.zeros(image.shape, bool)

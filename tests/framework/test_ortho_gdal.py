@@ -23,7 +23,8 @@ from affine import Affine
 from rasterio.errors import NotGeoreferencedWarning
 from rasterio.warp import Resampling, reproject
 
-from carto.framework.imaging.ortho import OrthoGrid, orthorectify
+from carto.framework.imaging.ortho import orthorectify
+from carto.framework.imaging.ortho_grid import OrthoGrid
 from carto.framework.raster.dem import DEM
 from carto.framework.workflows.opening import open_sensor
 

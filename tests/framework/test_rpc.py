@@ -1,5 +1,5 @@
-"""The RPC sensor (:mod:`carto.framework.geometry.rpc`): evaluation, readers, writers, sensor, GDAL
-parity.
+"""The RPC sensor (:mod:`carto.framework.geometry.rpc_model`, ``rpc_readers``, ``rpc_writers``,
+``rpc_sensor``): evaluation, readers, writers, sensor, GDAL parity.
 
 GDAL is the reference: rasterio's ``RPCTransformer.rowcol(lon, lat, h, op=np.positive)`` (an
 identity ufunc, so no rounding) returns GDAL's continuous ``(row, col)`` with the centre of the
@@ -23,12 +23,9 @@ import rasterio
 from rasterio.transform import RPCTransformer
 
 from carto.framework.errors import InputError
-from carto.framework.geometry import rpc as rpc_mod
-from carto.framework.geometry.rpc import (
-    RPC00B_TERMS,
-    RPCCoefficients,
-    RPCSensor,
-    RPCSensorType,
+from carto.framework.geometry import rpc_model as rpc_mod
+from carto.framework.geometry.rpc_model import RPC00B_TERMS, RPCCoefficients
+from carto.framework.geometry.rpc_readers import (
     read_dimap_rpc,
     read_ossim_geom,
     read_rpb,
@@ -36,9 +33,9 @@ from carto.framework.geometry.rpc import (
     read_rpc_gdal,
     read_rpc_txt,
     read_worldview_xml,
-    write_geotiff_rpc,
-    write_rpc_txt,
 )
+from carto.framework.geometry.rpc_sensor import RPCSensor, RPCSensorType
+from carto.framework.geometry.rpc_writers import write_geotiff_rpc, write_rpc_txt
 from carto.framework.geometry.sensor import Sensor
 
 RPC_FILES = "rpc-files"
@@ -145,7 +142,7 @@ def test_term_order_is_rpc00b() -> None:
     rng = np.random.default_rng(0)
     lnorm, pnorm, hnorm = rng.uniform(-1, 1, (3, 50))
     out = np.empty((20, 50))
-    rpc_mod._monomials(lnorm, pnorm, hnorm, out)
+    rpc_mod.monomials(lnorm, pnorm, hnorm, out)
     values = {"L": lnorm, "P": pnorm, "H": hnorm}
     for k, name in enumerate(RPC00B_TERMS):
         expected = np.ones(50)
@@ -228,13 +225,13 @@ def test_derivative_matrices_are_exact() -> None:
     rng = np.random.default_rng(5)
     x = rng.uniform(-1, 1, (3, 10))
     t = np.empty((20, 10))
-    rpc_mod._monomials(*x, t)
+    rpc_mod.monomials(*x, t)
     for axis in range(3):
         eps = np.zeros((3, 1))
         eps[axis] = 1e-6
         tp, tm = np.empty((20, 10)), np.empty((20, 10))
-        rpc_mod._monomials(*(x + eps), tp)
-        rpc_mod._monomials(*(x - eps), tm)
+        rpc_mod.monomials(*(x + eps), tp)
+        rpc_mod.monomials(*(x - eps), tm)
         assert np.allclose(rpc_mod._D_LPH[axis] @ t, (tp - tm) / 2e-6, atol=1e-8)
 
 
@@ -490,7 +487,7 @@ def _rpb_text(rpc: RPCCoefficients) -> str:
            "\terrBias =   3.31;", "\terrRand =   0.5;"]  # fmt: skip
     out += [f"\t{names[k]} = {d[k]!r};" for k in names]
     tags = ("lineNumCoef", "lineDenCoef", "sampNumCoef", "sampDenCoef")
-    for key, tag in zip(rpc_mod._COEFF_FIELDS, tags, strict=True):
+    for key, tag in zip(rpc_mod.COEFF_FIELDS, tags, strict=True):
         values = ",\n\t\t\t".join(f"{v:+.15E}" for v in d[key])
         out.append(f"\t{tag} = (\n\t\t\t{values});")
     out += ["END_GROUP = IMAGE", "END;"]
@@ -512,11 +509,11 @@ def test_rpb_reader_matches_gdal(tmp_path: Path) -> None:
 
 def _geom_text(rpc: RPCCoefficients, fmt: str = "B") -> str:
     d = rpc.as_dict()
-    lines = [f"{k.lower()}:  {d[k]!r}" for k in rpc_mod._SCALAR_FIELDS]
+    lines = [f"{k.lower()}:  {d[k]!r}" for k in rpc_mod.SCALAR_FIELDS]
     lines += ["type:  ossimRpcModel", f"polynomial_format:  {fmt}", "number_lines:  10000",
               "number_samples:  12400", "bias_error:  2", "rand_error:  0.25"]  # fmt: skip
     b_to_a = [rpc_mod.RPC00B_TERMS.index(t) for t in rpc_mod.RPC00A_TERMS]  # a[j] = b[b_to_a[j]]
-    for key in rpc_mod._COEFF_FIELDS:
+    for key in rpc_mod.COEFF_FIELDS:
         values = np.asarray(d[key])
         if fmt == "A":
             values = values[b_to_a]
@@ -548,16 +545,16 @@ def test_rpc00a_order_follows_ossim() -> None:
         + c[16] * P * P * H + c[17] * L * H * H + c[18] * P * H * H + c[19] * H * H * H
     )  # fmt: skip
     terms = np.empty((20, 7))
-    rpc_mod._monomials(lnorm, pnorm, hnorm, terms)
-    assert np.allclose(c[list(rpc_mod._RPC00A_TO_B)] @ terms, ossim, rtol=1e-14, atol=1e-14)
+    rpc_mod.monomials(lnorm, pnorm, hnorm, terms)
+    assert np.allclose(c[list(rpc_mod.RPC00A_TO_B)] @ terms, ossim, rtol=1e-14, atol=1e-14)
 
 
 def test_txt_reader_accepts_units_and_gdal_style(tmp_path: Path) -> None:
     rpc = synthetic_rpc()
     d = rpc.as_dict()
     lines = [f"{k}: {d[k]:+012.6f} pixels" if k.endswith(("LINE_OFF", "SAMP_OFF"))
-             else f"{k}: {d[k]!r}" for k in rpc_mod._SCALAR_FIELDS]  # fmt: skip
-    lines += [f"{k}: {' '.join(repr(v) for v in d[k])}" for k in rpc_mod._COEFF_FIELDS]
+             else f"{k}: {d[k]!r}" for k in rpc_mod.SCALAR_FIELDS]  # fmt: skip
+    lines += [f"{k}: {' '.join(repr(v) for v in d[k])}" for k in rpc_mod.COEFF_FIELDS]
     (tmp_path / "gdal_style_RPC.TXT").write_text("\n".join(lines))
     assert read_rpc_txt(tmp_path / "gdal_style_RPC.TXT") == rpc
 

@@ -1,5 +1,5 @@
-"""RPC fitting (:func:`carto.framework.geometry.rpc.fit_rpc`): to RPC sensors and to a non-RPC
-sensor."""
+"""RPC fitting (:func:`carto.framework.geometry.rpc_fitting.fit_rpc`): to RPC sensors and to a
+non-RPC sensor."""
 
 from __future__ import annotations
 
@@ -13,15 +13,10 @@ from numpy.typing import ArrayLike
 
 from carto.framework.errors import InputError
 from carto.framework.geometry import frames
-from carto.framework.geometry.rpc import (
-    FitReport,
-    RPCSensor,
-    RPCSensorType,
-    fit_rpc,
-    footprint,
-    read_rpc,
-    write_rpc_txt,
-)
+from carto.framework.geometry.rpc_fitting import FitReport, fit_rpc, footprint
+from carto.framework.geometry.rpc_readers import read_rpc
+from carto.framework.geometry.rpc_sensor import RPCSensor, RPCSensorType
+from carto.framework.geometry.rpc_writers import write_rpc_txt
 from carto.framework.geometry.sensor import Sensor
 
 

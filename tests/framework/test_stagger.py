@@ -20,7 +20,8 @@ import pytest
 
 from carto.framework.errors import InputError
 from carto.framework.geometry.camera import Camera
-from carto.framework.geometry.linescan import LineScanner, LineTiming
+from carto.framework.geometry.linescan import LineScanner
+from carto.framework.geometry.linescan_timing import LineTiming
 from carto.framework.geometry.stagger import (
     MergedImage,
     StaggerField,
@@ -34,7 +35,7 @@ from carto.framework.geometry.stagger import (
 )
 from carto.framework.raster.dem import DEM
 from carto.framework.simulation.render import render_reflectance
-from carto.framework.simulation.terrain import make_texture
+from carto.framework.simulation.texture import make_texture
 
 from ..scenes import simulate
 

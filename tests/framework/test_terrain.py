@@ -1,4 +1,5 @@
-"""Synthetic terrain and ground texture (``carto.framework.simulation.terrain``).
+"""Synthetic terrain and ground texture (``carto.framework.simulation.terrain``,
+``carto.framework.simulation.texture``).
 
 Truth is independent of the code under test: ground distances from pyproj's geodesic on the
 WGS84 ellipsoid, slopes from ``numpy.gradient`` over those distances, flat areas from the raw
@@ -25,14 +26,12 @@ from carto.framework.raster.dem import DEM, EGM96
 from carto.framework.simulation.terrain import (
     TERRAINS,
     TerrainPreset,
-    Texture,
-    add_point_targets,
     geographic_grid,
     make_terrain,
-    make_texture,
     terrain_from_dem,
     uniform_mask_from_dem,
 )
+from carto.framework.simulation.texture import Texture, add_point_targets, make_texture
 
 GEOD = pyproj.Geod(ellps="WGS84")
 LAT0 = 20.0
@@ -155,7 +154,8 @@ def test_results_are_identical_across_processes():
     """Bit-identical heights and texture in a fresh interpreter (no hidden global state)."""
     code = (
         "import hashlib, sys\n"
-        "from carto.framework.simulation.terrain import make_terrain, make_texture\n"
+        "from carto.framework.simulation.terrain import make_terrain\n"
+        "from carto.framework.simulation.texture import make_texture\n"
         "dem = make_terrain('flat-coastal', (78.0, 20.0, 78.01, 20.01), 10.0, seed=7)\n"
         "tex = make_texture(dem, 2.5, seed=7)\n"
         "print(hashlib.sha256(dem.heights.tobytes()).hexdigest(),"

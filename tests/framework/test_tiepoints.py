@@ -16,17 +16,15 @@ from scipy import ndimage
 
 from carto.framework.errors import InputError
 from carto.framework.imaging.ortho import orthorectify
-from carto.framework.imaging.preparation import prepared_image, system_orthos
+from carto.framework.imaging.preparation import system_orthos
 from carto.framework.matching.base import Matcher
-from carto.framework.matching.ncc import global_shift, grid_points
+from carto.framework.matching.candidates import candidate_points, grid_points
+from carto.framework.matching.multiview import inconsistent_points, match_views, ortho_parallax
+from carto.framework.matching.shifts import global_shift
 from carto.framework.matching.tiepoints import (
     TABLE_COLUMNS,
     OrthoTiePointMatcher,
     automatic_tie_points,
-    candidate_points,
-    inconsistent_points,
-    match_views,
-    ortho_parallax,
     tie_point_errors,
 )
 from carto.framework.products.scene import Scene
@@ -163,7 +161,7 @@ def test_ortho_parallax_predicts_how_orthos_move_with_the_dem(pair):
     raised = DEM.from_array(dem.heights + 30.0, dem.transform, dem.crs, vertical="ellipsoid")
     moved = {}
     for name in ("fore", "aft"):
-        image = prepared_image(read_raster(rasters[name]), sensors[name], dem)
+        image = sensors[name].prepare_raw(read_raster(rasters[name]), dem)
         ortho = orthorectify(image, sensors[name], grid, raised)
         d_line, d_sample, _ = global_shift(orthos[name], ortho)
         moved[name] = np.array([d_line, d_sample])

@@ -11,7 +11,8 @@ from numpy.polynomial import polynomial as npoly
 from carto.framework.errors import InputError
 from carto.framework.geometry import frames
 from carto.framework.geometry.camera import Camera
-from carto.framework.geometry.linescan import LineScanner, LineTiming
+from carto.framework.geometry.linescan import LineScanner
+from carto.framework.geometry.linescan_timing import LineTiming
 from carto.framework.geometry.trajectory import AttitudeSamples, EphemerisSamples, Trajectory
 
 from .geometry import EPOCH, circular_orbit

@@ -8,7 +8,6 @@ import pytest
 from carto.framework import get_registry
 from carto.framework.errors import InputError
 from carto.framework.geometry import frames
-from carto.framework.imaging.preparation import prepared_image
 from carto.framework.products.scene import Scene
 from carto.framework.raster.dem import DEM
 from carto.framework.raster.images import read_raster
@@ -82,7 +81,7 @@ def test_ior_refines_the_coarse_dem(hilly):
     truth = hilly.truth_sensors()
     init = DEM.open(hilly.path("init_dem.tif"))
     true_dem = DEM.open(hilly.path("truth/dem.tif"))
-    images = [prepared_image(read_raster(hilly.raster(n)), truth[n], init) for n in ("aft", "fore")]
+    images = [truth[n].prepare_raw(read_raster(hilly.raster(n)), init) for n in ("aft", "fore")]
     lines = []
     result = refine_dem(
         images[0],
@@ -134,7 +133,7 @@ def test_tiles_on_dask_threads_give_the_dem_of_one_tile(hilly):
 
     truth = hilly.truth_sensors()
     init = DEM.open(hilly.path("init_dem.tif"))
-    images = [prepared_image(read_raster(hilly.raster(n)), truth[n], init) for n in ("aft", "fore")]
+    images = [truth[n].prepare_raw(read_raster(hilly.raster(n)), init) for n in ("aft", "fore")]
     args = (images[0], images[1], truth["aft"], truth["fore"], init)
     one = refine_dem(*args, IORSettings(posting_m=10.0, max_iterations=2))
     tiled = refine_dem(

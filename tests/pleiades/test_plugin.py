@@ -11,7 +11,7 @@ import pytest
 import carto.pleiades
 from carto.framework import get_registry
 from carto.framework.geometry.linescan import LineScanner
-from carto.framework.geometry.rpc import RPCSensor
+from carto.framework.geometry.rpc_sensor import RPCSensor
 from carto.framework.workflows.opening import open_sensor
 from carto.pleiades.sensor import PleiadesDimapType
 

@@ -11,7 +11,7 @@ import pytest
 
 from carto.framework.geometry import frames
 from carto.framework.geometry.linescan import LineScanner
-from carto.framework.geometry.rpc import RPCSensorType
+from carto.framework.geometry.rpc_sensor import RPCSensorType
 from carto.pleiades.dimap import read_dimap
 
 pytestmark = pytest.mark.realdata

@@ -31,14 +31,17 @@ the file is refused rather than opened as a silently wrong model.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from carto.framework.errors import InputError
 from carto.framework.geometry.camera import Camera
-from carto.framework.geometry.linescan import TABLE_MARGIN_LINES, LineScanner, LineTiming
-from carto.framework.geometry.rpc import RPCSensorType
-from carto.framework.geometry.sensor import SensorType
+from carto.framework.geometry.linescan import LineScanner, save_line_scanner
+from carto.framework.geometry.linescan_solver import TABLE_MARGIN_LINES
+from carto.framework.geometry.linescan_timing import LineTiming
+from carto.framework.geometry.rpc_sensor import RPCSensorType
+from carto.framework.geometry.sensor import Sensor, SensorType, refuse_options
 from carto.framework.geometry.trajectory import AttitudeSamples, EphemerisSamples, Trajectory
 from carto.pleiades.dimap import (
     EPHEMERIS_LAGRANGE_POINTS,
@@ -156,7 +159,16 @@ class PleiadesDimapType(SensorType):
         """True for a DIMAP v1.4 SENSOR document (its first 16 KB); never raises."""
         return is_dimap_v14_sensor(path)
 
-    def open(self, path: Path) -> LineScanner:
+    def open(self, path: Path, **options: Any) -> LineScanner:
         """The product's physical model as a :class:`LineScanner`; :class:`InputError` naming
-        the file and element for anything else (another DIMAP version, a damaged file)."""
+        the file and element for anything else (another DIMAP version, a damaged file). The
+        trajectory is the product's own (Lagrange through its samples): no
+        ``trajectory_model`` option."""
+        refuse_options(f"{path} (a Pleiades physical model)", options)
         return open_dimap(path)
+
+    def save(
+        self, sensor: Sensor, out_dir: Path, name: str, *, h_range_m: tuple[float, float]
+    ) -> dict[str, Any]:
+        """The adjusted line scanner as a Carto model file and a fitted RPC."""
+        return save_line_scanner(sensor, Path(out_dir), name, h_range_m)

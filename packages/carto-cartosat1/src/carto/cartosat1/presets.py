@@ -10,13 +10,8 @@ from __future__ import annotations
 from carto.cartosat1 import constants as c
 from carto.framework.products.ancillary import CameraSpec
 from carto.framework.simulation import acquisition
-from carto.framework.simulation.preset import ScenePreset
-from carto.framework.simulation.simulate import (
-    ScenePlan,
-    SegmentPlan,
-    SimulationOptions,
-    ViewPlan,
-)
+from carto.framework.simulation.plan import ScenePlan, SegmentPlan, SimulationOptions, ViewPlan
+from carto.framework.simulation.preset import DemoAdjustment, DemoChain, ScenePreset
 
 DEFAULT_TARGET = (77.95, 30.30)
 """Near Dehradun, India: hilly terrain as in the paper's test sites."""
@@ -73,6 +68,27 @@ class Cartosat1PairPreset(ScenePreset):
 
     name = "cartosat1-pair"
     description = "Cartosat-1 Fore (+26 deg) / Aft (-5 deg) stereo pair, 2.5 m, 52 s apart"
+    # carto demo: the tied and the separate adjustment with one GCP, then the IOR DEM
+    demo = DemoChain(
+        adjustments=(
+            DemoAdjustment(
+                "stagger + tied, 1 GCP, matched",
+                "cartosat1-combined",
+                {"mode": "combined"},
+                folder="adjust-combined",
+            ),
+            DemoAdjustment(
+                "separate, 1 GCP, matched",
+                "cartosat1-combined",
+                {"mode": "separate"},
+                folder="adjust-separate",
+            ),
+        ),
+        dem_generator="ior",
+        dem_label="IOR",
+        dem_options={"posting_m": 10.0},
+    )
+    demo_priority = 10
 
     def plan(self, options: SimulationOptions) -> ScenePlan:
         return cartosat1_pair_plan()

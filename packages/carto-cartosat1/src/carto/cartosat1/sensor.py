@@ -21,9 +21,11 @@ from pathlib import Path
 from typing import Any
 
 from carto.framework.errors import InputError
-from carto.framework.geometry.rpc import RPCSensor, read_rpc_txt
-from carto.framework.geometry.sensor import Sensor, SensorType
-from carto.framework.products.scene import Scene
+from carto.framework.geometry.linescan import save_line_scanner
+from carto.framework.geometry.rpc_readers import read_rpc_txt
+from carto.framework.geometry.rpc_sensor import RPCSensor, save_corrected_rpc
+from carto.framework.geometry.sensor import Sensor, SensorType, refuse_options
+from carto.framework.products.scene import Scene, find_scene_manifest
 
 _BAND = re.compile(r"(^band[af]|[_-][af])$", re.IGNORECASE)
 PLATFORM_PREFIX = "Cartosat-1"
@@ -31,27 +33,7 @@ PLATFORM_PREFIX = "Cartosat-1"
 
 def _scene_manifest(path: Path) -> Path | None:
     """The scene.json of a Cartosat-1 scene that ``path`` is, or is an image of."""
-    candidates = []
-    if path.is_dir():
-        candidates.append(path / "scene.json")
-    elif path.name == "scene.json":
-        candidates.append(path)
-    elif path.suffix.lower() in (".tif", ".tiff"):
-        candidates.append(path.parent / "scene.json")
-    for c in candidates:
-        try:
-            with c.open("rb") as fh:
-                head = fh.read(65536)
-            doc = json.loads(head) if head.strip().endswith(b"}") else None
-        except (OSError, ValueError):
-            continue
-        if isinstance(doc, dict) and str(doc.get("platform", "")).startswith(PLATFORM_PREFIX):
-            if path.suffix.lower() in (".tif", ".tiff") and not any(
-                i.get("raster") == path.name for i in doc.get("images", {}).values()
-            ):
-                return None
-            return c
-    return None
+    return find_scene_manifest(path, PLATFORM_PREFIX)
 
 
 def rpc_sidecar(band: Path) -> tuple[Path, Path | None]:
@@ -124,10 +106,14 @@ def open_orthokit_band(band: Path) -> RPCSensor:
     except rasterio.errors.RasterioError as exc:
         raise InputError(f"{band}: not a readable GeoTIFF: {exc}") from None
     note = f" (preferred over {passed_over.name})" if passed_over is not None else ""
-    sensor = RPCSensor(rpc, shape, source=f"{chosen}{note}", prefix=f"{band.stem}.")
     met = _met_file(band)
-    sensor.metadata = read_met(met) if met is not None else {}
-    return sensor
+    return RPCSensor(
+        rpc,
+        shape,
+        source=f"{chosen}{note}",
+        prefix=f"{band.stem}.",
+        metadata=read_met(met) if met is not None else {},
+    )
 
 
 class Cartosat1SensorType(SensorType):
@@ -136,6 +122,8 @@ class Cartosat1SensorType(SensorType):
     name = "cartosat1"
     description = "Cartosat-1 Fore/Aft: tied rigorous model from ancillary data, or orthokit RPCs"
     priority = 10  # more specific than the generic rpc and linescan types
+    default_adjuster = "cartosat1-combined"
+    default_dem_generator = "ior"
 
     def identify(self, path: Path) -> bool:
         path = Path(path)
@@ -144,24 +132,37 @@ class Cartosat1SensorType(SensorType):
         except OSError:
             return False
 
-    def open_all(self, path: Path, **fit_options: Any) -> dict[str, Sensor]:
+    def open_all(self, path: Path, **options: Any) -> dict[str, Sensor]:
+        """Fore and Aft of a scene (``options``: ``trajectory_model``, ``components`` and
+        the fit options of :meth:`carto.framework.products.ancillary.Ancillary.trajectory`),
+        or the bands of an orthokit product (RPCs: no options but ``components``)."""
         path = Path(path)
         manifest = _scene_manifest(path)
         if manifest is not None:
-            return dict(Scene.open(manifest).sensors(**fit_options))
+            return dict(Scene.open(manifest).sensors(**options))
         if path.is_dir():
             bands = sorted(p for p in path.iterdir() if _is_orthokit_band(p))
         else:
             bands = sorted(p for p in path.parent.iterdir() if _is_orthokit_band(p))
         if not bands:
             raise InputError(f"{path}: not a Cartosat-1 scene or orthokit product")
+        refuse_options(f"{path} (an orthokit RPC product has no trajectory)", options)
         return {b.stem: open_orthokit_band(b) for b in bands}
 
-    def open(self, path: Path) -> Sensor:
+    def save(
+        self, sensor: Sensor, out_dir: Path, name: str, *, h_range_m: tuple[float, float]
+    ) -> dict[str, Any]:
+        """A scene image's line scanner as a model file and a fitted RPC; an orthokit band's
+        RPC with its correction baked in."""
+        if isinstance(sensor, RPCSensor):
+            return save_corrected_rpc(sensor, Path(out_dir), name)
+        return save_line_scanner(sensor, Path(out_dir), name, h_range_m)
+
+    def open(self, path: Path, **options: Any) -> Sensor:
         path = Path(path)
         manifest = _scene_manifest(path)
         if manifest is not None:
-            sensors = Scene.open(manifest).sensors()
+            sensors = Scene.open(manifest).sensors(**options)
             if path.is_dir() or path.name == "scene.json":
                 raise InputError(
                     f"{path}: a scene holds several images "
@@ -171,5 +172,6 @@ class Cartosat1SensorType(SensorType):
                 if image["raster"] == path.name:
                     return sensors[name]
         if _is_orthokit_band(path):
+            refuse_options(f"{path} (an orthokit RPC product has no trajectory)", options)
             return open_orthokit_band(path)
         raise InputError(f"{path}: not a Cartosat-1 scene image or orthokit band")

@@ -13,32 +13,15 @@ from pathlib import Path
 from typing import Any
 
 from carto.framework.errors import InputError
+from carto.framework.geometry.linescan import save_line_scanner
 from carto.framework.geometry.sensor import Sensor, SensorType
-from carto.framework.products.scene import Scene
+from carto.framework.products.scene import Scene, find_scene_manifest
 
 PLATFORM_PREFIX = "Cartosat-2"
 
 
 def _scene_manifest(path: Path) -> Path | None:
-    if path.is_dir():
-        candidate = path / "scene.json"
-    elif path.name == "scene.json":
-        candidate = path
-    elif path.suffix.lower() in (".tif", ".tiff"):
-        candidate = path.parent / "scene.json"
-    else:
-        return None
-    try:
-        doc = json.loads(candidate.read_text())
-    except (OSError, ValueError):
-        return None
-    if not isinstance(doc, dict) or not str(doc.get("platform", "")).startswith(PLATFORM_PREFIX):
-        return None
-    if path.suffix.lower() in (".tif", ".tiff") and not any(
-        i.get("raster") == path.name for i in doc.get("images", {}).values()
-    ):
-        return None
-    return candidate
+    return find_scene_manifest(path, PLATFORM_PREFIX)
 
 
 class Cartosat2SensorType(SensorType):
@@ -47,6 +30,14 @@ class Cartosat2SensorType(SensorType):
     name = "cartosat2"
     description = "Cartosat-2 agile views: rigorous line scanners, one attitude segment each"
     priority = 10
+    default_adjuster = "cartosat2-bba"
+    default_dem_generator = "ior"
+
+    def save(
+        self, sensor: Sensor, out_dir: Path, name: str, *, h_range_m: tuple[float, float]
+    ) -> dict[str, Any]:
+        """A view's line scanner as a model file and a fitted RPC."""
+        return save_line_scanner(sensor, Path(out_dir), name, h_range_m)
 
     def identify(self, path: Path) -> bool:
         try:
@@ -54,18 +45,21 @@ class Cartosat2SensorType(SensorType):
         except OSError:
             return False
 
-    def open_all(self, path: Path, **fit_options: Any) -> dict[str, Sensor]:
+    def open_all(self, path: Path, **options: Any) -> dict[str, Sensor]:
+        """Every view of a scene; ``options``: ``trajectory_model``, ``components`` (see
+        :meth:`SensorType.open_all`) and the fit options of
+        :meth:`carto.framework.products.ancillary.Ancillary.trajectory`."""
         manifest = _scene_manifest(Path(path))
         if manifest is None:
             raise InputError(f"{path}: not a Cartosat-2 scene")
-        return dict(Scene.open(manifest).sensors(**fit_options))
+        return dict(Scene.open(manifest).sensors(**options))
 
-    def open(self, path: Path) -> Sensor:
+    def open(self, path: Path, **options: Any) -> Sensor:
         path = Path(path)
         manifest = _scene_manifest(path)
         if manifest is None or path.is_dir() or path.name == "scene.json":
             raise InputError(f"{path}: open one image raster of a Cartosat-2 scene")
-        sensors = Scene.open(manifest).sensors()
+        sensors = Scene.open(manifest).sensors(**options)
         for name, image in json.loads(manifest.read_text())["images"].items():
             if image["raster"] == path.name:
                 return sensors[name]

@@ -10,7 +10,7 @@ returns instances of them from the hooks in :mod:`carto.framework.plugins.hooksp
 from __future__ import annotations
 
 import re
-from typing import ClassVar
+from typing import Any, ClassVar, Protocol
 
 NAME_PATTERN = re.compile(r"^[a-z0-9][a-z0-9._-]*$")
 """Component names: lower case ASCII, digits, ``.``, ``_`` and ``-``; used on the command line."""
@@ -31,3 +31,18 @@ class Component:
 
     def __repr__(self) -> str:
         return f"<{type(self).__name__} {self.name!r}>"
+
+
+class ComponentLookup(Protocol):
+    """Finds a registered component by kind and name: the registry
+    (:class:`carto.framework.plugins.registry.Registry`) as lower layers see it.
+
+    Readers that meet a component's name in a file (a model file naming its trajectory model)
+    take a lookup as an argument, so they can use a plugin's component without importing the
+    plugin machinery; the opening workflow passes the registry.
+    """
+
+    def get(self, kind: str, name: str) -> Any:
+        """The component of ``kind`` (``"trajectory"``, ``"matcher"`` ...) named ``name``;
+        raises :class:`~carto.framework.errors.UnknownComponentError` when there is none."""
+        ...

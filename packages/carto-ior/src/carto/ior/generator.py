@@ -7,14 +7,54 @@ from typing import Any
 
 import attrs
 import numpy as np
+from numpy.typing import NDArray
 
-from carto.framework.dem_generation.base import DEMGenerator
+from carto.framework.dem_generation.base import (
+    DEMGenerator,
+    DEMProduct,
+    IterationRecord,
+    QualityLayer,
+)
 from carto.framework.errors import InputError
 from carto.framework.geometry.sensor import Sensor
+from carto.framework.matching.base import Matcher
 from carto.framework.raster.dem import DEM
 from carto.ior.refine import IORResult, IORSettings, refine_dem
 
 _SETTINGS = {f.name for f in attrs.fields(IORSettings)}
+
+
+def ior_product(result: IORResult) -> DEMProduct:
+    """The framework's :class:`DEMProduct` of an IOR result: the DEM, both ortho-images, the
+    last matching's score and validity as quality layers, the iterations' figures and the
+    base-to-height ratio (``extras["b_over_h"]``)."""
+    iterations = [
+        IterationRecord(
+            r.iteration,
+            r.seconds,
+            {
+                "median_abs_mismatch_px": r.median_abs_mismatch_px,
+                "matched_percent": r.matched_percent,
+                "median_abs_dem_change_m": r.median_abs_dem_change_m,
+                "median_across_base_px": r.median_across_base_px,
+            },
+        )
+        for r in result.iterations
+    ]
+    quality = [
+        QualityLayer("score", "correlation score", result.score),
+        QualityLayer("valid", "valid match (1) or not (0)", result.valid.astype(np.float32)),
+    ]
+    return DEMProduct(
+        dem=result.dem,
+        dem_grid=result.dem_grid,
+        orthos=(result.ortho_left, result.ortho_right),
+        ortho_grid=result.ortho_grid,
+        quality=quality,
+        iterations=iterations,
+        converged=result.converged,
+        extras={"b_over_h": result.b_over_h},
+    )
 
 
 class IORGenerator(DEMGenerator):
@@ -24,13 +64,14 @@ class IORGenerator(DEMGenerator):
     description = "DEM + ortho-images by iterative ortho-image refinement (Radhadevi et al. 2010)"
 
     def generate(
-        self, images: Sequence[Any], sensors: Sequence[Sensor], **options: Any
-    ) -> IORResult:
-        """``images``: the left and right raw images (2-D arrays, staggered arrays merged);
+        self, images: Sequence[NDArray], sensors: Sequence[Sensor], **options: Any
+    ) -> DEMProduct:
+        """``images``: the left and right prepared raw images (2-D arrays);
         ``sensors``: their models. Options: ``init_dem`` (a :class:`DEM`, required),
-        ``progress`` (callable taking a line), ``scheduler`` (see :func:`refine_dem`) and the
-        fields of :class:`IORSettings` (``posting_m``, ``ortho_res_m``, ``crs``,
-        ``max_iterations`` ...)."""
+        ``matcher`` (a matcher with dense matching, default ``"ncc"``), ``progress``
+        (callable taking a line), ``scheduler`` (see :func:`refine_dem`) and the fields of
+        :class:`IORSettings` (``posting_m``, ``ortho_res_m``, ``crs``, ``max_iterations``
+        ...)."""
         if len(images) != 2 or len(sensors) != 2:
             raise InputError(
                 f"ior: needs exactly two images and two sensors, got {len(images)} and "
@@ -39,6 +80,14 @@ class IORGenerator(DEMGenerator):
         init_dem = options.pop("init_dem", None)
         if not isinstance(init_dem, DEM):
             raise InputError("ior: option init_dem (a DEM or a constant height) is required")
+        matcher = options.pop("matcher", None)
+        if matcher is not None and not isinstance(matcher, Matcher):
+            raise InputError(f"ior: option matcher must be a matcher, got {matcher!r}")
+        if matcher is not None and not matcher.dense:
+            raise InputError(
+                f"ior: matcher {matcher.name!r} does not match densely; IOR needs a dense "
+                "matcher (carto plugins --kind matcher)"
+            )
         progress = options.pop("progress", None)
         scheduler = options.pop("scheduler", None)
         unknown = sorted(set(options) - _SETTINGS)
@@ -47,6 +96,15 @@ class IORGenerator(DEMGenerator):
             raise InputError(f"ior: unknown option(s) {', '.join(unknown)} (known: {known})")
         settings = IORSettings(**{k: v for k, v in options.items() if v is not None})
         left, right = (np.asarray(i) for i in images)
-        return refine_dem(
-            left, right, sensors[0], sensors[1], init_dem, settings, progress, scheduler
+        result = refine_dem(
+            left,
+            right,
+            sensors[0],
+            sensors[1],
+            init_dem,
+            settings,
+            progress,
+            scheduler,
+            matcher=matcher,
         )
+        return ior_product(result)

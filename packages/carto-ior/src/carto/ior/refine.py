@@ -6,8 +6,10 @@ identical; where the DEM height is wrong by ``e`` they are shifted against each 
 the stereo base. The loop:
 
 1. orthorectify both images on the current DEM (:func:`carto.framework.imaging.ortho.orthorectify`);
-2. match the two ortho-images densely (:func:`carto.framework.matching.disparity.dense_offsets`:
-   pyramid, left-right check, sub-pixel, score and validity);
+2. match the two ortho-images densely with the chosen matcher's ``match_dense`` (the
+   matcher extension point, ``carto dem --matcher``; the default ``"ncc"`` is
+   :func:`carto.framework.matching.disparity.dense_offsets`: pyramid, left-right check,
+   sub-pixel, score and validity);
 3. turn each mismatch into a height by intersecting the two image rays at the matched points
    (:func:`carto.framework.geometry.intersection.intersect_sensors`), carried back to the DEM node;
 4. update the DEM with regularisation: outliers against the local median removed, holes and
@@ -48,7 +50,9 @@ from numpy.typing import NDArray
 
 from carto.framework.errors import InputError
 from carto.framework.geometry.sensor import Sensor
-from carto.framework.imaging.ortho import OrthoGrid, orthorectify
+from carto.framework.imaging.ortho import orthorectify
+from carto.framework.imaging.ortho_grid import OrthoGrid
+from carto.framework.matching.base import DenseSettings, Matcher
 from carto.framework.raster.dem import DEM, ELLIPSOID
 
 FloatArray = NDArray[np.float64]
@@ -276,6 +280,12 @@ class TileResult:
     valid: NDArray[np.bool_]
 
 
+def _default_matcher() -> Matcher:
+    from carto.framework.matching.ncc_matcher import NCCMatcher
+
+    return NCCMatcher()
+
+
 def refine_tile(
     images: tuple[NDArray, NDArray],
     sensors: tuple[Sensor, Sensor],
@@ -288,6 +298,7 @@ def refine_tile(
     settings: IORSettings,
     levels: int | None = None,
     guess: tuple[float, float] = (0.0, 0.0),
+    matcher: Matcher | None = None,
 ) -> TileResult:
     """One tile of one iteration: orthos on the current DEM, dense matching, intersection.
 
@@ -295,7 +306,6 @@ def refine_tile(
     nodes around it); the result covers ``rows, cols`` (DEM node slices) only.
     """
     from carto.framework.geometry.intersection import intersect_sensors
-    from carto.framework.matching.disparity import dense_offsets
 
     n_r, n_c = dem_grid.shape
     r0, r1 = max(0, rows.start - overlap), min(n_r, rows.stop + overlap)
@@ -310,13 +320,15 @@ def refine_tile(
     )
     left, right = sensors
     ortho = [orthorectify(img, s, ogrid, dem) for img, s in zip(images, sensors, strict=True)]
-    field = dense_offsets(
+    field = (matcher or _default_matcher()).match_dense(
         ortho[0],
         ortho[1],
-        levels=settings.levels if levels is None else levels,
-        guess=guess,
-        window=settings.window,
-        min_score=settings.min_score,
+        settings=DenseSettings(
+            levels=settings.levels if levels is None else levels,
+            guess=guess,
+            window=settings.window,
+            min_score=settings.min_score,
+        ),
     )
     # node offsets: the mean of the valid offsets of the node's k x k ortho pixels
     shape = (r1 - r0, c1 - c0)
@@ -420,6 +432,7 @@ def refine_dem(
     settings: IORSettings | None = None,
     progress: Callable[[str], None] | None = None,
     scheduler: Callable[[list[Callable[[], TileResult]]], list[TileResult]] | None = None,
+    matcher: Matcher | None = None,
 ) -> IORResult:
     """The IOR loop (see the module docstring).
 
@@ -433,6 +446,8 @@ def refine_dem(
         progress: called with one line per iteration.
         scheduler: runs a list of tile tasks and returns their results (default: in turn;
             e.g. ``lambda tasks: dask.compute(*map(dask.delayed, tasks))``).
+        matcher: the dense matcher of the ortho-images (default: the framework's ``"ncc"``,
+            hierarchical NCC with a left-right check); any matcher with ``match_dense``.
 
     Raises:
         InputError: images that do not overlap, an initial DEM that does not cover them, bad
@@ -473,6 +488,7 @@ def refine_dem(
                 if reports and reports[-1].median_abs_mismatch_px < 2.0
                 else s.levels,
                 guess,
+                matcher,
             )
             for r in range(0, n_r, tile_n)
             for c in range(0, n_c, tile_n)

@@ -29,7 +29,7 @@ class RPCBiasAdjuster(Adjuster):
     def adjust(
         self, sensors: Mapping[str, Sensor], observations: Observations, **options: Any
     ) -> AdjustmentResult:
-        from carto.framework.geometry.rpc import RPCSensor
+        from carto.framework.geometry.rpc_sensor import RPCSensor
 
         mode = options.pop("mode", "shift")
         fixed = set(options.pop("fixed", ()))

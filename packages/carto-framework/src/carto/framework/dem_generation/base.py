@@ -1,19 +1,175 @@
-"""The DEM-generator component kind: what ``carto dem`` asks of a DEM generator."""
+"""The DEM-generator component kind: what ``carto dem`` asks of a DEM generator and what it
+gets back.
+
+A :class:`DEMGenerator` takes the prepared raw images of a stereo pair (staggered arrays
+merged, see :meth:`carto.framework.geometry.sensor.Sensor.prepare_raw`), their models and a
+starting DEM, and returns a :class:`DEMProduct`. ``carto dem`` writes every output
+(``dem.tif``, the ortho-images, ``quality.tif``, ``report.json``) from the product alone, so a
+generator never writes files itself and any generator's outputs look the same to users.
+
+Options every generator receives (``generate(..., **options)``):
+
+``init_dem``
+    the starting :class:`~carto.framework.raster.dem.DEM` (ellipsoidal heights), required;
+``matcher``
+    the :class:`~carto.framework.matching.base.Matcher` chosen by the user
+    (``carto dem --matcher NAME``, default the registry's ``"ncc"``), for generators that
+    match images; a generator that does not match must refuse a matcher it would ignore;
+``progress``
+    ``None`` or a callable taking one line of text per step;
+``scheduler``
+    ``None`` (run tile tasks in this process) or a callable that runs a sequence of
+    argument-less tasks and returns their results in order.
+
+Every other option is generator specific (``posting_m``, ``ortho_res_m``, ``crs``,
+``max_iterations`` for ``ior``); unknown options are refused with an
+:class:`~carto.framework.errors.InputError`.
+"""
 
 from __future__ import annotations
 
 import abc
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
+import attrs
+import numpy as np
+from numpy.typing import NDArray
+
 from carto.framework.component import Component
+from carto.framework.errors import InputError
 from carto.framework.geometry.sensor import Sensor
+from carto.framework.imaging.ortho_grid import OrthoGrid
+from carto.framework.raster.dem import DEM
+
+
+def _layer_values(value: Any) -> NDArray[np.float32]:
+    return np.asarray(value, dtype=np.float32)
+
+
+@attrs.frozen(eq=False)
+class QualityLayer:
+    """One band of ``quality.tif``: a per-pixel measure on the product's ortho grid.
+
+    Attributes:
+        name: short identifier (``"score"``, ``"valid"``), written as the band's GDAL
+            description.
+        description: one line for people (the band's ``DESCRIPTION`` tag).
+        values: float32 array of the ortho grid's shape (NaN = no value).
+    """
+
+    name: str
+    description: str
+    values: NDArray[np.float32] = attrs.field(converter=_layer_values)
+
+    def __attrs_post_init__(self) -> None:
+        if self.values.ndim != 2:
+            raise InputError(
+                f"quality layer {self.name!r}: values must be 2-D, got shape {self.values.shape}"
+            )
+
+
+@attrs.frozen
+class IterationRecord:
+    """One iteration (or stage) of a generator: its number, duration and measures.
+
+    Attributes:
+        iteration: 1-based number.
+        seconds: wall time of the iteration.
+        measures: generator-specific figures of the iteration by name (numbers; e.g.
+            ``median_abs_mismatch_px``, ``matched_percent`` for ``ior``), written to
+            ``report.json`` beside ``iteration`` and ``seconds``.
+    """
+
+    iteration: int
+    seconds: float
+    measures: Mapping[str, float] = attrs.field(factory=dict, converter=dict)
+
+    def as_dict(self) -> dict[str, Any]:
+        """The ``report.json`` form: ``iteration``, the measures, ``seconds``."""
+        return {"iteration": self.iteration, **self.measures, "seconds": self.seconds}
+
+
+def _tuple(value: Sequence[Any]) -> tuple[Any, ...]:
+    return tuple(value)
+
+
+@attrs.frozen(eq=False)
+class DEMProduct:
+    """What a DEM generator returns: everything ``carto dem`` writes.
+
+    Attributes:
+        dem: the DEM (ellipsoidal heights, NaN where nothing was measured or filled), on
+            ``dem_grid``.
+        dem_grid: the DEM's map grid.
+        orthos: one float32 ortho-image per input image, in the input order, on
+            ``ortho_grid`` (NaN = no data).
+        ortho_grid: the ortho-images' map grid (also the grid of the quality layers).
+        quality: the bands of ``quality.tif``.
+        iterations: one record per iteration (possibly one for a single-pass generator).
+        converged: whether the generator's own stopping test was met (``None`` for a
+            generator without one).
+        extras: generator-specific results for ``report.json`` (JSON-able values: numbers,
+            strings, lists, mappings; e.g. ``b_over_h`` for ``ior``). Keys must not collide
+            with the report's own fields.
+    """
+
+    dem: DEM
+    dem_grid: OrthoGrid
+    orthos: tuple[NDArray[np.float32], ...] = attrs.field(converter=_tuple)
+    ortho_grid: OrthoGrid
+    quality: tuple[QualityLayer, ...] = attrs.field(converter=_tuple)
+    iterations: tuple[IterationRecord, ...] = attrs.field(converter=_tuple)
+    converged: bool | None = None
+    extras: Mapping[str, Any] = attrs.field(factory=dict, converter=dict)
+
+    def __attrs_post_init__(self) -> None:
+        if self.dem.heights.shape != tuple(self.dem_grid.shape):
+            raise InputError(
+                f"DEM product: DEM of shape {self.dem.heights.shape} on a grid of shape "
+                f"{tuple(self.dem_grid.shape)}"
+            )
+        shape = tuple(self.ortho_grid.shape)
+        for k, ortho in enumerate(self.orthos):
+            if np.shape(ortho) != shape:
+                raise InputError(
+                    f"DEM product: ortho-image {k} has shape {np.shape(ortho)}, the ortho "
+                    f"grid {shape}"
+                )
+        for layer in self.quality:
+            if layer.values.shape != shape:
+                raise InputError(
+                    f"DEM product: quality layer {layer.name!r} has shape "
+                    f"{layer.values.shape}, the ortho grid {shape}"
+                )
+        names = [layer.name for layer in self.quality]
+        if len(set(names)) != len(names):
+            raise InputError(f"DEM product: quality layer names repeat: {', '.join(names)}")
+
+    @property
+    def measured_fraction(self) -> float:
+        """Share of the DEM's nodes that hold a height (0 for an empty grid)."""
+        heights = self.dem.heights
+        return float(np.isfinite(heights).mean()) if heights.size else 0.0
+
+    def iteration_dicts(self) -> list[dict[str, Any]]:
+        """The iterations in their ``report.json`` form."""
+        return [r.as_dict() for r in self.iterations]
 
 
 class DEMGenerator(Component):
     """Derives a digital elevation model from overlapping images with known orientation."""
 
     @abc.abstractmethod
-    def generate(self, images: Sequence[Any], sensors: Sequence[Sensor], **options: Any) -> Any:
-        """Generate a DEM (and ortho-images and quality layers) from ``images`` seen through
-        ``sensors``; ``options`` carry the initial DEM, posting and output CRS."""
+    def generate(
+        self, images: Sequence[NDArray], sensors: Sequence[Sensor], **options: Any
+    ) -> DEMProduct:
+        """Generate a DEM, ortho-images and quality layers from ``images`` (prepared raw
+        images, 2-D arrays) seen through ``sensors`` (one per image, same order).
+
+        ``options``: the common ones of the module docstring (``init_dem``, ``matcher``,
+        ``progress``, ``scheduler``) and the generator's own.
+
+        Raises:
+            InputError: unknown or invalid options, images that cannot be used.
+        """

@@ -15,14 +15,17 @@ Ground -> image (:meth:`LineScanner.ground_to_image`)
     coordinate, solving ``v_x / v_z = tan psi_x(s)`` for the camera-frame vector
     ``v = R_camera_to_ecef(t)^T (X - P(t))``, from a first guess given by a cubic polynomial
     in (lon, lat, h) fitted to the model over the image and heights -500..9000 m. Iterations stop
-    when the line changes by less than ``LINE_TOLERANCE`` (1e-8 line); the sample is then
-    ``s = tan_psi_y^-1(v_y / v_z)``. Points that do not converge in ``MAX_ITERATIONS``, or that
-    are behind the camera, come back as NaN; points outside the image come back as NaN from
+    when the line changes by less than
+    :data:`~carto.framework.geometry.linescan_solver.LINE_TOLERANCE` (1e-8 line); the sample is
+    then ``s = tan_psi_y^-1(v_y / v_z)``. Points that do not converge in ``MAX_ITERATIONS``, or
+    that are behind the camera, come back as NaN; points outside the image come back as NaN from
     :meth:`~LineScanner.ground_to_image` and with their (extrapolated) coordinates and a False
-    mask from :meth:`~LineScanner.project`.
+    mask from :meth:`~LineScanner.project`. The first guess, the camera-state table and the
+    compiled solver are in :mod:`~carto.framework.geometry.linescan_solver`.
 
 Image coordinates follow the project convention (first pixel centre at ``(0.5, 0.5)``); line
-``l`` is imaged at ``t(l)`` given by a :class:`LineTiming` (``t0 + (l - 0.5) * period`` for a
+``l`` is imaged at ``t(l)`` given by a
+:class:`~carto.framework.geometry.linescan_timing.LineTiming` (``t0 + (l - 0.5) * period`` for a
 constant period, piecewise linear for asynchronous imaging).
 """
 
@@ -35,11 +38,11 @@ from pathlib import Path
 from typing import Any
 
 import attrs
-import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from carto.framework.arrays import as_float_arrays
+from carto.framework.component import ComponentLookup
 from carto.framework.errors import InputError
 from carto.framework.files.documents import (
     check_document,
@@ -48,382 +51,24 @@ from carto.framework.files.documents import (
 )
 from carto.framework.geometry import frames
 from carto.framework.geometry.camera import Camera
-from carto.framework.geometry.sensor import Parameter, Sensor, SensorType
+from carto.framework.geometry.linescan_solver import (
+    FirstGuess,
+    LineTable,
+    camera_vectors,
+    solve_lines,
+)
+from carto.framework.geometry.linescan_timing import LineTiming
+from carto.framework.geometry.sensor import Parameter, Sensor, SensorType, refuse_options
 from carto.framework.geometry.trajectory import Trajectory
 
 FloatArray = NDArray[np.float64]
 
 MODEL_FORMAT = "carto-linescan-model"
 MODEL_VERSION = 1
-LINE_TOLERANCE = 1e-8
 MAX_ITERATIONS = 25
 HEIGHT_TOLERANCE_M = 1e-6
-TABLE_MARGIN_LINES = 3000
-"""Ground -> image works this many lines (or half an image) beyond the image's ends: room for
-the orientation errors an adjustment starts from; farther points come back NaN."""
 EDGE_TOLERANCE_PX = 1e-6
 """Points this close outside the image border still count as inside (rounding of round trips)."""
-
-
-def _tuple_of_floats(value: Any) -> tuple[float, ...]:
-    return tuple(float(v) for v in np.atleast_1d(np.asarray(value, dtype=np.float64)))
-
-
-@attrs.frozen
-class LineTiming:
-    """Time of each image line: piecewise linear through nodes, extrapolated linearly.
-
-    Attributes:
-        line_nodes: line coordinates (project convention), strictly increasing, >= 2.
-        dt_nodes_s: imaging times of those lines, seconds since the trajectory's epoch,
-            strictly increasing.
-    """
-
-    line_nodes: tuple[float, ...] = attrs.field(converter=_tuple_of_floats)
-    dt_nodes_s: tuple[float, ...] = attrs.field(converter=_tuple_of_floats)
-
-    def __attrs_post_init__(self) -> None:
-        lines, times = np.asarray(self.line_nodes), np.asarray(self.dt_nodes_s)
-        if lines.size < 2 or lines.size != times.size:
-            raise InputError("line timing: need >= 2 (line, time) nodes of equal count")
-        if np.any(np.diff(lines) <= 0) or np.any(np.diff(times) <= 0):
-            raise InputError("line timing: lines and times must increase strictly")
-
-    @classmethod
-    def constant(cls, dt_first_line_s: float, period_s: float) -> LineTiming:
-        """``t(l) = dt_first_line_s + (l - 0.5) * period_s`` (the first line's centre is 0.5)."""
-        if not period_s > 0:
-            raise InputError(f"line timing: period must be > 0 s, got {period_s}")
-        return cls((0.5, 1.5), (dt_first_line_s, dt_first_line_s + period_s))
-
-    @staticmethod
-    def _piecewise(x: FloatArray, xs: FloatArray, ys: FloatArray) -> FloatArray:
-        i = np.clip(np.searchsorted(xs, x) - 1, 0, xs.size - 2)
-        slope = (ys[i + 1] - ys[i]) / (xs[i + 1] - xs[i])
-        return ys[i] + (x - xs[i]) * slope
-
-    def time(self, line: ArrayLike) -> FloatArray:
-        """Imaging time (s since epoch) of continuous line coordinates."""
-        return self._piecewise(
-            np.asarray(line, float), np.asarray(self.line_nodes), np.asarray(self.dt_nodes_s)
-        )
-
-    def line(self, dt_s: ArrayLike) -> FloatArray:
-        """Continuous line coordinate imaged at ``dt_s``."""
-        return self._piecewise(
-            np.asarray(dt_s, float), np.asarray(self.dt_nodes_s), np.asarray(self.line_nodes)
-        )
-
-    def period(self, line: ArrayLike) -> FloatArray:
-        """Local line period (s per line) at ``line``."""
-        line = np.asarray(line, float)
-        return self.time(line + 0.5) - self.time(line - 0.5)
-
-
-class _FirstGuess:
-    """Cubic polynomial (lon, lat, h) -> line fitted to the model; shared by sensors that differ
-    only by small corrections (it is only a starting point)."""
-
-    def __init__(self) -> None:
-        self.coeffs: FloatArray | None = None
-        self.offset: FloatArray | None = None
-        self.scale: FloatArray | None = None
-
-    @staticmethod
-    def _terms(x: FloatArray, y: FloatArray, z: FloatArray) -> FloatArray:
-        one = np.ones_like(x)
-        return np.stack(
-            [
-                one,
-                x,
-                y,
-                z,
-                x * y,
-                x * z,
-                y * z,
-                x * x,
-                y * y,
-                z * z,
-                x * y * z,
-                x**3,
-                x * y * y,
-                x * z * z,
-                x * x * y,
-                y**3,
-                y * z * z,
-                x * x * z,
-                y * y * z,
-                z**3,
-            ],
-            axis=-1,
-        )
-
-    def fit(self, sensor: LineScanner) -> None:
-        lines = np.linspace(0.0, sensor.n_lines, 9)
-        samples = np.linspace(0.0, sensor.n_samples, 9)
-        heights = np.array([-500.0, 1500.0, 4500.0, 9000.0])
-        ll, ss, hh = np.meshgrid(lines, samples, heights, indexing="ij")
-        lon, lat = sensor.image_to_ground(ll.ravel(), ss.ravel(), hh.ravel())
-        xyz = np.stack([lon, lat, hh.ravel()], axis=-1)
-        ok = np.all(np.isfinite(xyz), axis=1)
-        if ok.sum() < 40:
-            raise InputError(f"sensor {sensor.name}: the image does not intersect the Earth")
-        xyz = xyz[ok]
-        self.offset = 0.5 * (xyz.min(axis=0) + xyz.max(axis=0))
-        self.scale = np.maximum(0.5 * (xyz.max(axis=0) - xyz.min(axis=0)), 1e-9)
-        n = (xyz - self.offset) / self.scale
-        a = self._terms(n[:, 0], n[:, 1], n[:, 2])
-        self.coeffs = np.linalg.lstsq(a, ll.ravel()[ok], rcond=None)[0]
-
-    def __call__(self, lon: FloatArray, lat: FloatArray, h: FloatArray) -> FloatArray:
-        return _eval_guess(lon, lat, h, self.offset, self.scale, self.coeffs)
-
-
-def _eval_guess_py(
-    lon: FloatArray,
-    lat: FloatArray,
-    h: FloatArray,
-    offset: FloatArray,
-    scale: FloatArray,
-    c: FloatArray,
-) -> FloatArray:  # pragma: no cover - compiled; same terms as _FirstGuess._terms
-    out = np.empty(lon.shape[0])
-    for i in numba.prange(lon.shape[0]):
-        x = (lon[i] - offset[0]) / scale[0]
-        y = (lat[i] - offset[1]) / scale[1]
-        z = (h[i] - offset[2]) / scale[2]
-        out[i] = (
-            c[0]
-            + c[1] * x
-            + c[2] * y
-            + c[3] * z
-            + c[4] * x * y
-            + c[5] * x * z
-            + c[6] * y * z
-            + c[7] * x * x
-            + c[8] * y * y
-            + c[9] * z * z
-            + c[10] * x * y * z
-            + c[11] * x**3
-            + c[12] * x * y * y
-            + c[13] * x * z * z
-            + c[14] * x * x * y
-            + c[15] * y**3
-            + c[16] * y * z * z
-            + c[17] * x * x * z
-            + c[18] * y * y * z
-            + c[19] * z**3
-        )
-    return out
-
-
-class _LineTable:
-    """Exact camera state at regularly spaced times: ``P_ecef`` and ``R_ecef_to_camera``.
-
-    Between nodes the state is interpolated by 4-point Lagrange polynomials (cubic) in time, in
-    which the motion of a satellite is smooth (the line timing may have kinks, so the table is
-    not indexed by line). Nodes are at most two line periods apart and span half an image
-    before the first line to half an image after the last; the interpolation error is far
-    below 1e-6 px (tested against the exact chain).
-    """
-
-    def __init__(self) -> None:
-        self.node0: float = 0.0
-        self.spacing: float = 1.0
-        self.position: FloatArray | None = None  # (K, 3)
-        self.rotation: FloatArray | None = None  # (K, 3, 3) ecef -> camera
-        self.tolerance_s: float = 1e-12
-
-    def build(self, sensor: LineScanner) -> None:
-        n = max(int(sensor.n_lines), 1)
-        timing = sensor.timing
-        margin = max(0.5 * n, TABLE_MARGIN_LINES)
-        t_lo = float(timing.time(-margin))
-        t_hi = float(timing.time(n + margin))
-        periods = np.diff(np.asarray(timing.dt_nodes_s)) / np.diff(np.asarray(timing.line_nodes))
-        self.spacing = float(2.0 * periods.min())
-        self.tolerance_s = LINE_TOLERANCE * float(periods.min())
-        k = int(np.ceil((t_hi - t_lo) / self.spacing)) + 8
-        self.node0 = t_lo - 4 * self.spacing
-        times = self.node0 + self.spacing * np.arange(k)
-        p, r_b2e = sensor.trajectory.evaluate(times)
-        r_c2e = r_b2e @ sensor.camera.camera_to_body()
-        self.position = np.ascontiguousarray(p)
-        self.rotation = np.ascontiguousarray(np.swapaxes(r_c2e, -1, -2))
-
-
-@numba.njit(cache=True, nogil=True)
-def _polyval(coeffs: FloatArray, u: float) -> float:  # pragma: no cover - compiled
-    out = 0.0
-    for k in range(coeffs.shape[0] - 1, -1, -1):
-        out = out * u + coeffs[k]
-    return out
-
-
-@numba.njit(cache=True, nogil=True)
-def _sample_from_tan_y(coeffs: FloatArray, t: float, half: float) -> float:  # pragma: no cover
-    u = (t - coeffs[0]) / coeffs[1]
-    if coeffs.shape[0] > 2:
-        for _ in range(6):
-            val = 0.0
-            der = 0.0
-            for k in range(coeffs.shape[0] - 1, -1, -1):
-                der = der * u + val
-                val = val * u + coeffs[k]
-            u = u - (val - t) / der
-    return u * half + half
-
-
-@numba.njit(cache=True, nogil=True)
-def _focal_offset(
-    x: FloatArray,
-    t_s: float,
-    node0: float,
-    spacing: float,
-    pos: FloatArray,
-    rot: FloatArray,
-    tan_x: FloatArray,
-    tan_y: FloatArray,
-    stagger: float,
-    half: float,
-    v: FloatArray,
-) -> float:  # pragma: no cover - compiled
-    """Interpolate the camera state at time ``t_s``; fill ``v`` (camera frame); return f."""
-    nk = pos.shape[0]
-    q = (t_s - node0) / spacing
-    k = int(np.floor(q))
-    if k < 1 or k > nk - 3:
-        return np.nan
-    t = q - k
-    # 4-point Lagrange weights for nodes k-1, k, k+1, k+2 at local coordinate t in [0, 1)
-    w0 = -t * (t - 1.0) * (t - 2.0) / 6.0
-    w1 = (t + 1.0) * (t - 1.0) * (t - 2.0) / 2.0
-    w2 = -(t + 1.0) * t * (t - 2.0) / 2.0
-    w3 = (t + 1.0) * t * (t - 1.0) / 6.0
-    d0 = x[0] - (w0 * pos[k - 1, 0] + w1 * pos[k, 0] + w2 * pos[k + 1, 0] + w3 * pos[k + 2, 0])
-    d1 = x[1] - (w0 * pos[k - 1, 1] + w1 * pos[k, 1] + w2 * pos[k + 1, 1] + w3 * pos[k + 2, 1])
-    d2 = x[2] - (w0 * pos[k - 1, 2] + w1 * pos[k, 2] + w2 * pos[k + 1, 2] + w3 * pos[k + 2, 2])
-    for i in range(3):
-        r0 = (
-            w0 * rot[k - 1, i, 0]
-            + w1 * rot[k, i, 0]
-            + w2 * rot[k + 1, i, 0]
-            + w3 * rot[k + 2, i, 0]
-        )
-        r1 = (
-            w0 * rot[k - 1, i, 1]
-            + w1 * rot[k, i, 1]
-            + w2 * rot[k + 1, i, 1]
-            + w3 * rot[k + 2, i, 1]
-        )
-        r2 = (
-            w0 * rot[k - 1, i, 2]
-            + w1 * rot[k, i, 2]
-            + w2 * rot[k + 1, i, 2]
-            + w3 * rot[k + 2, i, 2]
-        )
-        v[i] = r0 * d0 + r1 * d1 + r2 * d2
-    if v[2] <= 0.0:
-        return np.nan
-    if tan_x.shape[0] == 1:
-        target = tan_x[0] + stagger
-    else:
-        s = _sample_from_tan_y(tan_y, v[1] / v[2], half)
-        target = _polyval(tan_x, (s - half) / half) + stagger
-    return v[0] / v[2] - target
-
-
-@numba.njit(cache=True, nogil=True)
-def _camera_vectors(
-    x: FloatArray,
-    t_s: FloatArray,
-    node0: float,
-    spacing: float,
-    pos: FloatArray,
-    rot: FloatArray,
-) -> FloatArray:  # pragma: no cover - compiled
-    """Camera-frame vectors ``R_ecef_to_camera (X - P)`` at times ``t_s`` from the table,
-    ``(N, 3)``; NaN outside the table."""
-    out = np.full((x.shape[0], 3), np.nan)
-    one = np.zeros(1)
-    for i in range(x.shape[0]):
-        _focal_offset(x[i], t_s[i], node0, spacing, pos, rot, one, one, 0.0, 1.0, out[i])
-    return out
-
-
-def _solve_lines_py(
-    x: FloatArray,
-    guess: FloatArray,
-    node0: float,
-    spacing: float,
-    pos: FloatArray,
-    rot: FloatArray,
-    tan_x: FloatArray,
-    tan_y: FloatArray,
-    stagger: float,
-    half: float,
-    tol: float,
-    max_iter: int,
-) -> tuple[FloatArray, FloatArray]:  # pragma: no cover - compiled
-    """Secant iteration on the imaging time for every point (parallel over points).
-
-    ``guess`` and the result are times (s since epoch); ``tol`` in seconds."""
-    n = x.shape[0]
-    out_line = np.full(n, np.nan)
-    out_sample = np.full(n, np.nan)
-    for i in numba.prange(n):
-        v = np.empty(3)
-        xi = x[i]
-        l0 = guess[i]
-        f0 = _focal_offset(xi, l0, node0, spacing, pos, rot, tan_x, tan_y, stagger, half, v)
-        if not np.isfinite(f0):
-            continue
-        l1 = l0 + 0.5 * spacing
-        converged = False
-        for _ in range(max_iter):
-            f1 = _focal_offset(xi, l1, node0, spacing, pos, rot, tan_x, tan_y, stagger, half, v)
-            if not np.isfinite(f1):
-                break
-            if f1 == f0:  # stagnation at the rounding floor of f (~1e-15)
-                converged = f1 == 0.0 or abs(l1 - l0) < 1e3 * tol
-                break
-            l2 = l1 - f1 * (l1 - l0) / (f1 - f0)
-            l0, f0 = l1, f1
-            l1 = l2
-            if abs(l1 - l0) < tol:
-                converged = True
-                break
-        if converged:
-            f1 = _focal_offset(xi, l1, node0, spacing, pos, rot, tan_x, tan_y, stagger, half, v)
-            if np.isfinite(f1):
-                out_line[i] = l1
-                out_sample[i] = _sample_from_tan_y(tan_y, v[1] / v[2], half)
-    return out_line, out_sample
-
-
-PARALLEL_MIN_POINTS = 20_000
-"""Below this many points the compiled kernels run on one thread (no thread start-up cost)."""
-_eval_guess_parallel = numba.njit(parallel=True, cache=True, nogil=True)(_eval_guess_py)
-_eval_guess_serial = numba.njit(cache=True, nogil=True)(_eval_guess_py)
-_solve_lines_parallel = numba.njit(parallel=True, cache=True, nogil=True)(_solve_lines_py)
-_solve_lines_serial = numba.njit(cache=True, nogil=True)(_solve_lines_py)
-
-
-def _eval_guess(
-    lon: FloatArray,
-    lat: FloatArray,
-    h: FloatArray,
-    offset: FloatArray,
-    scale: FloatArray,
-    c: FloatArray,
-) -> FloatArray:
-    fn = _eval_guess_parallel if lon.shape[0] >= PARALLEL_MIN_POINTS else _eval_guess_serial
-    return fn(lon, lat, h, offset, scale, c)
-
-
-def _solve_lines(x: FloatArray, *args: Any) -> tuple[FloatArray, FloatArray]:
-    fn = _solve_lines_parallel if x.shape[0] >= PARALLEL_MIN_POINTS else _solve_lines_serial
-    return fn(x, *args)
 
 
 @attrs.frozen(eq=False)
@@ -433,7 +78,7 @@ class LineScanner(Sensor):
     Attributes:
         name: image identifier (``"fore"``, ``"IMG_02"`` ...).
         n_lines: number of image lines.
-        timing: :class:`LineTiming` of the lines.
+        timing: :class:`~carto.framework.geometry.linescan_timing.LineTiming` of the lines.
         camera: :class:`~carto.framework.geometry.camera.Camera` of the whole detector line.
         trajectory: :class:`~carto.framework.geometry.trajectory.Trajectory` of the platform body.
         first_sample: detector index of the image's first column: an image that is a window
@@ -456,8 +101,8 @@ class LineScanner(Sensor):
     first_sample: int = 0
     width: int | None = None
     first_line: int = 0
-    _guess: _FirstGuess = attrs.field(factory=_FirstGuess, alias="guess", repr=False)
-    _table: _LineTable = attrs.field(factory=_LineTable, init=False, repr=False)
+    _guess: FirstGuess = attrs.field(factory=FirstGuess, alias="guess", repr=False)
+    _table: LineTable = attrs.field(factory=LineTable, init=False, repr=False)
 
     # ------------------------------------------------------------------ Sensor interface
     def __attrs_post_init__(self) -> None:
@@ -575,7 +220,7 @@ class LineScanner(Sensor):
         jac = np.empty((lon.size, 2, 2))
         step = 0.5
         table = self._table
-        v_step = _camera_vectors(
+        v_step = camera_vectors(
             np.ascontiguousarray(x),
             np.ascontiguousarray(self.timing.time(li + step)),
             table.node0,
@@ -660,7 +305,7 @@ class LineScanner(Sensor):
 
     def with_camera(self, camera: Camera) -> LineScanner:
         """The same image through another camera model (e.g. the even array)."""
-        return attrs.evolve(self, camera=camera, guess=_FirstGuess())
+        return attrs.evolve(self, camera=camera, guess=FirstGuess())
 
     # ------------------------------------------------------------------ geometry
     def camera_to_ecef(self, line: ArrayLike) -> tuple[FloatArray, FloatArray]:
@@ -705,7 +350,7 @@ class LineScanner(Sensor):
         if self._table.position is None:
             self._table.build(self)
         cam = self.camera
-        result_t, sample = _solve_lines(
+        result_t, sample = solve_lines(
             np.ascontiguousarray(x),
             np.ascontiguousarray(self.timing.time(guess)),
             self._table.node0,
@@ -760,8 +405,14 @@ class LineScanner(Sensor):
         }
 
     @classmethod
-    def from_dict(cls, d: Mapping[str, Any], source: str = "model") -> LineScanner:
-        """Inverse of :meth:`to_dict`; ``source`` names the file in error messages."""
+    def from_dict(
+        cls,
+        d: Mapping[str, Any],
+        source: str = "model",
+        components: ComponentLookup | None = None,
+    ) -> LineScanner:
+        """Inverse of :meth:`to_dict`; ``source`` names the file in error messages;
+        ``components`` (the registry) reads the series of a plugin's trajectory model."""
         check_document(d, MODEL_FORMAT, MODEL_VERSION, "model file", source)
         try:
             window = d.get("window", {})
@@ -770,7 +421,7 @@ class LineScanner(Sensor):
                 int(d["n_lines"]),
                 LineTiming(d["timing"]["line_nodes"], d["timing"]["dt_nodes_s"]),
                 Camera.from_dict(d["camera"]),
-                Trajectory.from_dict(d["trajectory"]),
+                Trajectory.from_dict(d["trajectory"], components),
                 first_sample=int(window.get("first_sample", 0)),
                 width=None if window.get("width") is None else int(window["width"]),
                 first_line=int(window.get("first_line", 0)),
@@ -780,15 +431,28 @@ class LineScanner(Sensor):
         except InputError as exc:
             raise InputError(f"{source}: {exc}") from None
 
+    def prepare_raw(self, raw: ArrayLike, dem: Any) -> NDArray[np.float32]:
+        """The raw image with its staggered arrays merged onto this model's geometry
+        (:func:`~carto.framework.geometry.stagger.merge_staggered`, stagger field every 8
+        lines) when the camera is staggered and this model describes its odd array (raw
+        Cartosat data); the image as it is otherwise."""
+        if self.camera.stagger_tan and self.camera.array == "odd":
+            from carto.framework.geometry.stagger import merge_staggered
+
+            return merge_staggered(raw, self, dem, step=8).image
+        return np.array(raw, dtype=np.float32)
+
     def save(self, path: str | os.PathLike[str]) -> Path:
         """Write the model file (JSON) atomically: temporary name, then rename."""
         return write_json_atomic(path, self.to_dict())
 
     @classmethod
-    def load(cls, path: str | os.PathLike[str]) -> LineScanner:
-        """Read a model file written by :meth:`save`."""
+    def load(
+        cls, path: str | os.PathLike[str], components: ComponentLookup | None = None
+    ) -> LineScanner:
+        """Read a model file written by :meth:`save` (``components``: see :meth:`from_dict`)."""
         doc = read_json_document(path, MODEL_FORMAT, MODEL_VERSION, "model file")
-        return cls.from_dict(doc, source=str(Path(path)))
+        return cls.from_dict(doc, source=str(Path(path)), components=components)
 
 
 def intersect_ellipsoid_height(
@@ -849,8 +513,38 @@ class LineScannerModelType(SensorType):
             return False
         return MODEL_FORMAT.encode() in head
 
-    def open(self, path: Path) -> LineScanner:
-        return LineScanner.load(path)
+    def open(self, path: Path, **options: Any) -> LineScanner:
+        """Read a model file; ``components`` (the registry) reads a plugin's trajectory
+        series. A fitted model has no samples to refit: ``trajectory_model`` is refused."""
+        refuse_options(f"{path} (a fitted model file)", options)
+        return LineScanner.load(path, options.get("components"))
+
+    def save(
+        self, sensor: Sensor, out_dir: Path, name: str, *, h_range_m: tuple[float, float]
+    ) -> dict[str, Any]:
+        """``<name>.model.json`` and an RPC fitted to it (``<name>_RPC.TXT``)."""
+        return save_line_scanner(sensor, Path(out_dir), name, h_range_m)
+
+
+def save_line_scanner(
+    sensor: Sensor, out_dir: Path, name: str, h_range_m: tuple[float, float]
+) -> dict[str, Any]:
+    """Write an adjusted :class:`LineScanner` as ``<name>.model.json`` and an RPC fitted to it
+    over ``h_range_m`` (``<name>_RPC.TXT``, GDAL's sidecar of ``<name>.tif``)."""
+    from carto.framework.geometry.rpc_fitting import fit_rpc
+    from carto.framework.geometry.rpc_writers import write_rpc_txt
+
+    if not isinstance(sensor, LineScanner):
+        raise InputError(f"image {name}: not a line scanner ({type(sensor).__name__})")
+    model = sensor.save(out_dir / f"{name}.model.json").name
+    rpc, report = fit_rpc(sensor, h_range=h_range_m)
+    return {
+        "model": model,
+        "rpc": {
+            "file": write_rpc_txt(rpc, out_dir / f"{name}_RPC.TXT").name,
+            "fit_check_max_px": report.check_max_px,
+        },
+    }
 
 
 def shared_parameter_names(sensors: Sequence[Sensor]) -> list[str]:

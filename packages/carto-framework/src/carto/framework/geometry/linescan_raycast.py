@@ -22,6 +22,7 @@ simulator generates them so; :func:`locate_pixels` and :func:`render_reflectance
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numba
 import numpy as np
@@ -29,7 +30,9 @@ from numpy.typing import NDArray
 
 from carto.framework.errors import InputError
 from carto.framework.geometry import frames
-from carto.framework.geometry.linescan import LineScanner
+
+if TYPE_CHECKING:  # the model whose table the kernels read
+    from carto.framework.geometry.linescan import LineScanner
 
 FloatArray = NDArray[np.float64]
 

@@ -17,7 +17,7 @@ import abc
 import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import attrs
 import numpy as np
@@ -150,6 +150,22 @@ class Sensor(abc.ABC):
 
         return dem_surface_locate(self, line, sample, dem, **options)
 
+    def prepare_raw(self, raw: ArrayLike, dem: Any) -> NDArray[np.float32]:
+        """The raw image as recorded, made to follow this model (float32, NaN = no data).
+
+        Most images follow their model as they are (the default: a float32 copy). Sensors
+        whose raw data do not (staggered detector arrays, whose odd and even detectors look
+        at different lines) override it; ``dem`` (ellipsoidal heights) is the terrain the
+        correction may depend on. Matching, orthorectification and DEM generation take the
+        prepared image."""
+        return np.array(raw, dtype=np.float32)
+
+    def for_raster(self, raster: Path) -> Sensor:
+        """This sensor fitted to the raster it comes with (default: ``self``). A model of a
+        whole scene opened with a crop of it (an RPC whose crop offset is in the crop's
+        geotransform) returns the crop's model."""
+        return self
+
     # ------------------------------------------------------------------ adjustable parameters
     @property
     def parameters(self) -> tuple[Parameter, ...]:
@@ -255,21 +271,76 @@ class SensorType(Component):
     can, the one with the highest ``priority`` wins (a specific format over a generic one, e.g.
     a Cartosat orthokit product over a plain RPC file); a tie is an error that asks for
     ``--sensor``.
+
+    Options of :meth:`open` and :meth:`open_all` (the opening workflow passes them):
+
+    ``components``
+        a :class:`~carto.framework.component.ComponentLookup` (the registry): readers that
+        meet a component's name in a file (a trajectory model) look it up there; every type
+        accepts it.
+    ``trajectory_model``
+        a :class:`~carto.framework.geometry.trajectory_models.TrajectoryModel` to fit the
+        trajectories of products with ancillary data (``carto adjust --trajectory``); a type
+        whose products have no trajectory to fit refuses it.
+
+    A type refuses options it does not know with an
+    :class:`~carto.framework.errors.InputError`, so nothing asked for is silently ignored.
+
+    Attributes:
+        priority: see above.
+        default_adjuster: name of the adjuster ``carto adjust`` uses for this type's products
+            when none is named (``None``: the type names none).
+        default_dem_generator: name of the DEM generator ``carto dem`` uses for this type's
+            products when none is named (``None``: the only one installed, if one).
     """
 
     priority: int = 0
+    default_adjuster: ClassVar[str | None] = None
+    default_dem_generator: ClassVar[str | None] = None
 
     @abc.abstractmethod
     def identify(self, path: Path) -> bool:
         """Return True if ``path`` looks like a product this sensor type opens."""
 
     @abc.abstractmethod
-    def open(self, path: Path) -> Sensor:
+    def open(self, path: Path, **options: Any) -> Sensor:
         """Open ``path`` as a sensor; raise :class:`carto.framework.errors.InputError` naming
         the file and field when it is not a valid product of this type."""
 
-    def open_all(self, path: Path) -> dict[str, Sensor]:
+    def open_all(self, path: Path, **options: Any) -> dict[str, Sensor]:
         """Open every image of a product (a stereo pair, a scene folder) as named sensors.
 
         The default opens ``path`` as one image named after the file."""
-        return {Path(path).stem: self.open(path)}
+        return {Path(path).stem: self.open(path, **options)}
+
+    def save(
+        self, sensor: Sensor, out_dir: Path, name: str, *, h_range_m: tuple[float, float]
+    ) -> dict[str, Any]:
+        """Write an adjusted sensor of this type into ``out_dir`` as image ``name``.
+
+        Args:
+            sensor: a sensor this type opened, adjusted (``with_parameters``).
+            out_dir: the output folder (exists).
+            name: the image name; files are named after it (``<name>.model.json``,
+                ``<name>_RPC.TXT`` ...), and a reader of the folder finds them so.
+            h_range_m: ellipsoidal height range of the scene, metres (for models fitted over
+                a 3-D grid, e.g. a corrected RPC).
+
+        Returns:
+            what was written, for ``report.json``: ``{"model": file name}`` for a model
+            file this type opens again, ``{"rpc": {"file": ..., ...}}`` for a corrected RPC
+            (GDAL reads ``<image>_RPC.TXT`` beside ``<image>.tif``).
+
+        Raises:
+            NotImplementedError: the type cannot save adjusted sensors (the default); the
+                adjust workflow says so in its report and on stderr.
+        """
+        raise NotImplementedError(f"sensor type {self.name!r} cannot save adjusted models")
+
+
+def refuse_options(owner: str, options: dict[str, Any], allowed: tuple[str, ...] = ()) -> None:
+    """Raise :class:`InputError` for opening options that ``owner`` does not use (beside
+    ``components``, which every sensor type accepts)."""
+    unknown = sorted(set(options) - {"components", *allowed})
+    if unknown:
+        raise InputError(f"{owner}: option(s) {', '.join(unknown)} do not apply")

@@ -76,7 +76,7 @@ Validation (:func:`measure_line_shifts`)
 from __future__ import annotations
 
 import math
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import attrs
 import numba
@@ -85,7 +85,9 @@ from numpy.typing import ArrayLike, NDArray
 
 from carto.framework.errors import InputError
 from carto.framework.geometry import frames
-from carto.framework.geometry.linescan import LineScanner
+
+if TYPE_CHECKING:  # the model of the odd array; used through its methods
+    from carto.framework.geometry.linescan import LineScanner
 
 FloatArray = NDArray[np.float64]
 Float32Array = NDArray[np.float32]

@@ -8,14 +8,17 @@ sight and refines the first crossing of the terrain (see its docstring).
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from carto.framework.arrays import as_float_arrays
 from carto.framework.errors import InputError
-from carto.framework.geometry.sensor import Sensor
 from carto.framework.raster.dem import DEM, bilinear_sample
+
+if TYPE_CHECKING:  # any sensor: used through its methods only
+    from carto.framework.geometry.sensor import Sensor
 
 FloatArray = NDArray[np.float64]
 

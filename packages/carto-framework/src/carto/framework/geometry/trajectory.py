@@ -22,7 +22,7 @@ over the samples.
 
 from __future__ import annotations
 
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import attrs
 import numpy as np
@@ -32,12 +32,21 @@ from numpy.typing import ArrayLike, NDArray
 from carto.framework.errors import InputError
 from carto.framework.geometry import frames
 from carto.framework.geometry.sensor import Parameter, replace_parameters
+from carto.framework.geometry.time_series import (
+    BUILTIN_KINDS,
+    BuiltinSeries,
+    Interpolation,
+    SeriesModel,
+    TimeSeries,
+)
+
+if TYPE_CHECKING:
+    from carto.framework.component import ComponentLookup
 
 FloatArray = NDArray[np.float64]
 
 EphemerisFrame = Literal["eci", "ecef"]
 AttitudeFrame = Literal["orbit", "eci", "ecef"]
-Interpolation = Literal["polynomial", "lagrange"]
 
 _ANGLE_NAMES = ("roll", "pitch", "yaw")
 _POSITION_NAMES = ("along", "across", "radial")
@@ -190,79 +199,6 @@ class FitReport:
 
 
 # ------------------------------------------------------------------------ interpolators
-@attrs.frozen(eq=False)
-class _Series:
-    """Vector-valued function of time: polynomial in normalised time, or Lagrange."""
-
-    kind: Interpolation
-    t_mid_s: float
-    t_half_s: float
-    coeffs: FloatArray | None = None  # (order+1, C): value = sum_k coeffs[k] * tau**k
-    samples_t: FloatArray | None = None  # (N,)
-    samples_v: FloatArray | None = None  # (N, C)
-    lagrange_points: int = 8
-
-    @classmethod
-    def fit(
-        cls,
-        t: FloatArray,
-        values: FloatArray,
-        kind: Interpolation,
-        order: int,
-        t_mid: float,
-        t_half: float,
-    ) -> _Series:
-        if kind == "polynomial":
-            if order not in (1, 2, 3):
-                raise InputError(f"polynomial order must be 1, 2 or 3, got {order}")
-            tau = (t - t_mid) / t_half
-            coeffs = npoly.polyfit(tau, values, order)
-            return cls("polynomial", t_mid, t_half, coeffs=np.atleast_2d(coeffs))
-        if kind == "lagrange":
-            points = min(order, t.shape[0])
-            return cls(
-                "lagrange", t_mid, t_half, samples_t=t, samples_v=values, lagrange_points=points
-            )
-        raise InputError(f"interpolation must be 'polynomial' or 'lagrange', got {kind!r}")
-
-    def __call__(self, t: FloatArray) -> FloatArray:
-        if self.kind == "polynomial":
-            tau = (t - self.t_mid_s) / self.t_half_s
-            out = np.zeros((*tau.shape, self.coeffs.shape[1]))
-            for k in range(self.coeffs.shape[0] - 1, -1, -1):  # Horner
-                out = out * tau[..., None] + self.coeffs[k]
-            return out
-        return _lagrange(self.samples_t, self.samples_v, t, self.lagrange_points)
-
-    def derivative(self, t: FloatArray) -> FloatArray:
-        """d value / d t (per second)."""
-        if self.kind == "polynomial":
-            tau = (t - self.t_mid_s) / self.t_half_s
-            order = self.coeffs.shape[0] - 1
-            out = np.zeros((*tau.shape, self.coeffs.shape[1]))
-            for k in range(order, 0, -1):
-                out = out * tau[..., None] + k * self.coeffs[k]
-            return out / self.t_half_s
-        h = 1e-3
-        return (self(t + h) - self(t - h)) / (2 * h)
-
-
-def _lagrange(ts: FloatArray, vs: FloatArray, t: FloatArray, points: int) -> FloatArray:
-    """Lagrange interpolation with ``points`` samples centred on each ``t`` (vectorised)."""
-    n = ts.shape[0]
-    points = min(points, n)
-    idx = np.searchsorted(ts, t) - points // 2
-    idx = np.clip(idx, 0, n - points)
-    window = idx[..., None] + np.arange(points)  # (..., P)
-    tw = ts[window]
-    out = np.zeros((*t.shape, vs.shape[1]))
-    for j in range(points):
-        w = np.ones(t.shape)
-        for m in range(points):
-            if m != j:
-                w = w * (t - tw[..., m]) / (tw[..., j] - tw[..., m])
-        out += w[..., None] * vs[window[..., j]]
-    return out
 
 
 # ------------------------------------------------------------------------ the trajectory
@@ -282,8 +218,8 @@ class Trajectory:
 
     epoch_j2000_s: float
     attitude_frame: AttitudeFrame
-    _orbit: _Series  # 6 components: P_eci (m), V_eci (m/s)
-    _angles: _Series  # 3 components: roll, pitch, yaw (orbit frame) or rotvec w.r.t. _r_ref
+    _orbit: TimeSeries  # 6 components: P_eci (m), V_eci (m/s)
+    _angles: TimeSeries  # 3 components: roll, pitch, yaw (orbit frame) or rotvec w.r.t. _r_ref
     _r_ref: FloatArray  # (3, 3) reference rotation for rotvec attitude
     t_mid_s: float
     t_half_s: float
@@ -299,6 +235,12 @@ class Trajectory:
         object.__setattr__(self, "_gmst0_rad", float(frames.gmst_rad(self.epoch_j2000_s)))
         object.__setattr__(self, "_gmst_rate", float(frames.gmst_rate_rad_s(self.epoch_j2000_s)))
 
+    @property
+    def model(self) -> str:
+        """Registry name of the trajectory model that made the orbit series
+        (``"polynomial"``, ``"lagrange"`` or a plugin's)."""
+        return self._orbit.kind
+
     # ---------------------------------------------------------------- construction
     @classmethod
     def from_samples(
@@ -307,7 +249,7 @@ class Trajectory:
         ephemeris: EphemerisSamples,
         attitude: AttitudeSamples,
         *,
-        interpolation: Interpolation = "polynomial",
+        interpolation: Interpolation | SeriesModel = "polynomial",
         order: int = 3,
         lagrange_points: int = 8,
         attitude_correction_order: int = 1,
@@ -320,8 +262,9 @@ class Trajectory:
 
         Args:
             epoch_j2000_s: absolute time of ``dt_s = 0`` (seconds since J2000).
-            interpolation: ``"polynomial"`` (least squares, ``order`` 1-3, per component) or
-                ``"lagrange"`` (``lagrange_points`` samples around each time).
+            interpolation: ``"polynomial"`` (least squares, ``order`` 1-3, per component),
+                ``"lagrange"`` (``lagrange_points`` samples around each time), or a trajectory
+                model (a plugin's) whose ``fit_series`` fits the orbit and the attitude angles.
             attitude_correction_order, position_correction_order: orders of the correction
                 polynomials, -1 for none (Cartosat-1: attitude bias + drift = 1).
             attitude_sigma_rad, position_sigma_m: a-priori sigmas of the correction
@@ -343,8 +286,15 @@ class Trajectory:
         else:
             p_eci, v_eci = ephemeris.position_m, ephemeris.velocity_m_s
         orbit_values = np.concatenate([p_eci, v_eci], axis=1)
-        points = order if interpolation == "polynomial" else lagrange_points
-        orbit = _Series.fit(ephemeris.dt_s, orbit_values, interpolation, points, t_mid, t_half)
+        if isinstance(interpolation, str):
+            points = order if interpolation == "polynomial" else lagrange_points
+            orbit: TimeSeries = BuiltinSeries.fit(
+                ephemeris.dt_s, orbit_values, interpolation, points, t_mid, t_half
+            )
+        else:
+            orbit = interpolation.fit_series(
+                ephemeris.dt_s, orbit_values, role="orbit", t_mid_s=t_mid, t_half_s=t_half
+            )
 
         # attitude as three angles
         r_att = frames.quat_to_matrix(attitude.quaternion_wxyz)
@@ -355,8 +305,15 @@ class Trajectory:
             r_ref = r_att[attitude.dt_s.shape[0] // 2]
             angles = frames.matrix_to_rotvec(r_ref.T @ r_att)
         angles = np.unwrap(angles, axis=0)
-        att_points = min(order, 3) if interpolation == "polynomial" else min(lagrange_points, 4)
-        ang = _Series.fit(attitude.dt_s, angles, interpolation, att_points, t_mid, t_half)
+        if isinstance(interpolation, str):
+            att_points = min(order, 3) if interpolation == "polynomial" else min(lagrange_points, 4)
+            ang: TimeSeries = BuiltinSeries.fit(
+                attitude.dt_s, angles, interpolation, att_points, t_mid, t_half
+            )
+        else:
+            ang = interpolation.fit_series(
+                attitude.dt_s, angles, role="attitude", t_mid_s=t_mid, t_half_s=t_half
+            )
 
         report = FitReport(
             ("x_m", "y_m", "z_m", "vx_m_s", "vy_m_s", "vz_m_s", "a1_rad", "a2_rad", "a3_rad"),
@@ -521,22 +478,12 @@ class Trajectory:
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready state (exact: fitted coefficients or samples are stored as they are)."""
 
-        def series(s: _Series) -> dict[str, Any]:
-            d: dict[str, Any] = {"kind": s.kind, "t_mid_s": s.t_mid_s, "t_half_s": s.t_half_s}
-            if s.kind == "polynomial":
-                d["coeffs"] = s.coeffs.tolist()
-            else:
-                d["samples_t"] = s.samples_t.tolist()
-                d["samples_v"] = s.samples_v.tolist()
-                d["lagrange_points"] = s.lagrange_points
-            return d
-
         return {
             "epoch_j2000_s": self.epoch_j2000_s,
             "epoch_utc": frames.j2000_s_to_utc(self.epoch_j2000_s),
             "attitude_frame": self.attitude_frame,
-            "orbit": series(self._orbit),
-            "angles": series(self._angles),
+            "orbit": self._orbit.to_dict(),
+            "angles": self._angles.to_dict(),
             "r_ref": self._r_ref.tolist(),
             "t_mid_s": self.t_mid_s,
             "t_half_s": self.t_half_s,
@@ -554,26 +501,23 @@ class Trajectory:
         }
 
     @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> Trajectory:
-        """Inverse of :meth:`to_dict`; raises :class:`InputError` naming a missing field."""
+    def from_dict(cls, d: dict[str, Any], components: ComponentLookup | None = None) -> Trajectory:
+        """Inverse of :meth:`to_dict`; raises :class:`InputError` naming a missing field.
+
+        Series of a trajectory model that is not built in are read by that model, looked up
+        by its name in ``components`` (the registry, which the opening workflow passes)."""
         try:
 
-            def series(s: dict[str, Any]) -> _Series:
-                if s["kind"] == "polynomial":
-                    return _Series(
-                        "polynomial",
-                        float(s["t_mid_s"]),
-                        float(s["t_half_s"]),
-                        coeffs=np.asarray(s["coeffs"], float),
+            def series(s: dict[str, Any]) -> TimeSeries:
+                kind = s["kind"]
+                if kind in BUILTIN_KINDS:
+                    return BuiltinSeries.from_dict(s)
+                if components is None:
+                    raise InputError(
+                        f"trajectory model {kind!r} is not built in; open the model through "
+                        "the registry (carto commands do) so that its plugin reads it"
                     )
-                return _Series(
-                    "lagrange",
-                    float(s["t_mid_s"]),
-                    float(s["t_half_s"]),
-                    samples_t=np.asarray(s["samples_t"], float),
-                    samples_v=np.asarray(s["samples_v"], float),
-                    lagrange_points=int(s["lagrange_points"]),
-                )
+                return components.get("trajectory", kind).series_from_dict(s)
 
             fr = d.get("fit_report")
             return cls(

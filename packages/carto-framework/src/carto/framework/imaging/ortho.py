@@ -1,7 +1,8 @@
 """Orthorectification: a sensor's raw image resampled onto a north-up map grid over a DEM.
 
-* :class:`OrthoGrid`: the output grid (CRS, north-up affine transform, shape);
-  :meth:`OrthoGrid.covering` builds the grid that covers one or several images (their borders
+* :class:`~carto.framework.imaging.ortho_grid.OrthoGrid`: the output grid (CRS, north-up
+  affine transform, shape), in :mod:`carto.framework.imaging.ortho_grid`;
+  ``OrthoGrid.covering`` builds the grid that covers one or several images (their borders
   located on the DEM) or given bounds, snapped to the resolution.
 * :func:`ortho_mapping` (and the :class:`OrthoMapper` behind it): the image coordinates
   ``(line, sample)`` of every ortho pixel centre.
@@ -23,7 +24,8 @@ Mapping method
     sampled bilinearly at each pixel, at DEM pixel coordinates interpolated between the nodes
     (the map projection is smooth: an error below a micrometre). The coefficients vary as
     smoothly as the sensor geometry does, however rough the terrain. The per-pixel evaluation
-    is one compiled (numba) pass, parallel over rows.
+    is one compiled (numba) pass, parallel over rows
+    (:func:`carto.framework.imaging.ortho_kernel.evaluate_kernel`).
 
     Measured (``benchmarks/ortho_speed.py``, ``tests/framework/test_ortho.py``): 1e-5 px from
     the exact per-pixel mapping at ``coarse_step=16`` (1.4e-4 px at 64) on 4000-6000 m
@@ -56,12 +58,11 @@ Conventions
 
 from __future__ import annotations
 
-import functools
 import math
 import os
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import attrs
 import numpy as np
@@ -70,15 +71,24 @@ from numpy.typing import ArrayLike, NDArray
 from carto.framework.errors import InputError
 from carto.framework.files.atomic import atomic_output
 from carto.framework.geometry.sensor import Sensor
+from carto.framework.imaging.ortho_grid import (
+    OrthoGrid,
+    check_dem,
+    check_sensor,
+    dem_transformer,
+    lonlat_transformer,
+)
+from carto.framework.imaging.ortho_kernel import (
+    cell_any,
+    cell_centres,
+    cell_positions,
+    evaluate_kernel,
+    node_positions,
+)
 from carto.framework.raster.dem import DEM
-
-if TYPE_CHECKING:  # pyproj, rasterio and cv2 are imported when used
-    import pyproj
-    from affine import Affine
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
-Bounds = tuple[float, float, float, float]
 
 RESAMPLING_METHODS = ("nearest", "linear", "cubic", "lanczos")
 """Names accepted by :func:`orthorectify` (OpenCV ``INTER_NEAREST`` ... ``INTER_LANCZOS4``)."""
@@ -90,62 +100,6 @@ _CV_MAX_SIDE = 32767  # cv2.remap works with source images smaller than SHRT_MAX
 
 
 # ----------------------------------------------------------------------------- helpers
-def _to_crs(value: Any) -> pyproj.CRS:
-    import pyproj
-
-    try:
-        crs = pyproj.CRS.from_user_input(value)
-    except pyproj.exceptions.CRSError as exc:
-        raise InputError(f"ortho grid: crs {value!r} is not a CRS pyproj knows") from exc
-    if not (crs.is_projected or crs.is_geographic):
-        raise InputError(f"ortho grid: crs {crs.name} is neither projected nor geographic")
-    return crs
-
-
-def _to_affine(value: Any) -> Affine:
-    from affine import Affine
-
-    if isinstance(value, Affine):
-        return value
-    try:
-        coefficients = tuple(float(v) for v in value)
-    except (TypeError, ValueError) as exc:
-        raise InputError(f"ortho grid: transform {value!r} is not an affine transform") from exc
-    if len(coefficients) == 9:
-        coefficients = coefficients[:6]
-    if len(coefficients) != 6:
-        raise InputError(f"ortho grid: transform needs 6 coefficients, got {len(coefficients)}")
-    return Affine(*coefficients)
-
-
-def _to_shape(value: Any) -> tuple[int, int]:
-    try:
-        rows, cols = (int(v) for v in value)
-    except (TypeError, ValueError) as exc:
-        raise InputError(f"ortho grid: shape {value!r} is not (rows, cols)") from exc
-    return rows, cols
-
-
-@functools.lru_cache(maxsize=16)
-def _lonlat_transformer(crs_wkt: str) -> Any:
-    """``crs -> EPSG:4326`` in lon/lat order, cached per CRS."""
-    import pyproj
-
-    return pyproj.Transformer.from_crs(
-        pyproj.CRS.from_wkt(crs_wkt), pyproj.CRS.from_epsg(4326), always_xy=True
-    )
-
-
-@functools.lru_cache(maxsize=16)
-def _dem_transformer(crs_wkt: str) -> Any:
-    """``EPSG:4326 -> crs`` in lon/lat order (a DEM's CRS), cached per CRS."""
-    import pyproj
-
-    return pyproj.Transformer.from_crs(
-        pyproj.CRS.from_epsg(4326), pyproj.CRS.from_wkt(crs_wkt), always_xy=True
-    )
-
-
 def _project(
     sensor: Sensor, lon: FloatArray, lat: FloatArray, h: FloatArray
 ) -> tuple[FloatArray, FloatArray]:
@@ -156,207 +110,6 @@ def _project(
     else:  # pragma: no cover - every Sensor has project; kept for duck-typed models
         line, sample = sensor.ground_to_image(lon, lat, h)
     return np.asarray(line, np.float64), np.asarray(sample, np.float64)
-
-
-def _check_dem(dem: Any) -> DEM:
-    if not isinstance(dem, DEM):
-        raise InputError(f"dem must be a carto.framework.raster.dem.DEM, got {type(dem).__name__}")
-    if not dem.is_ellipsoidal:
-        raise InputError(
-            f"DEM {dem.name}: heights are {dem.vertical}, orthorectification needs ellipsoidal "
-            "heights; convert with DEM.to_ellipsoid(geoid)"
-        )
-    return dem
-
-
-def _check_sensor(sensor: Any) -> Sensor:
-    if not isinstance(sensor, Sensor):
-        raise InputError(f"sensor must be a carto Sensor, got {type(sensor).__name__}")
-    return sensor
-
-
-# ----------------------------------------------------------------------------- grid
-@attrs.frozen
-class OrthoGrid:
-    """A north-up map grid: CRS, affine transform of pixel corners, ``(rows, cols)``.
-
-    Attributes:
-        crs: the map CRS (:class:`pyproj.CRS`; anything ``CRS.from_user_input`` takes).
-        transform: :class:`affine.Affine` ``(res_x, 0, left, 0, -res_y, top)`` of pixel corners.
-        shape: ``(rows, cols)``.
-    """
-
-    crs: pyproj.CRS = attrs.field(converter=_to_crs)
-    transform: Affine = attrs.field(converter=_to_affine)
-    shape: tuple[int, int] = attrs.field(converter=_to_shape)
-
-    def __attrs_post_init__(self) -> None:
-        t = self.transform
-        if t.b != 0.0 or t.d != 0.0 or not (t.a > 0.0 and t.e < 0.0):
-            raise InputError(
-                f"ortho grid: transform {tuple(t)[:6]} is not north-up "
-                "(need a > 0, e < 0, no rotation)"
-            )
-        if not all(math.isfinite(v) for v in tuple(t)[:6]):
-            raise InputError(f"ortho grid: transform {tuple(t)[:6]} is not finite")
-        if min(self.shape) < 1:
-            raise InputError(f"ortho grid: shape {self.shape} must be at least 1 x 1")
-
-    # ------------------------------------------------------------------ constructors
-    @classmethod
-    def covering(
-        cls,
-        sensors: Sensor | Sequence[Sensor],
-        dem: DEM,
-        resolution_m: float,
-        crs: Any = None,
-        bounds: Bounds | None = None,
-    ) -> OrthoGrid:
-        """The grid at ``resolution_m`` that covers the images' footprints (or ``bounds``).
-
-        The footprint of each image is its border (every edge sampled at 33 points) located on
-        the DEM (:meth:`Sensor.locate_on_dem`; where the line of sight misses the DEM, at the
-        DEM's middle height). The grid edges are snapped outwards to multiples of the
-        resolution, so grids of the same resolution and CRS are aligned.
-
-        Args:
-            sensors: one sensor or several.
-            dem: DEM with ellipsoidal heights.
-            resolution_m: pixel size in CRS units (metres for projected CRSs).
-            crs: the map CRS; default the WGS84 UTM zone of the footprint's centre.
-            bounds: ``(left, bottom, right, top)`` in ``crs`` (or in the default UTM CRS) to
-                cover instead of the footprint.
-
-        Raises:
-            InputError: no sensor, bad resolution or bounds, a footprint entirely off the DEM.
-        """
-        from carto.framework.raster.crs import utm_crs
-
-        sensor_list = [sensors] if isinstance(sensors, Sensor) else list(sensors)
-        for s in sensor_list:
-            _check_sensor(s)
-        _check_dem(dem)
-        res = float(resolution_m)
-        if not (math.isfinite(res) and res > 0.0):
-            raise InputError(f"ortho grid: resolution {resolution_m!r} must be > 0")
-        if not sensor_list and (crs is None or bounds is None):
-            raise InputError("ortho grid: give at least one sensor, or both crs and bounds")
-        lon = lat = np.empty(0)
-        if sensor_list:
-            lon, lat = _footprint(sensor_list, dem)
-        if crs is None:
-            lon_c = 0.5 * (lon.min() + lon.max())
-            lat_c = 0.5 * (lat.min() + lat.max())
-            crs_obj = utm_crs(float(lon_c), float(lat_c))
-        else:
-            crs_obj = _to_crs(crs)
-        if bounds is None:
-            import pyproj
-
-            to_map = pyproj.Transformer.from_crs(
-                pyproj.CRS.from_epsg(4326), crs_obj, always_xy=True
-            )
-            x, y = (np.asarray(v, np.float64) for v in to_map.transform(lon, lat))
-            box = (float(x.min()), float(y.min()), float(x.max()), float(y.max()))
-        else:
-            box = tuple(float(v) for v in bounds)  # type: ignore[assignment]
-            if len(box) != 4 or not all(map(math.isfinite, box)):
-                raise InputError(f"ortho grid: bounds {bounds!r} must be 4 finite numbers")
-        left, bottom, right, top = box
-        if not (left < right and bottom < top):
-            raise InputError(
-                f"ortho grid: bounds {box} must be (left, bottom, right, top) with "
-                "left < right and bottom < top"
-            )
-        eps = 1e-9
-        x0 = math.floor(left / res + eps) * res
-        x1 = math.ceil(right / res - eps) * res
-        y0 = math.floor(bottom / res + eps) * res
-        y1 = math.ceil(top / res - eps) * res
-        cols = max(round((x1 - x0) / res), 1)
-        rows = max(round((y1 - y0) / res), 1)
-        from affine import Affine
-
-        return cls(crs_obj, Affine(res, 0.0, x0, 0.0, -res, y1), (rows, cols))
-
-    # ------------------------------------------------------------------ properties
-    @property
-    def resolution(self) -> tuple[float, float]:
-        """``(res_x, res_y)``, positive, in CRS units."""
-        return float(self.transform.a), float(-self.transform.e)
-
-    @property
-    def bounds(self) -> Bounds:
-        """``(left, bottom, right, top)`` of the outer pixel edges, in CRS units."""
-        t = self.transform
-        rows, cols = self.shape
-        return (t.c, t.f + t.e * rows, t.c + t.a * cols, t.f)
-
-    def xy(self, row: ArrayLike, col: ArrayLike) -> tuple[FloatArray, FloatArray]:
-        """Map coordinates of pixel centres: 0-based ``(row, col)`` indices (fractional ok)."""
-        t = self.transform
-        r, c = np.broadcast_arrays(np.asarray(row, np.float64), np.asarray(col, np.float64))
-        return t.c + t.a * (c + 0.5), t.f + t.e * (r + 0.5)
-
-    def lonlat(self, row: ArrayLike, col: ArrayLike) -> tuple[FloatArray, FloatArray]:
-        """WGS84 ``(lon_deg, lat_deg)`` of pixel centres."""
-        x, y = self.xy(row, col)
-        lon, lat = _lonlat_transformer(self.crs.to_wkt()).transform(x, y)
-        return np.asarray(lon, np.float64), np.asarray(lat, np.float64)
-
-    def map_xy(self, lon: ArrayLike, lat: ArrayLike) -> tuple[FloatArray, FloatArray]:
-        """Map coordinates (CRS units) of WGS84 ``(lon_deg, lat_deg)`` points."""
-        x, y = _dem_transformer(self.crs.to_wkt()).transform(
-            np.asarray(lon, np.float64), np.asarray(lat, np.float64)
-        )
-        return np.asarray(x, np.float64), np.asarray(y, np.float64)
-
-    def rowcol(self, lon: ArrayLike, lat: ArrayLike) -> tuple[FloatArray, FloatArray]:
-        """Fractional 0-based ``(row, col)`` of WGS84 points (pixel centres at whole numbers:
-        the inverse of :meth:`lonlat`)."""
-        x, y = self.map_xy(lon, lat)
-        t = self.transform
-        return (y - t.f) / t.e - 0.5, (x - t.c) / t.a - 0.5
-
-    def window(self, row0: int, col0: int, n_rows: int, n_cols: int) -> OrthoGrid:
-        """The sub-grid of ``n_rows x n_cols`` pixels starting at pixel ``(row0, col0)``."""
-        from affine import Affine
-
-        return OrthoGrid(
-            self.crs, self.transform @ Affine.translation(col0, row0), (n_rows, n_cols)
-        )
-
-
-def _footprint(sensors: Sequence[Sensor], dem: DEM) -> tuple[FloatArray, FloatArray]:
-    """lon/lat of the images' borders on the DEM (NaN-free), concatenated."""
-    lo, hi = dem.height_range
-    h_mid = 0.5 * (lo + hi)
-    lons, lats = [], []
-    t = np.linspace(0.0, 1.0, 33)
-    for sensor in sensors:
-        n_l, n_s = sensor.image_shape
-        line = np.concatenate([0 * t, t * n_l, 0 * t + n_l, t * n_l])
-        sample = np.concatenate([t * n_s, 0 * t, t * n_s, 0 * t + n_s])
-        lon, lat, _h = sensor.locate_on_dem(line, sample, dem)
-        miss = ~(np.isfinite(lon) & np.isfinite(lat))
-        if miss.any():
-            lon_m, lat_m = sensor.image_to_ground(
-                line[miss], sample[miss], np.full(miss.sum(), h_mid)
-            )
-            lon, lat = lon.copy(), lat.copy()
-            lon[miss], lat[miss] = lon_m, lat_m
-        ok = np.isfinite(lon) & np.isfinite(lat)
-        if not ok.any():
-            raise InputError(
-                f"ortho grid: the footprint of image {getattr(sensor, 'name', '?')} cannot be "
-                f"located (on DEM {dem.name})"
-            )
-        lons.append(lon[ok])
-        lats.append(lat[ok])
-    lon = np.concatenate(lons)
-    lat = np.concatenate(lats)
-    lon = lon[0] + (np.mod(lon - lon[0] + 180.0, 360.0) - 180.0)  # no jump at the antimeridian
-    return lon, lat
 
 
 # ----------------------------------------------------------------------------- mapping
@@ -396,122 +149,6 @@ class MappingStats:
         return out
 
 
-def _node_positions(start: int, stop: int, step: int, size: int) -> IntArray:
-    """Node indices every ``step`` from ``start`` covering pixels ``[start, stop)``: the last
-    node is ``stop`` (the next block's first node) or ``size - 1`` at the grid's end."""
-    nodes = np.arange(start, stop, step, dtype=np.intp)
-    last = stop if stop < size else size - 1
-    if nodes[-1] != last:
-        nodes = np.append(nodes, last)
-    return nodes
-
-
-def _cells(nodes: IntArray, positions: IntArray) -> tuple[IntArray, FloatArray]:
-    """Cell index (left node) and fraction of each position between its two nodes."""
-    if nodes.size == 1:
-        return np.zeros(positions.size, np.intp), np.zeros(positions.size)
-    i = np.clip(np.searchsorted(nodes, positions, side="right") - 1, 0, nodes.size - 2)
-    span = (nodes[i + 1] - nodes[i]).astype(np.float64)
-    return i, (positions - nodes[i]) / span
-
-
-@functools.cache
-def _evaluate_kernel() -> Any:
-    """The compiled per-pixel evaluation (numba is imported on first use only)."""
-    import numba
-
-    @numba.njit(parallel=True, cache=True, nogil=True)
-    def evaluate(coeffs, dem_rc, ir, fr, ic, fc, heights, h_ref, line, sample):  # pragma: no cover
-        """Bilinear interpolation of the node coefficients and DEM coordinates at each pixel,
-        the DEM height there (bilinear, NaN outside the span of its pixel centres or next to
-        nodata, as :meth:`DEM.height`), and the polynomials in ``h - h_ref`` evaluated."""
-        n_r, n_c = coeffs.shape[2], coeffs.shape[3]
-        h_rows, h_cols = heights.shape
-        tol = 1e-9
-        for a in numba.prange(ir.shape[0]):
-            i0 = ir[a]
-            i1 = min(i0 + 1, n_r - 1)
-            wr = fr[a]
-            for b in range(ic.shape[0]):
-                j0 = ic[b]
-                j1 = min(j0 + 1, n_c - 1)
-                wc = fc[b]
-                w00 = (1.0 - wr) * (1.0 - wc)
-                w01 = (1.0 - wr) * wc
-                w10 = wr * (1.0 - wc)
-                w11 = wr * wc
-                row = (
-                    w00 * dem_rc[0, i0, j0]
-                    + w01 * dem_rc[0, i0, j1]
-                    + w10 * dem_rc[0, i1, j0]
-                    + w11 * dem_rc[0, i1, j1]
-                )
-                col = (
-                    w00 * dem_rc[1, i0, j0]
-                    + w01 * dem_rc[1, i0, j1]
-                    + w10 * dem_rc[1, i1, j0]
-                    + w11 * dem_rc[1, i1, j1]
-                )
-                if not (
-                    row >= -tol
-                    and row <= h_rows - 1 + tol
-                    and col >= -tol
-                    and col <= h_cols - 1 + tol
-                ):
-                    line[a, b] = np.nan
-                    sample[a, b] = np.nan
-                    continue
-                r0 = min(max(math.floor(row), 0), max(h_rows - 2, 0))
-                c0 = min(max(math.floor(col), 0), max(h_cols - 2, 0))
-                tr = min(max(row - r0, 0.0), 1.0)
-                tc = min(max(col - c0, 0.0), 1.0)
-                r1 = r0 + 1 if h_rows > 1 else r0
-                c1 = c0 + 1 if h_cols > 1 else c0
-                top = heights[r0, c0] * (1.0 - tc) + heights[r0, c1] * tc
-                bottom = heights[r1, c0] * (1.0 - tc) + heights[r1, c1] * tc
-                u = top * (1.0 - tr) + bottom * tr - h_ref
-                for k in range(2):
-                    p0 = (
-                        w00 * coeffs[k, 0, i0, j0]
-                        + w01 * coeffs[k, 0, i0, j1]
-                        + w10 * coeffs[k, 0, i1, j0]
-                        + w11 * coeffs[k, 0, i1, j1]
-                    )
-                    p1 = (
-                        w00 * coeffs[k, 1, i0, j0]
-                        + w01 * coeffs[k, 1, i0, j1]
-                        + w10 * coeffs[k, 1, i1, j0]
-                        + w11 * coeffs[k, 1, i1, j1]
-                    )
-                    p2 = (
-                        w00 * coeffs[k, 2, i0, j0]
-                        + w01 * coeffs[k, 2, i0, j1]
-                        + w10 * coeffs[k, 2, i1, j0]
-                        + w11 * coeffs[k, 2, i1, j1]
-                    )
-                    value = p0 + u * (p1 + u * p2)
-                    if k == 0:
-                        line[a, b] = value
-                    else:
-                        sample[a, b] = value
-
-    return evaluate
-
-
-def _cell_any(flags: NDArray[np.bool_]) -> NDArray[np.bool_]:
-    """Per cell: any of its (up to four) nodes flagged."""
-    out = flags
-    if out.shape[0] > 1:
-        out = out[:-1] | out[1:]
-    if out.shape[1] > 1:
-        out = out[:, :-1] | out[:, 1:]
-    return out
-
-
-def _cell_centres(nodes: IntArray) -> IntArray:
-    return nodes if nodes.size == 1 else (nodes[:-1] + nodes[1:]) // 2
-
-
 class OrthoMapper:
     """Image coordinates of ortho pixel centres by checked coarse-grid interpolation.
 
@@ -538,11 +175,11 @@ class OrthoMapper:
         tol_px: float = 0.01,
         block: int = 1024,
     ) -> None:
-        self.sensor = _check_sensor(sensor)
+        self.sensor = check_sensor(sensor)
         if not isinstance(grid, OrthoGrid):
             raise InputError(f"grid must be an OrthoGrid, got {type(grid).__name__}")
         self.grid = grid
-        self.dem = _check_dem(dem)
+        self.dem = check_dem(dem)
         if isinstance(coarse_step, bool) or not isinstance(coarse_step, (int, np.integer)):
             raise InputError(f"coarse_step must be an integer >= 1, got {coarse_step!r}")
         if coarse_step < 1:
@@ -553,7 +190,7 @@ class OrthoMapper:
         self.tol_px = float(tol_px)
         self.block = max(self.coarse_step, -(-int(block) // self.coarse_step) * self.coarse_step)
         self.stats = MappingStats(min_step=self.coarse_step)
-        self._to_lonlat = _lonlat_transformer(grid.crs.to_wkt())
+        self._to_lonlat = lonlat_transformer(grid.crs.to_wkt())
         self._n_lines, self._n_samples = sensor.image_shape
         self._box: tuple[float, float, float, float] | None = None
         self._heights = np.ascontiguousarray(dem.heights, dtype=np.float64)
@@ -677,7 +314,7 @@ class OrthoMapper:
         """DEM centre indices ``(row, col)`` (0 = first pixel centre) of WGS84 lon/lat, the
         convention of :meth:`DEM.height` (longitudes wrapped into the DEM's 360 degrees)."""
         dem = self.dem
-        x, y = _dem_transformer(dem.crs.to_wkt()).transform(lon, lat)
+        x, y = dem_transformer(dem.crs.to_wkt()).transform(lon, lat)
         x, y = np.asarray(x, np.float64), np.asarray(y, np.float64)
         t = dem.transform
         if dem.crs.is_geographic:
@@ -693,22 +330,22 @@ class OrthoMapper:
         self, r0: int, r1: int, c0: int, c1: int, step: int
     ) -> tuple[FloatArray, FloatArray]:
         n_rows, n_cols = self.grid.shape
-        node_r = _node_positions(r0, r1, step, n_rows)
-        node_c = _node_positions(c0, c1, step, n_cols)
-        cr, cc = _cell_centres(node_r), _cell_centres(node_c)
+        node_r = node_positions(r0, r1, step, n_rows)
+        node_c = node_positions(c0, c1, step, n_cols)
+        cr, cc = cell_centres(node_r), cell_centres(node_c)
         coeffs, dem_rc, h_ref, exact_l, exact_s = self._nodes(node_r, node_c, cr, cc)
-        ir, fr = _cells(node_r, np.arange(r0, r1))
-        ic, fc = _cells(node_c, np.arange(c0, c1))
+        ir, fr = cell_positions(node_r, np.arange(r0, r1))
+        ic, fc = cell_positions(node_c, np.arange(c0, c1))
         line = np.empty((r1 - r0, c1 - c0))
         sample = np.empty((r1 - r0, c1 - c0))
-        _evaluate_kernel()(coeffs, dem_rc, ir, fr, ic, fc, self._heights, h_ref, line, sample)
+        evaluate_kernel()(coeffs, dem_rc, ir, fr, ic, fc, self._heights, h_ref, line, sample)
 
         # check: exact mapping at the centre pixel of every cell
         got_l = line[np.ix_(cr - r0, cc - c0)]
         got_s = sample[np.ix_(cr - r0, cc - c0)]
         error = np.hypot(got_l - exact_l, got_s - exact_s)
         finite = np.isfinite(error)
-        missing_node = _cell_any(~np.isfinite(coeffs).all(axis=(0, 1)))
+        missing_node = cell_any(~np.isfinite(coeffs).all(axis=(0, 1)))
         if missing_node.any():  # cells away from the image cannot see it: skip them
             row_min, row_max, col_min, col_max = self._image_box()
             rows_c = node_r if node_r.size == 1 else node_r[:-1]

@@ -12,23 +12,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from carto.framework.errors import InputError
-from carto.framework.geometry.linescan import LineScanner
 from carto.framework.geometry.sensor import Sensor
 from carto.framework.raster.images import read_raster
-
-
-def prepared_image(raw: NDArray, sensor: Sensor, dem: Any) -> NDArray[np.float32]:
-    """The raw image with staggered arrays merged onto the model's geometry (line scanners
-    of a staggered camera); other images as they are."""
-    if (
-        isinstance(sensor, LineScanner)
-        and sensor.camera.stagger_tan
-        and (sensor.camera.array == "odd")
-    ):
-        from carto.framework.geometry.stagger import merge_staggered
-
-        return merge_staggered(raw, sensor, dem, step=8).image
-    return np.asarray(raw, np.float32)
 
 
 def ground_sampling_m(sensor: Sensor, h_m: float = 0.0) -> float:
@@ -60,8 +45,9 @@ def system_orthos(
             DEM's median height).
 
     Returns:
-        ``(grid, orthos)``: the :class:`~carto.framework.imaging.ortho.OrthoGrid` covering all
-        footprints, and image name -> float32 ortho (NaN outside the image or the DEM).
+        ``(grid, orthos)``: the :class:`~carto.framework.imaging.ortho_grid.OrthoGrid`
+        covering all footprints, and image name -> float32 ortho (NaN outside the image or the
+        DEM).
     """
     from carto.framework.imaging.ortho import orthorectify
 
@@ -80,7 +66,7 @@ def block_grid(
     resolution_m: float | None = None,
 ) -> Any:
     """The ortho grid of :func:`system_orthos` (every image has a raster: checked)."""
-    from carto.framework.imaging.ortho import OrthoGrid
+    from carto.framework.imaging.ortho_grid import OrthoGrid
 
     missing = [n for n in sensors if n not in rasters]
     if missing:
@@ -92,6 +78,6 @@ def block_grid(
 
 def prepared_raster(raster: Path | NDArray, sensor: Sensor, dem: Any) -> NDArray[np.float32]:
     """A raw raster (file or array) read and prepared for orthorectification
-    (:func:`prepared_image`)."""
+    (:meth:`~carto.framework.geometry.sensor.Sensor.prepare_raw`: staggered arrays merged)."""
     raw = read_raster(Path(raster)) if not isinstance(raster, np.ndarray) else raster
-    return prepared_image(raw, sensor, dem)
+    return sensor.prepare_raw(raw, dem)

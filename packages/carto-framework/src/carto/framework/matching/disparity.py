@@ -28,38 +28,15 @@ NaN marks no data in the inputs; windows touching it get no match.
 
 from __future__ import annotations
 
-import attrs
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from carto.framework.errors import InputError
+from carto.framework.matching.base import OffsetField
 
 FloatArray = NDArray[np.float32]
 
 _BAND_ROWS = 512  # rows per band of the full-resolution search (memory stays flat)
-
-
-@attrs.frozen(eq=False)
-class OffsetField:
-    """Dense offsets from the left to the right image, every array of the left image's shape.
-
-    Attributes:
-        d_row, d_col: offsets, pixels (float32; NaN where ``valid`` is False).
-        score: correlation coefficient at the match (NaN where no match was found).
-        valid: the match passed the score, texture and left-right checks.
-        lr_error_px: length of ``d_lr(p) + d_rl(p + d_lr(p))`` (NaN where not computed).
-    """
-
-    d_row: FloatArray
-    d_col: FloatArray
-    score: FloatArray
-    valid: NDArray[np.bool_]
-    lr_error_px: FloatArray
-
-    @property
-    def matched_fraction(self) -> float:
-        """Fraction of the pixels with a valid match."""
-        return float(np.mean(self.valid)) if self.valid.size else 0.0
 
 
 def _as_image(image: ArrayLike, name: str) -> FloatArray:

@@ -63,8 +63,9 @@ def gcp_offsets(
        pixels around the point (the tie points' resolution,
        :func:`~carto.framework.imaging.preparation.system_orthos`);
     2. the hand position in ``a`` is matched into ``b``
-       (:func:`~carto.framework.matching.tiepoints.match_views`: pyramid,
-       least-squares matching, left-right check, ``matching`` options); when the GCP is
+       (:func:`~carto.framework.matching.multiview.match_views`: pyramid,
+       least-squares matching, left-right check, ``matching`` options, ``matcher`` the
+       registry's matcher ``carto adjust --matcher`` names); when the GCP is
        measured in ``b`` too, its position there is matched back into ``a``, and when both
        succeed the two offsets must agree within ``agree_px`` (their mean is kept);
     3. the offset (position in ``b`` minus in ``a``, raw pixels) must agree within
@@ -102,6 +103,7 @@ def gcp_offsets(
         closure_px=0.5,
         require_closure=True,
         subpixel="lsm-affine",
+        matcher=None,
     )
     unknown = set(matching) - set(options)
     if unknown:

@@ -11,7 +11,7 @@ from collections.abc import Sequence
 from carto.framework.adjustment.base import Adjuster
 from carto.framework.adjustment.rpc_bias import RPCBiasAdjuster
 from carto.framework.geometry.linescan import LineScannerModelType
-from carto.framework.geometry.rpc import RPCSensorType
+from carto.framework.geometry.rpc_sensor import RPCSensorType
 from carto.framework.geometry.sensor import SensorType
 from carto.framework.geometry.trajectory_models import (
     LagrangeTrajectoryModel,
@@ -19,7 +19,7 @@ from carto.framework.geometry.trajectory_models import (
     TrajectoryModel,
 )
 from carto.framework.matching.base import Matcher
-from carto.framework.matching.ncc import NCCMatcher
+from carto.framework.matching.ncc_matcher import NCCMatcher
 from carto.framework.plugins.hooks import hookimpl
 
 

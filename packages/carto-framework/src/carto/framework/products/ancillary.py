@@ -18,6 +18,7 @@ from typing import Any
 
 import attrs
 
+from carto.framework.component import NAME_PATTERN, ComponentLookup
 from carto.framework.errors import InputError
 from carto.framework.files.documents import (
     check_document,
@@ -26,13 +27,11 @@ from carto.framework.files.documents import (
 )
 from carto.framework.geometry import frames
 from carto.framework.geometry.camera import Camera
-from carto.framework.geometry.linescan import LineScanner, LineTiming
-from carto.framework.geometry.trajectory import (
-    AttitudeSamples,
-    EphemerisSamples,
-    Interpolation,
-    Trajectory,
-)
+from carto.framework.geometry.linescan import LineScanner
+from carto.framework.geometry.linescan_timing import LineTiming
+from carto.framework.geometry.time_series import BUILTIN_KINDS, Interpolation
+from carto.framework.geometry.trajectory import AttitudeSamples, EphemerisSamples, Trajectory
+from carto.framework.geometry.trajectory_models import TrajectoryModel
 
 FORMAT = "carto-ancillary"
 VERSION = 1
@@ -118,6 +117,7 @@ class Ancillary:
     attitude: AttitudeSamples
     cameras: Mapping[str, CameraSpec]
     images: Mapping[str, ImageSpec]
+    trajectory_model: str = "polynomial"
 
     @property
     def epoch_j2000_s(self) -> float:
@@ -129,6 +129,7 @@ class Ancillary:
             "version": VERSION,
             "platform": self.platform,
             "epoch_utc": self.epoch_utc,
+            "trajectory_model": self.trajectory_model,
             "ephemeris": {
                 "frame": self.ephemeris.frame,
                 "dt_s": self.ephemeris.dt_s.tolist(),
@@ -149,14 +150,44 @@ class Ancillary:
         return write_json_atomic(path, self.to_dict())
 
     def trajectory(
-        self, *, interpolation: Interpolation = "polynomial", order: int = 3, **options: Any
+        self,
+        *,
+        trajectory_model: TrajectoryModel | None = None,
+        components: ComponentLookup | None = None,
+        interpolation: Interpolation | None = None,
+        order: int = 3,
+        **options: Any,
     ) -> Trajectory:
-        """The platform trajectory fitted to the samples (``options``: correction orders ...)."""
+        """The platform trajectory fitted to the samples.
+
+        Args:
+            trajectory_model: the trajectory model to fit with (e.g. ``carto adjust --trajectory``);
+                default: the one the file names (``trajectory_model``), looked up in
+                ``components`` (the registry) unless it is built in.
+            interpolation: a built-in model by name, instead of ``trajectory_model``
+            (``"polynomial"``
+                or ``"lagrange"``).
+            order: polynomial order of the built-in polynomial model.
+            options: those of :meth:`Trajectory.from_samples` (correction orders ...).
+        """
+        model = trajectory_model
+        if model is not None and interpolation is not None:
+            raise InputError("ancillary trajectory: give a model or an interpolation, not both")
+        name = interpolation or (model.name if model is not None else self.trajectory_model)
+        if model is None and name not in BUILTIN_KINDS:
+            if components is None:
+                raise InputError(
+                    f"ancillary file names trajectory model {name!r}, which is not built in; "
+                    "open it through the registry (carto commands do)"
+                )
+            model = components.get("trajectory", name)
+        if model is not None and model.name not in BUILTIN_KINDS:
+            return model.fit(self.epoch_j2000_s, self.ephemeris, self.attitude, **options)
         return Trajectory.from_samples(
             self.epoch_j2000_s,
             self.ephemeris,
             self.attitude,
-            interpolation=interpolation,
+            interpolation=name,
             order=order,
             **options,
         )
@@ -187,6 +218,15 @@ def _get(d: Mapping[str, Any], key: str, source: str, where: str = "") -> Any:
         return d[key]
     except (KeyError, TypeError):
         raise InputError(f"{source}: missing field {where}{key!r}") from None
+
+
+def _trajectory_model(value: Any, source: str) -> str:
+    if not isinstance(value, str) or not NAME_PATTERN.match(value):
+        raise InputError(
+            f"{source}: trajectory_model must be a component name (e.g. 'polynomial'), "
+            f"got {value!r}"
+        )
+    return value
 
 
 def parse_ancillary(doc: Mapping[str, Any], source: str = "ancillary") -> Ancillary:
@@ -248,6 +288,7 @@ def parse_ancillary(doc: Mapping[str, Any], source: str = "ancillary") -> Ancill
             attitude,
             cameras,
             images,
+            _trajectory_model(doc.get("trajectory_model", "polynomial"), source),
         )
     except InputError as exc:
         message = str(exc)

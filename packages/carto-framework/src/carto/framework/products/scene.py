@@ -1,16 +1,16 @@
-"""Simulated scenes: presets that describe an acquisition the simulator can render.
+"""Scene folders: the products ``carto simulate`` writes (``docs/formats.md``), read as
+images, ancillary files, control tables and truth.
 
-A plugin adds a scene preset (``carto simulate PRESET``) by returning a :class:`ScenePreset`
-from the ``carto_scene_presets`` hook. The preset decides the acquisition (orbit, attitude laws,
-cameras, views) as a :class:`carto.framework.simulation.simulate.ScenePlan`; the framework's
-simulator renders it with known truth.
+:class:`Scene` opens a folder by its ``scene.json``; :func:`find_scene_manifest` tells a
+sensor type cheaply whether a path is (or is an image of) a scene of its platform.
 """
 
 from __future__ import annotations
 
+import json
 import os
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import attrs
 
@@ -20,9 +20,6 @@ from carto.framework.geometry.linescan import LineScanner
 
 SCENE_FORMAT = "carto-scene"
 SCENE_VERSION = 1
-
-if TYPE_CHECKING:
-    pass
 
 
 @attrs.frozen(eq=False)
@@ -92,3 +89,36 @@ class Scene:
             numeric=("lon_deg", "lat_deg", "h_m", "line", "sample"),
             text=("id", "image"),
         )
+
+
+def find_scene_manifest(path: str | os.PathLike[str], platform_prefix: str) -> Path | None:
+    """The ``scene.json`` of a scene of a platform (``"Cartosat-1"`` ...) that ``path`` is
+    (the folder or its manifest), or is an image raster of; ``None`` otherwise.
+
+    Cheap and silent (sensor types call it from ``identify``): it reads the first 64 KiB of
+    the manifest and never raises for foreign or unreadable files.
+    """
+    path = Path(path)
+    if path.is_dir():
+        candidate = path / "scene.json"
+    elif path.name == "scene.json":
+        candidate = path
+    elif path.suffix.lower() in (".tif", ".tiff"):
+        candidate = path.parent / "scene.json"
+    else:
+        return None
+    try:
+        with candidate.open("rb") as fh:
+            head = fh.read(65536)
+        doc = json.loads(head) if head.strip().endswith(b"}") else None
+    except (OSError, ValueError):
+        return None
+    if not isinstance(doc, dict) or not str(doc.get("platform", "")).startswith(platform_prefix):
+        return None
+    images = doc.get("images", {})
+    if path.suffix.lower() in (".tif", ".tiff") and not (
+        isinstance(images, dict)
+        and any(isinstance(i, dict) and i.get("raster") == path.name for i in images.values())
+    ):
+        return None
+    return candidate

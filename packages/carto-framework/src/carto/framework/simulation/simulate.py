@@ -1,7 +1,8 @@
 """The scene simulator: physically faithful pushbroom acquisitions with known truth.
 
-A plugin's scene preset describes an acquisition as a :class:`ScenePlan` (orbit, trajectory
-segments with their attitude laws, cameras, views); :func:`simulate_scene` renders it:
+A plugin's scene preset describes an acquisition as a
+:class:`~carto.framework.simulation.plan.ScenePlan` (orbit, trajectory segments with their
+attitude laws, cameras, views); :func:`simulate_scene` renders it:
 
 1. the **true** platform motion: the orbit propagated with two-body + J2 and sampled densely
    (every 25 ms), the attitude law plus optional jitter; Lagrange interpolation of these
@@ -10,11 +11,12 @@ segments with their attitude laws, cameras, views); :func:`simulate_scene` rende
 3. each view rendered through its true model as the detectors see it (odd/even arrays
    staggered), blurred, with noise, quantised to 10 bits;
 4. the **product**: ancillary files with ephemeris and attitude every 125 ms *as measured*,
-   i.e. with the errors of :class:`ErrorModel` (ephemeris bias, attitude bias and drift, smooth
-   higher-order attitude error, camera misalignment), the nominal camera constants;
+   i.e. with the errors of :class:`~carto.framework.simulation.plan.ErrorModel` (ephemeris
+   bias, attitude bias and drift, smooth higher-order attitude error, camera misalignment), the
+   nominal camera constants;
 5. control: GCPs (ground and image measurement noise) and independent checkpoints (true
-   coordinates), an SRTM-like initial DEM, and ``truth/`` (true DEM, true ortho-image, true
-   model files, the drawn errors).
+   coordinates, :mod:`carto.framework.simulation.control`), an SRTM-like initial DEM, and
+   ``truth/`` (true DEM, true ortho-image, true model files, the drawn errors).
 
 Every random draw comes from its own stream of ``numpy.random.SeedSequence(seed)``, so the same
 seed gives a byte-identical scene, and switching one error source off leaves the others' draws
@@ -41,177 +43,26 @@ from carto.framework.files.documents import write_json_atomic
 from carto.framework.files.point_table import write_point_table
 from carto.framework.geometry import frames, orbit
 from carto.framework.geometry.camera import Camera
-from carto.framework.geometry.linescan import LineScanner, LineTiming
+from carto.framework.geometry.linescan import LineScanner
+from carto.framework.geometry.linescan_timing import LineTiming
 from carto.framework.geometry.trajectory import AttitudeSamples, EphemerisSamples, Trajectory
 from carto.framework.products.ancillary import Ancillary, CameraSpec, ImageSpec
 from carto.framework.products.scene import SCENE_FORMAT, SCENE_VERSION
 from carto.framework.raster.crs import utm_crs
 from carto.framework.simulation import acquisition
+from carto.framework.simulation.control import control_points
+from carto.framework.simulation.plan import (
+    ErrorModel,
+    ScenePlan,
+    SegmentPlan,
+    SimulationOptions,
+    ViewPlan,
+)
 
 FloatArray = NDArray[np.float64]
 TRUTH_STEP_S = 0.025
 """Sampling of the true motion (40 Hz: resolves jitter up to ~10 Hz with Lagrange)."""
 DN_MAX = 1023
-
-
-# ----------------------------------------------------------------------------- errors
-@attrs.frozen
-class ErrorModel:
-    """Error sources of a simulated product (design brief section 4); 0 switches one off.
-
-    Attributes (one-sigma sizes; each drawn value is normal with that sigma):
-        ephemeris_bias_m: position bias per axis (along, across, radial), metres.
-        attitude_bias_deg: attitude bias per axis (roll, pitch, yaw).
-        attitude_drift_deg_s: attitude drift per axis.
-        attitude_smooth_deg: amplitude of the smooth higher-order (tau^2, tau^3) attitude
-            error over a segment (agile platforms).
-        jitter_deg: amplitude of attitude jitter (sinusoids at ``jitter_hz``) in the true
-            motion, which the 8 Hz attitude samples do not carry.
-        misalignment_deg: residual camera alignment error per axis (Fore/Aft relative).
-        gcp_planimetric_m: GCP ground error, planimetric RMS (east and north each
-            ``/sqrt(2)``).
-        gcp_height_m: GCP height error.
-        gcp_image_px: GCP image measurement error per image axis, pixels.
-    """
-
-    ephemeris_bias_m: float = 0.0
-    attitude_bias_deg: float = 0.0
-    attitude_drift_deg_s: float = 0.0
-    attitude_smooth_deg: float = 0.0
-    jitter_deg: float = 0.0
-    jitter_hz: tuple[float, ...] = (1.7, 4.3)
-    misalignment_deg: float = 0.0
-    gcp_planimetric_m: float = 0.0
-    gcp_height_m: float = 0.0
-    gcp_image_px: float = 0.0
-
-    @classmethod
-    def realistic(cls, *, agile: bool = False) -> ErrorModel:
-        """The sizes of the design brief, section 4 (``agile`` adds the Cartosat-2 terms)."""
-        return cls(
-            ephemeris_bias_m=15.0,
-            attitude_bias_deg=0.02,
-            attitude_drift_deg_s=2e-5,
-            attitude_smooth_deg=0.002 if agile else 0.0,
-            jitter_deg=2e-5 if agile else 0.0,
-            misalignment_deg=0.002,
-            gcp_planimetric_m=0.7,
-            gcp_height_m=1.0,
-            gcp_image_px=0.3,
-        )
-
-    @classmethod
-    def none(cls) -> ErrorModel:
-        """No errors: the product carries the true values."""
-        return cls()
-
-    def as_dict(self) -> dict[str, Any]:
-        return attrs.asdict(
-            self, value_serializer=lambda _i, _a, v: list(v) if isinstance(v, tuple) else v
-        )
-
-
-# ----------------------------------------------------------------------------- the plan
-@attrs.frozen
-class ViewPlan:
-    """One image of a segment.
-
-    Attributes:
-        name: image name (``"fore"``, ``"nadir"``, ``"swath2"`` ...).
-        camera: nominal camera constants (as the product states them).
-        n_lines_full: lines of the full acquisition (the window is cut from it).
-        period_s: line period, seconds (constant over the image).
-        centre_dt_s: time of the full image's middle line; None: the time at which the
-            camera sees the view's target (found on the true trajectory).
-        target: (lon_deg, lat_deg) the window is centred on; None: the scene target.
-    """
-
-    name: str
-    camera: CameraSpec
-    n_lines_full: int
-    period_s: float
-    centre_dt_s: float | None = None
-    target: tuple[float, float] | None = None
-
-
-@attrs.frozen
-class SegmentPlan:
-    """A trajectory segment (one ancillary file) and the views acquired during it.
-
-    Attributes:
-        name: segment name (file ``<name>.ancillary.json``).
-        span_s: time range of the ancillary samples (s since the epoch).
-        law: true attitude law (see :mod:`carto.framework.simulation.acquisition`).
-        views: the images of the segment.
-    """
-
-    name: str
-    span_s: tuple[float, float]
-    law: acquisition.OrbitAttitudeLaw
-    views: tuple[ViewPlan, ...]
-
-
-@attrs.frozen
-class ScenePlan:
-    """Everything a preset decides; :func:`simulate_scene` does the rest.
-
-    Attributes:
-        preset: preset name; platform: platform name (written in the products).
-        epoch_utc: the epoch (the platform is over the target then).
-        elements: orbit elements at the epoch.
-        target: (lon_deg, lat_deg) the views are centred on.
-        segments: trajectory segments.
-        gsd_m: nominal ground sampling distance (sets texture and DEM postings).
-        agile: the platform is agile (adds the agile error terms).
-        default_terrain: terrain preset used when none is given.
-        default_size: default window (width, height) in pixels.
-        default_gcps, default_checkpoints: default numbers of control points.
-        blur_sigma_px: optical blur (Gaussian sigma, in pixels of the nominal GSD) applied to
-            the ground texture before rendering, i.e. the point spread function projected on
-            the ground (blurring the raw image instead would mix the odd and even arrays,
-            which see the ground at different times); 0 for none.
-        noise_dn: read noise (one sigma) in digital numbers.
-        control_min_views: control points are placed where at least this many images see
-            them (None: all images; 1 for paint-brush swaths that only overlap pairwise).
-    """
-
-    preset: str
-    platform: str
-    epoch_utc: str
-    elements: orbit.OrbitElements
-    target: tuple[float, float]
-    segments: tuple[SegmentPlan, ...]
-    gsd_m: float
-    agile: bool = False
-    default_terrain: str = "hilly"
-    default_size: tuple[int, int] = (2000, 2000)
-    default_gcps: int = 1
-    default_checkpoints: int = 50
-    blur_sigma_px: float = 0.4
-    noise_dn: float = 1.5
-    control_min_views: int | None = None
-
-
-@attrs.frozen
-class SimulationOptions:
-    """User choices for :func:`simulate_scene` (``carto simulate`` options)."""
-
-    seed: int = 0
-    terrain: str | None = None
-    dem_path: Path | None = None
-    size: tuple[int, int] | None = None
-    errors: str = "realistic"
-    n_gcps: int | None = None
-    n_checkpoints: int | None = None
-    supersample: int = 2
-    point_targets: bool = False
-    error_sizes: tuple[tuple[str, float], ...] = ()
-    """Overrides of single error sizes on top of ``errors``, e.g. ``(("attitude_bias_deg",
-    0.05),)``; 0 switches a source off."""
-    platform_seed: int | None = None
-    """Seed of the platform's residual camera misalignment (a property of the satellite,
-    the same in every scene it takes: scenes simulated with one ``platform_seed`` share it, as
-    an in-flight calibration needs); None: drawn from ``seed`` with the other errors."""
 
 
 def _progress(message: str) -> None:
@@ -434,54 +285,17 @@ def _write_raster(path: Path, data: NDArray, **profile: Any) -> Path:
     return path
 
 
-def _select_points(
-    pool_lon: FloatArray,
-    pool_lat: FloatArray,
-    n: int,
-    rng: np.random.Generator,
-    exclude: NDArray[np.bool_] | None = None,
-) -> NDArray[np.intp]:
-    """Indices of ``n`` well-distributed pool points: 1 -> nearest the centre, 2 -> opposite
-    corners, more -> one random point in each cell of a near-square grid over the pool."""
-    ok = np.ones(pool_lon.size, bool) if exclude is None else ~exclude
-    idx = np.flatnonzero(ok)
-    if n <= 0:
-        return np.array([], dtype=np.intp)
-    if idx.size < n:
-        raise InputError(f"only {idx.size} candidate points in the common footprint, {n} requested")
-    x = (pool_lon[idx] - pool_lon[idx].min()) / max(np.ptp(pool_lon[idx]), 1e-12)
-    y = (pool_lat[idx] - pool_lat[idx].min()) / max(np.ptp(pool_lat[idx]), 1e-12)
-    if n == 1:
-        return idx[[int(np.argmin((x - 0.5) ** 2 + (y - 0.5) ** 2))]]
-    if n == 2:
-        a = int(np.argmin((x - 0.2) ** 2 + (y - 0.2) ** 2))
-        b = int(np.argmin((x - 0.8) ** 2 + (y - 0.8) ** 2))
-        return idx[[a, b]]
-    k = math.ceil(math.sqrt(n))
-    cell = np.minimum((x * k).astype(int), k - 1) * k + np.minimum((y * k).astype(int), k - 1)
-    chosen: list[int] = []
-    for c in rng.permutation(k * k):
-        members = np.flatnonzero(cell == c)
-        if members.size:
-            chosen.append(int(rng.choice(members)))
-        if len(chosen) == n:
-            break
-    rest = np.setdiff1d(np.arange(idx.size), chosen)
-    if len(chosen) < n:
-        chosen.extend(rng.choice(rest, n - len(chosen), replace=False).tolist())
-    return idx[np.asarray(chosen, dtype=np.intp)]
-
-
 def simulate_scene(
     plan: ScenePlan,
     out_dir: str | os.PathLike[str],
-    options: SimulationOptions = SimulationOptions(),
+    options: SimulationOptions = SimulationOptions(),  # noqa: B008 (frozen, immutable)
     *,
     quiet: bool = False,
 ) -> Path:
     """Render ``plan`` into the scene folder ``out_dir``; return the path of ``scene.json``."""
     from carto.framework.raster.dem import DEM
     from carto.framework.simulation import terrain as terrain_mod
+    from carto.framework.simulation import texture as texture_mod
     from carto.framework.simulation.render import render_reflectance
 
     out = Path(out_dir)
@@ -618,15 +432,15 @@ def simulate_scene(
         for name, s in true_sensors.items()
     }
     with _Stage("ground texture", quiet):
-        texture = terrain_mod.make_texture(dem, 0.5 * plan.gsd_m, int(rng_tex.integers(2**31)))
+        texture = texture_mod.make_texture(dem, 0.5 * plan.gsd_m, int(rng_tex.integers(2**31)))
 
     # --- control points (before rendering: point targets may mark them)
     with _Stage("control points", quiet):
-        gcp_rows, check_rows, targets = _control_points(
+        gcp_rows, check_rows, targets = control_points(
             true_sensors, dem, n_gcps, n_check, errors, rng_ctl, plan.control_min_views
         )
     if options.point_targets and targets[0].size:
-        texture = terrain_mod.add_point_targets(
+        texture = texture_mod.add_point_targets(
             texture, targets[0], targets[1], radius_m=2.5 * plan.gsd_m, contrast=0.8
         )
 
@@ -728,101 +542,6 @@ def _terrain_range(name: str, dem_path: Path | None) -> tuple[float, float]:
         return float(lo), float(hi)
     preset = terrain_mod.TERRAINS[name]
     return float(preset.h_min_m), float(preset.h_max_m)
-
-
-def _control_points(
-    sensors: dict[str, LineScanner],
-    dem: Any,
-    n_gcps: int,
-    n_check: int,
-    errors: ErrorModel,
-    rng: np.random.Generator,
-    min_views: int | None = None,
-) -> tuple[dict[str, list], dict[str, list], tuple[FloatArray, FloatArray]]:
-    """GCP and checkpoint observation rows (long format) and their ground positions.
-
-    Points are chosen where at least ``min_views`` images (None: all) see them; each gets a
-    row for every image that sees it."""
-    west, south, east, north = dem.bounds_lonlat
-    n = 160
-    gx, gy = np.meshgrid(np.linspace(west, east, n), np.linspace(south, north, n))
-    lon, lat = gx.ravel(), gy.ravel()
-    h = dem.height(lon, lat)
-    proj, seen_by = {}, {}
-    for name, s in sensors.items():
-        line, sample = s.ground_to_image(lon, lat, np.nan_to_num(h))
-        n_l, n_s = s.image_shape
-        margin = 16.0
-        seen_by[name] = (
-            np.isfinite(h)
-            & np.isfinite(line)
-            & (line > margin)
-            & (line < n_l - margin)
-            & (sample > margin)
-            & (sample < n_s - margin)
-        )
-        proj[name] = (line, sample)
-    n_seen = np.sum(list(seen_by.values()), axis=0)
-    inside = n_seen >= (len(sensors) if min_views is None else min_views)
-    gcp_idx = _select_points(lon, lat, n_gcps, rng, exclude=~inside)
-    taken = ~inside
-    taken[gcp_idx] = True
-    check_idx = _select_points(lon, lat, n_check, rng, exclude=taken)
-    # exact projections of the chosen points (refined ground -> image, true models)
-    cols = (
-        "id",
-        "lon_deg",
-        "lat_deg",
-        "h_m",
-        "image",
-        "line",
-        "sample",
-        "sigma_planimetric_m",
-        "sigma_h_m",
-        "sigma_px",
-    )
-
-    def rows(indices: NDArray[np.intp], prefix: str, noisy: bool) -> dict[str, list]:
-        table: dict[str, list] = {c: [] for c in cols}
-        plan_sigma = errors.gcp_planimetric_m / math.sqrt(2.0)
-        for k, i in enumerate(indices):
-            lo_, la_, hh = lon[i], lat[i], h[i]
-            if noisy:
-                m_lat = 111_320.0
-                m_lon = m_lat * math.cos(math.radians(la_))
-                de, dn = rng.normal(0.0, plan_sigma, 2) if plan_sigma else (0.0, 0.0)
-                lo_m, la_m = lo_ + de / m_lon, la_ + dn / m_lat
-                hh_m = hh + (rng.normal(0.0, errors.gcp_height_m) if errors.gcp_height_m else 0)
-            else:
-                lo_m, la_m, hh_m = lo_, la_, hh
-            for name in sensors:
-                if not seen_by[name][i]:
-                    continue
-                line, sample = proj[name][0][i], proj[name][1][i]
-                if noisy and errors.gcp_image_px:
-                    line += rng.normal(0.0, errors.gcp_image_px)
-                    sample += rng.normal(0.0, errors.gcp_image_px)
-                for c, value in zip(
-                    cols,
-                    (
-                        f"{prefix}{k + 1:03d}",
-                        lo_m,
-                        la_m,
-                        hh_m,
-                        name,
-                        line,
-                        sample,
-                        errors.gcp_planimetric_m if noisy else 0.0,
-                        errors.gcp_height_m if noisy else 0.0,
-                        errors.gcp_image_px if noisy else 0.0,
-                    ),
-                    strict=True,
-                ):
-                    table[c].append(value)
-        return table
-
-    all_idx = np.concatenate([gcp_idx, check_idx])
-    return (rows(gcp_idx, "G", True), rows(check_idx, "C", False), (lon[all_idx], lat[all_idx]))
 
 
 def _write_init_dem(path: Path, dem: Any, rng: np.random.Generator) -> Path:

@@ -17,6 +17,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+import attrs
 import numpy as np
 from numpy.typing import NDArray
 
@@ -26,16 +27,14 @@ from carto.framework.errors import InputError
 from carto.framework.files.documents import read_json, write_json_atomic
 from carto.framework.files.point_table import read_point_table, write_point_table
 from carto.framework.geometry import frames
-from carto.framework.geometry.linescan import LineScanner
-from carto.framework.geometry.rpc import RPCSensor, fit_rpc, write_rpc_txt
-from carto.framework.geometry.sensor import Sensor
+from carto.framework.geometry.sensor import Sensor, SensorType
 from carto.framework.matching.gcp_transfer import (
     GCP_OFFSET_COLUMNS,
     GCP_OFFSET_SIGMA_PX,
     gcp_offsets,
 )
 from carto.framework.plugins.registry import get_registry
-from carto.framework.workflows.opening import open_sensors
+from carto.framework.workflows.opening import open_options, open_product, sensor_type_for
 
 Table = dict[str, NDArray]
 
@@ -67,14 +66,18 @@ def select_gcps(table: Table, n: int | None) -> Table:
     return {k: v[m] for k, v in table.items()}
 
 
-def _default_adjuster(sensors: Mapping[str, Sensor], platform: str) -> str:
-    if all(isinstance(s, RPCSensor) for s in sensors.values()):
-        return "rpc-bias"
-    if platform.startswith("Cartosat-1"):
-        return "cartosat1-combined"
-    if platform.startswith("Cartosat-2"):
-        return "cartosat2-bba"
-    raise InputError("no default adjuster for this product; name one with --adjuster")
+def choose_adjuster(requested: str | None, types: Mapping[str, SensorType]) -> str:
+    """The adjuster of a run: the one named, else the default the images' sensor types name
+    (they must agree), else an error that asks for ``--adjuster``."""
+    if requested is not None:
+        return requested
+    defaults = {t.default_adjuster for t in types.values()}
+    if len(defaults) == 1 and None not in defaults:
+        return defaults.pop()
+    named = ", ".join(sorted(f"{n}: {t.name}" for n, t in types.items()))
+    raise InputError(
+        f"no default adjuster for these images (sensor types {named}); name one with --adjuster"
+    )
 
 
 def residual_plot(result: AdjustmentResult, path: Path, title: str) -> Path:
@@ -165,6 +168,8 @@ def adjust_product(
     ties: str = "auto",
     options: Mapping[str, Any] | None = None,
     sensor_type: str | None = None,
+    matcher: str | None = None,
+    trajectory: str | None = None,
     quiet: bool = False,
 ) -> dict[str, Any]:
     """Adjust a scene or configured product and write the outputs; return the report.
@@ -174,10 +179,16 @@ def adjust_product(
             ``carto adjust --help``).
         out_dir: output folder.
         n_gcps: number of GCPs to use (None: all that the product has).
-        adjuster: adjuster name (default from the platform).
+        adjuster: adjuster name (default: the one the images' sensor types name).
         ties: ``"auto"`` (automatic tie points), ``"none"``, or a CSV file
             (``id,image,line,sample[,sigma_px]``).
         options: adjuster options (mode, attitude_order ...).
+        sensor_type: open the product with this sensor type (default: the one that
+            recognises it).
+        matcher: the matcher of the tie points and of the GCP transfer (a registry name;
+            default: the configuration's ``"matcher"``, else ``"ncc"``).
+        trajectory: the trajectory model to fit the products' trajectories with (a registry
+            name; default: the one the ancillary data name).
     """
     from carto.framework.evaluation.checkpoints import (
         checkpoint_accuracy,
@@ -199,10 +210,10 @@ def adjust_product(
     rasters: dict[str, Path] = {}
     if src.is_dir() or src.name == "scene.json":
         scene = Scene.open(src)
-        sensors = open_sensors(scene.root, sensor_type)
+        opened = open_product(scene.root, sensor_type, trajectory_model=trajectory)
+        sensors, types = opened.sensors, opened.types
         gcps = scene.control("gcps")
         checkpoints = scene.control("checkpoints")
-        platform = str(scene.manifest.get("platform", ""))
         rasters = {n: scene.raster(n) for n in scene.image_names}
         init = scene.manifest.get("init_dem")
         if init:
@@ -210,10 +221,14 @@ def adjust_product(
 
             dem = DEM.open(scene.path(init))
     elif src.suffix.lower() == ".json":
-        config = _read_config(src)
-        sensors, rasters, gcps, dem, platform = config
+        config = read_configuration(src, sensor_type, trajectory)
+        sensors, types, rasters, gcps = config.sensors, config.types, config.rasters, config.gcps
+        dem = config.dem
+        matcher = matcher or config.matcher or "ncc"
     else:
         raise InputError(f"{src}: expected a scene folder or a JSON configuration file")
+    matcher = matcher or "ncc"
+    chosen_matcher = get_registry().get("matcher", matcher)
     gcps = select_gcps(gcps, n_gcps) if gcps is not None else None
     n_used = len(set(gcps["id"].tolist())) if gcps is not None else 0
     # tie points
@@ -227,7 +242,7 @@ def adjust_product(
                 '"dem" in the configuration)'
             )
         _progress("matching tie points on system-level ortho-images", quiet)
-        tie_table = block_tie_points(rasters, sensors, dem)
+        tie_table = block_tie_points(rasters, sensors, dem, matcher=chosen_matcher)
     elif ties != "none":
         tie_table = read_point_table(ties, numeric=("line", "sample"), text=("id", "image"))
     n_ties = len(set(tie_table["id"].tolist())) if tie_table is not None else 0
@@ -257,7 +272,7 @@ def adjust_product(
         transfer["why_not"] = "it needs every image's raster and a DEM"
         if gcp_transfer is True:
             raise InputError(f"gcp_transfer: {transfer['why_not']}")
-    name = adjuster or _default_adjuster(sensors, platform)
+    name = choose_adjuster(adjuster, types)
     component = get_registry().get("adjuster", name)
     _progress(
         f"adjusting {len(sensors)} images with {name} ({n_used} GCPs, {n_ties} tie points)", quiet
@@ -278,6 +293,7 @@ def adjust_product(
                 result.sensors,
                 dem,
                 sigma_px=offset_sigma_px,
+                matcher=chosen_matcher,
             )
         except InputError as exc:
             if gcp_transfer is True:
@@ -293,7 +309,7 @@ def adjust_product(
             result = component.adjust(sensors, obs, dem=dem, **options)
     # outputs
     out.mkdir(parents=True, exist_ok=True)
-    files = _write_models(result, out)
+    files = _write_models(result, types, out, quiet)
     for product, document in result.products.items():
         if product in RESERVED_OUTPUTS or not product.isidentifier():
             raise InputError(f"adjuster {name}: product name {product!r} is not allowed")
@@ -308,6 +324,10 @@ def adjust_product(
     report: dict[str, Any] = {
         "source": str(src),
         "adjuster": name,
+        "matcher": matcher,
+        "trajectory_models": {
+            n: s.trajectory.model for n, s in sensors.items() if hasattr(s, "trajectory")
+        },
         "options": {
             k: v
             for k, v in options.items()
@@ -464,19 +484,24 @@ def intersection_angles_deg(obs: Observations, sensors: Mapping[str, Sensor]) ->
     return dict(zip(ids.tolist(), best.tolist(), strict=True))
 
 
-def _write_models(result: AdjustmentResult, out: Path) -> dict[str, Any]:
-    files: dict[str, Any] = {"models": {}, "rpc": {}}
+def _write_models(
+    result: AdjustmentResult, types: Mapping[str, SensorType], out: Path, quiet: bool
+) -> dict[str, Any]:
+    """Every adjusted sensor saved by the sensor type that opened it; the images whose type
+    cannot save one are listed (``not_saved``) and named on stderr."""
+    files: dict[str, Any] = {"models": {}, "rpc": {}, "not_saved": {}}
+    h_range = _height_range(result)
     for name, sensor in result.sensors.items():
-        if isinstance(sensor, LineScanner):
-            files["models"][name] = sensor.save(out / f"{name}.model.json").name
-            rpc, report = fit_rpc(sensor, h_range=_height_range(result))
-            files["rpc"][name] = {
-                "file": write_rpc_txt(rpc, out / f"{name}_RPC.TXT").name,
-                "fit_check_max_px": report.check_max_px,
-            }
-        elif isinstance(sensor, RPCSensor):
-            corrected = _bake_rpc(sensor)
-            files["rpc"][name] = {"file": write_rpc_txt(corrected, out / f"{name}_RPC.TXT").name}
+        try:
+            written = types[name].save(sensor, out, name, h_range_m=h_range)
+        except NotImplementedError as exc:
+            files["not_saved"][name] = str(exc)
+            _progress(f"image {name}: adjusted model not written: {exc}", quiet)
+            continue
+        if "model" in written:
+            files["models"][name] = written["model"]
+        if "rpc" in written:
+            files["rpc"][name] = written["rpc"]
     return files
 
 
@@ -487,20 +512,29 @@ def _height_range(result: AdjustmentResult) -> tuple[float, float]:
     return lo - pad, hi + pad
 
 
-def _bake_rpc(sensor: RPCSensor) -> Any:
-    """An RPC that includes the sensor's image-space correction (refitted on a 3-D grid)."""
-    h0, hs = sensor.rpc.height_off, abs(sensor.rpc.height_scale)
-    rpc, _ = fit_rpc(sensor, h_range=(h0 - hs, h0 + hs))
-    return rpc
+@attrs.frozen(eq=False)
+class Configuration:
+    """A JSON configuration of ``carto adjust`` (see :func:`read_configuration`)."""
+
+    sensors: dict[str, Sensor]
+    types: dict[str, SensorType]
+    rasters: dict[str, Path]
+    gcps: Table | None
+    dem: Any
+    platform: str
+    matcher: str | None
+    trajectory_model: str | None
 
 
-def _read_config(path: Path) -> tuple[dict[str, Sensor], dict[str, Path], Table | None, Any, str]:
+def read_configuration(
+    path: Path, sensor_type: str | None = None, trajectory: str | None = None
+) -> Configuration:
     """A JSON configuration: ``{"images": {name: {"model": file, "raster": file,
-    "sensor": type}}, "gcps": csv, "dem": file, "geoid": gtx, "platform": text}``, or
-    ``"height_m": number`` (ellipsoidal) for a flat DEM instead of ``"dem"``; paths relative
-    to the file."""
+    "sensor": type}}, "gcps": csv, "dem": file, "geoid": gtx, "platform": text,
+    "matcher": name, "trajectory_model": name}``, or ``"height_m": number`` (ellipsoidal)
+    for a flat DEM instead of ``"dem"``; paths relative to the file. ``sensor_type`` and
+    ``trajectory`` (the command line's) override the file's."""
     from carto.framework.raster.dem import DEM, Geoid
-    from carto.framework.workflows.opening import open_sensor
 
     doc = read_json(path, "configuration")
     if not isinstance(doc, dict):
@@ -509,15 +543,25 @@ def _read_config(path: Path) -> tuple[dict[str, Sensor], dict[str, Path], Table 
     images = doc.get("images")
     if not isinstance(images, dict) or len(images) < 1:
         raise InputError(f"{path}: field 'images' must map image names to models")
+    names = {}
+    for key in ("matcher", "trajectory_model"):
+        value = doc.get(key)
+        if value is not None and not isinstance(value, str):
+            raise InputError(f"{path}: field {key!r} must be a component name, got {value!r}")
+        names[key] = value
+    trajectory = trajectory or names["trajectory_model"]
     sensors: dict[str, Sensor] = {}
+    types: dict[str, SensorType] = {}
     rasters: dict[str, Path] = {}
     for name, spec in images.items():
-        if "model" not in spec:
+        if not isinstance(spec, dict) or "model" not in spec:
             raise InputError(f"{path}: images.{name} has no 'model'")
-        sensor = open_sensor(base / spec["model"], spec.get("sensor"))
+        model = base / spec["model"]
+        types[name] = sensor_type_for(model, sensor_type or spec.get("sensor"), "file")
+        sensor = types[name].open(model, **open_options(trajectory))
         if "raster" in spec:
             rasters[name] = base / spec["raster"]
-            sensor = _crop_offset(sensor, rasters[name])
+            sensor = sensor.for_raster(rasters[name])
         sensors[name] = sensor
     gcps = None
     if doc.get("gcps"):
@@ -535,35 +579,13 @@ def _read_config(path: Path) -> tuple[dict[str, Sensor], dict[str, Path], Table 
         if isinstance(h, bool) or not isinstance(h, int | float) or not math.isfinite(h):
             raise InputError(f"{path}: field 'height_m' must be a number, got {h!r}")
         dem = DEM.constant(float(h))
-    return sensors, rasters, gcps, dem, str(doc.get("platform", ""))
-
-
-def _crop_offset(sensor: Sensor, raster: Path) -> Sensor:
-    """An RPC sensor of a full scene, restricted to a crop whose pixel offset is in the crop's
-    (non-georeferenced) geotransform, as in CNES's test data."""
-    import warnings
-
-    import attrs
-    import rasterio
-
-    if not isinstance(sensor, RPCSensor):
-        return sensor
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        with rasterio.open(raster) as ds:
-            t, crs, shape = ds.transform, ds.crs, (ds.height, ds.width)
-    if crs is not None or t.b != 0 or t.d != 0 or t.a != 1 or abs(t.e) != 1:
-        return sensor
-    col_off, row_off = t.c, t.f if t.e > 0 else -t.f
-    if col_off == 0 and row_off == 0 and shape == sensor.image_shape:
-        return sensor
-    rpc = attrs.evolve(
-        sensor.rpc, line_off=sensor.rpc.line_off - row_off, samp_off=sensor.rpc.samp_off - col_off
-    )
-    return RPCSensor(
-        rpc,
-        shape,
-        parameters=sensor.parameters,
-        source=f"{sensor.source} (crop at row {row_off:g}, column {col_off:g})",
-        prefix=sensor.prefix,
+    return Configuration(
+        sensors,
+        types,
+        rasters,
+        gcps,
+        dem,
+        str(doc.get("platform", "")),
+        names["matcher"],
+        names["trajectory_model"],
     )

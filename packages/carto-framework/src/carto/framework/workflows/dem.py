@@ -1,5 +1,6 @@
 """The DEM workflow behind ``carto dem``: a stereo pair (two images with models, or a scene
-folder with its adjusted models) -> a DEM generator (default ``ior``) -> ``dem.tif``,
+folder with its adjusted models) -> a DEM generator (chosen by name, or the default the images'
+sensor types name) with a matcher (default ``ncc``) -> ``dem.tif``,
 ``ortho_left.tif``, ``ortho_right.tif``, ``quality.tif``, ``report.json`` and a hillshade
 (and, against a reference DEM, the accuracy and a difference map).
 
@@ -21,12 +22,19 @@ import numpy as np
 
 from carto.framework.errors import InputError
 from carto.framework.files.atomic import atomic_output
-from carto.framework.geometry.sensor import Sensor
+from carto.framework.geometry.sensor import Sensor, SensorType
 from carto.framework.plugins.registry import get_registry
 from carto.framework.raster.dem import DEM, ELLIPSOID, Geoid
-from carto.framework.workflows.opening import open_sensor
+from carto.framework.workflows.opening import open_options, open_sensor, sensor_type_for
 
-__all__ = ["StereoInputs", "dem_product", "open_pair", "tile_scheduler"]
+__all__ = [
+    "StereoInputs",
+    "StereoPair",
+    "choose_dem_generator",
+    "dem_product",
+    "open_pair",
+    "tile_scheduler",
+]
 
 
 def _progress(message: str, quiet: bool) -> None:
@@ -81,22 +89,37 @@ class StereoInputs:
     pair: Sequence[str] | None = None
 
 
-def open_pair(
-    inputs: StereoInputs,
-) -> tuple[dict[str, Path], dict[str, Sensor], DEM | None]:
-    """The stereo pair to process: image name -> raster, image name -> model (left first),
-    and the scene's initial DEM (None for loose images); see :class:`StereoInputs`. A crop's
-    pixel offset in its geotransform is applied to a full-scene RPC."""
-    from carto.framework.workflows.adjust import _crop_offset
+@attrs.frozen(eq=False)
+class StereoPair:
+    """The stereo pair of a DEM run (left first).
+
+    Attributes:
+        rasters: image name -> raster file.
+        sensors: image name -> model (adjusted when a ``carto adjust`` folder was given).
+        types: the sensor types that opened the images (they name the default generator).
+        init_dem: the scene's initial DEM (``None`` for loose images).
+    """
+
+    rasters: dict[str, Path]
+    sensors: dict[str, Sensor]
+    types: tuple[SensorType, ...]
+    init_dem: DEM | None
+
+
+def open_pair(inputs: StereoInputs) -> StereoPair:
+    """The stereo pair to process (see :class:`StereoInputs`). A sensor is fitted to the
+    raster it comes with (:meth:`~carto.framework.geometry.sensor.Sensor.for_raster`: e.g. a
+    crop's pixel offset applied to a full-scene RPC)."""
 
     source, pair, sensor_type = inputs.source, inputs.pair, inputs.sensor_type
     models_dir = Path(inputs.models) if inputs.models is not None else None
     if source is not None:
         from carto.framework.products.scene import Scene
-        from carto.framework.workflows.opening import open_sensors
+        from carto.framework.workflows.opening import open_product
 
         scene = Scene.open(source)
-        sensors = open_sensors(scene.root, sensor_type)
+        product = open_product(scene.root, sensor_type)
+        sensors = product.sensors
         names = list(pair) if pair else list(sensors)[:2]
         if len(names) != 2 or any(n not in sensors for n in names):
             raise InputError(
@@ -107,11 +130,13 @@ def open_pair(
         chosen = {n: _adjusted(models_dir, n, sensors[n]) for n in names}
         init = scene.manifest.get("init_dem")
         dem = DEM.open(scene.path(init)) if init else None
-        return {n: scene.raster(n) for n in names}, chosen, dem
+        types = tuple(product.types[n] for n in names)
+        return StereoPair({n: scene.raster(n) for n in names}, chosen, types, dem)
     if inputs.left is None or inputs.right is None:
         raise InputError("dem: give a scene folder, or both --left and --right images")
     rasters: dict[str, Path] = {}
     sensors = {}
+    types = []
     for key, image, model in (
         ("left", inputs.left, inputs.left_model),
         ("right", inputs.right, inputs.right_model),
@@ -119,10 +144,13 @@ def open_pair(
         path = Path(image)
         if not path.is_file():
             raise InputError(f"{path}: no such image")
-        sensor = open_sensor(Path(model) if model else _model_beside(path), sensor_type)
-        sensors[key] = _adjusted(models_dir, key, _crop_offset(sensor, path))
+        model_path = Path(model) if model else _model_beside(path)
+        chosen_type = sensor_type_for(model_path, sensor_type, "file")
+        sensor = chosen_type.open(model_path, **open_options())
+        sensors[key] = _adjusted(models_dir, key, sensor.for_raster(path))
         rasters[key] = path
-    return rasters, sensors, None
+        types.append(chosen_type)
+    return StereoPair(rasters, sensors, tuple(types), None)
 
 
 def _off_nadir_deg(sensor: Sensor) -> float:
@@ -187,6 +215,26 @@ def _jsonable(value: Any) -> Any:
     return str(value)
 
 
+def choose_dem_generator(requested: str | None, types: Sequence[SensorType]) -> str:
+    """The DEM generator of a run: the one named, else the first default of the images'
+    sensor types that is installed, else the only one installed."""
+    registry = get_registry()
+    installed = registry.names("dem-generator")
+    if requested is not None:
+        registry.get("dem-generator", requested)  # a clear error when it is not installed
+        return requested
+    for sensor_type in types:
+        default = sensor_type.default_dem_generator
+        if default is not None and default in installed:
+            return default
+    if len(installed) == 1:
+        return installed[0]
+    raise InputError(
+        "dem: no default DEM generator for these images "
+        f"(installed: {', '.join(installed) or 'none'}); name one with --generator"
+    )
+
+
 def dem_product(
     out_dir: str | os.PathLike[str],
     inputs: StereoInputs,
@@ -194,7 +242,8 @@ def dem_product(
     init_dem: str | os.PathLike[str] | None = None,
     geoid: str | os.PathLike[str] | None = None,
     init_height_m: float | None = None,
-    generator: str = "ior",
+    generator: str | None = None,
+    matcher: str = "ncc",
     reference: str | os.PathLike[str] | None = None,
     options: Mapping[str, Any] | None = None,
     quiet: bool = False,
@@ -202,18 +251,22 @@ def dem_product(
     """Generate a DEM and ortho-images and write them to ``out_dir``; return the report.
 
     See :class:`StereoInputs` for the inputs and :func:`initial_dem` for the starting DEM;
-    ``options`` go to the generator (``posting_m``, ``ortho_res_m``, ``crs``,
-    ``max_iterations`` ...; ``workers``: tiles in parallel, :func:`tile_scheduler`). With
-    ``reference`` (a DEM file), the report gets its accuracy
+    ``generator`` names the DEM generator (default: :func:`choose_dem_generator`),
+    ``matcher`` the matcher it uses (a registry name); ``options`` go to the generator
+    (``posting_m``, ``ortho_res_m``, ``crs``, ``max_iterations`` ...; ``workers``: tiles in
+    parallel, :func:`tile_scheduler`). The outputs are written from the generator's
+    :class:`~carto.framework.dem_generation.base.DEMProduct` alone. With ``reference`` (a
+    DEM file), the report gets its accuracy
     (:func:`carto.framework.evaluation.dem_accuracy.dem_accuracy`) and a difference map is drawn.
     """
+    from carto.framework.dem_generation.base import DEMProduct
     from carto.framework.imaging.ortho import write_ortho
-    from carto.framework.imaging.preparation import prepared_image
     from carto.framework.raster.images import read_raster
 
     t0 = time.perf_counter()
     out = Path(out_dir)
-    rasters, sensors, scene_dem = open_pair(inputs)
+    pair = open_pair(inputs)
+    rasters, sensors, scene_dem = pair.rasters, pair.sensors, pair.init_dem
     if inputs.source is not None and inputs.models is None:
         _progress(
             "no --models: using the scene's delivered (system-level) models; give a carto "
@@ -222,84 +275,95 @@ def dem_product(
         )
     start = initial_dem(init_dem, geoid, init_height_m, scene_dem)
     names = list(sensors)
-    images = [prepared_image(read_raster(rasters[n]), sensors[n], start) for n in names]
-    component = get_registry().get("dem-generator", generator)
+    images = [sensors[n].prepare_raw(read_raster(rasters[n]), start) for n in names]
+    generator = choose_dem_generator(generator, pair.types)
+    registry = get_registry()
+    component = registry.get("dem-generator", generator)
+    chosen_matcher = registry.get("matcher", matcher)
     settings = dict(options or {})
+    posting = settings.get("posting_m")
     _progress(
-        f"{generator}: {names[0]} (left) and {names[1]} (right), posting "
-        f"{settings.get('posting_m', 'default')} m",
+        f"{generator}: {names[0]} (left) and {names[1]} (right)"
+        + (f", posting {posting:g} m" if isinstance(posting, int | float) else "")
+        + f", matcher {matcher}",
         quiet,
     )
     workers = int(settings.pop("workers", 1) or 1)
     extra: dict[str, Any] = {}
     if workers > 1:
         extra["scheduler"] = tile_scheduler(workers)
-    result = component.generate(
+    product = component.generate(
         images,
         [sensors[n] for n in names],
         init_dem=start,
+        matcher=chosen_matcher,
         progress=None if quiet else (lambda line: _progress(line, False)),
         **settings,
         **extra,
     )
+    if not isinstance(product, DEMProduct):
+        raise InputError(
+            f"DEM generator {generator!r} returned {type(product).__name__}, not a DEMProduct"
+        )
+    if len(product.orthos) != len(names):
+        raise InputError(
+            f"DEM generator {generator!r} returned {len(product.orthos)} ortho-images for "
+            f"{len(names)} images"
+        )
     out.mkdir(parents=True, exist_ok=True)
     files = {
         "dem": write_ortho(
             out / "dem.tif",
-            result.dem.heights.astype(np.float32),
-            result.dem_grid,
+            product.dem.heights.astype(np.float32),
+            product.dem_grid,
             vertical=ELLIPSOID,
             tags={"CARTO_PRODUCT": "dem", "CARTO_GENERATOR": generator},
-        ).name,
-        "ortho_left": write_ortho(
-            out / "ortho_left.tif", result.ortho_left, result.ortho_grid
-        ).name,
-        "ortho_right": write_ortho(
-            out / "ortho_right.tif", result.ortho_right, result.ortho_grid
-        ).name,
-        "quality": write_ortho(
-            out / "quality.tif",
-            np.stack([result.score, result.valid.astype(np.float32)]),
-            result.ortho_grid,
-            tags={"BAND_1": "correlation score", "BAND_2": "valid match (1) or not (0)"},
-        ).name,
+        ).name
     }
+    for side, ortho in zip(("left", "right"), product.orthos, strict=True):
+        files[f"ortho_{side}"] = write_ortho(
+            out / f"ortho_{side}.tif", ortho, product.ortho_grid
+        ).name
+    if product.quality:
+        files["quality"] = write_ortho(
+            out / "quality.tif",
+            np.stack([layer.values for layer in product.quality]),
+            product.ortho_grid,
+            tags={f"BAND_{k}": layer.description for k, layer in enumerate(product.quality, 1)},
+        ).name
     from carto.framework.raster.quicklook import difference_png, hillshade_png
 
     files["hillshade"] = hillshade_png(out / "dem.tif", out / "dem_hillshade.png", "DEM").name
     report: dict[str, Any] = {
         "generator": generator,
+        "matcher": matcher,
         "images": {n: str(rasters[n]) for n in names},
         "settings": {k: v for k, v in settings.items() if isinstance(v, str | int | float)},
         "initial_dem": start.name,
         "dem_grid": {
-            "crs": result.dem_grid.crs.to_string(),
-            "posting_m": result.dem_grid.resolution[0],
-            "shape": list(result.dem_grid.shape),
+            "crs": product.dem_grid.crs.to_string(),
+            "posting_m": product.dem_grid.resolution[0],
+            "shape": list(product.dem_grid.shape),
         },
-        "ortho_resolution_m": result.ortho_grid.resolution[0],
+        "ortho_resolution_m": product.ortho_grid.resolution[0],
         "vertical_reference": "ellipsoid WGS84",
-        "b_over_h": result.b_over_h,
-        "converged": result.converged,
-        "iterations": [
-            {
-                "iteration": r.iteration,
-                "median_abs_mismatch_px": r.median_abs_mismatch_px,
-                "matched_percent": r.matched_percent,
-                "median_abs_dem_change_m": r.median_abs_dem_change_m,
-                "median_across_base_px": r.median_across_base_px,
-                "seconds": r.seconds,
-            }
-            for r in result.iterations
-        ],
+        "quality_bands": [layer.name for layer in product.quality],
+        "converged": product.converged,
+        "iterations": product.iteration_dicts(),
         "files": files,
     }
+    clash = sorted(set(product.extras) & set(report))
+    if clash:
+        raise InputError(
+            f"DEM generator {generator!r}: extras {', '.join(clash)} collide with report fields"
+        )
+    report.update(product.extras)
     if reference is not None:
         from carto.framework.evaluation.dem_accuracy import dem_accuracy, dem_difference
 
         ref = DEM.open(reference, geoid=Geoid.open(geoid) if geoid else None)
-        report["accuracy"] = dem_accuracy(result.dem, ref)
-        diff, _, _ = dem_difference(result.dem, ref)
+        report["accuracy"] = dem_accuracy(product.dem, ref)
+        diff, _, _ = dem_difference(product.dem, ref)
         files["difference"] = difference_png(
             diff, out / "dem_difference.png", f"DEM - {Path(reference).name}"
         ).name

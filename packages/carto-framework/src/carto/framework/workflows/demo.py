@@ -1,9 +1,11 @@
 """``carto demo``: the whole chain on the embedded simulated scene, with a paper-style table.
 
-The demo simulates the default Cartosat-1 stereo pair (preset ``cartosat1-pair`` of the
-carto-cartosat1 plugin, found through the registry like any component), then runs every stage
-that is installed, and reports the accuracy of each at independent checkpoints against the
-simulator's truth. Stages appear as the plugins that provide them land.
+The demo simulates the default scene preset of the installed plugins (the preset with a
+:class:`~carto.framework.simulation.preset.DemoChain` and the highest ``demo_priority``; with
+the Cartosat plugins, the Cartosat-1 stereo pair), then runs the chain that preset's plugin
+declares (its adjustments and DEM generator), every stage whose component is installed, and
+reports the accuracy of each at independent checkpoints against the simulator's truth. The
+framework names no component: everything comes from the registry and the preset.
 """
 
 from __future__ import annotations
@@ -14,13 +16,29 @@ import time
 from pathlib import Path
 from typing import Any
 
+from carto.framework.errors import InputError
 from carto.framework.evaluation.checkpoints import checkpoint_accuracy
 from carto.framework.files.documents import write_json_atomic
-from carto.framework.plugins.registry import get_registry
+from carto.framework.plugins.registry import Registry, get_registry
 from carto.framework.products.scene import Scene
-from carto.framework.simulation.simulate import SimulationOptions
+from carto.framework.simulation.plan import SimulationOptions
+from carto.framework.simulation.preset import DemoChain, ScenePreset
 
-DEMO_PRESET = "cartosat1-pair"
+
+def default_demo_preset(registry: Registry) -> ScenePreset:
+    """The scene preset ``carto demo`` simulates: the one with a demo chain and the highest
+    ``demo_priority`` (ties: the first by name)."""
+    presets = [
+        info.component
+        for info in registry.components("scene-preset")
+        if info.component.demo is not None
+    ]
+    if not presets:
+        raise InputError(
+            "carto demo: no installed scene preset declares a demo chain "
+            "(install a platform plugin such as carto-cartosat1)"
+        )
+    return max(presets, key=lambda p: (p.demo_priority, [-ord(c) for c in p.name]))
 
 
 def _row(stage: str, gcps: int, acc: dict[str, Any], seconds: float) -> dict[str, Any]:
@@ -45,9 +63,11 @@ def format_table(title: str, rows: list[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
-def _dem_stage(scene: Scene, out: Path, quiet: bool) -> list[dict[str, Any]]:
-    """IOR DEM (10 m posting) from the scene's coarse DEM with the tied-adjustment models (or
-    the delivered ones), both DEMs compared with the true terrain."""
+def _dem_stage(
+    scene: Scene, out: Path, chain: DemoChain, models: Path | None, quiet: bool
+) -> list[dict[str, Any]]:
+    """The chain's DEM from the scene's coarse DEM with the first adjustment's models (or the
+    delivered ones), both DEMs compared with the true terrain."""
     from carto.framework.evaluation.dem_accuracy import dem_accuracy
     from carto.framework.raster.dem import DEM
     from carto.framework.workflows.dem import StereoInputs, dem_product
@@ -57,19 +77,21 @@ def _dem_stage(scene: Scene, out: Path, quiet: bool) -> list[dict[str, Any]]:
         dem_accuracy(DEM.open(scene.path(scene.manifest["init_dem"])), truth)
         | {"dem": "initial (SRTM-like, 3 arc-seconds)", "seconds": 0.0}
     ]
-    adjusted = out / "adjust-combined"
     t1 = time.perf_counter()
     rep = dem_product(
         out / "dem",
-        StereoInputs(scene.root, models=adjusted if (adjusted / "report.json").is_file() else None),
-        options={"posting_m": 10.0},
+        StereoInputs(scene.root, models=models),
+        generator=chain.dem_generator,
+        options=dict(chain.dem_options),
         quiet=quiet,
     )
     acc = dem_accuracy(DEM.open(out / "dem" / "dem.tif"), truth)
+    posting = chain.dem_options.get("posting_m")
+    where = f", {posting:g} m" if isinstance(posting, int | float) else ""
     rows.append(
         acc
         | {
-            "dem": f"IOR, 10 m ({len(rep['iterations'])} iterations)",
+            "dem": f"{chain.dem_label}{where} ({len(rep['iterations'])} iterations)",
             "seconds": round(time.perf_counter() - t1, 1),
         }
     )
@@ -101,7 +123,9 @@ def run_demo(
     """Run the demo into ``out_dir``; return the report (also written as ``report.json``)."""
     out = Path(out_dir)
     registry = get_registry()
-    preset = registry.get("scene-preset", DEMO_PRESET)
+    preset = default_demo_preset(registry)
+    chain = preset.demo
+    assert chain is not None  # default_demo_preset keeps presets with a chain
     t0 = time.perf_counter()
     options = SimulationOptions(seed=seed, size=size, terrain=terrain)
     manifest = preset.simulate(out / "scene", options, quiet=quiet)
@@ -112,32 +136,40 @@ def run_demo(
     t1 = time.perf_counter()
     system = checkpoint_accuracy(scene.sensors(), checkpoints)
     rows.append(_row("system level (ancillary only)", 0, system, time.perf_counter() - t1))
-    if "cartosat1-combined" in registry.names("adjuster"):
+    ties = None
+    models: Path | None = None
+    not_installed = []
+    for k, step in enumerate(chain.adjustments):
+        if step.adjuster not in registry.names("adjuster"):
+            not_installed.append(f"{step.label} (adjuster {step.adjuster})")
+            continue
         from carto.framework.workflows.adjust import adjust_product
 
-        ties = None
-        for label, mode in (
-            ("stagger + tied, 1 GCP, matched", "combined"),
-            ("separate, 1 GCP, matched", "separate"),
-        ):
-            t1 = time.perf_counter()
-            rep = adjust_product(
-                manifest.parent,
-                out / f"adjust-{mode}",
-                n_gcps=1,
-                adjuster="cartosat1-combined",
-                ties=ties or "auto",
-                options={"mode": mode},
-                quiet=quiet,
-            )
-            ties = str(out / f"adjust-{mode}" / "tie_points.csv")
-            row = _row(label, rep["gcps_used"], rep["checkpoints"], time.perf_counter() - t1)
-            row["tie_points"] = rep["tie_points"]
-            row["sigma0"] = rep["sigma0"]
-            rows.append(row)
+        folder = out / (step.folder or f"adjust-{k + 1}")
+        t1 = time.perf_counter()
+        rep = adjust_product(
+            manifest.parent,
+            folder,
+            n_gcps=step.n_gcps,
+            adjuster=step.adjuster,
+            ties=ties or "auto",
+            options=dict(step.options),
+            quiet=quiet,
+        )
+        ties = ties or str(folder / "tie_points.csv")
+        models = models or folder
+        row = _row(step.label, rep["gcps_used"], rep["checkpoints"], time.perf_counter() - t1)
+        row["tie_points"] = rep["tie_points"]
+        row["sigma0"] = rep["sigma0"]
+        rows.append(row)
     dem_rows = []
-    if "ior" in registry.names("dem-generator"):
-        dem_rows = _dem_stage(scene, out, quiet)
+    if chain.dem_generator is not None:
+        if chain.dem_generator in registry.names("dem-generator"):
+            dem_rows = _dem_stage(scene, out, chain, models, quiet)
+        else:
+            not_installed.append(
+                f"{chain.dem_label} DEM and ortho-images (DEM generator {chain.dem_generator})"
+            )
     m = scene.manifest
     title = (
         f"Carto demo: {m['platform']} stereo pair (simulated, {m['terrain']} terrain, "
@@ -149,14 +181,8 @@ def run_demo(
         "simulation_seconds": round(t_sim, 1),
         "stages": rows,
         "dem": dem_rows,
-        "stages_not_installed": [
-            stage
-            for stage, kind, name in (
-                ("stagger correction + combined adjustment", "adjuster", "cartosat1-combined"),
-                ("IOR DEM and ortho-images", "dem-generator", "ior"),
-            )
-            if name not in registry.names(kind)
-        ],
+        "preset": preset.name,
+        "stages_not_installed": not_installed,
     }
     write_json_atomic(out / "report.json", report)
     if not quiet:

@@ -1,18 +1,39 @@
 """Opening products as sensors through the registry of sensor types.
 
 :func:`open_sensor` and :func:`open_sensors` ask every registered sensor type whether it
-recognises a file (``identify``); the one with the highest priority opens it.
+recognises a file (``identify``); the one with the highest priority opens it. They pass the
+registry down (option ``components``), so a model file that names a plugin's component (its
+trajectory model) is read by that plugin, and an optional ``trajectory_model`` (a registered
+trajectory model's name, ``carto adjust --trajectory``) for products whose trajectories are
+fitted to ancillary data. :func:`open_product` also returns the sensor type, which saves the
+adjusted models and names the default adjuster and DEM generator.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
+
+import attrs
 
 from carto.framework.errors import InputError
 from carto.framework.geometry.sensor import Sensor, SensorType
 
 
-def _sensor_type_for(path: Path, sensor_type: str | None, what: str) -> SensorType:
+@attrs.frozen(eq=False)
+class OpenedProduct:
+    """The images of a product as sensors, with the sensor type that opened each.
+
+    Attributes:
+        sensors: image name -> sensor.
+        types: image name -> the sensor type that opened it.
+    """
+
+    sensors: dict[str, Sensor]
+    types: dict[str, SensorType]
+
+
+def sensor_type_for(path: Path, sensor_type: str | None, what: str = "file") -> SensorType:
     """The named sensor type, or the one that identifies ``path`` (highest priority)."""
     from carto.framework.plugins.registry import get_registry
 
@@ -39,25 +60,49 @@ def _sensor_type_for(path: Path, sensor_type: str | None, what: str) -> SensorTy
     return top[0]
 
 
-def open_sensor(path: str | Path, sensor_type: str | None = None) -> Sensor:
+def open_options(trajectory_model: str | None = None) -> dict[str, Any]:
+    """The options every opening passes to a sensor type: the registry as ``components``,
+    and the registered trajectory model named ``trajectory_model`` (if any)."""
+    from carto.framework.plugins.registry import get_registry
+
+    registry = get_registry()
+    options: dict[str, Any] = {"components": registry}
+    if trajectory_model is not None:
+        options["trajectory_model"] = registry.get("trajectory", trajectory_model)
+    return options
+
+
+def open_sensor(
+    path: str | Path, sensor_type: str | None = None, *, trajectory_model: str | None = None
+) -> Sensor:
     """Open ``path`` with the named sensor type, or with the one that identifies it.
 
     Raises:
         InputError: the file does not exist, no registered type recognises it, or several do
             with the same priority.
-        UnknownComponentError: ``sensor_type`` is not registered.
+        UnknownComponentError: ``sensor_type`` or ``trajectory_model`` is not registered.
     """
     path = Path(path)
-    return _sensor_type_for(path, sensor_type, "file").open(path)
+    chosen = sensor_type_for(path, sensor_type, "file")
+    return chosen.open(path, **open_options(trajectory_model))
 
 
-def open_sensors(path: str | Path, sensor_type: str | None = None) -> dict[str, Sensor]:
-    """Open every image of a product (scene folder, stereo product, single image) by name.
-
-    Like :func:`open_sensor`, but through the sensor type's ``open_all``.
-    """
+def open_product(
+    path: str | Path, sensor_type: str | None = None, *, trajectory_model: str | None = None
+) -> OpenedProduct:
+    """Open every image of a product (scene folder, stereo product, single image) by name,
+    through the sensor type's ``open_all``; see :func:`open_sensor`."""
     path = Path(path)
-    return _sensor_type_for(path, sensor_type, "product").open_all(path)
+    chosen = sensor_type_for(path, sensor_type, "product")
+    sensors = chosen.open_all(path, **open_options(trajectory_model))
+    return OpenedProduct(dict(sensors), {name: chosen for name in sensors})
+
+
+def open_sensors(
+    path: str | Path, sensor_type: str | None = None, *, trajectory_model: str | None = None
+) -> dict[str, Sensor]:
+    """The sensors of :func:`open_product`."""
+    return open_product(path, sensor_type, trajectory_model=trajectory_model).sensors
 
 
 def _safe_identify(sensor_type: SensorType, path: Path) -> bool:

@@ -1,0 +1,163 @@
+"""``carto adjust``: orientations from GCPs and tie points."""
+
+from __future__ import annotations
+
+import argparse
+
+from carto.framework.cli.common import examples, formatter
+from carto.framework.matching.gcp_transfer import GCP_OFFSET_SIGMA_PX
+
+
+# --------------------------------------------------------------------------- adjust
+def cmd_adjust(args: argparse.Namespace) -> int:
+    from carto.framework.workflows.adjust import adjust_product
+
+    options: dict[str, object] = {}
+    if args.mode:
+        options["mode"] = args.mode
+    if args.attitude_order is not None:
+        options["attitude_order"] = args.attitude_order
+    if args.no_robust:
+        options["robust"] = False
+    if args.dem_heights is not None:
+        options["tie_heights"] = args.dem_heights > 0
+        options["height_sigma_m"] = args.dem_heights
+    if args.dem_offset_sigma is not None:
+        options["height_offset_sigma_m"] = args.dem_offset_sigma
+    if args.calibration:
+        options["calibration"] = list(args.calibration)
+    if args.no_gcp_transfer:
+        options["gcp_transfer"] = False
+    if args.gcp_offset_sigma is not None:
+        options["gcp_offset_sigma_px"] = args.gcp_offset_sigma
+    report = adjust_product(
+        args.source,
+        args.out,
+        n_gcps=args.gcps,
+        adjuster=args.adjuster,
+        ties=args.ties,
+        options=options,
+        sensor_type=args.sensor,
+        matcher=args.matcher,
+        trajectory=args.trajectory,
+        quiet=args.quiet,
+    )
+    print(
+        f"{report['adjuster']}: {report['gcps_used']} GCPs, {report['tie_points']} tie points, "
+        f"sigma0 {report['sigma0']:.3f}, outliers: {', '.join(report['outliers']) or 'none'}"
+    )
+    transfer = report.get("gcp_offsets")
+    if transfer:
+        print(
+            f"GCP transfer: {transfer['count']} image offsets matched at the GCPs"
+            + (f", {len(transfer['not_kept'])} not kept" if transfer["not_kept"] else "")
+        )
+    cp = report.get("checkpoints")
+    if cp:
+        before = report["checkpoints_before"]
+        print(
+            f"checkpoints ({cp['count']}): planimetric RMSE {cp['rmse_planimetric_m']:.2f} m "
+            f"(predicted {cp['predicted_sigma_planimetric_m']:.2f} m), height "
+            f"{cp['rmse_height_m']:.2f} m; before: {before['rmse_planimetric_m']:.1f} m / "
+            f"{before['rmse_height_m']:.1f} m"
+        )
+    extra = "".join(f", {f}" for k, f in report["files"].items() if k == "calibration")
+    print(f"outputs in {args.out}: report.json, residuals.png, adjusted models and RPCs{extra}")
+    return 0
+
+
+def add_adjust(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "adjust",
+        help="adjust sensor orientations with GCPs and automatic tie points",
+        description="Adjust the images of a scene folder (carto simulate) or of a JSON "
+        "configuration:\nGCPs, automatic tie points matched on system-level ortho-images "
+        "(or a tie-point\nCSV), then an adjuster (default: the one the product's sensor type "
+        "names).\nWrites adjusted model files, corrected RPCs (<image>_RPC.TXT, GDAL "
+        "reads them beside\n<image>.tif), residuals.png and report.json (checkpoint accuracy "
+        'when the scene has\ncheckpoints).\n\nconfiguration: {"images": {NAME: '
+        '{"model": FILE, "raster": FILE}}, "gcps": CSV,\n  "dem": FILE, '
+        '"geoid": GTX}',
+        epilog=examples(
+            "carto adjust scene1 --gcps 1 --out adj1",
+            "carto adjust scene1 --gcps 1 --mode separate --out adj1-separate",
+            "carto adjust scene1 --gcps 1 --no-gcp-transfer --out adj1-hand-only",
+            "carto adjust calib-scene --mode calibration --out calib   # many GCPs",
+            "carto adjust scene2 --gcps 1 --calibration calib/calibration.json --out adj2",
+            "carto adjust pair.json --adjuster rpc-bias --out adj",
+            "carto adjust pair.json --adjuster rpc-bias --dem-heights 10 --dem-offset-sigma 4 "
+            "--out adj",
+        ),
+        formatter_class=formatter,
+    )
+    p.add_argument("source", metavar="SCENE_OR_CONFIG", help="scene folder or JSON configuration")
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder")
+    p.add_argument("--gcps", type=int, metavar="N", help="number of GCPs to use (default all)")
+    p.add_argument("--adjuster", metavar="NAME", help="adjuster (carto plugins --kind adjuster)")
+    p.add_argument(
+        "--mode",
+        help="adjuster mode (rpc-bias: shift, affine; other adjusters: carto plugins NAME)",
+    )
+    p.add_argument(
+        "--attitude-order",
+        type=int,
+        metavar="K",
+        help="order of the attitude correction polynomials (0 bias, 1 + drift ...)",
+    )
+    p.add_argument(
+        "--ties",
+        default="auto",
+        metavar="auto|none|FILE",
+        help="tie points: automatic (default), none, or a CSV id,image,line,sample",
+    )
+    p.add_argument(
+        "--dem-heights",
+        type=float,
+        metavar="SIGMA_M",
+        help="constrain tie-point heights to the DEM with this sigma (0: never; default: "
+        "30 m when no GCP is used, else off)",
+    )
+    p.add_argument(
+        "--dem-offset-sigma",
+        type=float,
+        metavar="M",
+        help="a-priori sigma of one height offset common to all DEM constraints, estimated "
+        "(the DEM's absolute vertical error, e.g. 4 for SRTM)",
+    )
+    p.add_argument(
+        "--calibration",
+        action="append",
+        metavar="FILE",
+        help="in-flight camera calibration of the same satellite (calibration.json written "
+        "by --mode calibration, or its folder); repeat it to average several",
+    )
+    p.add_argument(
+        "--no-gcp-transfer",
+        action="store_true",
+        help="do not match the GCPs between images (by default each GCP's offset between "
+        "images is matched and adjusted with it: the stereo parallax at matching precision; "
+        "a GCP measured in one image is transferred into the others)",
+    )
+    p.add_argument(
+        "--gcp-offset-sigma",
+        type=float,
+        metavar="PX",
+        help="a-priori sigma of a matched GCP offset, pixels per coordinate (default "
+        f"{GCP_OFFSET_SIGMA_PX})",
+    )
+    p.add_argument("--sensor", metavar="TYPE", help="sensor type of the product")
+    p.add_argument(
+        "--matcher",
+        metavar="NAME",
+        help="matcher of the tie points and the GCP transfer (default: the configuration's, "
+        "else ncc; carto plugins --kind matcher)",
+    )
+    p.add_argument(
+        "--trajectory",
+        metavar="NAME",
+        help="trajectory model fitted to the ancillary data (default: the one the ancillary "
+        "files name, polynomial; carto plugins --kind trajectory)",
+    )
+    p.add_argument("--no-robust", action="store_true", help="no outlier rejection")
+    p.add_argument("--quiet", action="store_true", help="no progress messages")
+    p.set_defaults(handler=cmd_adjust)

@@ -1,0 +1,258 @@
+"""``carto dem`` and ``carto evaluate``: DEMs and ortho-images, and their accuracy."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import textwrap
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from carto.framework.cli.common import examples, formatter, table
+from carto.framework.errors import InputError
+
+
+# --------------------------------------------------------------------------- evaluate
+def _fmt_m(value: float | None, signed: bool = False) -> str:
+    if value is None:
+        return "-"
+    return f"{value:+.3f}" if signed else f"{value:.3f}"
+
+
+def _accuracy_summary(report: dict[str, Any]) -> str:
+    """The readable summary of a :func:`~carto.framework.evaluation.dem_accuracy.dem_accuracy`
+    report."""
+    completeness = report["completeness"]
+    lines = [
+        f"DEM {report['dem']} vs reference {report['reference']} "
+        f"(heights {report['vertical']}, d = DEM - reference)",
+        f"  {'pixels compared':17}{report['count']}",
+        f"  {'bias (mean)':17}{_fmt_m(report['bias_m'], signed=True)} m",
+        f"  {'median':17}{_fmt_m(report['median_m'], signed=True)} m",
+        f"  {'std':17}{_fmt_m(report['std_m'])} m",
+        f"  {'RMSE':17}{_fmt_m(report['rmse_m'])} m",
+        f"  {'NMAD':17}{_fmt_m(report['nmad_m'])} m",
+        f"  {'LE90':17}{_fmt_m(report['le90_m'])} m",
+        f"  {'max |d|':17}{_fmt_m(report['max_abs_m'])} m",
+        f"  {'completeness':17}"
+        + ("-" if completeness is None else f"{100.0 * completeness:.1f} %")
+        + f" of {report['reference_count']} valid reference pixels",
+        "",
+        "by slope class (slope of the reference):",
+    ]
+    rows = [
+        (
+            f"{c['slope_deg'][0]:g}-{c['slope_deg'][1]:g}",
+            str(c["count"]),
+            _fmt_m(c["bias_m"], signed=True),
+            _fmt_m(c["rmse_m"]),
+            _fmt_m(c["nmad_m"]),
+            _fmt_m(c["le90_m"]),
+        )
+        for c in report["by_slope"]
+    ]
+    header = ("SLOPE (deg)", "COUNT", "BIAS (m)", "RMSE (m)", "NMAD (m)", "LE90 (m)")
+    lines.append(textwrap.indent(table(rows, header), "  "))
+    return "\n".join(lines)
+
+
+def cmd_evaluate(args: argparse.Namespace) -> int:
+    from carto.framework.evaluation.dem_accuracy import dem_difference, difference_accuracy
+    from carto.framework.files.atomic import atomic_output
+    from carto.framework.raster.dem import DEM, Geoid
+
+    dem = DEM.open(args.dem)
+    reference = DEM.open(args.reference)
+    geoid = None if args.geoid is None else Geoid.open(args.geoid)
+    difference, slope, reference = dem_difference(dem, reference, geoid=geoid)
+    stats = difference_accuracy(difference, slope, np.isfinite(reference.heights))
+    report: dict[str, Any] = {
+        "dem": dem.name,
+        "reference": reference.name,
+        "vertical": reference.vertical,
+    }
+    report.update(stats)
+    print(_accuracy_summary(report))
+    outputs = []
+    if args.out:
+        try:
+            with atomic_output(args.out) as tmp:
+                tmp.write_text(json.dumps(report, indent=2) + "\n")
+        except OSError as exc:
+            raise InputError(f"cannot write report {args.out}: {exc.strerror or exc}") from exc
+        outputs.append(f"report {args.out}")
+    if args.plot or args.hillshade:
+        from carto.framework.raster.quicklook import difference_png, hillshade_png
+
+        if args.plot:
+            title = f"{Path(dem.name).name} - {Path(reference.name).name}"
+            difference_png(difference, args.plot, title=title)
+            outputs.append(f"difference map {args.plot}")
+        if args.hillshade:
+            hillshade_png(dem, args.hillshade)
+            outputs.append(f"hillshade {args.hillshade}")
+    if outputs:
+        print()
+        print("wrote " + ", ".join(outputs))
+    return 0
+
+
+def add_evaluate(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "evaluate",
+        help="accuracy of a DEM against a reference DEM (bias, RMSE, NMAD, LE90, by slope)",
+        description="Resample DEM bilinearly onto the grid of the reference DEM and summarise the "
+        "height\ndifferences d = DEM - reference where both are valid: bias (mean), median, std, "
+        "RMSE,\nNMAD (1.4826 median |d - median d|), LE90 (90th percentile of |d|), max |d|, "
+        "completeness\n(share of the valid reference pixels the DEM covers) and the same figures "
+        "by class of\nreference slope (0-10, 10-20, 20-30, 30-90 deg). Both DEMs must have the "
+        "same vertical\nreference; --geoid converts geoid heights when the other DEM is "
+        "ellipsoidal.",
+        epilog=examples(
+            "carto evaluate out/dem.tif --reference scene1/truth/dem.tif",
+            "carto evaluate dem.tif --reference lidar.tif --out report.json --plot diff.png",
+            "carto evaluate dem.tif --reference srtm.hgt --geoid egm96_15.gtx --hillshade hs.png",
+        ),
+        formatter_class=formatter,
+    )
+    p.add_argument("dem", metavar="DEM", help="the DEM to evaluate (GeoTIFF or any GDAL raster)")
+    p.add_argument(
+        "--reference", required=True, metavar="REF", help="reference DEM; its grid is used"
+    )
+    p.add_argument(
+        "--geoid",
+        metavar="GTX",
+        help="geoid grid (e.g. egm96_15.gtx) to compare geoid with ellipsoidal heights",
+    )
+    p.add_argument("--out", metavar="REPORT.json", help="write the figures as JSON")
+    p.add_argument("--plot", metavar="DIFF.png", help="write a map of the differences")
+    p.add_argument("--hillshade", metavar="HS.png", help="write a hillshade of DEM")
+    p.set_defaults(handler=cmd_evaluate, needs_registry=False)
+
+
+# --------------------------------------------------------------------------- dem
+def cmd_dem(args: argparse.Namespace) -> int:
+    from carto.framework.workflows.dem import StereoInputs, dem_product
+
+    options: dict[str, object] = {}
+    for key, value in (
+        ("posting_m", args.posting),
+        ("ortho_res_m", args.ortho_res),
+        ("crs", args.crs),
+        ("max_iterations", args.max_iterations),
+        ("workers", args.workers),
+    ):
+        if value is not None:
+            options[key] = value
+    report = dem_product(
+        args.out,
+        StereoInputs(
+            args.scene,
+            args.left,
+            args.right,
+            args.left_model,
+            args.right_model,
+            args.sensor,
+            args.models,
+            args.pair,
+        ),
+        init_dem=args.init_dem,
+        geoid=args.geoid,
+        init_height_m=args.init_height,
+        generator=args.generator,
+        matcher=args.matcher,
+        reference=args.reference,
+        options=options,
+        quiet=args.quiet,
+    )
+    print(_dem_summary(report))
+    grid = report["dem_grid"]
+    print(
+        f"DEM: {grid['shape'][1]} x {grid['shape'][0]} nodes at {grid['posting_m']:g} m, "
+        f"{grid['crs']}, ellipsoidal heights"
+    )
+    acc = report.get("accuracy")
+    if acc:
+        print(
+            f"against the reference ({acc['count']} pixels): median {acc['median_m']:.2f} m, "
+            f"NMAD {acc['nmad_m']:.2f} m, RMSE {acc['rmse_m']:.2f} m, LE90 {acc['le90_m']:.2f} "
+            f"m, completeness {100 * acc['completeness']:.1f} %"
+        )
+    print(f"outputs in {args.out}: {', '.join(report['files'].values())}, report.json")
+    return 0
+
+
+def _dem_summary(report: dict[str, Any]) -> str:
+    """One line on the generator's run: iterations, state, the last iteration's figures."""
+    n = len(report["iterations"])
+    state = {True: "converged", False: "stopped at the iteration limit", None: "done"}[
+        report["converged"]
+    ]
+    last = {k: v for k, v in report["iterations"][-1].items() if k not in ("iteration", "seconds")}
+    figures = ", ".join(
+        f"{k} {v:.3g}" if isinstance(v, float) else f"{k} {v}" for k, v in last.items()
+    )
+    return f"{report['generator']} with matcher {report['matcher']}: {n} iterations ({state})" + (
+        f", last: {figures}" if figures else ""
+    )
+
+
+def add_dem(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "dem",
+        help="DEM and ortho-images of a stereo pair (a DEM generator, e.g. IOR)",
+        description=(
+            "Generate a DEM and ortho-images from a stereo pair: a scene folder (its first two "
+            "images,\nthe one closer to nadir as left, or --pair; with --models, the adjusted "
+            "models of\n'carto adjust --out DIR') or two images with their models "
+            "(--left/--right; the model\nbeside each image: RPC tags, .geom, _RPC.TXT, .RPB, "
+            "or --left-model). Starts from\n--init-dem (SRTM .hgt with --geoid for geoid "
+            "heights) or a constant --init-height;\na scene's init_dem.tif by default. Writes "
+            "dem.tif (float32, ellipsoidal heights,\nnodata, CRS), ortho_left.tif, "
+            "ortho_right.tif, quality.tif (score, mask),\ndem_hillshade.png and report.json "
+            "(one entry per iteration); with --reference,\nthe accuracy against it and "
+            "dem_difference.png."
+        ),
+        epilog=examples(
+            "carto dem scene1 --models adj1 --posting 10 --out dem1",
+            "carto dem --left img_01.tif --right img_02.tif --init-height 2320 --posting 1 "
+            "--ortho-res 0.5 --out dem",
+            "carto dem --left left.tif --right right.tif --init-dem N44E005.hgt --geoid "
+            "egm96_15.gtx --out dem",
+        ),
+        formatter_class=formatter,
+    )
+    p.add_argument("scene", nargs="?", metavar="SCENE", help="scene folder (carto simulate)")
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder")
+    p.add_argument("--left", metavar="IMAGE", help="left image (instead of a scene)")
+    p.add_argument("--right", metavar="IMAGE", help="right image")
+    p.add_argument("--left-model", metavar="FILE", help="model of the left image")
+    p.add_argument("--right-model", metavar="FILE", help="model of the right image")
+    p.add_argument("--sensor", metavar="TYPE", help="sensor type of the models (e.g. rpc)")
+    p.add_argument("--models", metavar="DIR", help="adjusted models (a carto adjust output)")
+    p.add_argument("--pair", nargs=2, metavar=("LEFT", "RIGHT"), help="image names of a scene")
+    p.add_argument("--init-dem", metavar="FILE", help="starting DEM (GeoTIFF, SRTM .hgt)")
+    p.add_argument("--geoid", metavar="GTX", help="geoid grid for geoid heights (EGM96)")
+    p.add_argument("--init-height", type=float, metavar="M", help="constant starting height")
+    p.add_argument("--posting", type=float, metavar="M", help="DEM posting (default 10 m)")
+    p.add_argument("--ortho-res", type=float, metavar="M", help="ortho pixel (default: GSD)")
+    p.add_argument("--crs", metavar="CRS", help="output CRS (default: the UTM zone)")
+    p.add_argument("--max-iterations", type=int, metavar="N", help="most DEM updates (6)")
+    p.add_argument("--workers", type=int, metavar="N", help="tiles processed in parallel (1)")
+    p.add_argument(
+        "--generator",
+        metavar="NAME",
+        help="DEM generator (default: the one the images' sensor type names, else the only "
+        "one installed; carto plugins --kind dem-generator)",
+    )
+    p.add_argument(
+        "--matcher",
+        default="ncc",
+        metavar="NAME",
+        help="dense matcher the generator uses (default ncc; carto plugins --kind matcher)",
+    )
+    p.add_argument("--reference", metavar="DEM", help="reference DEM to evaluate against")
+    p.add_argument("--quiet", action="store_true", help="no progress messages")
+    p.set_defaults(handler=cmd_dem)

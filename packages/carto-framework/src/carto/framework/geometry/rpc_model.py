@@ -1,0 +1,495 @@
+"""RPC00B rational polynomial coefficients and their evaluation (:class:`RPCCoefficients`).
+
+An RPC maps normalised ground coordinates to normalised image coordinates by ratios of cubic
+polynomials (NITF STDI-0002 RPC00B; Grodecki & Dial 2003)::
+
+    L = (lon - LONG_OFF) / LONG_SCALE     P = (lat - LAT_OFF) / LAT_SCALE
+    H = (h - HEIGHT_OFF) / HEIGHT_SCALE
+    line_native = LINE_NUM(L, P, H) / LINE_DEN(L, P, H) * LINE_SCALE + LINE_OFF
+    samp_native = SAMP_NUM(L, P, H) / SAMP_DEN(L, P, H) * SAMP_SCALE + SAMP_OFF
+
+with the 20 terms of each polynomial in RPC00B order (the order of GDAL's ``RPCComputeTerms``)::
+
+    1, L, P, H, LP, LH, PH, L^2, P^2, H^2, LPH, L^3, LP^2, LH^2, L^2P, P^3, PH^2, L^2H, P^2H, H^3
+
+Conventions
+-----------
+* **Pixels.** The project convention (see :mod:`carto.framework.geometry.sensor`) puts the centre
+of the
+  first pixel at ``(line, sample) = (0.5, 0.5)``. RPC00B files (NITF TRE, GeoTIFF RPC tag,
+  ``_RPC.TXT``, ``.RPB``, WorldView XML, OSSIM ``.geom``) put it at ``(0, 0)``:
+  ``project = native + 0.5``. GDAL's RPC transformer adds the same 0.5 (``RPCTransformPoint``
+  in ``alg/gdal_rpc.cpp``), so :meth:`RPCCoefficients.project` equals rasterio's
+  ``RPCTransformer.rowcol(lon, lat, h, op=...)`` with an identity ``op`` (tested to 1e-6 px on
+  every supported file). DIMAP RPC XML (Pleiades, SPOT 6/7) count the centre of the first pixel
+  as 1 (the DIMAP ``FIRST_ROW``/``FIRST_COL``, 1 unless a DIMAP v3 ``ImagetoGround_Validity_Domain``
+  says otherwise): the reader subtracts it from ``LINE_OFF``/``SAMP_OFF``, as GDAL's Pleiades
+  metadata reader does, which makes the DIMAP file of a Pleiades image agree with OSSIM's
+  ``.geom`` of the same image.
+* :class:`RPCCoefficients` keeps ``LINE_OFF``/``SAMP_OFF`` in the **native** (file) convention, so
+  that writers reproduce the files; the 0.5 is added in :meth:`RPCCoefficients.project` and
+  removed when locating.
+* **Ground.** WGS84 geodetic longitude and latitude in degrees, heights in metres above the
+  WGS84 **ellipsoid**. Longitudes more than 270 degrees away from ``LONG_OFF`` are wrapped by
+  360 degrees, as GDAL does (a scene across the antimeridian).
+* Values outside the RPC's normalisation domain (``|L|, |P|, |H| > 1``) are extrapolated as GDAL
+  does; callers compare the results with
+  :attr:`~carto.framework.geometry.rpc_sensor.RPCSensor.image_shape`.
+
+Contents: the RPC00B and RPC00A term orders, the monomial evaluation shared with the fitting,
+and :class:`RPCCoefficients` (projection with analytic partials, Newton location, rasterio
+conversions). The rest of the RPC support is in sibling modules:
+
+* :mod:`~carto.framework.geometry.rpc_sensor`: the sensor
+  :class:`~carto.framework.geometry.rpc_sensor.RPCSensor` (with Grodecki & Dial's image-space
+  bias/affine correction as adjustable parameters) and its sensor type ``"rpc"``;
+* :mod:`~carto.framework.geometry.rpc_readers`: readers for every common RPC container;
+* :mod:`~carto.framework.geometry.rpc_writers`: ``_RPC.TXT`` and GeoTIFF RPC tag writers;
+* :mod:`~carto.framework.geometry.rpc_fitting`: terrain-independent RPC fitting to any sensor
+  (Tao & Hu 2001).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import attrs
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from carto.framework.arrays import as_float_arrays
+from carto.framework.errors import InputError
+
+FloatArray = NDArray[np.float64]
+
+__all__ = [
+    "RPC00A_TERMS",
+    "RPC00B_TERMS",
+    "RPCCoefficients",
+]
+
+# ----------------------------------------------------------------------------- RPC00B terms
+RPC00B_TERMS: tuple[str, ...] = (
+    "1", "L", "P", "H", "LP", "LH", "PH", "LL", "PP", "HH",
+    "LPH", "LLL", "LPP", "LHH", "LLP", "PPP", "PHH", "LLH", "PPH", "HHH",
+)  # fmt: skip
+"""The 20 monomials of RPC00B in order (L: longitude, P: latitude, H: height, normalised)."""
+
+_EXPONENTS = np.array([[t.count(v) for v in "LPH"] for t in RPC00B_TERMS], dtype=np.int64)
+
+RPC00A_TERMS: tuple[str, ...] = (
+    "1", "L", "P", "H", "LP", "LH", "PH", "LPH", "LL", "PP",
+    "HH", "LLL", "LLP", "LLH", "LPP", "PPP", "PPH", "LHH", "PHH", "HHH",
+)  # fmt: skip
+"""The RPC00A term order, as OSSIM evaluates ``polynomial_format: A`` (``ossimRpcModel``)."""
+
+RPC00A_TO_B = tuple(RPC00A_TERMS.index(t) for t in RPC00B_TERMS)
+"""``coeff_B[i] = coeff_A[RPC00A_TO_B[i]]``."""
+
+
+def _derivative_matrix(axis: int) -> FloatArray:
+    """``D`` with ``d(term_k)/d(var_axis) = sum_j D[k, j] term_j`` (exact, terms up to cubic)."""
+    index = {tuple(e): j for j, e in enumerate(_EXPONENTS.tolist())}
+    d = np.zeros((20, 20))
+    for k, e in enumerate(_EXPONENTS.tolist()):
+        if e[axis]:
+            lowered = list(e)
+            lowered[axis] -= 1
+            d[k, index[tuple(lowered)]] = e[axis]
+    return d
+
+
+_D_LPH = tuple(_derivative_matrix(a) for a in range(3))
+
+_CHUNK = 8192
+"""Points evaluated at a time: keeps the 20 x chunk monomial block in cache."""
+
+_MAX_LON_DIFF_DEG = 270.0
+
+
+def monomials(lnorm: FloatArray, pnorm: FloatArray, hnorm: FloatArray, out: FloatArray) -> None:
+    """Fill ``out`` (20, n) with the RPC00B terms, sharing the quadratic products."""
+    out[0] = 1.0
+    out[1] = lnorm
+    out[2] = pnorm
+    out[3] = hnorm
+    np.multiply(lnorm, pnorm, out=out[4])
+    np.multiply(lnorm, hnorm, out=out[5])
+    np.multiply(pnorm, hnorm, out=out[6])
+    np.multiply(lnorm, lnorm, out=out[7])
+    np.multiply(pnorm, pnorm, out=out[8])
+    np.multiply(hnorm, hnorm, out=out[9])
+    np.multiply(out[4], hnorm, out=out[10])
+    np.multiply(out[7], lnorm, out=out[11])
+    np.multiply(out[8], lnorm, out=out[12])
+    np.multiply(out[9], lnorm, out=out[13])
+    np.multiply(out[7], pnorm, out=out[14])
+    np.multiply(out[8], pnorm, out=out[15])
+    np.multiply(out[9], pnorm, out=out[16])
+    np.multiply(out[7], hnorm, out=out[17])
+    np.multiply(out[8], hnorm, out=out[18])
+    np.multiply(out[9], hnorm, out=out[19])
+
+
+def _poly_values(matrix: FloatArray, lnorm: FloatArray, pnorm: FloatArray, hnorm: FloatArray):
+    """``matrix @ terms(L, P, H)`` for 1-D normalised inputs, shape ``(k, n)``, in chunks."""
+    n = lnorm.size
+    out = np.empty((matrix.shape[0], n))
+    terms = np.empty((20, min(n, _CHUNK)))
+    for start in range(0, n, _CHUNK):
+        stop = min(start + _CHUNK, n)
+        t = terms[:, : stop - start]
+        monomials(lnorm[start:stop], pnorm[start:stop], hnorm[start:stop], t)
+        out[:, start:stop] = matrix @ t
+    return out
+
+
+# ----------------------------------------------------------------------------- coefficients
+SCALAR_FIELDS = (
+    "LINE_OFF", "SAMP_OFF", "LAT_OFF", "LONG_OFF", "HEIGHT_OFF",
+    "LINE_SCALE", "SAMP_SCALE", "LAT_SCALE", "LONG_SCALE", "HEIGHT_SCALE",
+)  # fmt: skip
+COEFF_FIELDS = ("LINE_NUM_COEFF", "LINE_DEN_COEFF", "SAMP_NUM_COEFF", "SAMP_DEN_COEFF")
+
+
+def _coefficient_array(value: ArrayLike) -> FloatArray:
+    arr = np.array(value, dtype=np.float64)
+    if arr.shape != (4, 20):
+        raise InputError(
+            f"RPC coefficients: expected shape (4, 20) "
+            f"(LINE_NUM, LINE_DEN, SAMP_NUM, SAMP_DEN x 20 terms), got {arr.shape}"
+        )
+    arr.setflags(write=False)
+    return arr
+
+
+def _optional_float(value: Any) -> float | None:
+    return None if value is None else float(value)
+
+
+@attrs.frozen
+class RPCCoefficients:
+    """An RPC00B model (see the module docstring for the formulas and conventions).
+
+    Attributes:
+        line_off, samp_off: image offsets, pixels, **native** convention (centre of the first
+            pixel at 0), as stored in RPC00B files.
+        lat_off, long_off: ground offsets, degrees.
+        height_off: height offset, metres above the WGS84 ellipsoid.
+        line_scale, samp_scale: image scales, pixels.
+        lat_scale, long_scale: ground scales, degrees.
+        height_scale: height scale, metres.
+        coefficients: shape ``(4, 20)``, rows ``LINE_NUM, LINE_DEN, SAMP_NUM, SAMP_DEN`` in
+            RPC00B term order (:data:`RPC00B_TERMS`); read-only.
+        err_bias, err_rand: RPC00B ``ERR_BIAS``/``ERR_RAND`` (metres, RMS per horizontal axis)
+            when the file gives them (``-1``: unknown), else None.
+    """
+
+    line_off: float = attrs.field(converter=float)
+    samp_off: float = attrs.field(converter=float)
+    lat_off: float = attrs.field(converter=float)
+    long_off: float = attrs.field(converter=float)
+    height_off: float = attrs.field(converter=float)
+    line_scale: float = attrs.field(converter=float)
+    samp_scale: float = attrs.field(converter=float)
+    lat_scale: float = attrs.field(converter=float)
+    long_scale: float = attrs.field(converter=float)
+    height_scale: float = attrs.field(converter=float)
+    coefficients: FloatArray = attrs.field(
+        converter=_coefficient_array, eq=attrs.cmp_using(eq=np.array_equal), hash=False
+    )
+    err_bias: float | None = attrs.field(default=None, converter=_optional_float)
+    err_rand: float | None = attrs.field(default=None, converter=_optional_float)
+
+    def __attrs_post_init__(self) -> None:
+        for name in SCALAR_FIELDS:
+            value = getattr(self, name.lower())
+            if not math.isfinite(value):
+                raise InputError(f"RPC field {name}: must be finite, got {value}")
+            if name.endswith("SCALE") and value == 0.0:
+                raise InputError(f"RPC field {name}: must be non-zero, got {value}")
+        for name, row in zip(COEFF_FIELDS, self.coefficients, strict=True):
+            if not np.all(np.isfinite(row)):
+                raise InputError(f"RPC field {name}: contains NaN or infinite values")
+        for name in ("LINE_DEN_COEFF", "SAMP_DEN_COEFF"):
+            if not np.any(self.coefficients[COEFF_FIELDS.index(name)]):
+                raise InputError(f"RPC field {name}: all 20 coefficients are zero")
+
+    # ------------------------------------------------------------------ views
+    @property
+    def line_num_coeff(self) -> FloatArray:
+        """``LINE_NUM_COEFF_1..20`` (read-only view)."""
+        return self.coefficients[0]
+
+    @property
+    def line_den_coeff(self) -> FloatArray:
+        """``LINE_DEN_COEFF_1..20`` (read-only view)."""
+        return self.coefficients[1]
+
+    @property
+    def samp_num_coeff(self) -> FloatArray:
+        """``SAMP_NUM_COEFF_1..20`` (read-only view)."""
+        return self.coefficients[2]
+
+    @property
+    def samp_den_coeff(self) -> FloatArray:
+        """``SAMP_DEN_COEFF_1..20`` (read-only view)."""
+        return self.coefficients[3]
+
+    # ------------------------------------------------------------------ evaluation
+    def normalise(
+        self, lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Normalised ground coordinates ``(L, P, H)`` (dimensionless), broadcast together."""
+        lon, lat, h = as_float_arrays(lon_deg, lat_deg, h_m)
+        return (
+            self._norm_lon(lon),
+            (lat - self.lat_off) / self.lat_scale,
+            ((h - self.height_off) / self.height_scale),
+        )
+
+    def _norm_lon(self, lon: FloatArray) -> FloatArray:
+        diff = lon - self.long_off
+        if np.fmax.reduce(np.abs(diff), axis=None, initial=0.0) > _MAX_LON_DIFF_DEG:
+            diff = np.where(diff > _MAX_LON_DIFF_DEG, diff - 360.0, diff)
+            diff = np.where(diff < -_MAX_LON_DIFF_DEG, diff + 360.0, diff)
+        diff /= self.long_scale
+        return diff
+
+    def project(
+        self, lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike
+    ) -> tuple[FloatArray, FloatArray]:
+        """Project ground points into the image.
+
+        Args:
+            lon_deg, lat_deg: WGS84 longitude and latitude, degrees.
+            h_m: height above the WGS84 ellipsoid, metres.
+
+        Returns:
+            ``(line, sample)`` in pixels, **project convention** (centre of the first pixel at
+            0.5, 0.5), broadcast shape; NaN where a denominator vanishes or an input is NaN.
+        """
+        lon, lat, h = np.broadcast_arrays(
+            np.asarray(lon_deg, dtype=np.float64),
+            np.asarray(lat_deg, dtype=np.float64),
+            np.asarray(h_m, dtype=np.float64),
+        )
+        shape = lon.shape
+        line, samp = self._project_flat(lon.ravel(), lat.ravel(), h.ravel())
+        return line.reshape(shape), samp.reshape(shape)
+
+    def _project_flat(
+        self, lon: FloatArray, lat: FloatArray, h: FloatArray
+    ) -> tuple[FloatArray, FloatArray]:
+        """:meth:`project` on 1-D arrays of equal size (the fast path, in cached chunks)."""
+        n = lon.size
+        line = np.empty(n)
+        samp = np.empty(n)
+        m = min(n, _CHUNK)
+        norm = np.empty((3, m))
+        terms = np.empty((20, m))
+        values = np.empty((4, m))
+        coeffs = self.coefficients
+        with np.errstate(divide="ignore", invalid="ignore"):
+            for start in range(0, n, _CHUNK):
+                stop = min(start + _CHUNK, n)
+                k = stop - start
+                ln, pn, hn = norm[0, :k], norm[1, :k], norm[2, :k]
+                np.subtract(lon[start:stop], self.long_off, out=ln)
+                lo, hi = np.fmin.reduce(ln), np.fmax.reduce(ln)  # NaN only if all are NaN
+                if lo < -_MAX_LON_DIFF_DEG or hi > _MAX_LON_DIFF_DEG:
+                    ln[ln > _MAX_LON_DIFF_DEG] -= 360.0
+                    ln[ln < -_MAX_LON_DIFF_DEG] += 360.0
+                np.divide(ln, self.long_scale, out=ln)
+                np.subtract(lat[start:stop], self.lat_off, out=pn)
+                np.divide(pn, self.lat_scale, out=pn)
+                np.subtract(h[start:stop], self.height_off, out=hn)
+                np.divide(hn, self.height_scale, out=hn)
+                t = terms[:, :k]
+                monomials(ln, pn, hn, t)
+                v = values[:, :k]
+                np.matmul(coeffs, t, out=v)
+                np.divide(v[0], v[1], out=line[start:stop])
+                np.divide(v[2], v[3], out=samp[start:stop])
+            line *= self.line_scale
+            line += self.line_off + 0.5
+            samp *= self.samp_scale
+            samp += self.samp_off + 0.5
+        bad = ~(np.isfinite(line) & np.isfinite(samp))
+        if bad.any():
+            line[bad] = np.nan
+            samp[bad] = np.nan
+        return line, samp
+
+    def _derivative_coefficients(self, axes: Sequence[int]) -> FloatArray:
+        """Rows: the 4 polynomials, then their derivatives along each of ``axes`` (0 L, 1 P,
+        2 H), all in the RPC00B term basis: ``(4 + 4 len(axes), 20)``."""
+        blocks = [self.coefficients] + [self.coefficients @ _D_LPH[a] for a in axes]
+        return np.concatenate(blocks, axis=0)
+
+    def project_with_partials(
+        self, lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Project and differentiate analytically.
+
+        Returns:
+            ``(line, sample, jacobian)`` for the points flattened to shape ``(N,)``: image
+            coordinates in pixels (project convention) and ``jacobian`` of shape ``(N, 2, 3)``,
+            the partials of ``(line, sample)`` w.r.t. ``(lon_deg, lat_deg, h_m)`` in px/deg,
+            px/deg and px/m.
+        """
+        lnorm, pnorm, hnorm = (a.ravel() for a in self.normalise(lon_deg, lat_deg, h_m))
+        v = _poly_values(self._derivative_coefficients((0, 1, 2)), lnorm, pnorm, hnorm)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            rl = v[0] / v[1]
+            rs = v[2] / v[3]
+            jac = np.empty((lnorm.size, 2, 3))
+            for a, unit in enumerate((self.long_scale, self.lat_scale, self.height_scale)):
+                blk = v[4 + 4 * a : 8 + 4 * a]
+                jac[:, 0, a] = (blk[0] - rl * blk[1]) / v[1] * (self.line_scale / unit)
+                jac[:, 1, a] = (blk[2] - rs * blk[3]) / v[3] * (self.samp_scale / unit)
+        line = rl * self.line_scale + self.line_off + 0.5
+        samp = rs * self.samp_scale + self.samp_off + 0.5
+        return line, samp, jac
+
+    def locate(
+        self,
+        line: ArrayLike,
+        sample: ArrayLike,
+        h_m: ArrayLike,
+        *,
+        tolerance_px: float = 1e-10,
+        max_iterations: int = 30,
+    ) -> tuple[FloatArray, FloatArray]:
+        """Invert :meth:`project` at given heights by vectorised Newton iteration on (lon, lat).
+
+        Starts at the RPC's ground offset, uses the analytic Jacobian of the rational functions
+        and limits each step to 0.5 in normalised units; points that leave ``|L|, |P| < 20``
+        are dropped.
+
+        Args:
+            line, sample: image coordinates, pixels, project convention.
+            h_m: heights above the WGS84 ellipsoid, metres.
+            tolerance_px: stop when both image residuals are below this, pixels.
+            max_iterations: Newton iterations at most.
+
+        Returns:
+            ``(lon_deg, lat_deg)``, broadcast shape; NaN where Newton did not reach
+            ``tolerance_px`` (points far outside the RPC domain, singular Jacobian).
+        """
+        ln_, sm_, h_ = as_float_arrays(line, sample, h_m)
+        shape = ln_.shape
+        target_l = (ln_.ravel() - 0.5 - self.line_off) / self.line_scale
+        target_s = (sm_.ravel() - 0.5 - self.samp_off) / self.samp_scale
+        hnorm = (h_.ravel() - self.height_off) / self.height_scale
+        n = target_l.size
+        lnorm = np.zeros(n)
+        pnorm = np.zeros(n)
+        done = np.zeros(n, dtype=bool)
+        active = np.flatnonzero(np.isfinite(target_l) & np.isfinite(target_s) & np.isfinite(hnorm))
+        matrix = self._derivative_coefficients((0, 1))
+        tol_l = tolerance_px / abs(self.line_scale)
+        tol_s = tolerance_px / abs(self.samp_scale)
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            for _ in range(max_iterations):
+                if active.size == 0:
+                    break
+                li, pi = lnorm[active], pnorm[active]
+                v = _poly_values(matrix, li, pi, hnorm[active])
+                rl = v[0] / v[1]
+                rs = v[2] / v[3]
+                el = rl - target_l[active]
+                es = rs - target_s[active]
+                conv = (np.abs(el) <= tol_l) & (np.abs(es) <= tol_s)
+                done[active[conv]] = True
+                a = (v[4] - rl * v[5]) / v[1]  # d rl / dL
+                c = (v[6] - rs * v[7]) / v[3]  # d rs / dL
+                b = (v[8] - rl * v[9]) / v[1]  # d rl / dP
+                d = (v[10] - rs * v[11]) / v[3]  # d rs / dP
+                det = a * d - b * c
+                dl = (d * el - b * es) / det
+                dp = (a * es - c * el) / det
+                step = np.hypot(dl, dp)
+                shrink = np.minimum(1.0, 0.5 / np.maximum(step, 1e-300))  # at most 0.5 per step
+                li = li - dl * shrink
+                pi = pi - dp * shrink
+                keep = ~conv & (np.abs(li) < 20.0) & (np.abs(pi) < 20.0)  # False for NaN
+                sel = active[keep]
+                lnorm[sel] = li[keep]
+                pnorm[sel] = pi[keep]
+                active = sel
+        lon = lnorm * self.long_scale + self.long_off
+        lat = pnorm * self.lat_scale + self.lat_off
+        lon = np.where(lon > 180.0, lon - 360.0, np.where(lon < -180.0, lon + 360.0, lon))
+        lon[~done] = np.nan
+        lat[~done] = np.nan
+        return lon.reshape(shape), lat.reshape(shape)
+
+    # ------------------------------------------------------------------ conversions
+    @classmethod
+    def from_rasterio(cls, rpc: Any) -> RPCCoefficients:
+        """From a :class:`rasterio.rpc.RPC` (GDAL's RPC metadata, native pixel convention)."""
+        return cls(
+            line_off=rpc.line_off,
+            samp_off=rpc.samp_off,
+            lat_off=rpc.lat_off,
+            long_off=rpc.long_off,
+            height_off=rpc.height_off,
+            line_scale=rpc.line_scale,
+            samp_scale=rpc.samp_scale,
+            lat_scale=rpc.lat_scale,
+            long_scale=rpc.long_scale,
+            height_scale=rpc.height_scale,
+            coefficients=[
+                rpc.line_num_coeff,
+                rpc.line_den_coeff,
+                rpc.samp_num_coeff,
+                rpc.samp_den_coeff,
+            ],
+            err_bias=rpc.err_bias,
+            err_rand=rpc.err_rand,
+        )
+
+    def to_rasterio(self) -> Any:
+        """As a :class:`rasterio.rpc.RPC` (for ``dataset.rpcs = ...`` or ``RPCTransformer``)."""
+        from rasterio.rpc import RPC
+
+        return RPC(
+            height_off=self.height_off,
+            height_scale=self.height_scale,
+            lat_off=self.lat_off,
+            lat_scale=self.lat_scale,
+            line_den_coeff=self.line_den_coeff.tolist(),
+            line_num_coeff=self.line_num_coeff.tolist(),
+            line_off=self.line_off,
+            line_scale=self.line_scale,
+            long_off=self.long_off,
+            long_scale=self.long_scale,
+            samp_den_coeff=self.samp_den_coeff.tolist(),
+            samp_num_coeff=self.samp_num_coeff.tolist(),
+            samp_off=self.samp_off,
+            samp_scale=self.samp_scale,
+            err_bias=self.err_bias,
+            err_rand=self.err_rand,
+        )
+
+    def as_dict(self) -> dict[str, Any]:
+        """Field name (RPC00B spelling) -> value; coefficient rows as lists of 20 floats."""
+        out: dict[str, Any] = {name: getattr(self, name.lower()) for name in SCALAR_FIELDS}
+        for name, row in zip(COEFF_FIELDS, self.coefficients, strict=True):
+            out[name] = row.tolist()
+        if self.err_bias is not None:
+            out["ERR_BIAS"] = self.err_bias
+        if self.err_rand is not None:
+            out["ERR_RAND"] = self.err_rand
+        return out
+
+    def default_image_shape(self) -> tuple[int, int]:
+        """Image size guessed from the offsets: ``2 * OFF`` rounded, with ``OFF`` in the project
+        convention (``LINE_OFF + 0.5``), i.e. an image centred on the offsets."""
+        return (
+            max(1, round(2.0 * (self.line_off + 0.5))),
+            max(1, round(2.0 * (self.samp_off + 0.5))),
+        )

@@ -1,0 +1,479 @@
+"""Readers of RPC00B models from every common RPC container, into
+:class:`~carto.framework.geometry.rpc_model.RPCCoefficients`.
+
+:func:`read_rpc` detects the format from the file's content (:func:`sniff_rpc_format`); one
+reader per format: :func:`read_rpc_gdal` (rasters with RPC metadata that GDAL opens: GeoTIFF RPC
+tag or sidecars, NITF RPC00B, VRT), :func:`read_rpc_txt` (``_RPC.TXT`` and other ``KEY: value``
+text), :func:`read_rpb` (``.RPB``), :func:`read_ossim_geom` (OSSIM ``.geom``),
+:func:`read_dimap_rpc` (DIMAP v1/v2/v3 RPC XML) and :func:`read_worldview_xml` (DigitalGlobe/Maxar
+``<isd>`` XML). Pixel offsets are converted to the native RPC00B convention of
+:mod:`~carto.framework.geometry.rpc_model`. Every failure is an
+:class:`~carto.framework.errors.InputError` naming the file (:func:`file_error`).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+import warnings
+import xml.etree.ElementTree as ET
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+from carto.framework.errors import InputError
+from carto.framework.geometry.rpc_model import (
+    COEFF_FIELDS,
+    RPC00A_TO_B,
+    SCALAR_FIELDS,
+    RPCCoefficients,
+)
+
+__all__ = [
+    "read_dimap_rpc",
+    "read_ossim_geom",
+    "read_rpb",
+    "read_rpc",
+    "read_rpc_gdal",
+    "read_rpc_txt",
+    "read_worldview_xml",
+]
+
+
+_SNIFF_BYTES = 262144
+
+
+def file_error(path: Path | str, message: str) -> InputError:
+    """The :class:`~carto.framework.errors.InputError` ``"<path>: <message>"`` of the RPC readers
+    and writers."""
+    return InputError(f"{path}: {message}")
+
+
+def _to_float(text: str | None, path: Path | str, field: str) -> float:
+    if text is None:
+        raise file_error(path, f"missing RPC field {field}")
+    token = text.strip().split(None, 1)[0] if text.strip() else ""
+    try:
+        value = float(token)
+    except ValueError:
+        raise file_error(path, f"RPC field {field}: not a number: {text.strip()[:40]!r}") from None
+    if not math.isfinite(value):
+        raise file_error(path, f"RPC field {field}: not finite: {text.strip()[:40]!r}")
+    return value
+
+
+def _to_floats(values: Sequence[str], path: Path | str, field: str) -> list[float]:
+    if len(values) != 20:
+        raise file_error(path, f"RPC field {field}: expected 20 coefficients, got {len(values)}")
+    return [_to_float(v, path, f"{field}_{i + 1}") for i, v in enumerate(values)]
+
+
+def _build(
+    path: Path | str,
+    scalars: Mapping[str, float],
+    coeffs: Mapping[str, Sequence[float]],
+    err_bias: float | None = None,
+    err_rand: float | None = None,
+) -> RPCCoefficients:
+    try:
+        return RPCCoefficients(
+            **{name.lower(): scalars[name] for name in SCALAR_FIELDS},
+            coefficients=[coeffs[name] for name in COEFF_FIELDS],
+            err_bias=err_bias,
+            err_rand=err_rand,
+        )
+    except InputError as err:
+        raise file_error(path, str(err)) from None
+
+
+def _read_text(path: Path) -> str:
+    try:
+        data = path.read_bytes()
+    except OSError as err:
+        raise file_error(path, f"cannot read: {err.strerror or err}") from None
+    return data.decode("utf-8", errors="replace").lstrip("\ufeff")
+
+
+def _load_txt(path: Path) -> tuple[RPCCoefficients, None]:
+    """``KEY: value`` text (``_RPC.TXT``, IKONOS/Cartosat/Planet/SkySat RPC text files)."""
+    text = _read_text(path)
+    fields: dict[str, str] = {}
+    for raw in text.splitlines():
+        key, sep, value = raw.partition(":")
+        if sep:
+            fields[key.strip().upper()] = value.strip()
+    if not fields:
+        raise file_error(path, "not an RPC text file (no 'KEY: value' lines)")
+    scalars = {name: _to_float(fields.get(name), path, name) for name in SCALAR_FIELDS}
+    coeffs = {}
+    for name in COEFF_FIELDS:
+        if name in fields:  # GDAL metadata style: all 20 on one line
+            coeffs[name] = _to_floats(fields[name].split(), path, name)
+        else:
+            coeffs[name] = [
+                _to_float(fields.get(f"{name}_{i}"), path, f"{name}_{i}") for i in range(1, 21)
+            ]
+    err = [_to_float(fields[k], path, k) if k in fields else None for k in ("ERR_BIAS", "ERR_RAND")]
+    return _build(path, scalars, coeffs, *err), None
+
+
+_RPB_KEYS = {
+    "LINE_OFF": "lineoffset",
+    "SAMP_OFF": "sampoffset",
+    "LAT_OFF": "latoffset",
+    "LONG_OFF": "longoffset",
+    "HEIGHT_OFF": "heightoffset",
+    "LINE_SCALE": "linescale",
+    "SAMP_SCALE": "sampscale",
+    "LAT_SCALE": "latscale",
+    "LONG_SCALE": "longscale",
+    "HEIGHT_SCALE": "heightscale",
+    "LINE_NUM_COEFF": "linenumcoef",
+    "LINE_DEN_COEFF": "linedencoef",
+    "SAMP_NUM_COEFF": "sampnumcoef",
+    "SAMP_DEN_COEFF": "sampdencoef",
+    "ERR_BIAS": "errbias",
+    "ERR_RAND": "errrand",
+}
+_RPB_ASSIGN = re.compile(r"(\w+)\s*=\s*(\([^)]*\)|[^;\n]*)\s*;?")
+
+
+def _load_rpb(path: Path) -> tuple[RPCCoefficients, None]:
+    """DigitalGlobe / Maxar ``.RPB`` (``lineOffset = 123;``, ``lineNumCoef = (a, b, ...);``)."""
+    text = _read_text(path)
+    fields = {m.group(1).lower(): m.group(2).strip() for m in _RPB_ASSIGN.finditer(text)}
+    if "linenumcoef" not in fields:
+        raise file_error(path, "not an .RPB file (no lineNumCoef)")
+    scalars = {
+        name: _to_float(fields.get(_RPB_KEYS[name]), path, _RPB_KEYS[name])
+        for name in SCALAR_FIELDS
+    }
+    coeffs = {}
+    for name in COEFF_FIELDS:
+        key = _RPB_KEYS[name]
+        value = fields.get(key)
+        if value is None or not value.startswith("("):
+            raise file_error(
+                path, f"missing or malformed RPC field {key} (expected '(c1, ..., c20)')"
+            )
+        coeffs[name] = _to_floats([v for v in value.strip("()").split(",")], path, key)
+    err = [
+        _to_float(fields[_RPB_KEYS[k]], path, _RPB_KEYS[k]) if _RPB_KEYS[k] in fields else None
+        for k in ("ERR_BIAS", "ERR_RAND")
+    ]
+    return _build(path, scalars, coeffs, *err), None
+
+
+def _load_geom(path: Path) -> tuple[RPCCoefficients, tuple[int, int] | None]:
+    """OSSIM keyword list (``.geom``): ``line_off:``, ``line_num_coeff_00: ...``."""
+    text = _read_text(path)
+    fields: dict[str, str] = {}
+    for raw in text.splitlines():
+        key, sep, value = raw.partition(":")
+        if sep:
+            fields[key.strip().lower()] = value.strip()
+    scalars = {
+        name: _to_float(fields.get(name.lower()), path, name.lower()) for name in SCALAR_FIELDS
+    }
+    fmt = fields.get("polynomial_format", "B").strip().upper() or "B"
+    if fmt not in ("A", "B"):
+        raise file_error(path, f"polynomial_format must be A or B, got {fmt!r}")
+    coeffs = {}
+    for name in COEFF_FIELDS:
+        key = name.lower()
+        values = [
+            _to_float(fields.get(f"{key}_{i:02d}"), path, f"{key}_{i:02d}") for i in range(20)
+        ]
+        coeffs[name] = [values[j] for j in RPC00A_TO_B] if fmt == "A" else values
+    err = [
+        _to_float(fields[k], path, k) if k in fields else None for k in ("bias_error", "rand_error")
+    ]
+    shape = None
+    if "number_lines" in fields and "number_samples" in fields:
+        shape = (
+            round(_to_float(fields["number_lines"], path, "number_lines")),
+            round(_to_float(fields["number_samples"], path, "number_samples")),
+        )
+    return _build(path, scalars, coeffs, *err), shape
+
+
+def _parse_xml(path: Path) -> ET.Element:
+    try:
+        return ET.parse(path).getroot()
+    except ET.ParseError as err:
+        raise file_error(path, f"malformed XML ({err})") from None
+    except OSError as err:
+        raise file_error(path, f"cannot read: {err.strerror or err}") from None
+
+
+def _local(tag: str) -> str:
+    return tag.rsplit("}", 1)[-1]
+
+
+def _find(root: ET.Element, name: str) -> ET.Element | None:
+    """First descendant (or self) whose local tag is ``name`` (case-insensitive)."""
+    name = name.lower()
+    for el in root.iter():
+        if _local(el.tag).lower() == name:
+            return el
+    return None
+
+
+def _children(el: ET.Element) -> dict[str, str]:
+    """Direct children's local tag (upper case) -> text."""
+    return {_local(c.tag).upper(): (c.text or "") for c in el}
+
+
+def _load_dimap(path: Path) -> tuple[RPCCoefficients, None]:
+    """DIMAP RPC XML (Pleiades/SPOT 6-7 ``RPC_*.XML`` v2, Pleiades Neo v3)."""
+    root = _parse_xml(path)
+    rfm = _find(root, "Rational_Function_Model")
+    if _local(root.tag) != "Dimap_Document" or rfm is None:
+        raise file_error(path, "not a DIMAP RPC file (no Dimap_Document/Rational_Function_Model)")
+    model = _find(rfm, "Inverse_Model")  # DIMAP v2: ground -> image
+    if model is None:
+        model = _find(rfm, "GroundtoImage_Values")  # DIMAP v3
+    if model is None:
+        raise file_error(path, "no Inverse_Model or GroundtoImage_Values (ground to image RPC)")
+    validity = _find(rfm, "RFM_Validity")
+    if validity is None:
+        raise file_error(path, "no RFM_Validity (RPC offsets and scales)")
+    values = _children(validity)
+    scalars = {name: _to_float(values.get(name), path, name) for name in SCALAR_FIELDS}
+    # DIMAP counts the centre of the first pixel as FIRST_ROW/FIRST_COL (1 in DIMAP v2).
+    first_col = first_row = 1.0
+    domain = _find(rfm, "ImagetoGround_Validity_Domain")
+    if domain is not None:
+        dom = _children(domain)
+        if "FIRST_COL" in dom:
+            first_col = first_row = _to_float(dom["FIRST_COL"], path, "FIRST_COL")
+        if "FIRST_ROW" in dom:
+            first_row = _to_float(dom["FIRST_ROW"], path, "FIRST_ROW")
+    scalars["LINE_OFF"] -= first_row
+    scalars["SAMP_OFF"] -= first_col
+    terms = _children(model)
+    coeffs = {
+        name: [_to_float(terms.get(f"{name}_{i}"), path, f"{name}_{i}") for i in range(1, 21)]
+        for name in COEFF_FIELDS
+    }
+    return _build(path, scalars, coeffs), None
+
+
+def _load_dimap_v1(path: Path) -> tuple[RPCCoefficients, tuple[int, int] | None]:
+    """Pleiades DIMAP v1 (``PHR_Dimap_Document``): ``Inverse_Model/F_ROW``, ``F_COL`` (20
+    numerator then 20 denominator terms) and ``RFM_Validity`` ``A`` (scale) ``B`` (offset)."""
+    root = _parse_xml(path)
+    model = _find(root, "Rational_Sensor_Model")
+    inverse = None if model is None else _find(model, "Inverse_Model")
+    validity = None if model is None else _find(model, "RFM_Validity")
+    if inverse is None or validity is None:
+        raise file_error(path, "not a DIMAP v1 RPC (no Rational_Sensor_Model/Inverse_Model)")
+    scalars = {}
+    for tag, field in (("Lon", "LONG"), ("Lat", "LAT"), ("Alt", "HEIGHT"), ("Row", "LINE"),
+                       ("Col", "SAMP")):  # fmt: skip
+        el = _find(validity, tag)
+        vals = _children(el) if el is not None else {}
+        scalars[f"{field}_SCALE"] = _to_float(vals.get("A"), path, f"RFM_Validity/{tag}/A")
+        scalars[f"{field}_OFF"] = _to_float(vals.get("B"), path, f"RFM_Validity/{tag}/B")
+    scalars["LINE_OFF"] -= 1.0  # DIMAP: centre of the first pixel at (1, 1)
+    scalars["SAMP_OFF"] -= 1.0
+    inv = _children(inverse)
+    rows = {}
+    for tag in ("F_ROW", "F_COL"):
+        values = inv.get(tag, "").split()
+        if len(values) != 40:
+            raise file_error(
+                path, f"Inverse_Model/{tag}: expected 40 coefficients, got {len(values)}"
+            )
+        rows[tag] = [_to_float(v, path, f"Inverse_Model/{tag}") for v in values]
+    coeffs = {
+        "LINE_NUM_COEFF": rows["F_ROW"][:20],
+        "LINE_DEN_COEFF": rows["F_ROW"][20:],
+        "SAMP_NUM_COEFF": rows["F_COL"][:20],
+        "SAMP_DEN_COEFF": rows["F_COL"][20:],
+    }
+    shape = None
+    nrows, ncols = _find(root, "NROWS"), _find(root, "NCOLS")
+    if nrows is not None and ncols is not None:
+        shape = (
+            round(_to_float(nrows.text, path, "NROWS")),
+            round(_to_float(ncols.text, path, "NCOLS")),
+        )
+    return _build(path, scalars, coeffs), shape
+
+
+_WV_KEYS = {
+    "LINE_OFF": "LINEOFFSET",
+    "SAMP_OFF": "SAMPOFFSET",
+    "LAT_OFF": "LATOFFSET",
+    "LONG_OFF": "LONGOFFSET",
+    "HEIGHT_OFF": "HEIGHTOFFSET",
+    "LINE_SCALE": "LINESCALE",
+    "SAMP_SCALE": "SAMPSCALE",
+    "LAT_SCALE": "LATSCALE",
+    "LONG_SCALE": "LONGSCALE",
+    "HEIGHT_SCALE": "HEIGHTSCALE",
+}
+
+
+def _load_worldview(path: Path) -> tuple[RPCCoefficients, tuple[int, int] | None]:
+    """DigitalGlobe/Maxar ``<isd>`` XML with an ``RPB/IMAGE`` block (WorldView, QuickBird)."""
+    root = _parse_xml(path)
+    rpb = _find(root, "RPB")
+    image = None if rpb is None else _find(rpb, "IMAGE")
+    if _local(root.tag).lower() != "isd" or image is None:
+        raise file_error(path, "not a DigitalGlobe isd XML with an RPB/IMAGE block")
+    vals = _children(image)
+    scalars = {name: _to_float(vals.get(key), path, key) for name, key in _WV_KEYS.items()}
+    coeffs = {}
+    for name in COEFF_FIELDS:
+        tag = name.replace("_COEFF", "COEF").replace("_", "")  # LINENUMCOEF
+        el = _find(image, tag)
+        coeffs[name] = _to_floats((el.text or "").split() if el is not None else [], path, tag)
+    err = [_to_float(vals[k], path, k) if k in vals else None for k in ("ERRBIAS", "ERRRAND")]
+    shape = None
+    imd = _find(root, "IMD")
+    if imd is not None:
+        d = _children(imd)
+        if "NUMROWS" in d and "NUMCOLUMNS" in d:
+            shape = (
+                round(_to_float(d["NUMROWS"], path, "NUMROWS")),
+                round(_to_float(d["NUMCOLUMNS"], path, "NUMCOLUMNS")),
+            )
+    return _build(path, scalars, coeffs, *err), shape
+
+
+def _load_gdal(path: Path) -> tuple[RPCCoefficients, tuple[int, int]]:
+    """Any raster GDAL opens with RPC metadata (GeoTIFF tag or sidecar, NITF RPC00B, VRT...)."""
+    import rasterio
+    from rasterio.errors import RasterioError
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # NotGeoreferencedWarning for RPC-only rasters
+            with rasterio.open(path) as ds:
+                rpcs = ds.rpcs
+                shape = (ds.height, ds.width)
+    except RasterioError as err:
+        message = str(err).splitlines()[0] if str(err) else type(err).__name__
+        raise file_error(path, f"GDAL cannot open it: {message}") from None
+    if rpcs is None:
+        raise file_error(path, "no RPC metadata (GDAL's RPC metadata domain is empty)")
+    try:
+        return RPCCoefficients.from_rasterio(rpcs), shape
+    except (InputError, TypeError, ValueError) as err:
+        raise file_error(path, f"invalid RPC metadata: {err}") from None
+
+
+def sniff_rpc_format(path: Path) -> str | None:
+    """The RPC container format of ``path`` from its first bytes, or None. Never raises."""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(_SNIFF_BYTES)
+    except OSError:
+        return None
+    if head[:4] in (b"II*\x00", b"MM\x00*", b"II+\x00", b"MM\x00+", b"NITF", b"NSIF"):
+        return "gdal"
+    text = head.decode("latin-1").lstrip("\ufeff\xef\xbb\xbf \t\r\n")
+    if text.startswith("<"):
+        if "<VRTDataset" in text:
+            return "gdal"
+        if re.search(r"<isd[\s>]", text) and "<RPB>" in text:
+            return "worldview"
+        if "<Dimap_Document" in text and "Rational_Function_Model" in text:
+            return "dimap"
+        if "<PHR_Dimap_Document" in text and "Rational_Sensor_Model" in text:
+            return "dimap_v1"
+        return None
+    low = text.lower()
+    if re.search(r"^\s*line_num_coeff_00\s*:", low, re.M):
+        return "geom"
+    if re.search(r"\blinenumcoef\s*=", low):
+        return "rpb"
+    if re.search(r"^\s*line_num_coeff(_1)?\s*:", low, re.M):
+        return "txt"
+    return None
+
+
+_LOADERS = {
+    "gdal": _load_gdal,
+    "txt": _load_txt,
+    "rpb": _load_rpb,
+    "geom": _load_geom,
+    "dimap": _load_dimap,
+    "dimap_v1": _load_dimap_v1,
+    "worldview": _load_worldview,
+}
+
+
+def read_rpc_and_shape(
+    path: str | os.PathLike[str],
+) -> tuple[RPCCoefficients, tuple[int, int] | None]:
+    """:func:`read_rpc` and the image shape ``(n_lines, n_samples)`` the file gives (raster size
+    or image size field), or None when it gives none (the sensor type's loader)."""
+    p = Path(path)
+    if not p.is_file():
+        raise file_error(p, "no such file")
+    kind = sniff_rpc_format(p)
+    if kind is None:
+        raise file_error(
+            p,
+            "unsupported RPC format (expected a GDAL raster with RPC metadata, _RPC.TXT, .RPB, "
+            "OSSIM .geom, DIMAP or WorldView RPC XML)",
+        )
+    return _LOADERS[kind](p)
+
+
+def read_rpc(path: str | os.PathLike[str]) -> RPCCoefficients:
+    """Read an RPC from any supported container, detected from the file's content.
+
+    Supported: rasters with RPC metadata that GDAL opens (GeoTIFF RPC tag or ``_RPC.TXT``/
+    ``.RPB`` sidecars, NITF RPC00B, VRT with an RPC metadata domain), ``KEY: value`` RPC text
+    (``_RPC.TXT``, IKONOS, Cartosat, Planet, SkySat), ``.RPB``, OSSIM ``.geom`` keyword lists,
+    DIMAP RPC XML (v2 ``RPC_*.XML``, v3, and the v1 Pleiades ``Rational_Sensor_Model``), and
+    DigitalGlobe/Maxar ``<isd>`` XML.
+
+    Raises:
+        InputError: one line naming the file and the field, for missing, unsupported or
+            malformed files.
+    """
+    return read_rpc_and_shape(path)[0]
+
+
+def _checked(path: str | os.PathLike[str]) -> Path:
+    p = Path(path)
+    if not p.is_file():
+        raise file_error(p, "no such file")
+    return p
+
+
+def read_rpc_gdal(path: str | os.PathLike[str]) -> RPCCoefficients:
+    """RPC metadata of a raster through GDAL (``rasterio.open(path).rpcs``)."""
+    return _load_gdal(_checked(path))[0]
+
+
+def read_rpc_txt(path: str | os.PathLike[str]) -> RPCCoefficients:
+    """``KEY: value`` RPC text (``LINE_OFF: 5124.00 pixels``, ``LINE_NUM_COEFF_1: ...``)."""
+    return _load_txt(_checked(path))[0]
+
+
+def read_rpb(path: str | os.PathLike[str]) -> RPCCoefficients:
+    """DigitalGlobe ``.RPB`` (``lineOffset = ...;``, ``lineNumCoef = (...);``)."""
+    return _load_rpb(_checked(path))[0]
+
+
+def read_ossim_geom(path: str | os.PathLike[str]) -> RPCCoefficients:
+    """OSSIM ``.geom`` keyword list (0-based pixel centres; ``polynomial_format`` A or B)."""
+    return _load_geom(_checked(path))[0]
+
+
+def read_dimap_rpc(path: str | os.PathLike[str]) -> RPCCoefficients:
+    """DIMAP RPC XML (v2/v3 ``Dimap_Document``, or v1 ``PHR_Dimap_Document``); the 1-based
+    DIMAP pixel centres are converted to the native 0-based RPC00B convention."""
+    p = _checked(path)
+    return (_load_dimap_v1(p) if sniff_rpc_format(p) == "dimap_v1" else _load_dimap(p))[0]
+
+
+def read_worldview_xml(path: str | os.PathLike[str]) -> RPCCoefficients:
+    """DigitalGlobe/Maxar ``<isd>`` XML (WorldView, QuickBird, GeoEye) ``RPB`` block."""
+    return _load_worldview(_checked(path))[0]

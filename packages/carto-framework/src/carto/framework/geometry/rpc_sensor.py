@@ -1,0 +1,364 @@
+"""The RPC sensor: an RPC00B model as a :class:`~carto.framework.geometry.sensor.Sensor`.
+
+:class:`RPCSensor` wraps :class:`~carto.framework.geometry.rpc_model.RPCCoefficients` with
+Grodecki & Dial's (2003) image-space bias/affine correction as adjustable parameters
+(:func:`default_rpc_parameters`); :class:`RPCSensorType` (name ``"rpc"``) opens every RPC
+container that :mod:`~carto.framework.geometry.rpc_readers` reads as an :class:`RPCSensor`.
+The pixel and ground conventions are those of :mod:`~carto.framework.geometry.rpc_model`.
+"""
+
+from __future__ import annotations
+
+import types
+import warnings
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import attrs
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from carto.framework.arrays import as_float_arrays
+from carto.framework.errors import InputError
+from carto.framework.geometry.frames import WGS84_A_M, WGS84_E2
+from carto.framework.geometry.rpc_model import RPCCoefficients
+from carto.framework.geometry.rpc_readers import read_rpc_and_shape, sniff_rpc_format
+from carto.framework.geometry.sensor import (
+    Parameter,
+    Sensor,
+    SensorType,
+    refuse_options,
+    replace_parameters,
+)
+
+FloatArray = NDArray[np.float64]
+
+__all__ = [
+    "DEFAULT_AFFINE_SIGMA",
+    "DEFAULT_OFFSET_SIGMA_PX",
+    "RPCSensor",
+    "RPCSensorType",
+    "default_rpc_parameters",
+]
+
+
+DEFAULT_OFFSET_SIGMA_PX = 100.0
+"""A-priori sigma of the image-space offsets ``rpc.line.c0``/``rpc.sample.c0``, pixels."""
+DEFAULT_AFFINE_SIGMA = 1e-4
+"""A-priori sigma of the affine terms (``c_line``, ``c_sample``), pixels per pixel."""
+
+_PARAMETER_NAMES = (
+    "rpc.line.c0",
+    "rpc.line.c_line",
+    "rpc.line.c_sample",
+    "rpc.sample.c0",
+    "rpc.sample.c_line",
+    "rpc.sample.c_sample",
+)
+
+
+def default_rpc_parameters() -> tuple[Parameter, ...]:
+    """The six image-space correction parameters, zero, offsets free and affine terms fixed."""
+    out = []
+    for name in _PARAMETER_NAMES:
+        axis, term = name.split(".")[1:]
+        if term == "c0":
+            out.append(Parameter(name, 0.0, DEFAULT_OFFSET_SIGMA_PX, "px", True, f"{axis} offset"))
+        else:
+            out.append(
+                Parameter(
+                    name, 0.0, DEFAULT_AFFINE_SIGMA, "px/px", False,
+                    f"{axis} correction per pixel of {term[2:]}",
+                )
+            )  # fmt: skip
+    return tuple(out)
+
+
+class RPCSensor(Sensor):
+    """An image whose geometry is an RPC, with an image-space correction (Grodecki & Dial 2003).
+
+    ``ground_to_image`` returns::
+
+        line'   = line   + a0 + a1 * line + a2 * sample
+        sample' = sample + b0 + b1 * line + b2 * sample
+
+    where ``(line, sample)`` is the RPC projection (project convention, pixels) and the
+    adjustable parameters are ``a0, a1, a2 = rpc.line.c0, rpc.line.c_line, rpc.line.c_sample``
+    and ``b0, b1, b2 = rpc.sample.c0, rpc.sample.c_line, rpc.sample.c_sample`` (px, px/px); only
+    the offsets ``a0, b0`` are free by default (a-priori sigmas :data:`DEFAULT_OFFSET_SIGMA_PX`
+    and :data:`DEFAULT_AFFINE_SIGMA`).
+
+    Args:
+        rpc: the RPC model.
+        image_shape: ``(n_lines, n_samples)``; default
+            :meth:`~carto.framework.geometry.rpc_model.RPCCoefficients.default_image_shape`.
+        parameters: the six parameters (default :func:`default_rpc_parameters`).
+        source: where the model came from, for messages.
+    """
+
+    def __init__(
+        self,
+        rpc: RPCCoefficients,
+        image_shape: tuple[int, int] | None = None,
+        *,
+        parameters: Sequence[Parameter] | None = None,
+        source: str = "",
+        prefix: str = "",
+        metadata: Mapping[str, str] | None = None,
+    ) -> None:
+        if not isinstance(rpc, RPCCoefficients):
+            raise InputError(f"RPCSensor needs RPCCoefficients, got {type(rpc).__name__}")
+        self._rpc = rpc
+        if image_shape is None:
+            image_shape = rpc.default_image_shape()
+        shape = tuple(int(v) for v in image_shape)
+        if len(shape) != 2 or min(shape) < 1:
+            raise InputError(f"RPC sensor image_shape must be two positive ints, got {image_shape}")
+        self._shape: tuple[int, int] = (shape[0], shape[1])
+        if parameters is None:
+            params = tuple(attrs.evolve(p, name=prefix + p.name) for p in default_rpc_parameters())
+        else:
+            params = tuple(parameters)
+        expected = tuple(prefix + n for n in _PARAMETER_NAMES)
+        if tuple(p.name for p in params) != expected:
+            raise InputError(
+                f"RPC sensor parameters must be {', '.join(expected)} in that order, "
+                f"got {', '.join(p.name for p in params)}"
+            )
+        self.prefix = prefix
+        self.metadata: Mapping[str, str] = types.MappingProxyType(dict(metadata or {}))
+        self._params = params
+        v = [p.value for p in params]
+        self._affine = np.array([[1.0 + v[1], v[2]], [v[4], 1.0 + v[5]]])
+        self._offset = np.array([v[0], v[3]])
+        self._identity = not any(v)
+        self.source = source
+
+    def __repr__(self) -> str:
+        src = f" {self.source}" if self.source else ""
+        return f"<RPCSensor{src} {self._shape[0]}x{self._shape[1]}>"
+
+    @property
+    def rpc(self) -> RPCCoefficients:
+        """The RPC model (without the image-space correction)."""
+        return self._rpc
+
+    @property
+    def image_shape(self) -> tuple[int, int]:
+        """Image size ``(n_lines, n_samples)``."""
+        return self._shape
+
+    @property
+    def parameters(self) -> tuple[Parameter, ...]:
+        """``rpc.line.c0, rpc.line.c_line, rpc.line.c_sample, rpc.sample.c0, ...`` (px, px/px)."""
+        return self._params
+
+    def with_parameters(
+        self,
+        values: Mapping[str, float] | None = None,
+        free: Mapping[str, bool] | None = None,
+        sigmas: Mapping[str, float] | None = None,
+    ) -> RPCSensor:
+        """A new sensor with some parameter values, free flags or sigmas replaced."""
+        params = replace_parameters(self._params, values, free, sigmas)
+        return RPCSensor(
+            self._rpc,
+            self._shape,
+            parameters=params,
+            source=self.source,
+            prefix=self.prefix,
+            metadata=self.metadata,
+        )
+
+    def with_prefix(self, prefix: str) -> RPCSensor:
+        """The same sensor whose parameter names start with ``prefix`` (e.g. the image name,
+        so that several RPC images in one adjustment get independent corrections)."""
+        n = len(self.prefix)
+        params = tuple(attrs.evolve(p, name=prefix + p.name[n:]) for p in self._params)
+        return RPCSensor(
+            self._rpc,
+            self._shape,
+            parameters=params,
+            source=self.source,
+            prefix=prefix,
+            metadata=self.metadata,
+        )
+
+    def for_raster(self, raster: Path) -> RPCSensor:
+        """The sensor of a full scene restricted to a crop of it whose pixel offset is in the
+        crop's (non-georeferenced) geotransform, as in CNES's test data; ``self`` for any
+        other raster."""
+        import rasterio
+
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                with rasterio.open(raster) as ds:
+                    t, crs, shape = ds.transform, ds.crs, (ds.height, ds.width)
+        except rasterio.errors.RasterioError as exc:
+            raise InputError(f"{raster}: cannot read raster: {exc}") from None
+        if crs is not None or t.b != 0 or t.d != 0 or t.a != 1 or abs(t.e) != 1:
+            return self
+        col_off, row_off = t.c, t.f if t.e > 0 else -t.f
+        if col_off == 0 and row_off == 0 and shape == self.image_shape:
+            return self
+        rpc = attrs.evolve(
+            self._rpc, line_off=self._rpc.line_off - row_off, samp_off=self._rpc.samp_off - col_off
+        )
+        return RPCSensor(
+            rpc,
+            shape,
+            parameters=self.parameters,
+            source=f"{self.source} (crop at row {row_off:g}, column {col_off:g})",
+            prefix=self.prefix,
+            metadata=self.metadata,
+        )
+
+    def _correct(self, line: FloatArray, samp: FloatArray) -> tuple[FloatArray, FloatArray]:
+        if self._identity:
+            return line, samp
+        (a11, a12), (a21, a22) = self._affine
+        return (
+            a11 * line + a12 * samp + self._offset[0],
+            a21 * line + a22 * samp + self._offset[1],
+        )
+
+    def ground_to_image(
+        self, lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike
+    ) -> tuple[FloatArray, FloatArray]:
+        """Project ground points (lon, lat degrees; h metres above the ellipsoid) into the image:
+        ``(line, sample)`` in pixels, first pixel centre at (0.5, 0.5), broadcast shape."""
+        line, samp = self._rpc.project(lon_deg, lat_deg, h_m)
+        return self._correct(line, samp)
+
+    def image_to_ground(
+        self,
+        line: ArrayLike,
+        sample: ArrayLike,
+        h_m: ArrayLike,
+        *,
+        tolerance_px: float = 1e-10,
+        max_iterations: int = 30,
+    ) -> tuple[FloatArray, FloatArray]:
+        """Locate image points (pixels) at ellipsoidal heights ``h_m`` (metres).
+
+        Undoes the image-space correction exactly, then inverts the RPC by Newton iteration
+        (:meth:`~carto.framework.geometry.rpc_model.RPCCoefficients.locate`).
+
+        Returns:
+            ``(lon_deg, lat_deg)``; NaN where the iteration does not converge to
+            ``tolerance_px``.
+        """
+        ln_, sm_, h_ = as_float_arrays(line, sample, h_m)
+        if not self._identity:
+            inv = np.linalg.inv(self._affine)
+            dl = ln_ - self._offset[0]
+            ds = sm_ - self._offset[1]
+            ln_, sm_ = inv[0, 0] * dl + inv[0, 1] * ds, inv[1, 0] * dl + inv[1, 1] * ds
+        return self._rpc.locate(
+            ln_, sm_, h_, tolerance_px=tolerance_px, max_iterations=max_iterations
+        )
+
+    def parameter_partials(
+        self,
+        lon_deg: ArrayLike,
+        lat_deg: ArrayLike,
+        h_m: ArrayLike,
+        names: Sequence[str] | None = None,
+    ) -> FloatArray:
+        """Analytic partials of ``(line, sample)`` w.r.t. the parameters, ``(N, 2, P)``.
+
+        ``names`` defaults to the free parameters; units px/px for offsets, px/(px/px) = px for
+        the affine terms.
+        """
+        line, samp = (a.ravel() for a in self._rpc.project(lon_deg, lat_deg, h_m))
+        if names is None:
+            names = [p.name for p in self._params if p.free]
+        n = len(self.prefix)
+        unknown = sorted(
+            m for m in names if not m.startswith(self.prefix) or m[n:] not in _PARAMETER_NAMES
+        )
+        if unknown:
+            raise InputError(f"unknown RPC sensor parameter(s) {', '.join(unknown)}")
+        out = np.zeros((line.size, 2, len(names)))
+        for k, name in enumerate(names):
+            row = 0 if name[n:].startswith("rpc.line.") else 1
+            term = name.rsplit(".", 1)[1]
+            out[:, row, k] = 1.0 if term == "c0" else (line if term == "c_line" else samp)
+        return out
+
+    def ground_partials(self, lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike) -> FloatArray:
+        """Analytic partials of ``(line, sample)`` w.r.t. local east, north, up displacements in
+        metres, ``(N, 2, 3)`` (px/m)."""
+        lon, lat, h = (a.ravel() for a in as_float_arrays(lon_deg, lat_deg, h_m))
+        _, _, jac = self._rpc.project_with_partials(lon, lat, h)
+        phi = np.radians(lat)
+        w = np.sqrt(1.0 - WGS84_E2 * np.sin(phi) ** 2)
+        m_per_deg_lat = np.radians(WGS84_A_M * (1 - WGS84_E2) / w**3 + h)
+        m_per_deg_lon = np.radians((WGS84_A_M / w + h) * np.cos(phi))
+        jac[:, :, 0] /= m_per_deg_lon[:, None]
+        jac[:, :, 1] /= m_per_deg_lat[:, None]
+        if not self._identity:
+            jac = np.einsum("ij,njk->nik", self._affine, jac)
+        return jac
+
+
+class RPCSensorType(SensorType):
+    """Opens any supported RPC container (see
+    :func:`~carto.framework.geometry.rpc_readers.read_rpc`) as an :class:`RPCSensor`."""
+
+    name = "rpc"
+    description = (
+        "RPC00B rational polynomial model (GeoTIFF/NITF RPC, _RPC.TXT, .RPB, OSSIM .geom, "
+        "DIMAP or WorldView XML)"
+    )
+
+    def identify(self, path: Path) -> bool:
+        """True for a raster with RPC metadata, or an RPC text/XML file. Cheap; never raises."""
+        try:
+            kind = sniff_rpc_format(Path(path))
+            if kind != "gdal":
+                return kind is not None
+            return _gdal_has_rpc(Path(path))
+        except Exception:  # noqa: BLE001 - identify must never raise
+            return False
+
+    default_adjuster = "rpc-bias"
+
+    def open(self, path: Path, **options: Any) -> RPCSensor:
+        """Open ``path`` as an :class:`RPCSensor`; the image shape comes from the raster (or the
+        format's image size field), else from the RPC offsets. No options but ``components``
+        (an RPC has no trajectory to fit)."""
+        refuse_options(f"{path} (an RPC has no trajectory)", options)
+        rpc, shape = read_rpc_and_shape(path)
+        return RPCSensor(rpc, shape, source=str(path))
+
+    def save(
+        self, sensor: Sensor, out_dir: Path, name: str, *, h_range_m: tuple[float, float]
+    ) -> dict[str, Any]:
+        """``<name>_RPC.TXT``: the RPC refitted with the sensor's image-space correction
+        (over the RPC's own height range), which GDAL reads beside ``<name>.tif``."""
+        return save_corrected_rpc(sensor, Path(out_dir), name)
+
+
+def save_corrected_rpc(sensor: Sensor, out_dir: Path, name: str) -> dict[str, Any]:
+    """Write an adjusted :class:`RPCSensor` as ``<name>_RPC.TXT`` (its correction baked into
+    the coefficients by a refit on a 3-D grid over the RPC's height range)."""
+    from carto.framework.geometry.rpc_fitting import fit_rpc
+    from carto.framework.geometry.rpc_writers import write_rpc_txt
+
+    if not isinstance(sensor, RPCSensor):
+        raise InputError(f"image {name}: not an RPC sensor ({type(sensor).__name__})")
+    h0, hs = sensor.rpc.height_off, abs(sensor.rpc.height_scale)
+    rpc, _ = fit_rpc(sensor, h_range=(h0 - hs, h0 + hs))
+    return {"rpc": {"file": write_rpc_txt(rpc, out_dir / f"{name}_RPC.TXT").name}}
+
+
+def _gdal_has_rpc(path: Path) -> bool:
+    import rasterio
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        with rasterio.open(path) as ds:
+            return bool(ds.tags(ns="RPC"))

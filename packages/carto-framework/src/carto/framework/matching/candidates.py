@@ -1,0 +1,119 @@
+"""Candidate points to match: a regular grid, or Forstner interest points spread over cells.
+
+* :func:`grid_points`: regular candidate points (the matchers take any points: an interest
+  operator can replace the grid).
+* :func:`candidate_points`: the candidates of the tie-point pipeline (step 3 of
+  :mod:`~carto.framework.matching.tiepoints`) on the reference ortho: the Forstner interest
+  operator (:func:`~carto.framework.matching.forstner.forstner_points`), the best two of each
+  cell of ``spacing_px`` ortho pixels (:func:`candidate_cells`; the second one is a spare: the
+  final selection keeps one per cell), with the cell's centre as a fall-back where the operator
+  finds nothing (or a plain grid).
+
+Points are ``(N, 2)`` arrays of continuous ``(line, sample)``, the centre of the first pixel at
+``(0.5, 0.5)`` (see :mod:`carto.framework.geometry.sensor`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from carto.framework.errors import InputError
+from carto.framework.matching.forstner import forstner_points
+from carto.framework.matching.inputs import as_image
+
+CANDIDATE_METHODS = ("forstner", "grid")
+"""Ways :func:`candidate_points` chooses the points to match."""
+
+
+def grid_points(shape: tuple[int, int], spacing: float, margin: float = 0.0) -> NDArray[np.float64]:
+    """Regular candidate points ``(N, 2)`` ``(line, sample)`` on pixel centres.
+
+    Rows and columns every ``spacing`` pixels from ``margin`` (the distance of the first and
+    last points from the image edges, pixels), centred in the image; row-major order.
+    """
+    rows, cols = (int(v) for v in shape)
+    spacing = float(spacing)
+    margin = float(margin)
+    if not spacing >= 1.0:
+        raise InputError(f"spacing must be >= 1 pixel, got {spacing}")
+    if margin < 0.0:
+        raise InputError(f"margin must be >= 0, got {margin}")
+
+    def axis(n: int) -> NDArray[np.float64]:
+        span = n - 2.0 * margin - 1.0
+        if span < 0:
+            return np.empty(0)
+        count = int(span // spacing) + 1
+        start = math.floor(margin + 0.5 * (span - (count - 1) * spacing))
+        return start + 0.5 + np.round(np.arange(count) * spacing)
+
+    lines, samples = axis(rows), axis(cols)
+    grid_l, grid_s = np.meshgrid(lines, samples, indexing="ij")
+    return np.stack([grid_l.ravel(), grid_s.ravel()], axis=1)
+
+
+def candidate_cells(shape: tuple[int, int], spacing_px: float) -> tuple[int, int]:
+    """``(rows, cols)``: the number of cells of about ``spacing_px`` pixels (at least one) that
+    divide an image of ``shape``."""
+    return (
+        max(1, round(shape[0] / float(spacing_px))),
+        max(1, round(shape[1] / float(spacing_px))),
+    )
+
+
+def _finite_at(image: NDArray[np.float32], points: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """True where the pixel holding each point has data."""
+    index = (points - 0.5).astype(np.intp)
+    return np.isfinite(image[index[:, 0], index[:, 1]])
+
+
+def candidate_points(
+    image: ArrayLike,
+    spacing_px: float = 40.0,
+    *,
+    method: str = "forstner",
+    per_cell: int = 2,
+    window: int = 5,
+    min_roundness: float = 0.5,
+    weight_quantile: float = 0.5,
+) -> NDArray[np.float64]:
+    """Points of ``image`` worth matching, ``(N, 2)`` ``(line, sample)`` (first pixel centre
+    at 0.5), spread over cells of about ``spacing_px`` pixels.
+
+    ``method="forstner"``: :func:`~carto.framework.matching.forstner.forstner_points` (box
+    ``window``, ``min_roundness``, weight above the ``weight_quantile`` of the image's weights,
+    suppression radius ``window``, least-squares corner location), the best ``per_cell`` of
+    each cell (the quantile only removes the weakest half: the cells choose the best); a
+    cell where the operator finds nothing (no texture, or only straight edges) gets its
+    centre pixel instead, where that pixel holds data (the fall-back grid). ``"grid"``:
+    :func:`grid_points` every ``spacing_px`` with a margin of two thirds of it, where the pixel
+    holds data.
+    """
+    img = as_image(image, "image")
+    if method not in CANDIDATE_METHODS:
+        raise InputError(f"candidates {method!r} is not one of {', '.join(CANDIDATE_METHODS)}")
+    spacing = float(spacing_px)
+    if not spacing >= 4.0:
+        raise InputError(f"spacing_px must be >= 4 pixels, got {spacing_px}")
+    if method == "grid":
+        points = grid_points(img.shape, spacing, margin=2 * spacing / 3)
+        return points[_finite_at(img, points)]
+    cells = candidate_cells(img.shape, spacing)
+    size = np.array([img.shape[0] / cells[0], img.shape[1] / cells[1]])
+    points = forstner_points(
+        img,
+        window=window,
+        min_roundness=min_roundness,
+        weight_quantile=weight_quantile,
+        grid_cells=cells,
+        per_cell=per_cell,
+    )
+    occupied = np.zeros(cells, bool)
+    index = np.minimum((points // size).astype(np.intp), np.array(cells) - 1)
+    occupied[index[:, 0], index[:, 1]] = True
+    empty_r, empty_c = np.nonzero(~occupied)
+    centres = np.floor((np.stack([empty_r, empty_c], axis=1) + 0.5) * size) + 0.5
+    return np.concatenate([points, centres[_finite_at(img, centres)]])

@@ -1,0 +1,155 @@
+"""Control points of a simulated scene: GCPs and independent checkpoints.
+
+:func:`control_points` places points where enough of the true image models see the true DEM,
+well distributed, and gives their observation rows: GCPs carry the ground and image
+measurement noise of the :class:`~carto.framework.simulation.plan.ErrorModel`, checkpoints
+their true coordinates. :func:`carto.framework.simulation.simulate.simulate_scene` writes them
+to ``gcps.csv`` and ``checkpoints.csv``.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from carto.framework.errors import InputError
+from carto.framework.geometry.linescan import LineScanner
+from carto.framework.simulation.plan import ErrorModel
+
+FloatArray = NDArray[np.float64]
+
+
+def _select_points(
+    pool_lon: FloatArray,
+    pool_lat: FloatArray,
+    n: int,
+    rng: np.random.Generator,
+    exclude: NDArray[np.bool_] | None = None,
+) -> NDArray[np.intp]:
+    """Indices of ``n`` well-distributed pool points: 1 -> nearest the centre, 2 -> opposite
+    corners, more -> one random point in each cell of a near-square grid over the pool."""
+    ok = np.ones(pool_lon.size, bool) if exclude is None else ~exclude
+    idx = np.flatnonzero(ok)
+    if n <= 0:
+        return np.array([], dtype=np.intp)
+    if idx.size < n:
+        raise InputError(f"only {idx.size} candidate points in the common footprint, {n} requested")
+    x = (pool_lon[idx] - pool_lon[idx].min()) / max(np.ptp(pool_lon[idx]), 1e-12)
+    y = (pool_lat[idx] - pool_lat[idx].min()) / max(np.ptp(pool_lat[idx]), 1e-12)
+    if n == 1:
+        return idx[[int(np.argmin((x - 0.5) ** 2 + (y - 0.5) ** 2))]]
+    if n == 2:
+        a = int(np.argmin((x - 0.2) ** 2 + (y - 0.2) ** 2))
+        b = int(np.argmin((x - 0.8) ** 2 + (y - 0.8) ** 2))
+        return idx[[a, b]]
+    k = math.ceil(math.sqrt(n))
+    cell = np.minimum((x * k).astype(int), k - 1) * k + np.minimum((y * k).astype(int), k - 1)
+    chosen: list[int] = []
+    for c in rng.permutation(k * k):
+        members = np.flatnonzero(cell == c)
+        if members.size:
+            chosen.append(int(rng.choice(members)))
+        if len(chosen) == n:
+            break
+    rest = np.setdiff1d(np.arange(idx.size), chosen)
+    if len(chosen) < n:
+        chosen.extend(rng.choice(rest, n - len(chosen), replace=False).tolist())
+    return idx[np.asarray(chosen, dtype=np.intp)]
+
+
+def control_points(
+    sensors: dict[str, LineScanner],
+    dem: Any,
+    n_gcps: int,
+    n_check: int,
+    errors: ErrorModel,
+    rng: np.random.Generator,
+    min_views: int | None = None,
+) -> tuple[dict[str, list], dict[str, list], tuple[FloatArray, FloatArray]]:
+    """GCP and checkpoint observation rows (long format) and their ground positions.
+
+    Points are chosen where at least ``min_views`` images (None: all) see them; each gets a
+    row for every image that sees it."""
+    west, south, east, north = dem.bounds_lonlat
+    n = 160
+    gx, gy = np.meshgrid(np.linspace(west, east, n), np.linspace(south, north, n))
+    lon, lat = gx.ravel(), gy.ravel()
+    h = dem.height(lon, lat)
+    proj, seen_by = {}, {}
+    for name, s in sensors.items():
+        line, sample = s.ground_to_image(lon, lat, np.nan_to_num(h))
+        n_l, n_s = s.image_shape
+        margin = 16.0
+        seen_by[name] = (
+            np.isfinite(h)
+            & np.isfinite(line)
+            & (line > margin)
+            & (line < n_l - margin)
+            & (sample > margin)
+            & (sample < n_s - margin)
+        )
+        proj[name] = (line, sample)
+    n_seen = np.sum(list(seen_by.values()), axis=0)
+    inside = n_seen >= (len(sensors) if min_views is None else min_views)
+    gcp_idx = _select_points(lon, lat, n_gcps, rng, exclude=~inside)
+    taken = ~inside
+    taken[gcp_idx] = True
+    check_idx = _select_points(lon, lat, n_check, rng, exclude=taken)
+    # exact projections of the chosen points (refined ground -> image, true models)
+    cols = (
+        "id",
+        "lon_deg",
+        "lat_deg",
+        "h_m",
+        "image",
+        "line",
+        "sample",
+        "sigma_planimetric_m",
+        "sigma_h_m",
+        "sigma_px",
+    )
+
+    def rows(indices: NDArray[np.intp], prefix: str, noisy: bool) -> dict[str, list]:
+        table: dict[str, list] = {c: [] for c in cols}
+        plan_sigma = errors.gcp_planimetric_m / math.sqrt(2.0)
+        for k, i in enumerate(indices):
+            lo_, la_, hh = lon[i], lat[i], h[i]
+            if noisy:
+                m_lat = 111_320.0
+                m_lon = m_lat * math.cos(math.radians(la_))
+                de, dn = rng.normal(0.0, plan_sigma, 2) if plan_sigma else (0.0, 0.0)
+                lo_m, la_m = lo_ + de / m_lon, la_ + dn / m_lat
+                hh_m = hh + (rng.normal(0.0, errors.gcp_height_m) if errors.gcp_height_m else 0)
+            else:
+                lo_m, la_m, hh_m = lo_, la_, hh
+            for name in sensors:
+                if not seen_by[name][i]:
+                    continue
+                line, sample = proj[name][0][i], proj[name][1][i]
+                if noisy and errors.gcp_image_px:
+                    line += rng.normal(0.0, errors.gcp_image_px)
+                    sample += rng.normal(0.0, errors.gcp_image_px)
+                for c, value in zip(
+                    cols,
+                    (
+                        f"{prefix}{k + 1:03d}",
+                        lo_m,
+                        la_m,
+                        hh_m,
+                        name,
+                        line,
+                        sample,
+                        errors.gcp_planimetric_m if noisy else 0.0,
+                        errors.gcp_height_m if noisy else 0.0,
+                        errors.gcp_image_px if noisy else 0.0,
+                    ),
+                    strict=True,
+                ):
+                    table[c].append(value)
+        return table
+
+    all_idx = np.concatenate([gcp_idx, check_idx])
+    return (rows(gcp_idx, "G", True), rows(check_idx, "C", False), (lon[all_idx], lat[all_idx]))

@@ -1,0 +1,182 @@
+"""What a scene preset decides and what the user chooses: the inputs of the scene simulator.
+
+A plugin's scene preset (:class:`carto.framework.simulation.preset.ScenePreset`) describes an
+acquisition as a :class:`ScenePlan`: orbit, trajectory segments (:class:`SegmentPlan`) with
+their attitude laws, and the views (:class:`ViewPlan`) acquired during them. The user's
+choices (``carto simulate`` options) are :class:`SimulationOptions`; the error sources of the
+product are an :class:`ErrorModel`. :func:`carto.framework.simulation.simulate.simulate_scene`
+renders a plan into a scene folder.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import attrs
+
+from carto.framework.geometry import orbit
+from carto.framework.products.ancillary import CameraSpec
+from carto.framework.simulation import acquisition
+
+
+# ----------------------------------------------------------------------------- errors
+@attrs.frozen
+class ErrorModel:
+    """Error sources of a simulated product (design brief section 4); 0 switches one off.
+
+    Attributes (one-sigma sizes; each drawn value is normal with that sigma):
+        ephemeris_bias_m: position bias per axis (along, across, radial), metres.
+        attitude_bias_deg: attitude bias per axis (roll, pitch, yaw).
+        attitude_drift_deg_s: attitude drift per axis.
+        attitude_smooth_deg: amplitude of the smooth higher-order (tau^2, tau^3) attitude
+            error over a segment (agile platforms).
+        jitter_deg: amplitude of attitude jitter (sinusoids at ``jitter_hz``) in the true
+            motion, which the 8 Hz attitude samples do not carry.
+        misalignment_deg: residual camera alignment error per axis (Fore/Aft relative).
+        gcp_planimetric_m: GCP ground error, planimetric RMS (east and north each
+            ``/sqrt(2)``).
+        gcp_height_m: GCP height error.
+        gcp_image_px: GCP image measurement error per image axis, pixels.
+    """
+
+    ephemeris_bias_m: float = 0.0
+    attitude_bias_deg: float = 0.0
+    attitude_drift_deg_s: float = 0.0
+    attitude_smooth_deg: float = 0.0
+    jitter_deg: float = 0.0
+    jitter_hz: tuple[float, ...] = (1.7, 4.3)
+    misalignment_deg: float = 0.0
+    gcp_planimetric_m: float = 0.0
+    gcp_height_m: float = 0.0
+    gcp_image_px: float = 0.0
+
+    @classmethod
+    def realistic(cls, *, agile: bool = False) -> ErrorModel:
+        """The sizes of the design brief, section 4 (``agile`` adds the Cartosat-2 terms)."""
+        return cls(
+            ephemeris_bias_m=15.0,
+            attitude_bias_deg=0.02,
+            attitude_drift_deg_s=2e-5,
+            attitude_smooth_deg=0.002 if agile else 0.0,
+            jitter_deg=2e-5 if agile else 0.0,
+            misalignment_deg=0.002,
+            gcp_planimetric_m=0.7,
+            gcp_height_m=1.0,
+            gcp_image_px=0.3,
+        )
+
+    @classmethod
+    def none(cls) -> ErrorModel:
+        """No errors: the product carries the true values."""
+        return cls()
+
+    def as_dict(self) -> dict[str, Any]:
+        return attrs.asdict(
+            self, value_serializer=lambda _i, _a, v: list(v) if isinstance(v, tuple) else v
+        )
+
+
+# ----------------------------------------------------------------------------- the plan
+@attrs.frozen
+class ViewPlan:
+    """One image of a segment.
+
+    Attributes:
+        name: image name (``"fore"``, ``"nadir"``, ``"swath2"`` ...).
+        camera: nominal camera constants (as the product states them).
+        n_lines_full: lines of the full acquisition (the window is cut from it).
+        period_s: line period, seconds (constant over the image).
+        centre_dt_s: time of the full image's middle line; None: the time at which the
+            camera sees the view's target (found on the true trajectory).
+        target: (lon_deg, lat_deg) the window is centred on; None: the scene target.
+    """
+
+    name: str
+    camera: CameraSpec
+    n_lines_full: int
+    period_s: float
+    centre_dt_s: float | None = None
+    target: tuple[float, float] | None = None
+
+
+@attrs.frozen
+class SegmentPlan:
+    """A trajectory segment (one ancillary file) and the views acquired during it.
+
+    Attributes:
+        name: segment name (file ``<name>.ancillary.json``).
+        span_s: time range of the ancillary samples (s since the epoch).
+        law: true attitude law (see :mod:`carto.framework.simulation.acquisition`).
+        views: the images of the segment.
+    """
+
+    name: str
+    span_s: tuple[float, float]
+    law: acquisition.OrbitAttitudeLaw
+    views: tuple[ViewPlan, ...]
+
+
+@attrs.frozen
+class ScenePlan:
+    """Everything a preset decides; :func:`~carto.framework.simulation.simulate.simulate_scene`
+    does the rest.
+
+    Attributes:
+        preset: preset name; platform: platform name (written in the products).
+        epoch_utc: the epoch (the platform is over the target then).
+        elements: orbit elements at the epoch.
+        target: (lon_deg, lat_deg) the views are centred on.
+        segments: trajectory segments.
+        gsd_m: nominal ground sampling distance (sets texture and DEM postings).
+        agile: the platform is agile (adds the agile error terms).
+        default_terrain: terrain preset used when none is given.
+        default_size: default window (width, height) in pixels.
+        default_gcps, default_checkpoints: default numbers of control points.
+        blur_sigma_px: optical blur (Gaussian sigma, in pixels of the nominal GSD) applied to
+            the ground texture before rendering, i.e. the point spread function projected on
+            the ground (blurring the raw image instead would mix the odd and even arrays,
+            which see the ground at different times); 0 for none.
+        noise_dn: read noise (one sigma) in digital numbers.
+        control_min_views: control points are placed where at least this many images see
+            them (None: all images; 1 for paint-brush swaths that only overlap pairwise).
+    """
+
+    preset: str
+    platform: str
+    epoch_utc: str
+    elements: orbit.OrbitElements
+    target: tuple[float, float]
+    segments: tuple[SegmentPlan, ...]
+    gsd_m: float
+    agile: bool = False
+    default_terrain: str = "hilly"
+    default_size: tuple[int, int] = (2000, 2000)
+    default_gcps: int = 1
+    default_checkpoints: int = 50
+    blur_sigma_px: float = 0.4
+    noise_dn: float = 1.5
+    control_min_views: int | None = None
+
+
+@attrs.frozen
+class SimulationOptions:
+    """User choices for :func:`~carto.framework.simulation.simulate.simulate_scene`
+    (``carto simulate`` options)."""
+
+    seed: int = 0
+    terrain: str | None = None
+    dem_path: Path | None = None
+    size: tuple[int, int] | None = None
+    errors: str = "realistic"
+    n_gcps: int | None = None
+    n_checkpoints: int | None = None
+    supersample: int = 2
+    point_targets: bool = False
+    error_sizes: tuple[tuple[str, float], ...] = ()
+    """Overrides of single error sizes on top of ``errors``, e.g. ``(("attitude_bias_deg",
+    0.05),)``; 0 switches a source off."""
+    platform_seed: int | None = None
+    """Seed of the platform's residual camera misalignment (a property of the satellite,
+    the same in every scene it takes: scenes simulated with one ``platform_seed`` share it, as
+    an in-flight calibration needs); None: drawn from ``seed`` with the other errors."""
