@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import math
 import os
-import sys
 import time
 from collections.abc import Mapping
 from pathlib import Path
@@ -35,6 +34,7 @@ from carto.framework.matching.gcp_transfer import (
 )
 from carto.framework.plugins.registry import get_registry
 from carto.framework.workflows.opening import open_options, open_product, sensor_type_for
+from carto.framework.workflows.reporting import jsonable, progress, write_report
 
 Table = dict[str, NDArray]
 
@@ -148,11 +148,6 @@ def residual_plot(result: AdjustmentResult, path: Path, title: str) -> Path:
     return path
 
 
-def _progress(message: str, quiet: bool) -> None:
-    if not quiet:
-        print(f"carto adjust: {message}", file=sys.stderr, flush=True)
-
-
 RESERVED_OUTPUTS = frozenset(
     {"report", "models", "rpc", "residual_plot", "tie_points", "gcp_offsets"}
 )
@@ -241,7 +236,7 @@ def adjust_product(
                 "automatic tie points need a DEM (the scene's init_dem.tif or "
                 '"dem" in the configuration)'
             )
-        _progress("matching tie points on system-level ortho-images", quiet)
+        progress("adjust", "matching tie points on system-level ortho-images", quiet)
         tie_table = block_tie_points(rasters, sensors, dem, matcher=chosen_matcher)
     elif ties != "none":
         tie_table = read_point_table(ties, numeric=("line", "sample"), text=("id", "image"))
@@ -274,8 +269,10 @@ def adjust_product(
             raise InputError(f"gcp_transfer: {transfer['why_not']}")
     name = choose_adjuster(adjuster, types)
     component = get_registry().get("adjuster", name)
-    _progress(
-        f"adjusting {len(sensors)} images with {name} ({n_used} GCPs, {n_ties} tie points)", quiet
+    progress(
+        "adjust",
+        f"adjusting {len(sensors)} images with {name} ({n_used} GCPs, {n_ties} tie points)",
+        quiet,
     )
     result = component.adjust(sensors, obs, dem=dem, **options)
     offsets = dropped_offsets = None
@@ -283,7 +280,7 @@ def adjust_product(
         # matched on chips orthorectified with the adjusted models (the system-level ones
         # may be hundreds of metres apart), then the adjustment again with the offsets;
         # GCPs the first adjustment rejected stay out
-        _progress("matching the GCPs between images (GCP transfer)", quiet)
+        progress("adjust", "matching the GCPs between images (GCP transfer)", quiet)
         rejected = set(result.outliers)
         kept = np.array([g not in rejected for g in gcps["id"]], bool)
         try:
@@ -315,7 +312,7 @@ def adjust_product(
             raise InputError(f"adjuster {name}: product name {product!r} is not allowed")
         if isinstance(document, dict) and document.get("sources") == []:
             document = document | {"sources": [str(src)]}  # what the adjuster did not know
-        files[product] = write_json_atomic(out / f"{product}.json", _jsonable(document)).name
+        files[product] = write_json_atomic(out / f"{product}.json", jsonable(document)).name
     plot = residual_plot(
         result,
         out / "residuals.png",
@@ -325,9 +322,8 @@ def adjust_product(
         "source": str(src),
         "adjuster": name,
         "matcher": matcher,
-        "trajectory_models": {
-            n: s.trajectory.model for n, s in sensors.items() if hasattr(s, "trajectory")
-        },
+        # the trajectory model asked for (None: the one each product names)
+        "trajectory_model": trajectory,
         "options": {
             k: v
             for k, v in options.items()
@@ -399,7 +395,7 @@ def adjust_product(
         if offsets["id"].size:
             write_point_table(out / "gcp_offsets.csv", offsets)
             report["files"]["gcp_offsets"] = "gcp_offsets.csv"
-    write_json_atomic(out / "report.json", _jsonable(report))
+    write_report(out / "report.json", report)
     return report
 
 
@@ -408,18 +404,6 @@ def _auto_flag(value: Any, name: str) -> str | bool:
     if isinstance(value, bool) or value == "auto":
         return value
     raise InputError(f"{name} must be 'auto', true or false, got {value!r}")
-
-
-def _jsonable(value: Any) -> Any:
-    if isinstance(value, dict):
-        return {str(k): _jsonable(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_jsonable(v) for v in value]
-    if isinstance(value, np.generic):
-        value = value.item()
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
 
 
 def _with_dem_heights(
@@ -496,7 +480,7 @@ def _write_models(
             written = types[name].save(sensor, out, name, h_range_m=h_range)
         except NotImplementedError as exc:
             files["not_saved"][name] = str(exc)
-            _progress(f"image {name}: adjusted model not written: {exc}", quiet)
+            progress("adjust", f"image {name}: adjusted model not written: {exc}", quiet)
             continue
         if "model" in written:
             files["models"][name] = written["model"]

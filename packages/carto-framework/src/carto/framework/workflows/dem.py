@@ -9,9 +9,7 @@ Every file is written to a temporary name and renamed when complete.
 
 from __future__ import annotations
 
-import json
 import os
-import sys
 import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -21,11 +19,11 @@ import attrs
 import numpy as np
 
 from carto.framework.errors import InputError
-from carto.framework.files.atomic import atomic_output
 from carto.framework.geometry.sensor import Sensor, SensorType
 from carto.framework.plugins.registry import get_registry
 from carto.framework.raster.dem import DEM, ELLIPSOID, Geoid
 from carto.framework.workflows.opening import open_options, open_sensor, sensor_type_for
+from carto.framework.workflows.reporting import progress, write_report
 
 __all__ = [
     "StereoInputs",
@@ -35,11 +33,6 @@ __all__ = [
     "open_pair",
     "tile_scheduler",
 ]
-
-
-def _progress(message: str, quiet: bool) -> None:
-    if not quiet:
-        print(f"carto dem: {message}", file=sys.stderr, flush=True)
 
 
 def _model_beside(image: Path) -> Path:
@@ -202,19 +195,6 @@ def tile_scheduler(workers: int) -> Any:
     return run
 
 
-def _write_json(path: Path, doc: Mapping[str, Any]) -> None:
-    with atomic_output(path) as tmp:
-        Path(tmp).write_text(json.dumps(doc, indent=1, default=_jsonable) + "\n")
-
-
-def _jsonable(value: Any) -> Any:
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, float) and not np.isfinite(value):
-        return None
-    return str(value)
-
-
 def choose_dem_generator(requested: str | None, types: Sequence[SensorType]) -> str:
     """The DEM generator of a run: the one named, else the first default of the images'
     sensor types that is installed, else the only one installed."""
@@ -268,7 +248,8 @@ def dem_product(
     pair = open_pair(inputs)
     rasters, sensors, scene_dem = pair.rasters, pair.sensors, pair.init_dem
     if inputs.source is not None and inputs.models is None:
-        _progress(
+        progress(
+            "dem",
             "no --models: using the scene's delivered (system-level) models; give a carto "
             "adjust output folder for a DEM of the adjusted accuracy",
             quiet,
@@ -282,7 +263,8 @@ def dem_product(
     chosen_matcher = registry.get("matcher", matcher)
     settings = dict(options or {})
     posting = settings.get("posting_m")
-    _progress(
+    progress(
+        "dem",
         f"{generator}: {names[0]} (left) and {names[1]} (right)"
         + (f", posting {posting:g} m" if isinstance(posting, int | float) else "")
         + f", matcher {matcher}",
@@ -297,7 +279,7 @@ def dem_product(
         [sensors[n] for n in names],
         init_dem=start,
         matcher=chosen_matcher,
-        progress=None if quiet else (lambda line: _progress(line, False)),
+        progress=None if quiet else (lambda line: progress("dem", line, False)),
         **settings,
         **extra,
     )
@@ -368,5 +350,5 @@ def dem_product(
             diff, out / "dem_difference.png", f"DEM - {Path(reference).name}"
         ).name
     report["seconds"] = time.perf_counter() - t0
-    _write_json(out / "report.json", report)
+    write_report(out / "report.json", report)
     return report
