@@ -59,6 +59,8 @@ def test_dem_from_a_scene_writes_every_product(run_carto, scene, tmp_path):
         assert np.isnan(ds.nodata)
     with rasterio.open(out / "quality.tif") as ds:
         assert ds.count == 2
+        assert ds.descriptions == ("score", "valid")  # GDAL band descriptions
+    assert report["quality_bands"] == ["score", "valid"]
     for name in ("ortho_left.tif", "ortho_right.tif", "dem_hillshade.png", "dem_difference.png"):
         assert (out / name).is_file(), name
     # with the true models, better than the starting DEM (truth from the simulator)

@@ -12,10 +12,10 @@ registry (and with it the component base classes) is imported on first use of
 :func:`get_registry` or the other registry names, so a plugin module that says
 ``from carto.framework import hookimpl`` loads neither numba, OpenCV nor the simulator.
 
-The layers of the framework, bottom to top (``docs/architecture.md``): ``errors``,
-``component``, ``arrays`` and ``files``; ``raster``; ``geometry``; ``imaging``; ``products``;
-``evaluation``; ``matching``; ``adjustment``; ``dem_generation``; ``simulation``; ``plugins``;
-``workflows``; ``cli``.
+The layers of the framework, bottom to top (``.importlinter``, ``docs/architecture.md``):
+``errors``, ``component`` and ``arrays``; ``files``; ``raster``; ``geometry``; ``imaging``;
+``products``; ``evaluation``; ``matching``; ``adjustment``; ``dem_generation``;
+``simulation``; ``plugins``; ``workflows``; ``cli``.
 """
 
 from __future__ import annotations

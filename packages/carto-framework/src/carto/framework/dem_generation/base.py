@@ -13,8 +13,9 @@ Options every generator receives (``generate(..., **options)``):
     the starting :class:`~carto.framework.raster.dem.DEM` (ellipsoidal heights), required;
 ``matcher``
     the :class:`~carto.framework.matching.base.Matcher` chosen by the user
-    (``carto dem --matcher NAME``, default the registry's ``"ncc"``), for generators that
-    match images; a generator that does not match must refuse a matcher it would ignore;
+    (``carto dem --matcher NAME``, default the registry's ``"ncc"``; always passed), for
+    generators that match images; a generator that does not match images ignores it and says
+    so in its description;
 ``progress``
     ``None`` or a callable taking one line of text per step;
 ``scheduler``
@@ -54,7 +55,7 @@ class QualityLayer:
     Attributes:
         name: short identifier (``"score"``, ``"valid"``), written as the band's GDAL
             description.
-        description: one line for people (the band's ``DESCRIPTION`` tag).
+        description: one line for people (the ``BAND_<k>`` tag of ``quality.tif``).
         values: float32 array of the ortho grid's shape (NaN = no value).
     """
 

@@ -60,7 +60,7 @@ from __future__ import annotations
 
 import math
 import os
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -530,6 +530,7 @@ def write_ortho(
     vertical: str | None = None,
     tags: Mapping[str, Any] | None = None,
     nodata: float | None = None,
+    band_descriptions: Sequence[str] | None = None,
 ) -> Path:
     """Write an ortho-image (or any raster on ``grid``) as a GeoTIFF, atomically.
 
@@ -545,6 +546,8 @@ def write_ortho(
             :meth:`carto.framework.raster.dem.DEM.write` does (so ``DEM.open`` reads it back).
         tags: more metadata tags (values written as strings).
         nodata: nodata value (default NaN for float data, none for integers).
+        band_descriptions: one GDAL band description per band (what QGIS and ``gdalinfo``
+            show as the band's name).
 
     Returns:
         ``path``.
@@ -566,6 +569,10 @@ def write_ortho(
     if array.ndim != 3 or tuple(array.shape[1:]) != tuple(grid.shape):
         raise InputError(
             f"write_ortho: data shape {np.shape(data)} does not match the grid {grid.shape}"
+        )
+    if band_descriptions is not None and len(band_descriptions) != array.shape[0]:
+        raise InputError(
+            f"write_ortho: {len(band_descriptions)} band descriptions for {array.shape[0]} bands"
         )
     if array.dtype == np.float16:
         array = array.astype(np.float32)
@@ -604,6 +611,8 @@ def write_ortho(
         with atomic_output(path) as tmp, rasterio.open(tmp, "w", **profile) as dst:
             dst.write(array)
             dst.update_tags(**all_tags)
+            for k, description in enumerate(band_descriptions or (), 1):
+                dst.set_band_description(k, str(description))
     except (RasterioError, OSError) as exc:
         text = str(exc).strip().splitlines()
         raise InputError(f"cannot write ortho {path}: {text[0] if text else exc}") from exc

@@ -21,11 +21,14 @@ from carto.framework.geometry.trajectory_models import (
 from carto.framework.matching.base import Matcher
 from carto.framework.matching.ncc_matcher import NCCMatcher
 from carto.framework.plugins.hooks import hookimpl
+from carto.framework.products.scene_sensor_type import SceneSensorType
+from carto.framework.simulation.generic_pair import GenericPairPreset
+from carto.framework.simulation.preset import ScenePreset
 
 
 @hookimpl
 def carto_sensor_types() -> Sequence[SensorType]:
-    return [LineScannerModelType(), RPCSensorType()]
+    return [LineScannerModelType(), RPCSensorType(), SceneSensorType()]
 
 
 @hookimpl
@@ -43,3 +46,8 @@ def carto_matchers() -> Sequence[Matcher]:
     from carto.framework.matching.tiepoints import OrthoTiePointMatcher
 
     return [NCCMatcher(), OrthoTiePointMatcher()]
+
+
+@hookimpl
+def carto_scene_presets() -> Sequence[ScenePreset]:
+    return [GenericPairPreset()]

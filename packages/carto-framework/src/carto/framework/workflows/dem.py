@@ -312,6 +312,7 @@ def dem_product(
             np.stack([layer.values for layer in product.quality]),
             product.ortho_grid,
             tags={f"BAND_{k}": layer.description for k, layer in enumerate(product.quality, 1)},
+            band_descriptions=[layer.name for layer in product.quality],
         ).name
     from carto.framework.raster.quicklook import difference_png, hillshade_png
 
