@@ -1,4 +1,4 @@
-"""Fixtures for framework tests: geometry (builders in ``geometry.py``) and the hilly simulated
+"""Fixtures for framework tests: geometry (builders in ``builders.py``) and the hilly simulated
 scenes of the tie-point and GCP-transfer tests."""
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from carto.framework.geometry.linescan_timing import LineTiming
 from carto.framework.products.scene import Scene
 
 from ..scenes import simulate
-from .geometry import cartosat1_camera, make_trajectory
+from .builders import cartosat1_camera, make_trajectory
 
 SIZE = 600  # px; the brief's expectation of >= 200 tie points on 2000 x 2000 scales to 18
 

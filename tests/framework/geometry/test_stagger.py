@@ -37,7 +37,7 @@ from carto.framework.raster.dem import DEM
 from carto.framework.simulation.render import render_reflectance
 from carto.framework.simulation.texture import make_texture
 
-from ..scenes import simulate
+from ...scenes import simulate
 
 GSD_M = {"c1": 2.5, "c2": 0.8}
 MERGED_RMS_MAX = 0.1  # done-when: merged geometry error <= 0.1 px RMS

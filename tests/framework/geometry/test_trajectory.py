@@ -9,7 +9,7 @@ from carto.framework.errors import InputError
 from carto.framework.geometry import frames
 from carto.framework.geometry.trajectory import AttitudeSamples, EphemerisSamples, Trajectory
 
-from .geometry import EPOCH, circular_orbit, make_trajectory
+from ..builders import EPOCH, circular_orbit, make_trajectory
 
 
 @pytest.mark.parametrize(("order", "tolerance_m"), [(1, 6000.0), (2, 200.0), (3, 1.0)])

@@ -15,7 +15,7 @@ from carto.framework.geometry.linescan import LineScanner
 from carto.framework.geometry.linescan_timing import LineTiming
 from carto.framework.geometry.trajectory import AttitudeSamples, EphemerisSamples, Trajectory
 
-from .geometry import EPOCH, circular_orbit
+from ..builders import EPOCH, circular_orbit
 
 
 # ----------------------------------------------------------------------------- detector polynomials

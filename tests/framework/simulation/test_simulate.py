@@ -17,7 +17,7 @@ from carto.framework.geometry.linescan import LineScanner
 from carto.framework.products.ancillary import read_ancillary
 from carto.framework.raster.dem import DEM
 
-from ..scenes import simulate
+from ...scenes import simulate
 
 
 def _read(path: Path) -> np.ndarray:

@@ -397,3 +397,18 @@ def locate_pixels(
         max_terrain_slope(grid, dx, dy, lat_c),
     )
     return out[:, 0], out[:, 1], out[:, 2]
+
+
+def is_lonlat_grid(dem: object) -> bool:
+    """True for a north-up geographic EPSG:4326 grid (what the compiled location takes)."""
+    import pyproj
+
+    crs, t = getattr(dem, "crs", None), getattr(dem, "transform", None)
+    if crs is None or t is None:
+        return False
+    return bool(
+        pyproj.CRS.from_user_input(crs).equals(pyproj.CRS("EPSG:4326"), ignore_axis_order=True)
+        and t.b == 0.0
+        and t.d == 0.0
+        and t.e < 0.0
+    )

@@ -248,26 +248,11 @@ def _interp_axis(values: FloatArray, nodes: IntArray, n: int, axis: int) -> Floa
     return np.take(values, k, axis=axis) * (1.0 - w) + np.take(values, k + 1, axis=axis) * w
 
 
-def _is_lonlat_grid(dem: object) -> bool:
-    """True for a north-up geographic EPSG:4326 grid (what the compiled location takes)."""
-    import pyproj
-
-    crs, t = getattr(dem, "crs", None), getattr(dem, "transform", None)
-    if crs is None or t is None:
-        return False
-    return bool(
-        pyproj.CRS.from_user_input(crs).equals(pyproj.CRS("EPSG:4326"), ignore_axis_order=True)
-        and t.b == 0.0
-        and t.d == 0.0
-        and t.e < 0.0
-    )
-
-
 def _locate(
     sensor: LineScanner, line: FloatArray, sample: FloatArray, dem: object
 ) -> tuple[FloatArray, FloatArray, FloatArray, int]:
     """Ground points of image points on the DEM; points off the DEM at its median height."""
-    from carto.framework.geometry.linescan_raycast import locate_pixels
+    from carto.framework.geometry.linescan_raycast import is_lonlat_grid
     from carto.framework.raster.dem import DEM
 
     if isinstance(dem, DEM) and not dem.is_ellipsoidal:
@@ -275,9 +260,7 @@ def _locate(
             f"DEM {dem.name}: heights are {dem.vertical}, sensors need ellipsoidal heights; "
             "convert with DEM.to_ellipsoid(geoid)"
         )
-    if _is_lonlat_grid(dem):
-        lon, lat, h = locate_pixels(sensor, line, sample, dem)
-    elif isinstance(dem, DEM):  # projected or rotated grids: the generic search
+    if isinstance(dem, DEM) or is_lonlat_grid(dem):
         lon, lat, h = (np.ravel(v) for v in sensor.locate_on_dem(line, sample, dem))
     else:
         raise InputError(
