@@ -1,22 +1,19 @@
-"""Rendering raw pushbroom images through a rigorous model over a DEM and a ground texture.
+"""Compiled ray casting of line-scanner pixels onto a geographic DEM: the fast path of
+:meth:`carto.framework.geometry.linescan.LineScanner.locate_on_dem`, and the kernels the
+simulator's renderer (:mod:`carto.framework.simulation.render`) builds on.
 
-For every image pixel (and ``supersample x supersample`` sub-pixel positions in it, which
-integrate the detector footprint and the motion during the line time) the line of sight of the
-detector is intersected with the terrain and the ground texture is sampled there. Rays are
-intersected with the DEM by *safe stepping*: at a height ``dh`` above the terrain a ray that
-descends ``c`` metres per metre and moves ``s`` metres horizontally cannot meet terrain of
-slope at most ``S`` before it has travelled ``dh / (c + s S)``; stepping by that much never
-jumps over a ridge, and it converges like Newton's method on gentle terrain. Iterations stop
-when the ray is within ``1e-4`` m of the terrain height.
+Each pixel's line of sight comes from the model's exact camera-state table (see
+:mod:`carto.framework.geometry.linescan_solver`) and is intersected with the terrain by *safe
+stepping*: at a height ``dh`` above the terrain, a ray that descends ``c`` metres per metre and
+moves ``s`` metres horizontally cannot meet terrain of slope at most ``S`` before it has
+travelled ``dh / (c + s S)``; stepping by that much never jumps over a ridge and converges like
+Newton's method on gentle terrain. Iterations stop within ``1e-4`` m of the terrain height.
+The result equals the generic search of
+:func:`carto.framework.geometry.surface.dem_surface_locate` to 1e-4 m in height.
 
-The camera state comes from the sensor's exact interpolation table (see
-:mod:`carto.framework.geometry.linescan`); with ``stagger=True`` detectors with odd 0-based index
-(the even array) look along track by the camera's ``stagger_tan`` more than the others, as the raw
-Cartosat images are recorded.
-
-DEMs and textures are regular geographic grids (EPSG:4326, north up, pixel-is-area): the
-simulator generates them so; :func:`locate_pixels` and :func:`render_reflectance` raise
-:class:`InputError` for anything else.
+Grids are regular geographic grids (EPSG:4326, north up, pixel-is-area);
+:func:`locate_pixels` raises :class:`InputError` for anything else (:func:`is_lonlat_grid`
+tells beforehand).
 """
 
 from __future__ import annotations

@@ -93,24 +93,12 @@ class NCCMatcher(Matcher):
         """
         left_img, right_img = as_image(left, "left"), as_image(right, "right")
         if settings is None:
-            guess = np.zeros(2) if guess_offsets is None else guess_offsets
+            settings = self.settings()
             small = min(*left_img.shape, *right_img.shape) < 8
             if guess_offsets is None and self.use_global_shift and not small:
                 d_line, d_sample, response = global_shift(left_img, right_img)
                 if response >= self.min_response:
-                    guess = np.array([d_line, d_sample])
-            return pyramid_match(
-                left_img,
-                right_img,
-                points,
-                levels=self.levels,
-                template=self.template,
-                search=self.search,
-                subpixel=self.subpixel,
-                min_score=self.min_score,
-                guess_offsets=guess,
-                tolerance=self.tolerance,
-            )
+                    guess_offsets = np.array([d_line, d_sample])
         if settings.levels == 1 and not settings.two_way:
             return match_ncc(
                 left_img,
@@ -134,6 +122,18 @@ class NCCMatcher(Matcher):
             guess_offsets=guess_offsets,
             bidirectional=settings.two_way,
             tolerance=settings.tolerance_px,
+        )
+
+    def settings(self) -> MatchSettings:
+        """This matcher's own options as :class:`MatchSettings` (both directions)."""
+        return MatchSettings(
+            template_px=self.template,
+            search_px=self.search,
+            levels=self.levels,
+            min_score=self.min_score,
+            two_way=True,
+            tolerance_px=self.tolerance,
+            subpixel=self.subpixel,
         )
 
     def match_dense(
