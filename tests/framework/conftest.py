@@ -1,9 +1,8 @@
-"""Fixtures for framework tests: geometry (builders in ``builders.py``) and the hilly simulated
-scenes of the tie-point and GCP-transfer tests."""
+"""Fixtures for framework tests: line-scanner geometry from the analytic builders in
+``builders.py`` (no plugin involved; the simulated Cartosat scenes are in
+``tests/integration/conftest.py``)."""
 
 from __future__ import annotations
-
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -11,12 +10,8 @@ import pytest
 from carto.framework.geometry.camera import Camera
 from carto.framework.geometry.linescan import LineScanner
 from carto.framework.geometry.linescan_timing import LineTiming
-from carto.framework.products.scene import Scene
 
-from ..scenes import simulate
 from .builders import cartosat1_camera, make_trajectory
-
-SIZE = 600  # px; the brief's expectation of >= 200 tie points on 2000 x 2000 scales to 18
 
 
 @pytest.fixture(scope="session")
@@ -57,20 +52,3 @@ def cartosat2_agile() -> LineScanner:
         ]
     )
     return LineScanner("cs2-nadir", 12000, LineTiming(lines, times), cam, traj)
-
-
-@pytest.fixture(scope="session")
-def triplet(tmp_path_factory) -> Scene:
-    """A Cartosat-2 agile triplet over hilly terrain with realistic errors (the system-level
-    models are some 600 m apart: their orthos overlap only in part)."""
-    out: Path = tmp_path_factory.mktemp("tp_c2")
-    simulate("cartosat2-triplet", out, seed=3, size=(SIZE, SIZE), terrain="hilly")
-    return Scene.open(out)
-
-
-@pytest.fixture(scope="session")
-def pair(tmp_path_factory) -> Scene:
-    """A Cartosat-1 Fore/Aft pair over hilly terrain with realistic errors."""
-    out: Path = tmp_path_factory.mktemp("tp_c1")
-    simulate("cartosat1-pair", out, seed=3, size=(SIZE, SIZE), terrain="hilly")
-    return Scene.open(out)

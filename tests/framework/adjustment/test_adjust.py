@@ -1,95 +1,13 @@
-"""The bundle-adjustment engine on a simulated Cartosat-1 pair (truth from the simulator)."""
+"""The bundle-adjustment observations: validation and point selection (the engine on a
+simulated Cartosat-1 pair: ``tests/integration/adjustment/test_adjust.py``)."""
 
 from __future__ import annotations
 
-import math
-
 import attrs
-import numpy as np
 import pytest
 
-from carto.framework.adjustment.bundle import adjust_bundle
 from carto.framework.adjustment.observations import Observations
-from carto.framework.errors import AdjustmentError, InputError
-from carto.framework.evaluation.checkpoints import checkpoint_accuracy
-from carto.framework.products.scene import Scene
-
-
-def _split(table: dict, every: int = 2):
-    """Half of the checkpoints as (perfectly measured) tie points, the rest to check."""
-    ids = np.array(sorted(set(table["id"])))
-    tie_ids = set(ids[::every])
-    m = np.array([i in tie_ids for i in table["id"]])
-    ties = {k: v[m] for k, v in table.items()}
-    ties["id"] = np.array(["T" + i for i in ties["id"]], object)
-    return ties, {k: v[~m] for k, v in table.items()}
-
-
-@pytest.fixture(scope="module")
-def scene(cartosat1_scene):
-    return Scene.open(cartosat1_scene)
-
-
-def test_one_gcp_and_tie_points_bring_200_m_to_metres(scene):
-    sensors = scene.sensors()
-    ties, check = _split(scene.control("checkpoints"))
-    before = checkpoint_accuracy(sensors, check)
-    assert before["rmse_planimetric_m"] > 50.0  # the injected system-level error
-    obs = Observations.from_tables(scene.control("gcps"), ties)
-    result = adjust_bundle(sensors, obs)
-    assert result.converged
-    after = checkpoint_accuracy(result.sensors, check)
-    assert after["rmse_planimetric_m"] < 3.0
-    assert after["rmse_height_m"] < 3.0
-    # the tie points are exact, the GCP has realistic errors: sigma0 well below 1
-    assert 0.0 < result.sigma0 < 1.0
-    assert result.redundancy > 0
-    assert set(result.parameters) >= {"trajectory.attitude.pitch.c0", "trajectory.attitude.roll.c1"}
-    assert np.all(result.sigmas > 0)
-    # residuals are reported per observation
-    assert result.image_residuals["d_line"].shape == obs.line.shape
-    assert result.outliers == ()
-
-
-def test_a_50_m_gcp_blunder_is_flagged(scene, cartosat1_scene):
-    from tests.scenes import simulate
-
-    three = Scene.open(
-        simulate(
-            "cartosat1-pair",
-            cartosat1_scene.parent / "blunder",
-            seed=11,
-            size=(400, 400),
-            n_gcps=3,
-            n_checkpoints=20,
-            terrain="plains",
-        )
-    )
-    sensors = three.sensors()
-    ties, check = _split(three.control("checkpoints"))
-    gcps = three.control("gcps")
-    clean = adjust_bundle(sensors, Observations.from_tables(gcps, ties))
-    bad = dict(gcps)
-    bad["lat_deg"] = np.where(
-        gcps["id"] == "G002", gcps["lat_deg"] + 50.0 / 111_320.0, gcps["lat_deg"]
-    )
-    blundered = adjust_bundle(sensors, Observations.from_tables(bad, ties))
-    assert blundered.outliers == ("G002",)
-    a = checkpoint_accuracy(clean.sensors, check)["rmse_planimetric_m"]
-    b = checkpoint_accuracy(blundered.sensors, check)["rmse_planimetric_m"]
-    assert b <= 1.1 * a + 0.05
-
-
-def test_singular_setup_names_the_missing_parameters(scene):
-    # no priors and no ground control: the absolute orientation is undetermined
-    sensors = scene.sensors()
-    sensors = {
-        n: s.with_parameters(sigmas={p.name: math.inf for p in s.parameters})
-        for n, s in sensors.items()
-    }
-    ties, _ = _split(scene.control("checkpoints"))
-    with pytest.raises(AdjustmentError, match="nothing determines trajectory"):
-        adjust_bundle(sensors, Observations.from_tables(None, ties))
+from carto.framework.errors import InputError
 
 
 def test_observation_validation():
@@ -100,78 +18,3 @@ def test_observation_validation():
     obs = Observations(["a", "b"], ["fore", "aft"], [1.0, 2.0], [2.0, 3.0], [1.0, 1.0])
     assert obs.without_points(["a"]).point_id.tolist() == ["b"]
     assert attrs.evolve(obs).line.tolist() == [1.0, 2.0]
-
-
-def test_a_common_dem_height_offset_is_estimated_not_absorbed(scene):
-    """Tie-point heights from a 'DEM' 8 m too high: as independent constraints they drag the
-    block up; with a common offset unknown the offset is estimated and the block stays put."""
-    from carto.framework.adjustment.observations import HEIGHT_OFFSET
-
-    sensors = scene.sensors()
-    ties, check = _split(scene.control("checkpoints"))
-    _, first = np.unique(ties["id"], return_index=True)
-    obs = Observations.from_tables(scene.control("gcps"), ties)
-    biased_h = ties["h_m"][first] + 8.0
-
-    dragged = adjust_bundle(sensors, obs.with_heights(ties["id"][first], biased_h, 2.0))
-    height_dragged = checkpoint_accuracy(dragged.sensors, check)["rmse_height_m"]
-    assert height_dragged > 4.0
-    assert HEIGHT_OFFSET not in dragged.parameters
-
-    result = adjust_bundle(sensors, obs.with_heights(ties["id"][first], biased_h, 2.0, 20.0))
-    k = result.parameters.index(HEIGHT_OFFSET)
-    # the GCP's own height error (1 m) moves the datum: compare with the a-priori sigma
-    # (the exact tie points make sigma0 << 1 and the a-posteriori sigma too small)
-    assert abs(result.values[k] - 8.0) < 3.0 * math.sqrt(result.covariance_unit[k, k])
-    assert checkpoint_accuracy(result.sensors, check)["rmse_height_m"] < 3.0
-    with pytest.raises(InputError, match="height_offset_sigma_m"):
-        obs.with_heights(ties["id"][first], biased_h, 2.0, -1.0)
-
-
-def test_a_matched_offset_carries_the_gcp_parallax(scene):
-    """A GCP measured by hand 1.5 px off along track in Aft only: its wrong stereo parallax
-    moves the block by metres in height. The image offset that matching measures (here the
-    exact one, from the true image positions) carries the parallax instead; and it transfers
-    a GCP measured in Fore only into Aft."""
-    sensors = scene.sensors()
-    ties, check = _split(scene.control("checkpoints"))
-    gid = check["id"][0]
-    at = check["id"] == gid
-    gcp = {k: v[at] for k, v in check.items()}  # error-free ground coordinates
-    true = {
-        im: (li, sa) for im, li, sa in zip(gcp["image"], gcp["line"], gcp["sample"], strict=True)
-    }
-    gcp["line"] = np.where(gcp["image"] == "aft", gcp["line"] + 1.5, gcp["line"])
-    rest = {k: v[~at] for k, v in check.items()}
-    d_line, d_sample = (true["aft"][0] - true["fore"][0], true["aft"][1] - true["fore"][1])
-    obs = Observations.from_tables(gcp, ties)
-
-    plain = checkpoint_accuracy(adjust_bundle(sensors, obs).sensors, rest)
-    result = adjust_bundle(sensors, obs.with_offsets([gid], "fore", "aft", d_line, d_sample, 0.05))
-    fixed = checkpoint_accuracy(result.sensors, rest)
-    assert plain["rmse_height_m"] > 3.0
-    assert fixed["rmse_height_m"] < 0.3 * plain["rmse_height_m"]
-    assert fixed["rmse_height_m"] < 1.0
-    res = result.offset_residuals
-    assert res["point_id"].tolist() == [gid]
-    assert abs(res["d_line"][0]) < 0.05  # the hand measurements' parallax gives way
-    # a GCP measured in Fore only, transferred into Aft by the offset
-    fore_only = {k: v[gcp["image"] == "fore"] for k, v in gcp.items()}
-    alone = Observations.from_tables(fore_only, ties)
-    moved = adjust_bundle(sensors, alone.with_offsets([gid], "fore", "aft", d_line, d_sample, 0.05))
-    assert checkpoint_accuracy(moved.sensors, rest)["rmse_height_m"] < 1.0
-    # (one image and the prior alone cannot place the block in height)
-    assert checkpoint_accuracy(adjust_bundle(sensors, alone).sensors, rest)["rmse_height_m"] > 3.0
-    # dropping the point drops its offsets; bad offsets are refused
-    assert (
-        obs.with_offsets([gid], "fore", "aft", 1.0, 1.0, 0.1).without_points([gid]).offset_id.size
-        == 0
-    )
-    with pytest.raises(InputError, match="between image 'fore' and itself"):
-        obs.with_offsets([gid], "fore", "fore", 1.0, 1.0, 0.1)
-    with pytest.raises(InputError, match="offset_sigma_px"):
-        obs.with_offsets([gid], "fore", "aft", 1.0, 1.0, 0.0)
-    with pytest.raises(InputError, match="that no image measures"):
-        adjust_bundle(sensors, obs.with_offsets(["nowhere"], "fore", "aft", 1.0, 1.0, 0.1))
-    with pytest.raises(InputError, match="without a sensor"):
-        adjust_bundle(sensors, obs.with_offsets([gid], "fore", "pan", 1.0, 1.0, 0.1))
