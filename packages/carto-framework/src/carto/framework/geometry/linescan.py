@@ -431,30 +431,6 @@ class LineScanner(Sensor):
         except InputError as exc:
             raise InputError(f"{source}: {exc}") from None
 
-    def locate_on_dem(
-        self, line: ArrayLike, sample: ArrayLike, dem: Any, **options: Any
-    ) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """Image points located on a DEM: ``(lon_deg, lat_deg, h_m)`` (see
-        :meth:`Sensor.locate_on_dem`). On a north-up geographic grid without voids, and
-        without ``options``, the compiled ray casting through this model's table
-        (:func:`~carto.framework.geometry.linescan_raycast.locate_pixels`, the same result to
-        1e-4 m); otherwise the generic search."""
-        from carto.framework.geometry.linescan_raycast import is_lonlat_grid, locate_pixels
-
-        heights = getattr(dem, "heights", None)
-        if (
-            options
-            or not is_lonlat_grid(dem)
-            or heights is None
-            or not np.isfinite(heights).all()
-            or not getattr(dem, "is_ellipsoidal", True)
-        ):
-            return super().locate_on_dem(line, sample, dem, **options)
-        line_a, sample_a = as_float_arrays(line, sample)
-        lon, lat, h = locate_pixels(self, line_a, sample_a, dem)
-        shape = line_a.shape
-        return lon.reshape(shape), lat.reshape(shape), h.reshape(shape)
-
     def prepare_raw(self, raw: ArrayLike, dem: Any) -> NDArray[np.float32]:
         """The raw image with its staggered arrays merged onto this model's geometry
         (:func:`~carto.framework.geometry.stagger.merge_staggered`, stagger field every 8

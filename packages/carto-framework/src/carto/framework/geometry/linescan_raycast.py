@@ -1,6 +1,6 @@
-"""Compiled ray casting of line-scanner pixels onto a geographic DEM: the fast path of
-:meth:`carto.framework.geometry.linescan.LineScanner.locate_on_dem`, and the kernels the
-simulator's renderer (:mod:`carto.framework.simulation.render`) builds on.
+"""Compiled ray casting of line-scanner pixels onto a geographic DEM: the fast location the
+stagger merge uses (:mod:`carto.framework.geometry.stagger`), and the kernels the simulator's
+renderer (:mod:`carto.framework.simulation.render`) builds on.
 
 Each pixel's line of sight comes from the model's exact camera-state table (see
 :mod:`carto.framework.geometry.linescan_solver`) and is intersected with the terrain by *safe

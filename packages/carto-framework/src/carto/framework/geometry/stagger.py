@@ -252,7 +252,7 @@ def _locate(
     sensor: LineScanner, line: FloatArray, sample: FloatArray, dem: object
 ) -> tuple[FloatArray, FloatArray, FloatArray, int]:
     """Ground points of image points on the DEM; points off the DEM at its median height."""
-    from carto.framework.geometry.linescan_raycast import is_lonlat_grid
+    from carto.framework.geometry.linescan_raycast import is_lonlat_grid, locate_pixels
     from carto.framework.raster.dem import DEM
 
     if isinstance(dem, DEM) and not dem.is_ellipsoidal:
@@ -260,7 +260,9 @@ def _locate(
             f"DEM {dem.name}: heights are {dem.vertical}, sensors need ellipsoidal heights; "
             "convert with DEM.to_ellipsoid(geoid)"
         )
-    if isinstance(dem, DEM) or is_lonlat_grid(dem):
+    if is_lonlat_grid(dem):  # the compiled ray casting (the generic search to 1e-4 m)
+        lon, lat, h = locate_pixels(sensor, line, sample, dem)
+    elif isinstance(dem, DEM):  # projected or rotated grids: the generic search
         lon, lat, h = (np.ravel(v) for v in sensor.locate_on_dem(line, sample, dem))
     else:
         raise InputError(
