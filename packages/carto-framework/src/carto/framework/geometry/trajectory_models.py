@@ -15,7 +15,7 @@ else (frames, correction parameters, fit report) is the framework's
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, ClassVar
 
 from carto.framework.component import Component
 from carto.framework.errors import InputError
@@ -76,7 +76,10 @@ class TrajectoryModel(Component):
 
 
 class _BuiltinModel(TrajectoryModel):
-    """The framework's models: the series of :class:`BuiltinSeries`."""
+    """The framework's models: the series of :class:`BuiltinSeries`, with ``points`` (the
+    polynomial order, or the Lagrange samples) by role."""
+
+    points: ClassVar[dict[str, int]] = {}
 
     def fit(
         self,
@@ -89,6 +92,17 @@ class _BuiltinModel(TrajectoryModel):
             epoch_j2000_s, ephemeris, attitude, interpolation=self.name, **options
         )
 
+    def fit_series(
+        self,
+        t_s: FloatArray,
+        values: FloatArray,
+        *,
+        role: str,
+        t_mid_s: float,
+        t_half_s: float,
+    ) -> TimeSeries:
+        return BuiltinSeries.fit(t_s, values, self.name, self.points[role], t_mid_s, t_half_s)
+
     def series_from_dict(self, d: dict[str, Any]) -> TimeSeries:
         if d.get("kind") != self.name:
             raise InputError(f"trajectory model {self.name}: a series of kind {d.get('kind')!r}")
@@ -100,17 +114,7 @@ class PolynomialTrajectoryModel(_BuiltinModel):
 
     name = "polynomial"
     description = "Least-squares polynomial (order 1-3) per component of ephemeris and attitude"
-
-    def fit_series(
-        self,
-        t_s: FloatArray,
-        values: FloatArray,
-        *,
-        role: str,
-        t_mid_s: float,
-        t_half_s: float,
-    ) -> TimeSeries:
-        return BuiltinSeries.fit(t_s, values, "polynomial", 3, t_mid_s, t_half_s)
+    points: ClassVar[dict[str, int]] = {"orbit": 3, "attitude": 3}
 
 
 class LagrangeTrajectoryModel(_BuiltinModel):
@@ -118,15 +122,4 @@ class LagrangeTrajectoryModel(_BuiltinModel):
 
     name = "lagrange"
     description = "Lagrange interpolation (8 samples for ephemeris, 4 for attitude)"
-
-    def fit_series(
-        self,
-        t_s: FloatArray,
-        values: FloatArray,
-        *,
-        role: str,
-        t_mid_s: float,
-        t_half_s: float,
-    ) -> TimeSeries:
-        points = 8 if role == "orbit" else 4
-        return BuiltinSeries.fit(t_s, values, "lagrange", points, t_mid_s, t_half_s)
+    points: ClassVar[dict[str, int]] = {"orbit": 8, "attitude": 4}
