@@ -169,6 +169,151 @@ def _optional_float(value: Any) -> float | None:
     return None if value is None else float(value)
 
 
+# ----------------------------------------------------------------------------- validation
+MAX_IMAGE_PX = 1e7
+"""Largest ``|LINE_OFF|``, ``|SAMP_OFF|``, ``LINE_SCALE``, ``SAMP_SCALE`` accepted, pixels (ten
+times RPC00B's six-digit fields: 999999)."""
+MAX_HEIGHT_M = 1e5
+"""Largest ``|HEIGHT_OFF|``, ``|HEIGHT_SCALE|`` accepted, metres (ten times RPC00B's +-9999)."""
+MAX_COEFFICIENT = 1e10
+"""Coefficients must be smaller than this in magnitude (RPC00B's ``+d.dddddddE+d`` format)."""
+MAX_SCALE_PER_PIXEL = 100.0
+MAX_SCALE_ANY_IMAGE_PX = 1e5
+"""When the image size is known (:meth:`RPCCoefficients.check_image_shape`), ``LINE_SCALE``
+(``SAMP_SCALE``) above both ``MAX_SCALE_PER_PIXEL`` times the lines (samples) and
+``MAX_SCALE_ANY_IMAGE_PX`` is refused. The absolute floor keeps crops of full scenes:
+``gdal_translate -srcwin`` keeps the scene's scales (a 100 px crop of a 40000-line Pleiades
+scene has ``LINE_SCALE`` 20000, 200 times its lines)."""
+SANITY_GRID = 9
+"""Nodes per axis of the grid over the normalised cube ``[-1, 1]^3`` where the model is checked."""
+MIN_DENOMINATOR_RATIO = 0.02
+"""Each denominator must stay above this fraction of its value at the centre (its constant
+term) on the sanity grid: no sign change (a pole) and no near-zero value (which multiplies the
+image coordinates by 50 or more). Real products: 0.67 (Planet), 0.087 (SkySat, whose 1-degree
+ground scales extend its cube far beyond its 2 km footprint), above 0.99 for the others."""
+MAX_NORMALISED_IMAGE = 1e4
+"""Largest normalised ``|line|``/``|sample|`` accepted on the sanity grid (real products: 1.5
+to 77, and 2640 for SkySat's oversized cube): catches garbage that sends the model's own domain
+millions of scales away."""
+DOMAIN_MARGIN = 1.1
+"""Ground validity domain of the RPC sensor: ``|L|, |P| <= DOMAIN_MARGIN``."""
+HEIGHT_MARGIN = 1.5
+HEIGHT_MARGIN_MIN_M = 500.0
+"""Height validity domain: ``|h - HEIGHT_OFF| <= max(HEIGHT_MARGIN * |HEIGHT_SCALE|,
+|HEIGHT_SCALE| + HEIGHT_MARGIN_MIN_M)``. Generous: the model is nearly linear in height (rays
+are straight), and vendors set tight height ranges from coarse DEMs (IKONOS: 28 +- 82 m)."""
+
+
+def _field_error(name: str, message: str) -> InputError:
+    return InputError(f"RPC field {name}: {message}")
+
+
+def validate_fields(rpc: RPCCoefficients) -> None:
+    """Check every field of ``rpc`` against its domain (RPC00B's field ranges, widened).
+
+    Raises:
+        InputError: ``"RPC field <NAME>: <value> ..."`` for the first field out of its domain.
+    """
+    for name in SCALAR_FIELDS:
+        value = getattr(rpc, name.lower())
+        if not math.isfinite(value):
+            raise _field_error(name, f"must be finite, got {value}")
+        if name.endswith("SCALE") and value == 0.0:
+            raise _field_error(name, f"must be non-zero, got {value}")
+    limits = {
+        "LAT_OFF": (-90.0, 90.0, "a latitude, degrees"),
+        "LONG_OFF": (-180.0, 360.0, "a longitude, degrees (-180 to 180, or 0 to 360)"),
+        "HEIGHT_OFF": (-MAX_HEIGHT_M, MAX_HEIGHT_M, "metres"),
+        "LINE_OFF": (-MAX_IMAGE_PX, MAX_IMAGE_PX, "pixels"),
+        "SAMP_OFF": (-MAX_IMAGE_PX, MAX_IMAGE_PX, "pixels"),
+        "LINE_SCALE": (0.0, MAX_IMAGE_PX, "pixels, positive"),
+        "SAMP_SCALE": (0.0, MAX_IMAGE_PX, "pixels, positive"),
+        "LAT_SCALE": (-90.0, 90.0, "degrees"),
+        "LONG_SCALE": (-180.0, 180.0, "degrees"),
+        "HEIGHT_SCALE": (-MAX_HEIGHT_M, MAX_HEIGHT_M, "metres"),
+    }
+    for name, (lo, hi, what) in limits.items():
+        value = getattr(rpc, name.lower())
+        if not lo <= value <= hi:
+            raise _field_error(name, f"{value:.15g} is out of range [{lo:g}, {hi:g}] ({what})")
+    for name, row in zip(COEFF_FIELDS, rpc.coefficients, strict=True):
+        for i, value in enumerate(row.tolist()):
+            if not abs(value) < MAX_COEFFICIENT:  # False for NaN
+                raise _field_error(
+                    f"{name}_{i + 1}",
+                    f"{value:.15g} is out of range (finite, |c| < {MAX_COEFFICIENT:g})",
+                )
+    for name in ("LINE_DEN_COEFF", "SAMP_DEN_COEFF"):
+        row = rpc.coefficients[COEFF_FIELDS.index(name)]
+        if not np.any(row):
+            raise _field_error(name, "all 20 coefficients are zero")
+        if row[0] == 0.0:
+            raise _field_error(
+                f"{name}_1", "0 (the denominator vanishes at the centre of the model's domain)"
+            )
+    for name, value in (("ERR_BIAS", rpc.err_bias), ("ERR_RAND", rpc.err_rand)):
+        if value is not None and not math.isfinite(value):
+            raise _field_error(name, f"must be finite, got {value}")
+
+
+def _at(lnorm: FloatArray, pnorm: FloatArray, hnorm: FloatArray, i: int) -> str:
+    return f"(L, P, H) = ({lnorm[i]:.3g}, {pnorm[i]:.3g}, {hnorm[i]:.3g})"
+
+
+def validate_model(rpc: RPCCoefficients) -> None:
+    """Check that ``rpc`` is a sane imaging model over its normalised cube ``[-1, 1]^3``.
+
+    On a :data:`SANITY_GRID`-node grid per axis: each denominator keeps the sign of its
+    constant term and stays above :data:`MIN_DENOMINATOR_RATIO` of it (no pole), the normalised
+    image coordinates stay within :data:`MAX_NORMALISED_IMAGE`, and the Jacobian
+    ``d(line, sample)/d(lon, lat)`` keeps one sign (the ground maps one-to-one onto the image,
+    no fold). A model is not checked against the image it belongs to: a change of a digit that
+    keeps it smooth and one-to-one gives another plausible model, which no check can detect.
+
+    Raises:
+        InputError: naming the fields (``LINE_DEN_COEFF``...) and the offending value.
+    """
+    u = np.linspace(-1.0, 1.0, SANITY_GRID)
+    lnorm, pnorm, hnorm = (a.ravel() for a in np.meshgrid(u, u, u, indexing="ij"))
+    with np.errstate(all="ignore"):
+        v = _poly_values(rpc._derivative_coefficients((0, 1)), lnorm, pnorm, hnorm)
+        for k, name, axis in ((1, "LINE_DEN_COEFF", "line"), (3, "SAMP_DEN_COEFF", "sample")):
+            c0 = rpc.coefficients[k, 0]
+            ratio = v[k] / c0
+            i = int(np.argmin(ratio))
+            if not ratio[i] >= MIN_DENOMINATOR_RATIO:
+                what = "changes sign (a pole)" if not ratio[i] > 0 else "comes near zero"
+                raise _field_error(
+                    name,
+                    f"the {axis} denominator {what} inside the model's domain: "
+                    f"{v[k][i]:.3g} at {_at(lnorm, pnorm, hnorm, i)}, {c0:.6g} at the centre",
+                )
+        rl = v[0] / v[1]
+        rs = v[2] / v[3]
+        for values, name in ((rl, "LINE"), (rs, "SAMP")):
+            i = int(np.nanargmax(np.abs(values))) if np.isfinite(values).any() else 0
+            if not abs(values[i]) <= MAX_NORMALISED_IMAGE:
+                raise _field_error(
+                    f"{name}_NUM_COEFF",
+                    f"normalised {name.lower()} {values[i]:.3g} at "
+                    f"{_at(lnorm, pnorm, hnorm, i)} (|value| <= {MAX_NORMALISED_IMAGE:g} "
+                    "expected inside the model's domain)",
+                )
+        a = (v[4] - rl * v[5]) / v[1]  # d rl / dL
+        c = (v[6] - rs * v[7]) / v[3]  # d rs / dL
+        b = (v[8] - rl * v[9]) / v[1]  # d rl / dP
+        d = (v[10] - rs * v[11]) / v[3]  # d rs / dP
+        det = a * d - b * c
+    if not (np.all(det > 0) or np.all(det < 0)):
+        i = int(np.argmin(det * np.sign(np.nanmedian(det)))) if np.isfinite(det).any() else 0
+        raise _field_error(
+            "LINE_NUM_COEFF/SAMP_NUM_COEFF",
+            f"the model folds over: d(line, sample)/d(lon, lat) has determinant {det[i]:.3g} "
+            f"at {_at(lnorm, pnorm, hnorm, i)}, {np.nanmedian(det):.3g} typically "
+            "(the ground must map one-to-one onto the image)",
+        )
+
+
 @attrs.frozen
 class RPCCoefficients:
     """An RPC00B model (see the module docstring for the formulas and conventions).
@@ -204,18 +349,8 @@ class RPCCoefficients:
     err_rand: float | None = attrs.field(default=None, converter=_optional_float)
 
     def __attrs_post_init__(self) -> None:
-        for name in SCALAR_FIELDS:
-            value = getattr(self, name.lower())
-            if not math.isfinite(value):
-                raise InputError(f"RPC field {name}: must be finite, got {value}")
-            if name.endswith("SCALE") and value == 0.0:
-                raise InputError(f"RPC field {name}: must be non-zero, got {value}")
-        for name, row in zip(COEFF_FIELDS, self.coefficients, strict=True):
-            if not np.all(np.isfinite(row)):
-                raise InputError(f"RPC field {name}: contains NaN or infinite values")
-        for name in ("LINE_DEN_COEFF", "SAMP_DEN_COEFF"):
-            if not np.any(self.coefficients[COEFF_FIELDS.index(name)]):
-                raise InputError(f"RPC field {name}: all 20 coefficients are zero")
+        validate_fields(self)
+        validate_model(self)
 
     # ------------------------------------------------------------------ views
     @property
@@ -426,6 +561,46 @@ class RPCCoefficients:
         lon[~done] = np.nan
         lat[~done] = np.nan
         return lon.reshape(shape), lat.reshape(shape)
+
+    # ------------------------------------------------------------------ validity domain
+    @property
+    def height_domain_m(self) -> tuple[float, float]:
+        """Heights where the model is used, metres: ``HEIGHT_OFF`` +- ``max(1.5 |HEIGHT_SCALE|,
+        |HEIGHT_SCALE| + 500 m)`` (:data:`HEIGHT_MARGIN`)."""
+        s = abs(self.height_scale)
+        half = max(HEIGHT_MARGIN * s, s + HEIGHT_MARGIN_MIN_M)
+        return self.height_off - half, self.height_off + half
+
+    def in_domain(self, lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike) -> NDArray[Any]:
+        """True where a ground point is inside the validity domain: ``|L|, |P| <=``
+        :data:`DOMAIN_MARGIN` (longitudes wrapped as in :meth:`project`) and ``h`` within
+        :attr:`height_domain_m`; False for NaN. Broadcast shape."""
+        lnorm, pnorm, _ = self.normalise(lon_deg, lat_deg, h_m)
+        h = np.broadcast_to(np.asarray(h_m, dtype=np.float64), lnorm.shape)
+        h_lo, h_hi = self.height_domain_m
+        return (
+            (np.abs(lnorm) <= DOMAIN_MARGIN)
+            & (np.abs(pnorm) <= DOMAIN_MARGIN)
+            & (h >= h_lo)
+            & (h <= h_hi)
+        )
+
+    def check_image_shape(self, image_shape: tuple[int, int]) -> None:
+        """Refuse scales absurd for an image of ``image_shape`` (``(n_lines, n_samples)``): above
+        both :data:`MAX_SCALE_PER_PIXEL` times its size and :data:`MAX_SCALE_ANY_IMAGE_PX`.
+
+        Raises:
+            InputError: naming ``LINE_SCALE`` or ``SAMP_SCALE`` and the value.
+        """
+        for name, scale, n, what in (
+            ("LINE_SCALE", self.line_scale, image_shape[0], "lines"),
+            ("SAMP_SCALE", self.samp_scale, image_shape[1], "samples"),
+        ):
+            limit = max(MAX_SCALE_PER_PIXEL * n, MAX_SCALE_ANY_IMAGE_PX)
+            if scale > limit:
+                raise _field_error(
+                    name, f"{scale:.15g} px is absurd for an image of {n} {what} (> {limit:g})"
+                )
 
     # ------------------------------------------------------------------ conversions
     @classmethod

@@ -18,12 +18,13 @@ import os
 import re
 import warnings
 import xml.etree.ElementTree as ET
-from collections.abc import Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from pathlib import Path
 
 from carto.framework.errors import InputError
 from carto.framework.geometry.rpc_model import (
     COEFF_FIELDS,
+    MAX_IMAGE_PX,
     RPC00A_TO_B,
     SCALAR_FIELDS,
     RPCCoefficients,
@@ -49,16 +50,25 @@ def file_error(path: Path | str, message: str) -> InputError:
     return InputError(f"{path}: {message}")
 
 
-def _to_float(text: str | None, path: Path | str, field: str) -> float:
+_UNITS = frozenset(("pixels", "pixel", "degrees", "degree", "meters", "metres", "meter", "metre"))
+"""Unit words allowed after a value in ``KEY: value`` text (IKONOS: ``+005124.00 pixels``)."""
+
+
+def _to_float(text: str | None, path: Path | str, field: str, *, units: bool = False) -> float:
+    """The number in ``text``: one token, and with ``units`` an optional unit word after it
+    (:data:`_UNITS`); anything else (a second number, garbage) is refused."""
     if text is None:
         raise file_error(path, f"missing RPC field {field}")
-    token = text.strip().split(None, 1)[0] if text.strip() else ""
+    tokens = text.split()
+    shown = " ".join(tokens)[:40]
     try:
-        value = float(token)
+        value = float(tokens[0]) if tokens else float("")
     except ValueError:
-        raise file_error(path, f"RPC field {field}: not a number: {text.strip()[:40]!r}") from None
+        raise file_error(path, f"RPC field {field}: not a number: {shown!r}") from None
+    if len(tokens) > 1 and not (units and len(tokens) == 2 and tokens[1].lower() in _UNITS):
+        raise file_error(path, f"RPC field {field}: unexpected text after the number: {shown!r}")
     if not math.isfinite(value):
-        raise file_error(path, f"RPC field {field}: not finite: {text.strip()[:40]!r}")
+        raise file_error(path, f"RPC field {field}: not finite: {shown!r}")
     return value
 
 
@@ -66,6 +76,22 @@ def _to_floats(values: Sequence[str], path: Path | str, field: str) -> list[floa
     if len(values) != 20:
         raise file_error(path, f"RPC field {field}: expected 20 coefficients, got {len(values)}")
     return [_to_float(v, path, f"{field}_{i + 1}") for i, v in enumerate(values)]
+
+
+def _to_shape(path: Path | str, fields: Sequence[tuple[str, str]]) -> tuple[int, int]:
+    """``(n_lines, n_samples)`` from the image size fields ``(name, text)``: whole numbers from
+    1 to :data:`~carto.framework.geometry.rpc_model.MAX_IMAGE_PX`."""
+    out = []
+    for name, text in fields:
+        value = _to_float(text, path, name)
+        if not (value == round(value) and 1 <= value <= MAX_IMAGE_PX):
+            raise file_error(
+                path,
+                f"image size field {name}: {value:.15g} is not a whole number of pixels "
+                f"from 1 to {MAX_IMAGE_PX:g}",
+            )
+        out.append(round(value))
+    return out[0], out[1]
 
 
 def _build(
@@ -94,27 +120,97 @@ def _read_text(path: Path) -> str:
     return data.decode("utf-8", errors="replace").lstrip("\ufeff")
 
 
-def _load_txt(path: Path) -> tuple[RPCCoefficients, None]:
-    """``KEY: value`` text (``_RPC.TXT``, IKONOS/Cartosat/Planet/SkySat RPC text files)."""
-    text = _read_text(path)
+def _signature(token: str) -> str:
+    """How a number is written: its digits as ``d``, any sign as ``s`` (``+1.2E-03`` ->
+    ``sd.dEsdd``), for :func:`_key_values`' truncation check."""
+    return re.sub(r"[+-]", "s", re.sub(r"\d", "d", token))
+
+
+def _key_values(
+    path: Path, text: str, known: frozenset[str], coefficient_keys: frozenset[str], *, upper: bool
+) -> dict[str, str]:
+    """The ``KEY: value`` lines of ``text`` whose (case-folded) key is in ``known``.
+
+    Refuses a known key given twice, and a file that looks truncated:
+
+    * its last line holds a known key but no line break follows it: every real RPC text file
+      (IKONOS, Planet, SkySat, OSSIM ``.geom``), GDAL's ``_RPC.TXT`` writer and ours end each
+      line with one, so a missing one means the file was cut inside its last value;
+    * its last known line is a coefficient written unlike all the file's other coefficients
+      (one format for all, as vendors such as IKONOS/Cartosat write them: ``+d.dddE+dd``), e.g.
+      ``-1.23E-04`` cut to ``-1.2``, even when something added a line break after the cut.
+      Files whose coefficients have varying formats (shortest round-trip, ``%.15g``) are not
+      checked by this rule.
+    """
     fields: dict[str, str] = {}
-    for raw in text.splitlines():
+    where: dict[str, int] = {}
+    last_key = None
+    lines = text.splitlines()
+    for number, raw in enumerate(lines, 1):
         key, sep, value = raw.partition(":")
-        if sep:
-            fields[key.strip().upper()] = value.strip()
-    if not fields:
-        raise file_error(path, "not an RPC text file (no 'KEY: value' lines)")
-    scalars = {name: _to_float(fields.get(name), path, name) for name in SCALAR_FIELDS}
+        key = key.strip().upper() if upper else key.strip().lower()
+        if not sep or key not in known:
+            continue
+        if key in fields:
+            raise file_error(path, f"duplicate key {key} at lines {where[key]} and {number}")
+        fields[key] = value.strip()
+        where[key] = number
+        last_key = key
+    if last_key is None:
+        return fields
+    if text[-1:] not in ("\n", "\r") and where[last_key] == len(lines):
+        raise file_error(
+            path,
+            f"no line break after the last line {lines[-1].strip()[:60]!r}: "
+            "the file looks truncated",
+        )
+    if last_key in coefficient_keys:
+        others = {_signature(fields[k].split()[0]) for k in coefficient_keys if k in fields
+                  and k != last_key and fields[k].split()}  # fmt: skip
+        mine = _signature(fields[last_key].split()[0]) if fields[last_key].split() else ""
+        if len(others) == 1 and len(fields) > 20 and mine not in others:
+            raise file_error(
+                path,
+                f"RPC field {last_key}: {fields[last_key][:40]!r} is written unlike the file's "
+                f"other coefficients ({others.pop()}): the file looks truncated",
+            )
+    return fields
+
+
+_TXT_COEFF_KEYS = frozenset(f"{n}_{i}" for n in COEFF_FIELDS for i in range(1, 21))
+_TXT_KEYS = frozenset(SCALAR_FIELDS + COEFF_FIELDS + ("ERR_BIAS", "ERR_RAND")) | _TXT_COEFF_KEYS
+
+
+def _fields_to_model(
+    path: Path, fields: Mapping[str, str], *, units: bool = True
+) -> RPCCoefficients:
+    """``KEY: value`` fields in GDAL's RPC metadata spelling (upper case; coefficients either as
+    ``LINE_NUM_COEFF_1..20`` or, as GDAL's metadata, all 20 in ``LINE_NUM_COEFF``)."""
+    scalars = {name: _to_float(fields.get(name), path, name, units=units) for name in SCALAR_FIELDS}
     coeffs = {}
     for name in COEFF_FIELDS:
         if name in fields:  # GDAL metadata style: all 20 on one line
+            if any(f"{name}_{i}" in fields for i in range(1, 21)):
+                raise file_error(path, f"RPC field {name}: given both in one line and one by one")
             coeffs[name] = _to_floats(fields[name].split(), path, name)
         else:
             coeffs[name] = [
                 _to_float(fields.get(f"{name}_{i}"), path, f"{name}_{i}") for i in range(1, 21)
             ]
-    err = [_to_float(fields[k], path, k) if k in fields else None for k in ("ERR_BIAS", "ERR_RAND")]
-    return _build(path, scalars, coeffs, *err), None
+    err = [
+        _to_float(fields[k], path, k, units=units) if k in fields else None
+        for k in ("ERR_BIAS", "ERR_RAND")
+    ]
+    return _build(path, scalars, coeffs, *err)
+
+
+def _load_txt(path: Path) -> tuple[RPCCoefficients, None]:
+    """``KEY: value`` text (``_RPC.TXT``, IKONOS/Cartosat/Planet/SkySat RPC text files)."""
+    text = _read_text(path)
+    fields = _key_values(path, text, _TXT_KEYS, _TXT_COEFF_KEYS, upper=True)
+    if not fields:
+        raise file_error(path, "not an RPC text file (no 'KEY: value' lines)")
+    return _fields_to_model(path, fields), None
 
 
 _RPB_KEYS = {
@@ -135,13 +231,34 @@ _RPB_KEYS = {
     "ERR_BIAS": "errbias",
     "ERR_RAND": "errrand",
 }
-_RPB_ASSIGN = re.compile(r"(\w+)\s*=\s*(\([^)]*\)|[^;\n]*)\s*;?")
+_RPB_ASSIGN = re.compile(r"(\w+)\s*=\s*(\([^)]*\)|\([^;]*|[^;\n]*)(\s*;)?")
+_RPB_READ = frozenset(_RPB_KEYS.values())
 
 
 def _load_rpb(path: Path) -> tuple[RPCCoefficients, None]:
-    """DigitalGlobe / Maxar ``.RPB`` (``lineOffset = 123;``, ``lineNumCoef = (a, b, ...);``)."""
+    """DigitalGlobe / Maxar ``.RPB`` (``lineOffset = 123;``, ``lineNumCoef = (a, b, ...);``).
+
+    Every assignment read must end with ``;`` and a coefficient list with ``)``: a file cut
+    inside an assignment is refused. A key given twice is refused."""
     text = _read_text(path)
-    fields = {m.group(1).lower(): m.group(2).strip() for m in _RPB_ASSIGN.finditer(text)}
+    fields: dict[str, str] = {}
+    where: dict[str, int] = {}
+    for m in _RPB_ASSIGN.finditer(text):
+        key = m.group(1).lower()
+        if key not in _RPB_READ:
+            continue
+        line = text.count("\n", 0, m.start()) + 1
+        if key in fields:
+            raise file_error(path, f"duplicate key {m.group(1)} at lines {where[key]} and {line}")
+        value = m.group(2).strip()
+        if not m.group(3) or (value.startswith("(") and not value.endswith(")")):
+            raise file_error(
+                path,
+                f"RPC field {m.group(1)} (line {line}): unterminated value "
+                f"{value[-40:]!r} (expected '...;' or '(c1, ..., c20);'): the file looks truncated",
+            )
+        fields[key] = value
+        where[key] = line
     if "linenumcoef" not in fields:
         raise file_error(path, "not an .RPB file (no lineNumCoef)")
     scalars = {
@@ -164,14 +281,17 @@ def _load_rpb(path: Path) -> tuple[RPCCoefficients, None]:
     return _build(path, scalars, coeffs, *err), None
 
 
+_GEOM_COEFF_KEYS = frozenset(f"{n.lower()}_{i:02d}" for n in COEFF_FIELDS for i in range(20))
+_GEOM_KEYS = _GEOM_COEFF_KEYS | frozenset(
+    [n.lower() for n in SCALAR_FIELDS]
+    + ["polynomial_format", "number_lines", "number_samples", "bias_error", "rand_error"]
+)
+
+
 def _load_geom(path: Path) -> tuple[RPCCoefficients, tuple[int, int] | None]:
     """OSSIM keyword list (``.geom``): ``line_off:``, ``line_num_coeff_00: ...``."""
     text = _read_text(path)
-    fields: dict[str, str] = {}
-    for raw in text.splitlines():
-        key, sep, value = raw.partition(":")
-        if sep:
-            fields[key.strip().lower()] = value.strip()
+    fields = _key_values(path, text, _GEOM_KEYS, _GEOM_COEFF_KEYS, upper=False)
     scalars = {
         name: _to_float(fields.get(name.lower()), path, name.lower()) for name in SCALAR_FIELDS
     }
@@ -190,9 +310,12 @@ def _load_geom(path: Path) -> tuple[RPCCoefficients, tuple[int, int] | None]:
     ]
     shape = None
     if "number_lines" in fields and "number_samples" in fields:
-        shape = (
-            round(_to_float(fields["number_lines"], path, "number_lines")),
-            round(_to_float(fields["number_samples"], path, "number_samples")),
+        shape = _to_shape(
+            path,
+            [
+                ("number_lines", fields["number_lines"]),
+                ("number_samples", fields["number_samples"]),
+            ],
         )
     return _build(path, scalars, coeffs, *err), shape
 
@@ -204,54 +327,64 @@ def _parse_xml(path: Path) -> ET.Element:
         raise file_error(path, f"malformed XML ({err})") from None
     except OSError as err:
         raise file_error(path, f"cannot read: {err.strerror or err}") from None
+    except (LookupError, ValueError) as err:  # unknown or multi-byte encoding declaration
+        raise file_error(path, f"unreadable XML ({err})") from None
 
 
 def _local(tag: str) -> str:
     return tag.rsplit("}", 1)[-1]
 
 
-def _find(root: ET.Element, name: str) -> ET.Element | None:
-    """First descendant (or self) whose local tag is ``name`` (case-insensitive)."""
+def _find(root: ET.Element, name: str, path: Path | None = None) -> ET.Element | None:
+    """The descendant (or self) whose local tag is ``name`` (case-insensitive), or None; with
+    ``path``, an element found more than once is refused (which one would be the model?)."""
     name = name.lower()
-    for el in root.iter():
-        if _local(el.tag).lower() == name:
-            return el
-    return None
+    found = [el for el in root.iter() if _local(el.tag).lower() == name]
+    if path is not None and len(found) > 1:
+        raise file_error(path, f"element <{_local(found[0].tag)}> appears {len(found)} times")
+    return found[0] if found else None
 
 
-def _children(el: ET.Element) -> dict[str, str]:
-    """Direct children's local tag (upper case) -> text."""
-    return {_local(c.tag).upper(): (c.text or "") for c in el}
+def _children(el: ET.Element, path: Path, keys: Collection[str] | None = None) -> dict[str, str]:
+    """Direct children's local tag (upper case) -> text; a child among ``keys`` (all when None)
+    given twice is refused."""
+    out: dict[str, str] = {}
+    for c in el:
+        tag = _local(c.tag).upper() if isinstance(c.tag, str) else ""
+        if tag in out and (keys is None or tag in keys):
+            raise file_error(path, f"element <{_local(c.tag)}> appears twice in <{_local(el.tag)}>")
+        out.setdefault(tag, c.text or "")
+    return out
 
 
 def _load_dimap(path: Path) -> tuple[RPCCoefficients, None]:
     """DIMAP RPC XML (Pleiades/SPOT 6-7 ``RPC_*.XML`` v2, Pleiades Neo v3)."""
     root = _parse_xml(path)
-    rfm = _find(root, "Rational_Function_Model")
+    rfm = _find(root, "Rational_Function_Model", path)
     if _local(root.tag) != "Dimap_Document" or rfm is None:
         raise file_error(path, "not a DIMAP RPC file (no Dimap_Document/Rational_Function_Model)")
-    model = _find(rfm, "Inverse_Model")  # DIMAP v2: ground -> image
+    model = _find(rfm, "Inverse_Model", path)  # DIMAP v2: ground -> image
     if model is None:
-        model = _find(rfm, "GroundtoImage_Values")  # DIMAP v3
+        model = _find(rfm, "GroundtoImage_Values", path)  # DIMAP v3
     if model is None:
         raise file_error(path, "no Inverse_Model or GroundtoImage_Values (ground to image RPC)")
-    validity = _find(rfm, "RFM_Validity")
+    validity = _find(rfm, "RFM_Validity", path)
     if validity is None:
         raise file_error(path, "no RFM_Validity (RPC offsets and scales)")
-    values = _children(validity)
+    values = _children(validity, path, SCALAR_FIELDS)
     scalars = {name: _to_float(values.get(name), path, name) for name in SCALAR_FIELDS}
     # DIMAP counts the centre of the first pixel as FIRST_ROW/FIRST_COL (1 in DIMAP v2).
     first_col = first_row = 1.0
-    domain = _find(rfm, "ImagetoGround_Validity_Domain")
+    domain = _find(rfm, "ImagetoGround_Validity_Domain", path)
     if domain is not None:
-        dom = _children(domain)
+        dom = _children(domain, path)
         if "FIRST_COL" in dom:
             first_col = first_row = _to_float(dom["FIRST_COL"], path, "FIRST_COL")
         if "FIRST_ROW" in dom:
             first_row = _to_float(dom["FIRST_ROW"], path, "FIRST_ROW")
     scalars["LINE_OFF"] -= first_row
     scalars["SAMP_OFF"] -= first_col
-    terms = _children(model)
+    terms = _children(model, path)
     coeffs = {
         name: [_to_float(terms.get(f"{name}_{i}"), path, f"{name}_{i}") for i in range(1, 21)]
         for name in COEFF_FIELDS
@@ -263,21 +396,21 @@ def _load_dimap_v1(path: Path) -> tuple[RPCCoefficients, tuple[int, int] | None]
     """Pleiades DIMAP v1 (``PHR_Dimap_Document``): ``Inverse_Model/F_ROW``, ``F_COL`` (20
     numerator then 20 denominator terms) and ``RFM_Validity`` ``A`` (scale) ``B`` (offset)."""
     root = _parse_xml(path)
-    model = _find(root, "Rational_Sensor_Model")
-    inverse = None if model is None else _find(model, "Inverse_Model")
-    validity = None if model is None else _find(model, "RFM_Validity")
+    model = _find(root, "Rational_Sensor_Model", path)
+    inverse = None if model is None else _find(model, "Inverse_Model", path)
+    validity = None if model is None else _find(model, "RFM_Validity", path)
     if inverse is None or validity is None:
         raise file_error(path, "not a DIMAP v1 RPC (no Rational_Sensor_Model/Inverse_Model)")
     scalars = {}
     for tag, field in (("Lon", "LONG"), ("Lat", "LAT"), ("Alt", "HEIGHT"), ("Row", "LINE"),
                        ("Col", "SAMP")):  # fmt: skip
-        el = _find(validity, tag)
-        vals = _children(el) if el is not None else {}
+        el = _find(validity, tag, path)
+        vals = _children(el, path) if el is not None else {}
         scalars[f"{field}_SCALE"] = _to_float(vals.get("A"), path, f"RFM_Validity/{tag}/A")
         scalars[f"{field}_OFF"] = _to_float(vals.get("B"), path, f"RFM_Validity/{tag}/B")
     scalars["LINE_OFF"] -= 1.0  # DIMAP: centre of the first pixel at (1, 1)
     scalars["SAMP_OFF"] -= 1.0
-    inv = _children(inverse)
+    inv = _children(inverse, path)
     rows = {}
     for tag in ("F_ROW", "F_COL"):
         values = inv.get(tag, "").split()
@@ -295,10 +428,7 @@ def _load_dimap_v1(path: Path) -> tuple[RPCCoefficients, tuple[int, int] | None]
     shape = None
     nrows, ncols = _find(root, "NROWS"), _find(root, "NCOLS")
     if nrows is not None and ncols is not None:
-        shape = (
-            round(_to_float(nrows.text, path, "NROWS")),
-            round(_to_float(ncols.text, path, "NCOLS")),
-        )
+        shape = _to_shape(path, [("NROWS", nrows.text or ""), ("NCOLS", ncols.text or "")])
     return _build(path, scalars, coeffs), shape
 
 
@@ -319,50 +449,46 @@ _WV_KEYS = {
 def _load_worldview(path: Path) -> tuple[RPCCoefficients, tuple[int, int] | None]:
     """DigitalGlobe/Maxar ``<isd>`` XML with an ``RPB/IMAGE`` block (WorldView, QuickBird)."""
     root = _parse_xml(path)
-    rpb = _find(root, "RPB")
-    image = None if rpb is None else _find(rpb, "IMAGE")
+    rpb = _find(root, "RPB", path)
+    image = None if rpb is None else _find(rpb, "IMAGE", path)
     if _local(root.tag).lower() != "isd" or image is None:
         raise file_error(path, "not a DigitalGlobe isd XML with an RPB/IMAGE block")
-    vals = _children(image)
+    vals = _children(image, path)
     scalars = {name: _to_float(vals.get(key), path, key) for name, key in _WV_KEYS.items()}
     coeffs = {}
     for name in COEFF_FIELDS:
         tag = name.replace("_COEFF", "COEF").replace("_", "")  # LINENUMCOEF
-        el = _find(image, tag)
+        el = _find(image, tag, path)
         coeffs[name] = _to_floats((el.text or "").split() if el is not None else [], path, tag)
     err = [_to_float(vals[k], path, k) if k in vals else None for k in ("ERRBIAS", "ERRRAND")]
     shape = None
-    imd = _find(root, "IMD")
+    imd = _find(root, "IMD", path)
     if imd is not None:
-        d = _children(imd)
+        d = _children(imd, path, ("NUMROWS", "NUMCOLUMNS"))
         if "NUMROWS" in d and "NUMCOLUMNS" in d:
-            shape = (
-                round(_to_float(d["NUMROWS"], path, "NUMROWS")),
-                round(_to_float(d["NUMCOLUMNS"], path, "NUMCOLUMNS")),
-            )
+            shape = _to_shape(path, [("NUMROWS", d["NUMROWS"]), ("NUMCOLUMNS", d["NUMCOLUMNS"])])
     return _build(path, scalars, coeffs, *err), shape
 
 
 def _load_gdal(path: Path) -> tuple[RPCCoefficients, tuple[int, int]]:
     """Any raster GDAL opens with RPC metadata (GeoTIFF tag or sidecar, NITF RPC00B, VRT...)."""
     import rasterio
+    from rasterio._err import CPLE_BaseError
     from rasterio.errors import RasterioError
 
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # NotGeoreferencedWarning for RPC-only rasters
             with rasterio.open(path) as ds:
-                rpcs = ds.rpcs
+                tags = ds.tags(ns="RPC")
                 shape = (ds.height, ds.width)
-    except RasterioError as err:
+    except (RasterioError, CPLE_BaseError, OSError, ValueError) as err:
         message = str(err).splitlines()[0] if str(err) else type(err).__name__
         raise file_error(path, f"GDAL cannot open it: {message}") from None
-    if rpcs is None:
+    if not tags:
         raise file_error(path, "no RPC metadata (GDAL's RPC metadata domain is empty)")
-    try:
-        return RPCCoefficients.from_rasterio(rpcs), shape
-    except (InputError, TypeError, ValueError) as err:
-        raise file_error(path, f"invalid RPC metadata: {err}") from None
+    fields = {str(k).strip().upper(): str(v) for k, v in tags.items()}
+    return _fields_to_model(path, fields), shape
 
 
 def sniff_rpc_format(path: Path) -> str | None:
@@ -411,9 +537,7 @@ def read_rpc_and_shape(
 ) -> tuple[RPCCoefficients, tuple[int, int] | None]:
     """:func:`read_rpc` and the image shape ``(n_lines, n_samples)`` the file gives (raster size
     or image size field), or None when it gives none (the sensor type's loader)."""
-    p = Path(path)
-    if not p.is_file():
-        raise file_error(p, "no such file")
+    p = _checked(path)
     kind = sniff_rpc_format(p)
     if kind is None:
         raise file_error(
@@ -421,7 +545,18 @@ def read_rpc_and_shape(
             "unsupported RPC format (expected a GDAL raster with RPC metadata, _RPC.TXT, .RPB, "
             "OSSIM .geom, DIMAP or WorldView RPC XML)",
         )
-    return _LOADERS[kind](p)
+    return _load(kind, p)
+
+
+def _load(kind: str, path: Path) -> tuple[RPCCoefficients, tuple[int, int] | None]:
+    """The loader of ``kind``, then the scales against the image size the file gives."""
+    rpc, shape = _LOADERS[kind](path)
+    if shape is not None:
+        try:
+            rpc.check_image_shape(shape)
+        except InputError as err:
+            raise file_error(path, str(err)) from None
+    return rpc, shape
 
 
 def read_rpc(path: str | os.PathLike[str]) -> RPCCoefficients:
@@ -442,6 +577,8 @@ def read_rpc(path: str | os.PathLike[str]) -> RPCCoefficients:
 
 def _checked(path: str | os.PathLike[str]) -> Path:
     p = Path(path)
+    if p.is_dir():
+        raise file_error(p, "no such file (a folder, not an RPC file)")
     if not p.is_file():
         raise file_error(p, "no such file")
     return p
@@ -449,31 +586,31 @@ def _checked(path: str | os.PathLike[str]) -> Path:
 
 def read_rpc_gdal(path: str | os.PathLike[str]) -> RPCCoefficients:
     """RPC metadata of a raster through GDAL (``rasterio.open(path).rpcs``)."""
-    return _load_gdal(_checked(path))[0]
+    return _load("gdal", _checked(path))[0]
 
 
 def read_rpc_txt(path: str | os.PathLike[str]) -> RPCCoefficients:
     """``KEY: value`` RPC text (``LINE_OFF: 5124.00 pixels``, ``LINE_NUM_COEFF_1: ...``)."""
-    return _load_txt(_checked(path))[0]
+    return _load("txt", _checked(path))[0]
 
 
 def read_rpb(path: str | os.PathLike[str]) -> RPCCoefficients:
     """DigitalGlobe ``.RPB`` (``lineOffset = ...;``, ``lineNumCoef = (...);``)."""
-    return _load_rpb(_checked(path))[0]
+    return _load("rpb", _checked(path))[0]
 
 
 def read_ossim_geom(path: str | os.PathLike[str]) -> RPCCoefficients:
     """OSSIM ``.geom`` keyword list (0-based pixel centres; ``polynomial_format`` A or B)."""
-    return _load_geom(_checked(path))[0]
+    return _load("geom", _checked(path))[0]
 
 
 def read_dimap_rpc(path: str | os.PathLike[str]) -> RPCCoefficients:
     """DIMAP RPC XML (v2/v3 ``Dimap_Document``, or v1 ``PHR_Dimap_Document``); the 1-based
     DIMAP pixel centres are converted to the native 0-based RPC00B convention."""
     p = _checked(path)
-    return (_load_dimap_v1(p) if sniff_rpc_format(p) == "dimap_v1" else _load_dimap(p))[0]
+    return _load("dimap_v1" if sniff_rpc_format(p) == "dimap_v1" else "dimap", p)[0]
 
 
 def read_worldview_xml(path: str | os.PathLike[str]) -> RPCCoefficients:
     """DigitalGlobe/Maxar ``<isd>`` XML (WorldView, QuickBird, GeoEye) ``RPB`` block."""
-    return _load_worldview(_checked(path))[0]
+    return _load("worldview", _checked(path))[0]
