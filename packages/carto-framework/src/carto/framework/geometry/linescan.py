@@ -52,6 +52,7 @@ from carto.framework.files.documents import (
 from carto.framework.geometry import frames
 from carto.framework.geometry.camera import Camera
 from carto.framework.geometry.linescan_solver import (
+    TABLE_MARGIN_LINES,
     FirstGuess,
     LineTable,
     camera_vectors,
@@ -69,6 +70,21 @@ MAX_ITERATIONS = 25
 HEIGHT_TOLERANCE_M = 1e-6
 EDGE_TOLERANCE_PX = 1e-6
 """Points this close outside the image border still count as inside (rounding of round trips)."""
+MAX_TABLE_NODES = 4e6
+"""Most camera states the ground -> image table may hold (~400 MB): the image and its margins
+(:data:`~carto.framework.geometry.linescan_solver.TABLE_MARGIN_LINES`) at two of the shortest
+line periods per node. A 38 000-line Pleiades image needs 38 000; only a wrong line time or
+period (a timing node far from the others) needs more."""
+
+
+def table_nodes(n_lines: int, timing: LineTiming) -> float:
+    """How many camera states :class:`LineTable` tabulates for an image of ``n_lines`` lines
+    with ``timing`` (the same arithmetic as :meth:`LineTable.build`, without building it)."""
+    n = max(int(n_lines), 1)
+    margin = max(0.5 * n, TABLE_MARGIN_LINES)
+    span = float(timing.time(n + margin)) - float(timing.time(-margin))
+    periods = np.diff(np.asarray(timing.dt_nodes_s)) / np.diff(np.asarray(timing.line_nodes))
+    return span / (2.0 * float(periods.min())) + 8.0
 
 
 @attrs.frozen(eq=False)
@@ -115,6 +131,15 @@ class LineScanner(Sensor):
             )
         if self.width is not None and self.width < 1:
             raise InputError(f"sensor {self.name}: width must be >= 1, got {self.width}")
+        nodes = table_nodes(self.n_lines, self.timing)
+        if not nodes <= MAX_TABLE_NODES:
+            raise InputError(
+                f"sensor {self.name}: the line timing (dt_nodes_s "
+                f"{list(self.timing.dt_nodes_s)[:4]} at line_nodes "
+                f"{list(self.timing.line_nodes)[:4]}) spans {nodes:.3g} shortest line periods "
+                f"over the {self.n_lines} lines and their margins (at most {MAX_TABLE_NODES:.3g}):"
+                " a wrong line time or period"
+            )
 
     @property
     def image_shape(self) -> tuple[int, int]:

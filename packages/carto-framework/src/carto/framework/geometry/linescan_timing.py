@@ -20,7 +20,18 @@ FloatArray = NDArray[np.float64]
 
 
 def _tuple_of_floats(value: Any) -> tuple[float, ...]:
-    return tuple(float(v) for v in np.atleast_1d(np.asarray(value, dtype=np.float64)))
+    if isinstance(value, (str, bytes, bool)) or (
+        isinstance(value, (list, tuple))
+        and any(isinstance(v, (str, bytes, bool)) or v is None for v in value)
+    ):
+        raise InputError(f"line timing: expected a list of numbers, got {value!r:.60}")
+    try:
+        arr = np.atleast_1d(np.asarray(value, dtype=np.float64))
+    except (TypeError, ValueError, OverflowError):
+        raise InputError(f"line timing: expected a list of numbers, got {value!r:.60}") from None
+    if arr.ndim != 1:
+        raise InputError(f"line timing: expected a list of numbers, got shape {arr.shape}")
+    return tuple(float(v) for v in arr)
 
 
 @attrs.frozen
@@ -39,9 +50,20 @@ class LineTiming:
     def __attrs_post_init__(self) -> None:
         lines, times = np.asarray(self.line_nodes), np.asarray(self.dt_nodes_s)
         if lines.size < 2 or lines.size != times.size:
-            raise InputError("line timing: need >= 2 (line, time) nodes of equal count")
-        if np.any(np.diff(lines) <= 0) or np.any(np.diff(times) <= 0):
-            raise InputError("line timing: lines and times must increase strictly")
+            raise InputError(
+                f"line timing: need >= 2 (line, time) nodes of equal count, got {lines.size} "
+                f"line_nodes and {times.size} dt_nodes_s"
+            )
+        if not (np.all(np.isfinite(lines)) and np.all(np.isfinite(times))):
+            raise InputError(
+                f"line timing: line_nodes {list(self.line_nodes)} / dt_nodes_s "
+                f"{list(self.dt_nodes_s)} must be finite numbers"
+            )
+        if not (np.all(np.diff(lines) > 0) and np.all(np.diff(times) > 0)):
+            raise InputError(
+                f"line timing: lines and times must increase strictly (line_nodes "
+                f"{list(self.line_nodes)[:4]}, dt_nodes_s {list(self.dt_nodes_s)[:4]})"
+            )
 
     @classmethod
     def constant(cls, dt_first_line_s: float, period_s: float) -> LineTiming:
