@@ -26,11 +26,13 @@ CNES's location grid of a real product to 0.001 px, see ``docs/writing-a-plugin.
     vector ``(PsiY(k), -PsiX(k), 1)``: the values are used as **tangents** (vector components),
     not as angles (at the swath edge, 0.0142 rad, the difference would be 1.3 px).
     ``Position_In_Retina/FIRST_COL .. LAST_COL`` are the detectors (counted from 1) of image
-    columns ``1 .. NCOLS``, and ``k`` counts the detectors from 0: image column ``c`` (DIMAP,
-    from 1) is detector ``k = (c - 1) + (FIRST_COL - 1)``, so ``k = 0`` at the centre of the
-    first column of a full-swath product. The offset is verified to 0.001 px for
-    ``FIRST_COL = 1``; the ``FIRST_COL - 1`` shift of other products follows Airbus's
-    definition (as NASA Ames Stereo Pipeline reads it) without independent truth here.
+    columns ``1 .. NCOLS`` (a range wider than the image, as some products give with
+    ``LAST_COL = NCOLS + 1``, is read with a warning: the image starts at ``FIRST_COL``), and
+    ``k`` counts the detectors from 0: image column ``c`` (DIMAP, from 1) is detector
+    ``k = (c - 1) + (FIRST_COL - 1)``, so ``k = 0`` at the centre of the first column of a
+    full-swath product. The offset is verified to 0.001 px for ``FIRST_COL = 1``; the
+    ``FIRST_COL - 1`` shift of other products follows Airbus's definition (as NASA
+    Ames Stereo Pipeline reads it) without independent truth here.
 
 Every failure raises :class:`carto.framework.errors.InputError` with one line that names the
 file, the element and the value: malformed XML, another DIMAP generation (v2 ``Dimap_Document``),
@@ -42,6 +44,7 @@ norm, row count vs the model's time range, column count vs the retina range).
 from __future__ import annotations
 
 import re
+import warnings
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -173,6 +176,10 @@ class _Document:
             raise self.fail("XML", f"malformed or truncated XML ({err})") from None
         except OSError as err:
             raise InputError(f"{path}: cannot read: {err.strerror or err}") from None
+        except (LookupError, ValueError) as err:  # unknown or multi-byte encoding declared
+            raise self.fail(
+                "XML declaration", f"unsupported encoding ({err}); DIMAP files are UTF-8"
+            ) from None
 
     def fail(self, field: str, problem: str) -> InputError:
         return InputError(f"{self.path}: {field}: {problem}")
@@ -417,14 +424,24 @@ def read_dimap(path: str | Path) -> DimapSensorModel:
     view = doc.element(smc, "Sensor_Viewing_Model", SMC)
     first_col = doc.integer(view, "Position_In_Retina/FIRST_COL", where)
     last_col = doc.integer(view, "Position_In_Retina/LAST_COL", where)
-    if first_col < 1 or last_col - first_col + 1 != n_cols:
+    if first_col < 1 or last_col - first_col + 1 < n_cols:
         raise doc.fail(
             f"{where}/Position_In_Retina",
-            f"FIRST_COL {first_col} .. LAST_COL {last_col} is not the {n_cols} image columns",
+            f"FIRST_COL {first_col} .. LAST_COL {last_col} does not cover the {n_cols} image "
+            "columns",
+        )
+    if last_col - first_col + 1 != n_cols:
+        # some products give the retina range one column wider than the image: the viewing
+        # model covers the image, which starts at FIRST_COL, and that is all the model uses
+        warnings.warn(
+            f"{doc.path}: {where}/Position_In_Retina: FIRST_COL {first_col} .. LAST_COL "
+            f"{last_col} is {last_col - first_col + 1 - n_cols} column(s) wider than the "
+            f"{n_cols} image columns; image column 1 is detector {first_col}",
+            stacklevel=2,
         )
     psi_x = doc.polynomial(view, "Viewing_Directions/PsiX_Model", where)
     psi_y = doc.polynomial(view, "Viewing_Directions/PsiY_Model", where)
-    k = np.linspace(first_col - 1, last_col - 1, 101)
+    k = np.linspace(first_col - 1, first_col - 1 + n_cols - 1, 101)  # the image's detectors
     for name, coeffs_psi in (("PsiX_Model", psi_x), ("PsiY_Model", psi_y)):
         values = np.polynomial.polynomial.polyval(k, coeffs_psi)
         if np.abs(values).max() > 0.5:

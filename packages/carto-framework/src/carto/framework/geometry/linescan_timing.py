@@ -20,7 +20,7 @@ FloatArray = NDArray[np.float64]
 
 
 def _tuple_of_floats(value: Any) -> tuple[float, ...]:
-    if isinstance(value, (str, bytes, bool)) or (
+    if value is None or isinstance(value, (str, bytes, bool, dict)) or (
         isinstance(value, (list, tuple))
         and any(isinstance(v, (str, bytes, bool)) or v is None for v in value)
     ):

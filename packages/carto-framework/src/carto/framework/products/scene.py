@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -40,9 +41,7 @@ class Scene:
         path = Path(path)
         manifest_path = path / "scene.json" if path.is_dir() else path
         doc = read_json_document(manifest_path, SCENE_FORMAT, SCENE_VERSION, "scene manifest")
-        for key in ("images", "gcps", "checkpoints"):
-            if key not in doc:
-                raise InputError(f"{manifest_path}: missing field {key!r}")
+        check_manifest(doc, manifest_path)
         return cls(manifest_path.parent, doc)
 
     @property
@@ -89,6 +88,60 @@ class Scene:
             numeric=("lon_deg", "lat_deg", "h_m", "line", "sample"),
             text=("id", "image"),
         )
+
+
+def _short(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def check_manifest(doc: Mapping[str, Any], manifest_path: Path) -> None:
+    """Check the fields of a scene manifest that opening the scene relies on.
+
+    ``images`` must be a non-empty object of image entries, each an object with ``raster`` and
+    ``ancillary`` (file names relative to the folder, of existing files) and optionally
+    ``truth_model``, ``camera``, ``array`` (strings); ``gcps`` and ``checkpoints`` must name
+    files (their tables are read by :meth:`Scene.control`); ``platform`` is a string.
+
+    Raises:
+        InputError: one line naming the manifest, the field and the value.
+    """
+    root = manifest_path.parent
+
+    def fail(field: str, problem: str) -> InputError:
+        return InputError(f"{manifest_path}: {field}: {problem}")
+
+    def name_of_file(value: Any, field: str) -> str:
+        if not isinstance(value, str) or not value.strip():
+            raise fail(field, f"expected a file name (a string), got {_short(value)}")
+        return value
+
+    for key in ("images", "gcps", "checkpoints"):
+        if key not in doc:
+            raise InputError(f"{manifest_path}: missing field {key!r}")
+    platform = doc.get("platform", "")
+    if not isinstance(platform, str):
+        raise fail("platform", f"expected a string, got {_short(platform)}")
+    images = doc["images"]
+    if not isinstance(images, Mapping) or not images:
+        raise fail("images", f"expected an object of images by name, got {_short(images)}")
+    for name, image in images.items():
+        where = f"images.{name}"
+        if not isinstance(image, Mapping):
+            raise fail(where, f"expected an object (raster, ancillary ...), got {_short(image)}")
+        for key in ("raster", "ancillary"):
+            if key not in image:
+                raise InputError(f"{manifest_path}: missing field '{where}.{key}'")
+            file = root / name_of_file(image[key], f"{where}.{key}")
+            if not file.is_file():
+                raise fail(f"{where}.{key}", f"file {file} does not exist")
+        for key in ("truth_model", "camera", "array"):
+            if key in image and not (isinstance(image[key], str) and image[key].strip()):
+                raise fail(
+                    f"{where}.{key}", f"expected a non-empty string, got {_short(image[key])}"
+                )
+    for key in ("gcps", "checkpoints"):
+        name_of_file(doc[key], key)
 
 
 def find_scene_manifest(path: str | os.PathLike[str], platform_prefix: str) -> Path | None:
