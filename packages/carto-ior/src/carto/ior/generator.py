@@ -18,7 +18,8 @@ from carto.framework.dem_generation.base import (
 from carto.framework.errors import InputError
 from carto.framework.geometry.sensor import Sensor
 from carto.framework.matching.base import Matcher
-from carto.framework.raster.dem import DEM
+from carto.framework.raster.dem import DEM, MIN_DEM_POSTS
+from carto.framework.raster.images import check_image
 from carto.ior.refine import IORResult, IORSettings, refine_dem
 
 _SETTINGS = {f.name for f in attrs.fields(IORSettings)}
@@ -27,7 +28,13 @@ _SETTINGS = {f.name for f in attrs.fields(IORSettings)}
 def ior_product(result: IORResult) -> DEMProduct:
     """The framework's :class:`DEMProduct` of an IOR result: the DEM, both ortho-images, the
     last matching's score and validity as quality layers, the iterations' figures and the
-    base-to-height ratio (``extras["b_over_h"]``)."""
+    base-to-height ratio (``extras["b_over_h"]``), and what the initial DEM gave: the share
+    of the images' common footprint it covered and the share whose starting height was
+    filled (``extras["init_dem_coverage_percent"]``, ``extras["init_dem_filled_percent"]``).
+
+    Each iteration's measures: ``median_abs_mismatch_px``, ``matched_percent`` (nodes with a
+    valid match among the nodes both ortho-images cover), ``median_abs_dem_change_m``,
+    ``median_across_base_px``."""
     iterations = [
         IterationRecord(
             r.iteration,
@@ -53,7 +60,11 @@ def ior_product(result: IORResult) -> DEMProduct:
         quality=quality,
         iterations=iterations,
         converged=result.converged,
-        extras={"b_over_h": result.b_over_h},
+        extras={
+            "b_over_h": result.b_over_h,
+            "init_dem_coverage_percent": round(100.0 * result.init_coverage, 2),
+            "init_dem_filled_percent": round(100.0 * result.init_filled, 2),
+        },
     )
 
 
@@ -80,6 +91,14 @@ class IORGenerator(DEMGenerator):
         init_dem = options.pop("init_dem", None)
         if not isinstance(init_dem, DEM):
             raise InputError("ior: option init_dem (a DEM or a constant height) is required")
+        if min(init_dem.shape) < MIN_DEM_POSTS:
+            n_rows, n_cols = init_dem.shape
+            raise InputError(
+                f"ior: initial DEM {init_dem.name}: {n_cols} x {n_rows} posts; a DEM needs at "
+                f"least {MIN_DEM_POSTS} x {MIN_DEM_POSTS}"
+            )
+        init_dem.check_ellipsoidal("ior")
+        init_dem.height_range  # noqa: B018 (InputError when the DEM holds no valid height)
         matcher = options.pop("matcher", None)
         if matcher is not None and not isinstance(matcher, Matcher):
             raise InputError(f"ior: option matcher must be a matcher, got {matcher!r}")
@@ -96,6 +115,8 @@ class IORGenerator(DEMGenerator):
             raise InputError(f"ior: unknown option(s) {', '.join(unknown)} (known: {known})")
         settings = IORSettings(**{k: v for k, v in options.items() if v is not None})
         left, right = (np.asarray(i) for i in images)
+        for side, image, sensor in (("left", left, sensors[0]), ("right", right, sensors[1])):
+            check_image(image, f"ior: {side} image ({getattr(sensor, 'name', None) or side})")
         result = refine_dem(
             left,
             right,

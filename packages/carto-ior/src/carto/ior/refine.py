@@ -51,7 +51,12 @@ from numpy.typing import NDArray
 from carto.framework.errors import InputError
 from carto.framework.geometry.sensor import Sensor
 from carto.framework.imaging.ortho import orthorectify
-from carto.framework.imaging.ortho_grid import OrthoGrid
+from carto.framework.imaging.ortho_grid import (
+    MAX_GRID_CELLS,
+    OrthoGrid,
+    check_grid_size,
+    footprint_box,
+)
 from carto.framework.matching.base import DenseSettings, Matcher
 from carto.framework.raster.dem import DEM, ELLIPSOID
 
@@ -72,9 +77,92 @@ def first_order_height_change(mismatch_m: Any, b_over_h: float) -> FloatArray:
     return -np.asarray(mismatch_m, np.float64) / float(b_over_h)
 
 
+_FLAGS = {
+    "posting_m": "--posting",
+    "ortho_res_m": "--ortho-res",
+    "crs": "--crs",
+    "max_iterations": "--max-iterations",
+}
+"""The ``carto dem`` option of each setting that has one (named in the messages)."""
+
+
+def _option(name: str) -> str:
+    flag = _FLAGS.get(name)
+    return f"ior: option {name}" + (f" ({flag})" if flag else "")
+
+
+def _number(name: str, low: float, high: float = math.inf, *, low_open: bool = False) -> Any:
+    """A converter to float that refuses (one-line InputError) what is not a finite number in
+    ``low..high`` (``low`` excluded with ``low_open``)."""
+
+    def convert(value: Any) -> float:
+        bad = isinstance(value, bool) or not isinstance(
+            value, int | float | np.integer | np.floating
+        )
+        number = math.nan if bad else float(value)
+        ok = math.isfinite(number) and number <= high
+        ok = ok and (number > low if low_open else number >= low)
+        if not ok:
+            bound = f"> {low:g}" if low_open else f">= {low:g}"
+            if math.isfinite(high):
+                bound += f" and <= {high:g}"
+            raise InputError(f"{_option(name)} must be a finite number {bound}, got {value!r}")
+        return number
+
+    return convert
+
+
+def _optional_number(name: str, low: float) -> Any:
+    inner = _number(name, low, low_open=True)
+    return lambda value: None if value is None else inner(value)
+
+
+def _integer(name: str, low: int, high: int) -> Any:
+    """A converter to int that refuses what is not a whole number in ``low..high``."""
+
+    def convert(value: Any) -> int:
+        ok = not isinstance(value, bool) and isinstance(
+            value, int | float | np.integer | np.floating
+        )
+        ok = ok and math.isfinite(float(value)) and float(value).is_integer()
+        if not (ok and low <= int(value) <= high):
+            raise InputError(
+                f"{_option(name)} must be a whole number within {low}..{high}, got {value!r}"
+            )
+        return int(value)
+
+    return convert
+
+
+def _map_crs(value: Any) -> Any:
+    """``None`` (the scene's UTM zone) or a projected CRS in metres (:class:`pyproj.CRS`)."""
+    if value is None:
+        return None
+    import pyproj
+
+    try:
+        crs = pyproj.CRS.from_user_input(value)
+    except pyproj.exceptions.CRSError as exc:
+        raise InputError(f"{_option('crs')}: {value!r} is not a CRS pyproj knows") from exc
+    if crs.is_compound:
+        crs = crs.sub_crs_list[0]
+    unit = crs.axis_info[0].unit_name if crs.axis_info else "?"
+    factor = crs.axis_info[0].unit_conversion_factor if crs.axis_info else None
+    if not crs.is_projected or factor != 1.0:
+        kind = "geographic (degrees)" if crs.is_geographic else f"in {unit}"
+        raise InputError(
+            f"{_option('crs')}: {value!r} is {kind}; the DEM posting is in metres, so IOR "
+            "needs a projected CRS in metres (e.g. a UTM zone such as EPSG:32643), or no "
+            "--crs for the scene's UTM zone"
+        )
+    return crs
+
+
 @attrs.frozen
 class IORSettings:
-    """Settings of :func:`refine_dem`.
+    """Settings of :func:`refine_dem`. Every value is checked: a bad one (not a number, not
+    finite, out of range, a CRS that is not projected in metres) is an InputError naming the
+    option and the value.
 
     Attributes:
         posting_m: DEM posting (node spacing), metres of the map CRS.
@@ -97,38 +185,48 @@ class IORSettings:
         tile_px, overlap_px: tile side and overlap on each side, ortho pixels (rounded to
             whole DEM nodes): tiles large enough for the matching pyramid, overlaps wider
             than its reach.
-        crs: map CRS of the DEM and orthos (default: the UTM zone of the scene).
+        crs: map CRS of the DEM and orthos, projected in metres (default: the UTM zone of
+            the scene).
+        min_init_coverage: the initial DEM must give a height at this share of the images'
+            common footprint (its voids are filled for the starting surface; a DEM mostly
+            void, or a tile of another place, is refused).
+        max_cells: most cells of the DEM grid and of the ortho grid (checked before anything
+            is allocated).
     """
 
-    posting_m: float = 10.0
-    ortho_res_m: float | None = None
-    max_iterations: int = 6
-    threshold_px: float = 0.06
-    min_improvement: float = 0.05
-    window: int = 11
-    levels: int = 5
-    refine_levels: int = 3
-    min_score: float = 0.5
-    smoothing_nodes: float = 1.0
-    outlier_m: float = 3.0
-    tile_px: int = 2048
-    overlap_px: int = 128
-    crs: Any = None
+    posting_m: float = attrs.field(default=10.0, converter=_number("posting_m", 0.0, low_open=True))
+    ortho_res_m: float | None = attrs.field(
+        default=None, converter=_optional_number("ortho_res_m", 0.0)
+    )
+    max_iterations: int = attrs.field(default=6, converter=_integer("max_iterations", 1, 50))
+    threshold_px: float = attrs.field(
+        default=0.06, converter=_number("threshold_px", 0.0, low_open=True)
+    )
+    min_improvement: float = attrs.field(
+        default=0.05, converter=_number("min_improvement", 0.0, 1.0)
+    )
+    window: int = attrs.field(default=11, converter=_integer("window", 3, 101))
+    levels: int = attrs.field(default=5, converter=_integer("levels", 1, 12))
+    refine_levels: int = attrs.field(default=3, converter=_integer("refine_levels", 1, 12))
+    min_score: float = attrs.field(default=0.5, converter=_number("min_score", -1.0, 1.0))
+    smoothing_nodes: float = attrs.field(
+        default=1.0, converter=_number("smoothing_nodes", 0.0, low_open=True)
+    )
+    outlier_m: float = attrs.field(default=3.0, converter=_number("outlier_m", 0.0, low_open=True))
+    tile_px: int = attrs.field(default=2048, converter=_integer("tile_px", 64, 1 << 20))
+    overlap_px: int = attrs.field(default=128, converter=_integer("overlap_px", 0, 1 << 20))
+    crs: Any = attrs.field(default=None, converter=_map_crs)
+    min_init_coverage: float = attrs.field(
+        default=0.75, converter=_number("min_init_coverage", 0.0, 1.0)
+    )
+    max_cells: float = attrs.field(default=MAX_GRID_CELLS, converter=_number("max_cells", 1.0))
 
     def __attrs_post_init__(self) -> None:
-        if not (math.isfinite(self.posting_m) and self.posting_m > 0):
-            raise InputError(f"posting must be > 0 m, got {self.posting_m}")
-        if self.ortho_res_m is not None and not (
-            math.isfinite(self.ortho_res_m) and 0 < self.ortho_res_m <= self.posting_m
-        ):
+        if self.ortho_res_m is not None and self.ortho_res_m > self.posting_m:
             raise InputError(
-                f"ortho resolution must be > 0 and at most the posting ({self.posting_m} m), "
-                f"got {self.ortho_res_m}"
+                f"{_option('ortho_res_m')} must be at most the posting ({self.posting_m:g} m), "
+                f"got {self.ortho_res_m:g}"
             )
-        if not 1 <= self.max_iterations <= 50:
-            raise InputError(f"max_iterations must be within 1..50, got {self.max_iterations}")
-        if not self.threshold_px > 0:
-            raise InputError(f"threshold must be > 0 px, got {self.threshold_px}")
 
 
 @attrs.frozen
@@ -160,6 +258,10 @@ class IORResult:
         iterations: one report per iteration.
         converged: the mismatch fell below the threshold.
         b_over_h: base-to-height ratio at the scene centre.
+        init_coverage: share of the images' common footprint where the initial DEM had a
+            height.
+        init_filled: share of that footprint whose starting height was filled (voids of
+            the initial DEM, :func:`starting_surface`).
     """
 
     dem: DEM
@@ -172,32 +274,66 @@ class IORResult:
     iterations: tuple[IterationReport, ...]
     converged: bool
     b_over_h: float
+    init_coverage: float = 1.0
+    init_filled: float = 0.0
 
 
 def _grids(
     left: Sensor, right: Sensor, init_dem: DEM, settings: IORSettings
 ) -> tuple[OrthoGrid, OrthoGrid, int]:
     """DEM grid (posting) and ortho grid (``k`` ortho pixels per node), aligned, covering the
-    area both images see."""
-    from carto.framework.imaging.preparation import ground_sampling_m
-
-    h_mid = float(np.nanmedian(init_dem.heights))
-    res = settings.ortho_res_m or max(ground_sampling_m(s, h_mid) for s in (left, right))
-    k = max(1, round(settings.posting_m / res))
-    posting = float(settings.posting_m)
-    union = OrthoGrid.covering([left, right], init_dem, posting, crs=settings.crs)
-    # the common area: the intersection of the two footprints' grids
-    a = OrthoGrid.covering([left], init_dem, posting, crs=union.crs)
-    b = OrthoGrid.covering([right], init_dem, posting, crs=union.crs)
-    la, ba, ra, ta = a.bounds
-    lb, bb, rb, tb = b.bounds
-    bounds = (max(la, lb), max(ba, bb), min(ra, rb), min(ta, tb))
-    if not (bounds[0] < bounds[2] and bounds[1] < bounds[3]):
-        raise InputError("dem: the two images do not overlap on the ground")
-    dem_grid = OrthoGrid.covering([], init_dem, posting, crs=union.crs, bounds=bounds)
-    t = dem_grid.transform
+    area both images see. Refuses (before allocating anything) grids too large or too small
+    for the common footprint."""
     from affine import Affine
 
+    from carto.framework.imaging.preparation import ground_sampling_m
+    from carto.framework.raster.images import MIN_IMAGE_PX
+
+    h_mid = float(np.nanmedian(init_dem.heights))
+    posting = float(settings.posting_m)
+    res = settings.ortho_res_m or max(ground_sampling_m(s, h_mid) for s in (left, right))
+    k = max(1, round(posting / res))
+    crs = settings.crs
+    if crs is None:  # the UTM zone of the two footprints' centre
+        crs = footprint_box([left, right], init_dem)[0]
+    _, (la, ba, ra, ta) = footprint_box([left], init_dem, crs)
+    _, (lb, bb, rb, tb) = footprint_box([right], init_dem, crs)
+    box = (max(la, lb), max(ba, bb), min(ra, rb), min(ta, tb))
+    if not (box[0] < box[2] and box[1] < box[3]):
+        raise InputError("dem: the two images do not overlap on the ground")
+    width, height = box[2] - box[0], box[3] - box[1]
+    size = f"{width:.0f} x {height:.0f} m"
+    if 2.0 * posting > min(width, height):
+        raise InputError(
+            f"{_option('posting_m')} {posting:g} m is larger than the images' common footprint "
+            f"({size}) allows: a DEM needs at least 2 x 2 nodes"
+        )
+    check_grid_size(
+        width,
+        height,
+        posting,
+        what="ior",
+        option="posting_m (--posting)",
+        max_cells=settings.max_cells,
+    )
+    o_rows, o_cols = check_grid_size(
+        width,
+        height,
+        posting / k,
+        what="ior",
+        option="ortho_res_m (--ortho-res)",
+        max_cells=settings.max_cells,
+    )
+    if min(o_rows, o_cols) < MIN_IMAGE_PX:
+        raise InputError(
+            f"{_option('ortho_res_m')} {posting / k:g} m gives {o_cols} x {o_rows} ortho pixels "
+            f"over the images' common footprint ({size}); matching needs at least "
+            f"{MIN_IMAGE_PX} x {MIN_IMAGE_PX}"
+        )
+    dem_grid = OrthoGrid.covering(
+        [], init_dem, posting, crs=crs, bounds=box, max_cells=settings.max_cells
+    )
+    t = dem_grid.transform
     ortho_grid = OrthoGrid(
         dem_grid.crs,
         Affine(t.a / k, 0.0, t.c, 0.0, t.e / k, t.f),
@@ -206,13 +342,105 @@ def _grids(
     return dem_grid, ortho_grid, k
 
 
-def _initial_heights(init_dem: DEM, grid: OrthoGrid) -> FloatArray:
+@attrs.frozen
+class StartingSurface:
+    """The starting heights on the DEM grid and what the initial DEM gave.
+
+    Attributes:
+        heights: heights of every DEM node (no NaN): the initial DEM's, its voids filled.
+        coverage: share of the images' common footprint where the initial DEM has a height.
+        filled: share of the footprint whose starting height was filled (interpolated).
+        footprint: share of the DEM grid's nodes that both images see.
+    """
+
+    heights: FloatArray = attrs.field(eq=False)
+    coverage: float
+    filled: float
+    footprint: float
+
+
+def _seen_by_both(
+    sensors: tuple[Sensor, Sensor], lon: FloatArray, lat: FloatArray, h: FloatArray
+) -> NDArray[np.bool_]:
+    """Whether both images see the ground points (inside both images' extents)."""
+    inside = np.ones(lon.shape, bool)
+    for sensor in sensors:
+        n_l, n_s = sensor.image_shape
+        with warnings.catch_warnings(), np.errstate(invalid="ignore"):
+            warnings.simplefilter("ignore", RuntimeWarning)
+            line, sample = sensor.ground_to_image(lon, lat, h)
+            line, sample = np.asarray(line), np.asarray(sample)
+            inside &= (line >= 0) & (line <= n_l) & (sample >= 0) & (sample <= n_s)
+    return inside
+
+
+def _nearest_post_valid(dem: DEM, lon: FloatArray, lat: FloatArray) -> NDArray[np.bool_]:
+    """Whether the post of ``dem`` nearest to each point exists and holds a height."""
+    row, col = dem.lonlat_to_pixel(lon, lat)
+    n_rows, n_cols = dem.shape
+    with np.errstate(invalid="ignore"):
+        inside = (row > -0.5) & (row < n_rows - 0.5) & (col > -0.5) & (col < n_cols - 0.5)
+    r = np.clip(np.rint(np.where(inside, row, 0)), 0, n_rows - 1).astype(np.intp)
+    c = np.clip(np.rint(np.where(inside, col, 0)), 0, n_cols - 1).astype(np.intp)
+    return inside & np.isfinite(dem.heights[r, c])
+
+
+_FOOTPRINT_SAMPLES = 250_000  # nodes at most on which the footprint and coverage are measured
+
+
+def starting_surface(
+    init_dem: DEM,
+    grid: OrthoGrid,
+    sensors: tuple[Sensor, Sensor],
+    min_coverage: float = 0.75,
+) -> StartingSurface:
+    """The starting heights of IOR on ``grid``: the initial DEM, its voids (and the nodes just
+    outside it) filled by GDAL's inverse-distance interpolation (:meth:`DEM.filled`), so the
+    first ortho-images have no holes and the first heights no jumps.
+
+    Raises:
+        InputError: the initial DEM gives a height at less than ``min_coverage`` of the
+            images' common footprint (mostly void, or a tile of another place).
+    """
     rows, cols = np.mgrid[0 : grid.shape[0], 0 : grid.shape[1]]
     lon, lat = grid.lonlat(rows, cols)
-    h = init_dem.height(lon, lat)
-    if not np.isfinite(h).any():
-        raise InputError(f"dem: the initial DEM {init_dem.name} does not cover the images")
-    return np.where(np.isfinite(h), h, np.nanmedian(h))
+    raw = init_dem.height(lon, lat)
+    covered = np.isfinite(raw)
+    step = max(1, math.ceil(math.sqrt(raw.size / _FOOTPRINT_SAMPLES)))
+    pick = (slice(None, None, step), slice(None, None, step))
+    h_mid = float(np.nanmedian(raw)) if covered.any() else float(np.nanmedian(init_dem.heights))
+    h_fp = np.where(covered[pick], raw[pick], h_mid)
+    seen = _seen_by_both(sensors, lon[pick], lat[pick], h_fp)
+    if not seen.any():  # a sliver: measure over the whole grid
+        seen = np.ones_like(seen)
+    # coverage: the nearest post has a height (bilinear sampling would also lose the ring of
+    # cells around each void, which overstates a void of a coarse DEM)
+    post = _nearest_post_valid(init_dem, lon[pick], lat[pick])
+    coverage = float(post[seen].mean())
+    if coverage < min_coverage:
+        raise InputError(
+            f"dem: initial DEM {init_dem.name} covers {100.0 * coverage:.0f} % of the images' "
+            f"footprint (at least {100.0 * min_coverage:.0f} % needed: a DEM mostly void, or "
+            "a tile of another place; check the file, or start from --init-height M)"
+        )
+    heights = raw
+    if not covered.all():
+        bounds = (float(lon.min()), float(lat.min()), float(lon.max()), float(lat.max()))
+        filled_dem, _ = init_dem.filled(bounds)
+        heights = np.where(covered, raw, filled_dem.height(lon, lat))
+        still = ~np.isfinite(heights)
+        if still.any():  # beyond the initial DEM: fill on the grid itself
+            from rasterio.fill import fillnodata
+
+            heights = fillnodata(
+                np.where(still, 0.0, heights),
+                mask=(~still).astype(np.uint8),
+                max_search_distance=float(math.hypot(*heights.shape)) + 1.0,
+                smoothing_iterations=0,
+            )
+        heights = np.where(np.isfinite(heights), heights, h_mid)
+    filled = float((~post & seen).sum()) / max(int(seen.sum()), 1)
+    return StartingSurface(np.asarray(heights, np.float64), coverage, filled, float(seen.mean()))
 
 
 def _dem_on(grid: OrthoGrid, heights: FloatArray) -> DEM:
@@ -450,12 +678,19 @@ def refine_dem(
             hierarchical NCC with a left-right check); any matcher with ``match_dense``.
 
     Raises:
-        InputError: images that do not overlap, an initial DEM that does not cover them, bad
-            settings.
+        InputError: images that do not overlap, an initial DEM that covers too little of
+            them (:func:`starting_surface`), a posting or ortho resolution that makes a grid
+            too large or too small for the footprint, bad settings.
     """
     s = settings or IORSettings()
     dem_grid, ortho_grid, k = _grids(left, right, init_dem, s)
-    heights = _initial_heights(init_dem, dem_grid)
+    start = starting_surface(init_dem, dem_grid, (left, right), s.min_init_coverage)
+    heights = start.heights
+    if progress and start.filled > 0.0:
+        progress(
+            f"initial DEM {init_dem.name}: {100.0 * start.filled:.1f} % of the footprint "
+            "filled (voids)"
+        )
     n_r, n_c = dem_grid.shape
     c_lon, c_lat = dem_grid.lonlat(n_r / 2, n_c / 2)
     bh, base_en = base_direction(
@@ -469,6 +704,7 @@ def refine_dem(
     converged = False
     tiles: list[TileResult] = []
     guess = (0.0, 0.0)
+    ever_matched = np.zeros(dem_grid.shape, bool)
     for iteration in range(1, s.max_iterations + 2):
         t0 = time.perf_counter()
         current = heights.copy()
@@ -504,6 +740,7 @@ def refine_dem(
             d_col[tile.rows, tile.cols] = tile.d_col_px
             covered[tile.rows, tile.cols] = tile.covered
         matched = np.isfinite(d_row) & covered
+        ever_matched |= matched
         # the mismatch a height change removes: along the base; across it, what the
         # relative orientation leaves (reported, and the next search starts from it)
         along = d_row * base_rc[0] + d_col * base_rc[1]
@@ -552,8 +789,32 @@ def refine_dem(
         cs = slice(tile.cols.start * k, tile.cols.stop * k)
         out_l[rs, cs], out_r[rs, cs] = tile.ortho_left, tile.ortho_right
         score[rs, cs], valid[rs, cs] = tile.score, tile.valid
-    final = np.where(covered, heights, np.nan)
+    final = np.where(covered & _support(ever_matched, s), heights, np.nan)
     dem = DEM.from_array(final, dem_grid.transform, dem_grid.crs.to_wkt(), vertical=ELLIPSOID)
     return IORResult(
-        dem, dem_grid, ortho_grid, out_l, out_r, score, valid, tuple(reports), converged, bh
+        dem,
+        dem_grid,
+        ortho_grid,
+        out_l,
+        out_r,
+        score,
+        valid,
+        tuple(reports),
+        converged,
+        bh,
+        init_coverage=start.coverage,
+        init_filled=start.filled,
     )
+
+
+def _support(matched: NDArray[np.bool_], settings: IORSettings) -> NDArray[np.bool_]:
+    """The nodes :func:`regularise` reaches from matched nodes (its widest Gaussian, 9 sigma):
+    the others were never measured and keep the starting height, so the DEM has no value
+    there."""
+    from scipy import ndimage
+
+    if not matched.any():
+        return matched.copy()
+    wide = 9.0 * float(settings.smoothing_nodes)
+    reach = ndimage.gaussian_filter(matched.astype(np.float64), wide, mode="constant")
+    return (reach > 1e-3) | matched

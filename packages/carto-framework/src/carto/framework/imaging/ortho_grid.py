@@ -33,6 +33,13 @@ if TYPE_CHECKING:  # pyproj and affine are imported when used
 FloatArray = NDArray[np.float64]
 Bounds = tuple[float, float, float, float]
 
+MAX_GRID_CELLS = 400_000_000
+"""Most cells of a grid built by :meth:`OrthoGrid.covering` (and of the grids of a DEM
+generator): 4e8 cells are 1.6 GB per float32 layer, and orthorectification or a DEM
+generator holds several layers of the grid's size (the ortho-images, the mapping, the score);
+a full 12000 x 12000 px scene at its own resolution is 1.44e8 cells. Larger grids are refused
+before anything is allocated."""
+
 
 # ----------------------------------------------------------------------------- helpers
 def _to_crs(value: Any) -> pyproj.CRS:
@@ -95,12 +102,35 @@ def check_dem(dem: Any) -> DEM:
     """``dem`` if it is a :class:`DEM` with ellipsoidal heights; InputError otherwise."""
     if not isinstance(dem, DEM):
         raise InputError(f"dem must be a carto.framework.raster.dem.DEM, got {type(dem).__name__}")
-    if not dem.is_ellipsoidal:
+    return dem.check_ellipsoidal("orthorectification")
+
+
+def check_grid_size(
+    width: float,
+    height: float,
+    resolution: float,
+    *,
+    what: str = "ortho grid",
+    option: str = "resolution",
+    unit: str = "m",
+    max_cells: float = MAX_GRID_CELLS,
+) -> tuple[int, int]:
+    """``(rows, cols)`` of a grid of ``resolution`` over ``width x height`` (CRS units), or
+    InputError (one line) naming ``option``, its value, the area and the grid size when the
+    grid would hold more than ``max_cells`` cells. Nothing is allocated."""
+    res = float(resolution)
+    if not (math.isfinite(res) and res > 0.0):
+        raise InputError(f"{what}: {option} {resolution!r} must be a finite number > 0")
+    cols = max(math.ceil(float(width) / res - 1e-9), 1)
+    rows = max(math.ceil(float(height) / res - 1e-9), 1)
+    if float(rows) * float(cols) > max_cells:
+        coarsest = res * math.sqrt(float(rows) * float(cols) / max_cells)
         raise InputError(
-            f"DEM {dem.name}: heights are {dem.vertical}, orthorectification needs ellipsoidal "
-            "heights; convert with DEM.to_ellipsoid(geoid)"
+            f"{what}: {option} {res:g} {unit} over a footprint of {width:.6g} x {height:.6g} "
+            f"{unit} gives {cols} x {rows} = {float(rows) * float(cols):.3g} cells, more than "
+            f"{max_cells:.3g}; use a {option} of at least {coarsest:.3g} {unit}"
         )
-    return dem
+    return rows, cols
 
 
 def check_sensor(sensor: Any) -> Sensor:
@@ -146,6 +176,7 @@ class OrthoGrid:
         resolution_m: float,
         crs: Any = None,
         bounds: Bounds | None = None,
+        max_cells: float = MAX_GRID_CELLS,
     ) -> OrthoGrid:
         """The grid at ``resolution_m`` that covers the images' footprints (or ``bounds``).
 
@@ -161,12 +192,12 @@ class OrthoGrid:
             crs: the map CRS; default the WGS84 UTM zone of the footprint's centre.
             bounds: ``(left, bottom, right, top)`` in ``crs`` (or in the default UTM CRS) to
                 cover instead of the footprint.
+            max_cells: refuse a grid of more cells (:func:`check_grid_size`).
 
         Raises:
-            InputError: no sensor, bad resolution or bounds, a footprint entirely off the DEM.
+            InputError: no sensor, bad resolution or bounds, a footprint entirely off the DEM,
+                a grid of more than ``max_cells`` cells.
         """
-        from carto.framework.raster.crs import utm_crs
-
         sensor_list = [sensors] if isinstance(sensors, Sensor) else list(sensors)
         for s in sensor_list:
             check_sensor(s)
@@ -176,24 +207,10 @@ class OrthoGrid:
             raise InputError(f"ortho grid: resolution {resolution_m!r} must be > 0")
         if not sensor_list and (crs is None or bounds is None):
             raise InputError("ortho grid: give at least one sensor, or both crs and bounds")
-        lon = lat = np.empty(0)
-        if sensor_list:
-            lon, lat = _footprint(sensor_list, dem)
-        if crs is None:
-            lon_c = 0.5 * (lon.min() + lon.max())
-            lat_c = 0.5 * (lat.min() + lat.max())
-            crs_obj = utm_crs(float(lon_c), float(lat_c))
-        else:
-            crs_obj = _to_crs(crs)
         if bounds is None:
-            import pyproj
-
-            to_map = pyproj.Transformer.from_crs(
-                pyproj.CRS.from_epsg(4326), crs_obj, always_xy=True
-            )
-            x, y = (np.asarray(v, np.float64) for v in to_map.transform(lon, lat))
-            box = (float(x.min()), float(y.min()), float(x.max()), float(y.max()))
+            crs_obj, box = footprint_box(sensor_list, dem, crs)
         else:
+            crs_obj = _to_crs(crs) if crs is not None else footprint_box(sensor_list, dem)[0]
             box = tuple(float(v) for v in bounds)  # type: ignore[assignment]
             if len(box) != 4 or not all(map(math.isfinite, box)):
                 raise InputError(f"ortho grid: bounds {bounds!r} must be 4 finite numbers")
@@ -204,6 +221,8 @@ class OrthoGrid:
                 "left < right and bottom < top"
             )
         eps = 1e-9
+        unit = "m" if crs_obj.is_projected else "degrees"
+        check_grid_size(right - left, top - bottom, res, unit=unit, max_cells=max_cells)
         x0 = math.floor(left / res + eps) * res
         x1 = math.ceil(right / res - eps) * res
         y0 = math.floor(bottom / res + eps) * res
@@ -260,6 +279,35 @@ class OrthoGrid:
         return OrthoGrid(
             self.crs, self.transform @ Affine.translation(col0, row0), (n_rows, n_cols)
         )
+
+
+def footprint_box(
+    sensors: Sensor | Sequence[Sensor], dem: DEM, crs: Any = None
+) -> tuple[pyproj.CRS, Bounds]:
+    """The map CRS (``crs``, default the WGS84 UTM zone of the footprint's centre) and the
+    ``(left, bottom, right, top)`` box, in it, of the images' borders located on ``dem`` (not
+    snapped to any resolution)."""
+    import pyproj
+
+    from carto.framework.raster.crs import utm_crs
+
+    sensor_list = [sensors] if isinstance(sensors, Sensor) else list(sensors)
+    if not sensor_list:
+        raise InputError("ortho grid: give at least one sensor")
+    lon, lat = _footprint(sensor_list, check_dem(dem))
+    if crs is None:
+        lon_c = 0.5 * (lon.min() + lon.max())
+        lat_c = 0.5 * (lat.min() + lat.max())
+        crs_obj = utm_crs(float(lon_c), float(lat_c))
+    else:
+        crs_obj = _to_crs(crs)
+    to_map = pyproj.Transformer.from_crs(pyproj.CRS.from_epsg(4326), crs_obj, always_xy=True)
+    x, y = (np.asarray(v, np.float64) for v in to_map.transform(lon, lat))
+    ok = np.isfinite(x) & np.isfinite(y)
+    if not ok.any():
+        raise InputError(f"ortho grid: the images' footprint has no coordinates in {crs_obj.name}")
+    x, y = x[ok], y[ok]
+    return crs_obj, (float(x.min()), float(y.min()), float(x.max()), float(y.max()))
 
 
 def _footprint(sensors: Sequence[Sensor], dem: DEM) -> tuple[FloatArray, FloatArray]:

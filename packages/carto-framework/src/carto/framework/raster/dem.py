@@ -25,6 +25,10 @@ Conventions
     * Nodata is NaN in memory; files are written as float32 GeoTIFF with NaN nodata and the
       vertical reference in the tag ``VERTICAL_REFERENCE`` (``"ellipsoid WGS84"`` or
       ``"geoid EGM96"``...).
+    * Heights outside ``MIN_HEIGHT_M..MAX_HEIGHT_M`` (-1000..10000 m) and non-finite heights
+      are nodata: voids a file does not declare (-9999, -32768 where the file declares no
+      nodata or another value), fill values such as 1e30. A file with no valid height, or
+      smaller than 2 x 2 posts, is refused.
     * Bounds are ``(west, south, east, north)``.
 """
 
@@ -61,6 +65,19 @@ VERTICAL_TAG = "VERTICAL_REFERENCE"
 """GeoTIFF metadata tag holding the vertical reference of a written DEM."""
 
 _EDGE_TOL_PX = 1e-9  # tolerance on "inside the span of pixel centres", in pixels
+
+MIN_HEIGHT_M = -1000.0
+MAX_HEIGHT_M = 10000.0
+"""Plausible heights on Earth, metres (above the ellipsoid or the geoid): the Dead Sea shore
+is at -430 m, Everest at 8849 m and geoid undulations stay within -107..+86 m. Anything
+outside is nodata: undeclared voids (-9999, -32768), fill values (1e30), overflowed sums."""
+MAX_UNDULATION_M = 150.0
+"""Largest plausible |geoid undulation|, metres (EGM96 and EGM2008 stay within -107..+86 m)."""
+MIN_DEM_POSTS = 2
+"""A DEM needs at least 2 x 2 posts: bilinear sampling and gradients need two per axis."""
+GEOID_ADVICE = 'give the geoid grid with --geoid GTX (configuration key "geoid"), e.g. egm96_15.gtx'
+"""What a user does about a DEM of geoid heights (SRTM ``.hgt``) where ellipsoidal heights
+are needed."""
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -121,6 +138,20 @@ def _readonly(array: ArrayLike) -> FloatArray:
     out = np.array(array, dtype=np.float64)  # always a copy
     out.flags.writeable = False
     return out
+
+
+def _plausible_heights(array: ArrayLike) -> FloatArray:
+    """A read-only float64 copy with non-finite heights and heights outside
+    ``MIN_HEIGHT_M..MAX_HEIGHT_M`` set to NaN (nodata)."""
+    out = np.array(array, dtype=np.float64)  # always a copy
+    with np.errstate(invalid="ignore"):
+        out[~((out >= MIN_HEIGHT_M) & (out <= MAX_HEIGHT_M))] = np.nan
+    out.flags.writeable = False
+    return out
+
+
+def _fmt_height_range() -> str:
+    return f"{MIN_HEIGHT_M:g}..{MAX_HEIGHT_M:g} m"
 
 
 def _is_wgs84_lonlat(crs: pyproj.CRS) -> bool:
@@ -210,6 +241,23 @@ class Geoid:
         t = self.transform
         if t.b != 0.0 or t.d != 0.0:
             raise InputError(f"geoid {self.source}: rotated grids are not supported")
+        if not (math.isfinite(t.a) and math.isfinite(t.e) and t.a > 0.0 and t.e < 0.0):
+            raise InputError(
+                f"geoid {self.source}: grid spacing (field transform) {t.a:g} degrees of "
+                f"longitude by {-t.e:g} of latitude; both must be finite and > 0"
+            )
+        if not (math.isfinite(t.c) and math.isfinite(t.f)):
+            raise InputError(f"geoid {self.source}: grid origin {t.c}, {t.f} is not finite")
+        with np.errstate(invalid="ignore"):
+            wild = ~np.isnan(self.undulations) & ~(np.abs(self.undulations) <= MAX_UNDULATION_M)
+        if wild.any():
+            row, col = (int(v[0]) for v in np.nonzero(wild))
+            lon, lat = t * (col + 0.5, row + 0.5)
+            raise InputError(
+                f"geoid {self.source}: undulation {self.undulations[row, col]:g} m at lon "
+                f"{lon:.4f}, lat {lat:.4f} ({int(wild.sum())} nodes) is implausible "
+                f"(|N| <= {MAX_UNDULATION_M:g} m on Earth; an undeclared nodata value?)"
+            )
         n_cols = self.undulations.shape[1]
         is_global = math.isclose(abs(t.a) * n_cols, 360.0, rel_tol=1e-9)
         padded = self.undulations
@@ -268,14 +316,15 @@ class DEM:
     Build one with :meth:`open`, :meth:`constant` or :meth:`from_array`.
 
     Attributes:
-        heights: ``(rows, cols)`` float64 heights in metres, read-only; NaN = nodata.
+        heights: ``(rows, cols)`` float64 heights in metres, read-only; NaN = nodata (also
+            where the given heights were not finite or outside ``MIN_HEIGHT_M..MAX_HEIGHT_M``).
         transform: affine transform of pixel corners into ``crs`` coordinates.
         crs: the horizontal CRS (:class:`pyproj.CRS`).
         vertical: ``"ellipsoid"`` or ``"geoid:<NAME>"`` (see module docstring).
         source: the file it was read from (named in error messages), or None.
     """
 
-    heights: FloatArray = attrs.field(converter=_readonly)
+    heights: FloatArray = attrs.field(converter=_plausible_heights)
     transform: Affine = attrs.field(converter=to_affine)
     crs: pyproj.CRS = attrs.field(converter=_to_horizontal_crs)
     vertical: str = attrs.field(default=ELLIPSOID, converter=normalise_vertical)
@@ -339,6 +388,10 @@ class DEM:
         west, south, east, north = (float(v) for v in bounds)
         if not (west < east and south < north):
             raise InputError(f"DEM.constant: bounds {bounds} must be (west, south, east, north)")
+        if not MIN_HEIGHT_M <= float(h_m) <= MAX_HEIGHT_M:
+            raise InputError(
+                f"DEM.constant: height {h_m} m is outside the plausible range {_fmt_height_range()}"
+            )
         dx, dy = east - west, north - south
         transform = Affine(dx, 0.0, west - dx / 2, 0.0, -dy, north + dy / 2)
         return cls(np.full((2, 2), float(h_m)), transform, "EPSG:4326", vertical=vertical)
@@ -352,6 +405,7 @@ class DEM:
         bounds: Bounds | None = None,
         vertical: str | None = None,
         band: int = 1,
+        require_ellipsoidal: bool = False,
     ) -> DEM:
         """Read a DEM from a GeoTIFF, an SRTM ``.hgt`` tile or any raster GDAL reads.
 
@@ -367,9 +421,16 @@ class DEM:
                 ``VERTICAL_REFERENCE`` tag, ``"geoid:EGM96"`` for SRTM ``.hgt`` tiles, the
                 vertical part of a compound CRS, else ``"ellipsoid"`` (the Carto convention).
             band: the band holding the heights.
+            require_ellipsoidal: refuse geoid heights that no ``geoid`` converts, with the
+                advice to give ``--geoid GTX`` (:meth:`check_ellipsoidal`).
+
+        Heights outside ``MIN_HEIGHT_M..MAX_HEIGHT_M`` are nodata (undeclared voids such as
+        -9999 or -32768, fill values such as 1e30), as is the file's declared nodata.
 
         Raises:
-            InputError: missing or unreadable file, no CRS, or ``bounds`` not covered.
+            InputError: missing or unreadable file, no CRS, smaller than 2 x 2 posts, no
+                valid height (all nodata or implausible), ``bounds`` not covered, geoid
+                heights with ``require_ellipsoidal`` and no geoid.
         """
         import rasterio
         from rasterio.errors import RasterioError
@@ -387,6 +448,11 @@ class DEM:
                     raise InputError(f"DEM {path}: no georeferencing (field transform)")
                 if not 1 <= band <= ds.count:
                     raise InputError(f"DEM {path}: band {band} does not exist ({ds.count} bands)")
+                if min(ds.width, ds.height) < MIN_DEM_POSTS:
+                    raise InputError(
+                        f"DEM {path}: {ds.width} x {ds.height} pixels; a DEM needs at least "
+                        f"{MIN_DEM_POSTS} x {MIN_DEM_POSTS} posts"
+                    )
                 crs, file_vertical = _split_crs(_to_crs(ds.crs))
                 tag = ds.tags().get(VERTICAL_TAG)
                 if vertical is not None:
@@ -415,8 +481,16 @@ class DEM:
         if scale not in (None, 1.0) or offset not in (None, 0.0):
             grid = grid * (1.0 if scale is None else scale) + (offset or 0.0)
         dem = cls(grid, transform, crs, vertical=vref, source=str(path))
+        if not np.isfinite(dem.heights).any():
+            where = "" if bounds is None else " in the requested bounds"
+            raise InputError(
+                f"DEM {path}: no valid height{where} (all {grid.shape[1]} x {grid.shape[0]} "
+                f"posts are nodata or outside {_fmt_height_range()})"
+            )
         if geoid is not None:
             dem = dem.to_ellipsoid(geoid)
+        if require_ellipsoidal:
+            dem.check_ellipsoidal()
         return dem
 
     # ------------------------------------------------------------------ properties
@@ -434,6 +508,22 @@ class DEM:
     def is_ellipsoidal(self) -> bool:
         """True when the heights are above the WGS84 ellipsoid (what sensors take)."""
         return self.vertical == ELLIPSOID
+
+    @property
+    def valid_fraction(self) -> float:
+        """Share of the posts that hold a height (0..1)."""
+        return float(np.isfinite(self.heights).mean())
+
+    def check_ellipsoidal(self, purpose: str = "Carto") -> DEM:
+        """``self`` if its heights are ellipsoidal; else InputError (one line) naming the file
+        and its vertical reference, with the advice to give the geoid grid (``--geoid GTX``,
+        configuration key ``"geoid"``). ``purpose`` names what needs ellipsoidal heights."""
+        if not self.is_ellipsoidal:
+            raise InputError(
+                f"DEM {self.name}: heights are above the geoid ({self.vertical}), {purpose} "
+                f"needs ellipsoidal heights; {GEOID_ADVICE}"
+            )
+        return self
 
     @property
     def height_range(self) -> tuple[float, float]:
@@ -510,6 +600,53 @@ class DEM:
                 f"lat {lat[uncovered][0]:.6f})"
             )
         return attrs.evolve(self, heights=self.heights + undulation, vertical=ELLIPSOID)
+
+    def filled(self, bounds: Bounds | None = None) -> tuple[DEM, int]:
+        """This DEM with its voids filled, and the number of posts filled.
+
+        GDAL's fill (:func:`rasterio.fill.fillnodata`: inverse-distance weighting from the
+        valid posts around each void, searched in four directions; no smoothing) fills every
+        void, at the edges too. With ``bounds`` (WGS84 ``(west, south, east, north)``), only
+        the posts around them (two more on each side) are filled and returned: a DEM made to
+        start from, not a measurement. A DEM without voids, or without any valid post in the
+        window, is returned as it is (cropped to the window).
+        """
+        from rasterio.fill import fillnodata
+        from rasterio.transform import Affine
+
+        n_rows, n_cols = self.shape
+        r0, r1, c0, c1 = 0, n_rows, 0, n_cols
+        if bounds is not None:
+            west, south, east, north = (float(v) for v in bounds)
+            t = np.linspace(0.0, 1.0, 17)
+            lon = np.concatenate([west + t * (east - west), west + t * (east - west)])
+            lon = np.concatenate([lon, np.full_like(t, west), np.full_like(t, east)])
+            lat = np.concatenate([np.full_like(t, south), np.full_like(t, north)])
+            lat = np.concatenate([lat, south + t * (north - south), south + t * (north - south)])
+            row, col = self.lonlat_to_pixel(lon, lat)
+            ok = np.isfinite(row) & np.isfinite(col)
+            if not ok.any():
+                return self, 0
+            r0 = int(np.clip(math.floor(row[ok].min()) - 2, 0, n_rows))
+            r1 = int(np.clip(math.ceil(row[ok].max()) + 3, 0, n_rows))
+            c0 = int(np.clip(math.floor(col[ok].min()) - 2, 0, n_cols))
+            c1 = int(np.clip(math.ceil(col[ok].max()) + 3, 0, n_cols))
+            if r1 - r0 < 1 or c1 - c0 < 1:
+                return self, 0
+        sub = self.heights[r0:r1, c0:c1]
+        valid = np.isfinite(sub)
+        n_filled = 0
+        if valid.any() and not valid.all():
+            reach = float(math.hypot(*sub.shape)) + 1.0
+            sub = fillnodata(
+                np.where(valid, sub, 0.0),
+                mask=valid.astype(np.uint8),
+                max_search_distance=reach,
+                smoothing_iterations=0,
+            )
+            n_filled = int((~valid & np.isfinite(sub)).sum())
+        window = self.transform @ Affine.translation(c0, r0)
+        return attrs.evolve(self, heights=sub, transform=window), n_filled
 
     def write(self, path: str | os.PathLike[str]) -> Path:
         """Write a float32 GeoTIFF (CRS, NaN nodata, ``VERTICAL_REFERENCE`` tag); return path.
