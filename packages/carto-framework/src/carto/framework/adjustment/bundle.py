@@ -24,7 +24,11 @@ Robustness
     convergence, rejection of observations whose normalised residual exceeds
     ``outlier_threshold`` (a GCP whose ground or image residuals are too large is flagged by
     its id, one at a time and only among at least :data:`MIN_GCPS_FOR_SNOOPING` GCPs), then
-    a new solution without them, from the previous one.
+    a new solution without them, from the previous one. A GCP that the model cannot project
+    into an image measuring it (ground coordinates far off) counts as the worst outlier;
+    with fewer GCPs it raises :class:`~carto.framework.errors.AdjustmentError` rather than
+    being left out unsaid. (Gross control errors are refused before, at the boundary:
+    :mod:`carto.framework.adjustment.control_checks`.)
 Results
     a-posteriori sigma0, the parameter covariance (``sigma0^2 S^-1``), residuals of every
     observation, flagged outliers and a convergence report (:class:`AdjustmentResult`).
@@ -532,10 +536,24 @@ def _solve(
     cov = s_inv * scale
     # outliers: normalised residuals above the threshold
     flagged: list[str] = []
+    controls = set(obs.control_id.tolist())
+    # a GCP the adjusted model cannot project into an image where it is measured (its ground
+    # coordinates far from the image: lat/lon swapped ...) took no part in the solution:
+    # it is the worst of outliers, never silently left out
+    is_control = np.array([p in controls for p in obs.point_id.tolist()], dtype=bool)
+    lost = is_control & ~(np.isfinite(d_line) & np.isfinite(d_sample))
+    if np.any(lost) and not (robust and len(controls) >= MIN_GCPS_FOR_SNOOPING):
+        k = int(np.flatnonzero(lost)[0])
+        raise AdjustmentError(
+            f"GCP {obs.point_id[k]!r} cannot be projected into image {obs.image[k]!r} "
+            "(its ground coordinates are far from where the image measures it), and with "
+            f"fewer than {MIN_GCPS_FOR_SNOOPING} GCPs it cannot be rejected as a blunder"
+        )
     if robust:
         # a GCP blunder distorts the whole block: reject the worst GCP alone and solve again;
         # only when the GCPs agree, reject every tie point above the threshold at once
         norm_img = np.nan_to_num(np.hypot(d_line, d_sample) / obs.sigma_px, nan=0.0)
+        norm_img[lost] = np.inf
         worst = {}
         for pid, v in zip(obs.point_id.tolist(), norm_img.tolist(), strict=True):
             worst[pid] = max(worst.get(pid, 0.0), v)
@@ -544,7 +562,6 @@ def _solve(
             nrm = np.linalg.norm(v_gcp / np.stack([sp, sp, obs.control_sigma_h_m], -1), axis=1)
             for cid, v in zip(obs.control_id.tolist(), nrm.tolist(), strict=True):
                 worst[cid] = max(worst.get(cid, 0.0), v)
-        controls = set(obs.control_id.tolist())
         # a GCP blunder can only be told from the others when at least three remain to
         # compare: with two, both show the same misfit and rejecting one would leave the
         # datum to the other (GCPs are then kept whatever their residuals)

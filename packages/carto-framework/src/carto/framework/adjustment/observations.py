@@ -140,6 +140,16 @@ class Observations:
             raise InputError("observations: every sigma must be > 0")
         if not np.all(np.isfinite(self.line) & np.isfinite(self.sample)):
             raise InputError("observations: image coordinates contain NaN")
+        ground = np.isfinite(self.control_lon_deg) & np.isfinite(self.control_lat_deg)
+        bad = np.flatnonzero(~(ground & np.isfinite(self.control_h_m)))
+        if bad.size:
+            # a GCP without a height (or position) would be dropped without a word
+            raise InputError(
+                f"observations: GCP {self.control_id[bad[0]]!r} has no finite lon_deg, lat_deg "
+                "and h_m"
+            )
+        if np.unique(self.control_id).size != self.control_id.size:
+            raise InputError("observations: a GCP is given twice (control_id repeated)")
         if np.any(~(self.offset_sigma_px > 0)):
             raise InputError("observations: every offset_sigma_px must be > 0")
         if not np.all(np.isfinite(self.offset_d_line) & np.isfinite(self.offset_d_sample)):
@@ -163,12 +173,20 @@ class Observations:
     ) -> Observations:
         """From long-format tables (``id, lon_deg, lat_deg, h_m, image, line, sample`` and
         optional ``sigma_px``, ``sigma_planimetric_m``, ``sigma_h_m`` columns). Tie tables
-        need only ``id, image, line, sample``. Zero or missing sigmas take the defaults."""
+        need only ``id, image, line, sample``. Missing sigmas (a NaN or 0 cell: not stated)
+        take the defaults; a negative or infinite one is refused, and so is a GCP whose rows
+        give different ground coordinates."""
 
         def col(t: Mapping[str, NDArray], name: str, default: float) -> FloatArray:
             if name not in t:
                 return np.full(len(t["id"]), default)
             v = np.asarray(t[name], float)
+            bad = np.flatnonzero(np.isinf(v) | (v < 0))
+            if bad.size:
+                raise InputError(
+                    f"observations: {name} of point {t['id'][bad[0]]!r} is {v[bad[0]]}, not a "
+                    "standard deviation (> 0; NaN or 0: not stated, the default is used)"
+                )
             return np.where(np.isfinite(v) & (v > 0), v, default)
 
         ids, images, lines, samples, sig = [], [], [], [], []
@@ -182,7 +200,17 @@ class Observations:
             samples.append(np.asarray(t["sample"], float))
             sig.append(col(t, "sigma_px", default_sigma_px))
         if gcps is not None and len(gcps["id"]):
-            _, first = np.unique(np.asarray(gcps["id"], object), return_index=True)
+            gid = np.asarray(gcps["id"], object)
+            _, first, inverse = np.unique(gid, return_index=True, return_inverse=True)
+            # the rows of one GCP agree on where it is (to about a centimetre)
+            for name, tol in (("lon_deg", 1e-7), ("lat_deg", 1e-7), ("h_m", 0.01)):
+                v = np.asarray(gcps[name], float)
+                differ = np.flatnonzero(np.abs(v - v[first][inverse]) > tol)
+                if differ.size:
+                    raise InputError(
+                        f"observations: GCP {gid[differ[0]]!r} has two values of {name} "
+                        f"({v[first][inverse][differ[0]]} and {v[differ[0]]})"
+                    )
             c_id = np.asarray(gcps["id"], object)[first]
             c_lon = np.asarray(gcps["lon_deg"], float)[first]
             c_lat = np.asarray(gcps["lat_deg"], float)[first]

@@ -80,14 +80,15 @@ class Scene:
         }
 
     def control(self, which: str = "checkpoints") -> dict[str, Any]:
-        """The ``gcps`` or ``checkpoints`` table (long format)."""
-        from carto.framework.files.point_table import read_point_table
+        """The ``gcps`` or ``checkpoints`` table (long format), checked
+        (:func:`carto.framework.files.control_table.read_control_table`: complete, finite and
+        plausible coordinates and sigmas, one row per point and image, the scene's images
+        only); errors name the file, row and column."""
+        from carto.framework.files.control_table import read_control_table
 
-        return read_point_table(
-            self.path(self.manifest[which]),
-            numeric=("lon_deg", "lat_deg", "h_m", "line", "sample"),
-            text=("id", "image"),
-        )
+        if which not in ("gcps", "checkpoints"):
+            raise InputError(f"scene control tables are gcps and checkpoints, not {which!r}")
+        return read_control_table(self.path(self.manifest[which]), which, images=self.image_names)
 
 
 def _short(value: Any) -> str:
