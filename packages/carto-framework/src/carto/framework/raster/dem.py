@@ -252,7 +252,7 @@ class Geoid:
             wild = ~np.isnan(self.undulations) & ~(np.abs(self.undulations) <= MAX_UNDULATION_M)
         if wild.any():
             row, col = (int(v[0]) for v in np.nonzero(wild))
-            lon, lat = t * (col + 0.5, row + 0.5)
+            lon, lat = t.c + t.a * (col + 0.5), t.f + t.e * (row + 0.5)
             raise InputError(
                 f"geoid {self.source}: undulation {self.undulations[row, col]:g} m at lon "
                 f"{lon:.4f}, lat {lat:.4f} ({int(wild.sum())} nodes) is implausible "
