@@ -33,8 +33,13 @@ of the
   WGS84 **ellipsoid**. Longitudes more than 270 degrees away from ``LONG_OFF`` are wrapped by
   360 degrees, as GDAL does (a scene across the antimeridian).
 * Values outside the RPC's normalisation domain (``|L|, |P|, |H| > 1``) are extrapolated as GDAL
-  does; callers compare the results with
-  :attr:`~carto.framework.geometry.rpc_sensor.RPCSensor.image_shape`.
+  does by :meth:`RPCCoefficients.project`; the sensor
+  :class:`~carto.framework.geometry.rpc_sensor.RPCSensor` returns NaN outside the validity
+  domain (:meth:`RPCCoefficients.in_domain`) and far outside its image.
+* **Validation.** Every :class:`RPCCoefficients` is checked when built (so by every reader):
+  :func:`validate_fields` (each field within its domain: RPC00B's ranges, widened) and
+  :func:`validate_model` (no pole, no fold, no absurd values over the normalised cube); the
+  readers add :meth:`RPCCoefficients.check_image_shape` when the file gives the image size.
 
 Contents: the RPC00B and RPC00A term orders, the monomial evaluation shared with the fitting,
 and :class:`RPCCoefficients` (projection with analytic partials, Newton location, rasterio
@@ -195,13 +200,20 @@ MAX_NORMALISED_IMAGE = 1e4
 """Largest normalised ``|line|``/``|sample|`` accepted on the sanity grid (real products: 1.5
 to 77, and 2640 for SkySat's oversized cube): catches garbage that sends the model's own domain
 millions of scales away."""
-DOMAIN_MARGIN = 1.1
-"""Ground validity domain of the RPC sensor: ``|L|, |P| <= DOMAIN_MARGIN``."""
+DOMAIN_MARGIN = 2.0
+"""Ground validity domain of the RPC sensor: ``|L|, |P| <= DOMAIN_MARGIN``. Not the usual 1.1:
+real images reach beyond their cube at the ends of their height range, e.g. the corners of the
+Planet image of ``rpc-files/rpc_unsupported.xml`` at ``|P|`` = 1.45 at ``HEIGHT_OFF +-
+HEIGHT_SCALE`` (1.66 at 1.5 scales), WorldView-2's at 1.11; 2 keeps them and their image
+margin, and still refuses the far extrapolation (10 E 10 N on a Reunion image: ``|L|`` = 470)."""
 HEIGHT_MARGIN = 1.5
-HEIGHT_MARGIN_MIN_M = 500.0
-"""Height validity domain: ``|h - HEIGHT_OFF| <= max(HEIGHT_MARGIN * |HEIGHT_SCALE|,
-|HEIGHT_SCALE| + HEIGHT_MARGIN_MIN_M)``. Generous: the model is nearly linear in height (rays
-are straight), and vendors set tight height ranges from coarse DEMs (IKONOS: 28 +- 82 m)."""
+TERRESTRIAL_HEIGHTS_M = (-1000.0, 9000.0)
+"""Height validity domain: ``HEIGHT_OFF +- HEIGHT_MARGIN * |HEIGHT_SCALE|``, widened to at least
+``TERRESTRIAL_HEIGHTS_M`` (every ellipsoidal height of the Earth's surface). Generous on
+purpose: an RPC is nearly linear in height (rays are straight), vendors set tight height ranges
+from coarse DEMs (IKONOS: 28 +- 82 m), and the Pleiades vendor RPC of
+``pleiades-dimap-algeria`` (575 +- 85 m) stays within 0.05 px of the physical model at -30 m,
+7 height scales out (``tests/pleiades``). Heights beyond (a typo of 1e5 m) are refused."""
 
 
 def _field_error(name: str, message: str) -> InputError:
@@ -394,13 +406,17 @@ class RPCCoefficients:
         return diff
 
     def project(
-        self, lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike
+        self, lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike, *, guard_poles: bool = False
     ) -> tuple[FloatArray, FloatArray]:
-        """Project ground points into the image.
+        """Project ground points into the image (extrapolating as GDAL does; the sensor
+        :class:`~carto.framework.geometry.rpc_sensor.RPCSensor` limits it to the validity
+        domain).
 
         Args:
             lon_deg, lat_deg: WGS84 longitude and latitude, degrees.
             h_m: height above the WGS84 ellipsoid, metres.
+            guard_poles: also NaN where a denominator is below :data:`MIN_DENOMINATOR_RATIO`
+                times its constant term (near a pole of the model, or past it).
 
         Returns:
             ``(line, sample)`` in pixels, **project convention** (centre of the first pixel at
@@ -412,11 +428,11 @@ class RPCCoefficients:
             np.asarray(h_m, dtype=np.float64),
         )
         shape = lon.shape
-        line, samp = self._project_flat(lon.ravel(), lat.ravel(), h.ravel())
+        line, samp = self._project_flat(lon.ravel(), lat.ravel(), h.ravel(), guard_poles)
         return line.reshape(shape), samp.reshape(shape)
 
     def _project_flat(
-        self, lon: FloatArray, lat: FloatArray, h: FloatArray
+        self, lon: FloatArray, lat: FloatArray, h: FloatArray, guard_poles: bool = False
     ) -> tuple[FloatArray, FloatArray]:
         """:meth:`project` on 1-D arrays of equal size (the fast path, in cached chunks)."""
         n = lon.size
@@ -448,6 +464,11 @@ class RPCCoefficients:
                 np.matmul(coeffs, t, out=v)
                 np.divide(v[0], v[1], out=line[start:stop])
                 np.divide(v[2], v[3], out=samp[start:stop])
+                if guard_poles:
+                    weak = (v[1] / coeffs[1, 0] < MIN_DENOMINATOR_RATIO) | (
+                        v[3] / coeffs[3, 0] < MIN_DENOMINATOR_RATIO
+                    )
+                    line[start:stop][weak] = np.nan
             line *= self.line_scale
             line += self.line_off + 0.5
             samp *= self.samp_scale
@@ -565,11 +586,13 @@ class RPCCoefficients:
     # ------------------------------------------------------------------ validity domain
     @property
     def height_domain_m(self) -> tuple[float, float]:
-        """Heights where the model is used, metres: ``HEIGHT_OFF`` +- ``max(1.5 |HEIGHT_SCALE|,
-        |HEIGHT_SCALE| + 500 m)`` (:data:`HEIGHT_MARGIN`)."""
-        s = abs(self.height_scale)
-        half = max(HEIGHT_MARGIN * s, s + HEIGHT_MARGIN_MIN_M)
-        return self.height_off - half, self.height_off + half
+        """Heights where the model is used, metres: ``HEIGHT_OFF +- 1.5 |HEIGHT_SCALE|``, and at
+        least -1000 to 9000 m (:data:`TERRESTRIAL_HEIGHTS_M`)."""
+        half = HEIGHT_MARGIN * abs(self.height_scale)
+        return (
+            min(self.height_off - half, TERRESTRIAL_HEIGHTS_M[0]),
+            max(self.height_off + half, TERRESTRIAL_HEIGHTS_M[1]),
+        )
 
     def in_domain(self, lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike) -> NDArray[Any]:
         """True where a ground point is inside the validity domain: ``|L|, |P| <=``

@@ -5,6 +5,27 @@ Grodecki & Dial's (2003) image-space bias/affine correction as adjustable parame
 (:func:`default_rpc_parameters`); :class:`RPCSensorType` (name ``"rpc"``) opens every RPC
 container that :mod:`~carto.framework.geometry.rpc_readers` reads as an :class:`RPCSensor`.
 The pixel and ground conventions are those of :mod:`~carto.framework.geometry.rpc_model`.
+
+Validity domain
+---------------
+An RPC is a fit over a cube of ground coordinates; outside it the polynomials extrapolate
+freely (a 1024 x 1024 Pleiades crop gave line 5.4e6 for 10 E 10 N). :class:`RPCSensor` returns
+NaN (README: "points outside the image come back as nan") for:
+
+* ground points outside the RPC's validity domain
+  (:meth:`~carto.framework.geometry.rpc_model.RPCCoefficients.in_domain`: ``|L|, |P| <= 2``,
+  and heights ``HEIGHT_OFF +- 1.5 |HEIGHT_SCALE|`` widened to at least -1000 to 9000 m; see
+  :data:`~carto.framework.geometry.rpc_model.DOMAIN_MARGIN` for why 2 and not 1.1) or near a
+  pole of the model (a denominator below 2 % of its constant term), in
+  :meth:`RPCSensor.ground_to_image`, :meth:`RPCSensor.project` and as results of
+  :meth:`RPCSensor.image_to_ground`;
+* when the image size is known (given, from the raster or the file's size fields; not when it
+  is guessed from the offsets): image points more than :data:`IMAGE_MARGIN` of the image size
+  outside the image, as results of :meth:`RPCSensor.ground_to_image` and as inputs of
+  :meth:`RPCSensor.image_to_ground`. :meth:`RPCSensor.project` (used by the adjustment and the
+  orthorectification) still extrapolates inside the ground domain and flags ``inside``.
+
+GDAL's RPC transformer extrapolates everywhere; OSSIM and ASP warn outside the domain.
 """
 
 from __future__ import annotations
@@ -47,6 +68,11 @@ DEFAULT_OFFSET_SIGMA_PX = 100.0
 """A-priori sigma of the image-space offsets ``rpc.line.c0``/``rpc.sample.c0``, pixels."""
 DEFAULT_AFFINE_SIGMA = 1e-4
 """A-priori sigma of the affine terms (``c_line``, ``c_sample``), pixels per pixel."""
+IMAGE_MARGIN = 0.1
+"""Image points up to this fraction of the image size outside the image are still computed
+(when the image size is known); beyond, NaN."""
+EDGE_TOLERANCE_PX = 1e-6
+"""Points this close outside the image border count as inside (``project``'s flag)."""
 
 _PARAMETER_NAMES = (
     "rpc.line.c0",
@@ -110,6 +136,7 @@ class RPCSensor(Sensor):
         if not isinstance(rpc, RPCCoefficients):
             raise InputError(f"RPCSensor needs RPCCoefficients, got {type(rpc).__name__}")
         self._rpc = rpc
+        self._shape_known = image_shape is not None
         if image_shape is None:
             image_shape = rpc.default_image_shape()
         shape = tuple(int(v) for v in image_shape)
@@ -150,6 +177,20 @@ class RPCSensor(Sensor):
         return self._shape
 
     @property
+    def image_shape_known(self) -> bool:
+        """True when the image size was given (raster, size fields), False when guessed from
+        the RPC offsets (then image coordinates are not limited to the image)."""
+        return self._shape_known
+
+    def _near_image(self, line: FloatArray, samp: FloatArray) -> NDArray[np.bool_]:
+        """Within the image plus :data:`IMAGE_MARGIN` (everywhere when the size is guessed)."""
+        if not self._shape_known:
+            return np.ones(np.shape(line), dtype=bool)
+        nl, ns = self._shape
+        ml, ms = IMAGE_MARGIN * nl, IMAGE_MARGIN * ns
+        return (line >= -ml) & (line <= nl + ml) & (samp >= -ms) & (samp <= ns + ms)
+
+    @property
     def parameters(self) -> tuple[Parameter, ...]:
         """``rpc.line.c0, rpc.line.c_line, rpc.line.c_sample, rpc.sample.c0, ...`` (px, px/px)."""
         return self._params
@@ -164,7 +205,7 @@ class RPCSensor(Sensor):
         params = replace_parameters(self._params, values, free, sigmas)
         return RPCSensor(
             self._rpc,
-            self._shape,
+            self._shape if self._shape_known else None,
             parameters=params,
             source=self.source,
             prefix=self.prefix,
@@ -178,7 +219,7 @@ class RPCSensor(Sensor):
         params = tuple(attrs.evolve(p, name=prefix + p.name[n:]) for p in self._params)
         return RPCSensor(
             self._rpc,
-            self._shape,
+            self._shape if self._shape_known else None,
             parameters=params,
             source=self.source,
             prefix=prefix,
@@ -228,9 +269,33 @@ class RPCSensor(Sensor):
         self, lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike
     ) -> tuple[FloatArray, FloatArray]:
         """Project ground points (lon, lat degrees; h metres above the ellipsoid) into the image:
-        ``(line, sample)`` in pixels, first pixel centre at (0.5, 0.5), broadcast shape."""
-        line, samp = self._rpc.project(lon_deg, lat_deg, h_m)
-        return self._correct(line, samp)
+        ``(line, sample)`` in pixels, first pixel centre at (0.5, 0.5), broadcast shape; NaN
+        outside the RPC's ground domain or (image size known) beyond the image plus
+        :data:`IMAGE_MARGIN` (module docstring)."""
+        line, samp, _ = self.project(lon_deg, lat_deg, h_m)
+        bad = ~self._near_image(line, samp)
+        if bad.any():
+            line = np.where(bad, np.nan, line)
+            samp = np.where(bad, np.nan, samp)
+        return line, samp
+
+    def project(
+        self, lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike
+    ) -> tuple[FloatArray, FloatArray, NDArray[np.bool_]]:
+        """Ground -> image without clipping to the image: ``(line, sample, inside)``, NaN only
+        outside the RPC's ground validity domain; ``inside`` where ``0 <= line <= n_lines`` and
+        ``0 <= sample <= n_samples`` (to :data:`EDGE_TOLERANCE_PX`)."""
+        line, samp = self._rpc.project(lon_deg, lat_deg, h_m, guard_poles=True)
+        line, samp = self._correct(line, samp)
+        out = ~self._rpc.in_domain(lon_deg, lat_deg, h_m)
+        if out.any():
+            line = np.where(out, np.nan, line)
+            samp = np.where(out, np.nan, samp)
+        nl, ns = self._shape
+        tol = EDGE_TOLERANCE_PX
+        with np.errstate(invalid="ignore"):
+            inside = (line >= -tol) & (line <= nl + tol) & (samp >= -tol) & (samp <= ns + tol)
+        return line, samp, inside
 
     def image_to_ground(
         self,
@@ -248,17 +313,27 @@ class RPCSensor(Sensor):
 
         Returns:
             ``(lon_deg, lat_deg)``; NaN where the iteration does not converge to
-            ``tolerance_px``.
+            ``tolerance_px``, where the image point is beyond the image plus
+            :data:`IMAGE_MARGIN` (image size known) and where the result is outside the RPC's
+            ground validity domain (module docstring).
         """
         ln_, sm_, h_ = as_float_arrays(line, sample, h_m)
+        far = ~self._near_image(ln_, sm_)
         if not self._identity:
             inv = np.linalg.inv(self._affine)
             dl = ln_ - self._offset[0]
             ds = sm_ - self._offset[1]
             ln_, sm_ = inv[0, 0] * dl + inv[0, 1] * ds, inv[1, 0] * dl + inv[1, 1] * ds
-        return self._rpc.locate(
+        if far.any():
+            ln_ = np.where(far, np.nan, ln_)
+        lon, lat = self._rpc.locate(
             ln_, sm_, h_, tolerance_px=tolerance_px, max_iterations=max_iterations
         )
+        out = ~self._rpc.in_domain(lon, lat, h_)
+        if out.any():
+            lon = np.where(out, np.nan, lon)
+            lat = np.where(out, np.nan, lat)
+        return lon, lat
 
     def parameter_partials(
         self,
@@ -353,6 +428,42 @@ def save_corrected_rpc(sensor: Sensor, out_dir: Path, name: str) -> dict[str, An
     h0, hs = sensor.rpc.height_off, abs(sensor.rpc.height_scale)
     rpc, _ = fit_rpc(sensor, h_range=(h0 - hs, h0 + hs))
     return {"rpc": {"file": write_rpc_txt(rpc, out_dir / f"{name}_RPC.TXT").name}}
+
+
+_RASTER_SUFFIXES = frozenset((".tif", ".tiff", ".ntf", ".nitf", ".ntif", ".vrt"))
+
+
+def why_not_rpc(path: Path) -> str | None:
+    """Why :class:`RPCSensorType` does not recognise ``path``, for a file that looks like a
+    raster (TIFF/NITF magic bytes or suffix) or an RPC file; None for anything else. One line,
+    without the path: ``"GDAL cannot open it: <GDAL's reason>"``, ``"has no RPC metadata (no
+    RPC tag, _RPC.TXT or .RPB sidecar)"`` or the reader's error. Never raises."""
+    try:
+        kind = sniff_rpc_format(path)
+        if kind is None and path.suffix.lower() not in _RASTER_SUFFIXES:
+            return None
+        if kind in (None, "gdal"):
+            import rasterio
+
+            try:
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")
+                    with rasterio.open(path) as ds:
+                        tags = ds.tags(ns="RPC")
+            except Exception as err:  # noqa: BLE001 - GDAL's reason, whatever its type
+                reason = str(err).splitlines()[0] if str(err) else type(err).__name__
+                return f"GDAL cannot open it: {reason}"
+            if not tags:
+                return "has no RPC metadata (no RPC tag, _RPC.TXT or .RPB sidecar)"
+        try:
+            read_rpc_and_shape(path)
+        except InputError as err:
+            message = str(err)
+            prefix = f"{path}: "
+            return message[len(prefix) :] if message.startswith(prefix) else message
+        return None
+    except Exception:  # noqa: BLE001 - a diagnosis must never hide the original error
+        return None
 
 
 def _gdal_has_rpc(path: Path) -> bool:

@@ -46,8 +46,16 @@ def sensor_type_for(path: Path, sensor_type: str | None, what: str = "file") -> 
     candidates = [t for t in types if _safe_identify(t, path)]
     if not candidates:
         names = ", ".join(t.name for t in types) or "none"
+        if path.is_dir() and what == "file":
+            raise InputError(
+                f"{path}: is a folder, not a model file (known sensor types: {names}); "
+                "name the model file itself"
+            )
+        reason = _why_unrecognised(path)
+        because = f": {reason}" if reason else ""
+        kind = "folder" if path.is_dir() else what
         raise InputError(
-            f"{path}: no sensor type recognises this {what} (known: {names}); "
+            f"{path}: no sensor type recognises this {kind}{because} (known: {names}); "
             "name one with --sensor TYPE"
         )
     best = max(t.priority for t in candidates)
@@ -103,6 +111,24 @@ def open_sensors(
 ) -> dict[str, Sensor]:
     """The sensors of :func:`open_product`."""
     return open_product(path, sensor_type, trajectory_model=trajectory_model).sensors
+
+
+def _why_unrecognised(path: Path) -> str | None:
+    """What is wrong with a file no sensor type identifies, when we can tell: empty,
+    unreadable, a raster GDAL cannot open (GDAL's reason) or without RPC metadata, a damaged
+    RPC file (the reader's reason); None otherwise."""
+    if not path.is_file():
+        return None
+    try:
+        if path.stat().st_size == 0:
+            return "the file is empty"
+        with path.open("rb") as fh:
+            fh.read(1)
+    except OSError as err:
+        return f"cannot read it: {err.strerror or err}"
+    from carto.framework.geometry.rpc_sensor import why_not_rpc
+
+    return why_not_rpc(path)
 
 
 def _safe_identify(sensor_type: SensorType, path: Path) -> bool:
