@@ -6,23 +6,44 @@ the sensors being evaluated (least squares,
 :func:`carto.framework.geometry.intersection.intersect_sensors`) and gives RMSE along track,
 across track, planimetric and in height, in metres; :func:`monoplot_accuracy` does the same for
 single images located on a DEM; :func:`predicted_checkpoint_sigma` propagates the adjusted
-parameters' covariance to the checkpoints.
+parameters' covariance to the checkpoints. :func:`read_checkpoints` reads a checkpoint table
+and checks it as GCP tables are checked (:mod:`carto.framework.files.control_table`); the
+accuracy functions refuse a table in memory that those checks refuse (a missing height, one
+point measured twice in an image ...), since a wrong checkpoint gives wrong accuracy figures.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+import os
+from collections.abc import Collection, Mapping
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from carto.framework.errors import InputError
+from carto.framework.files.control_table import check_control_table, read_control_table
+from carto.framework.files.point_table import PointTable
 from carto.framework.geometry import frames
 from carto.framework.geometry.intersection import intersect_sensors
 from carto.framework.geometry.sensor import Sensor
 
 FloatArray = NDArray[np.float64]
+
+
+def read_checkpoints(
+    path: str | os.PathLike[str],
+    *,
+    images: Collection[str] | None = None,
+    shapes: Mapping[str, tuple[int, int]] | None = None,
+) -> PointTable:
+    """Read and check a checkpoint table (long format: ``id, lon_deg, lat_deg, h_m, image,
+    line, sample``; see :func:`carto.framework.files.control_table.read_control_table`)."""
+    return read_control_table(path, "checkpoints", images=images, shapes=shapes)
+
+
+def _checked(table: Mapping[str, NDArray]) -> None:
+    check_control_table(table, "checkpoints")
 
 
 def _rms(values: FloatArray) -> float:
@@ -46,6 +67,7 @@ def checkpoint_accuracy(
         max_planimetric_m, max_height_m, images}``; NaN figures when no point could be
         intersected.
     """
+    _checked(table)
     names = [n for n in sensors if np.any(table["image"] == n)]
     if len(names) < 2:
         raise InputError(
@@ -118,6 +140,7 @@ def predicted_checkpoint_sigma(
         ``{predicted_sigma_planimetric_m, predicted_sigma_height_m}``: RMS over the points of
         the predicted east/north (together) and up standard deviations.
     """
+    _checked(table)
     sensors = result.sensors
     names = list(result.parameters)
     cov = result.covariance_unit * max(1.0, float(np.nan_to_num(result.sigma0, nan=1.0))) ** 2
@@ -169,6 +192,7 @@ def monoplot_accuracy(
     Returns:
         image name -> ``{count, rmse_planimetric_m, max_planimetric_m}``.
     """
+    _checked(table)
     out: dict[str, dict[str, float]] = {}
     for name, sensor in sensors.items():
         m = table["image"] == name
