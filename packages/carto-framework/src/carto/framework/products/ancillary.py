@@ -175,13 +175,16 @@ class Ancillary:
         """
         model = trajectory_model
         if model is not None and interpolation is not None:
-            raise InputError("ancillary trajectory: give a model or an interpolation, not both")
+            raise InputError(
+                f"{self.source}: trajectory: give a model or an interpolation, not both"
+            )
         name = interpolation or (model.name if model is not None else self.trajectory_model)
         if model is None and name not in BUILTIN_KINDS:
             if components is None:
                 raise InputError(
-                    f"ancillary file names trajectory model {name!r}, which is not built in; "
-                    "open it through the registry (carto commands do)"
+                    f"{self.source}: trajectory_model: the file names trajectory model "
+                    f"{name!r}, which is not built in; open it through the registry (carto "
+                    "commands do)"
                 )
             model = components.get("trajectory", name)
         if model is not None and model.name not in BUILTIN_KINDS:
@@ -375,6 +378,12 @@ def _image(name: str, i: Any, cameras: Mapping[str, CameraSpec], source: str) ->
         _get(i, "n_lines", source, f"{where}."), source, f"{where}.n_lines", 1, 10**9
     )
     width = _integer(_get(i, "width", source, f"{where}."), source, f"{where}.width", 1, n_det)
+    if "first_sample" not in i and width != n_det:
+        # the image is a window of the detector line: where it starts is not a default
+        raise InputError(
+            f"{source}: missing field '{where}.first_sample' (the image's {width} columns are "
+            f"a window of the {n_det} detectors of camera {cam!r})"
+        )
     first_sample = _integer(
         i.get("first_sample", 0), source, f"{where}.first_sample", 0, n_det - width
     )
