@@ -87,19 +87,25 @@ def check_control(
             continue
         at = frames.geodetic_to_ecef(lon[idx], lat[idx], h[idx])
         seen = _located(sensor, line[idx], sample[idx], h[idx])
-        step_l = _located(sensor, line[idx] + 1.0, sample[idx], h[idx])
-        step_s = _located(sensor, line[idx], sample[idx] + 1.0, h[idx])
         distance = np.linalg.norm(seen - at, axis=1)
-        gsd = 0.5 * (np.linalg.norm(step_l - seen, axis=1) + np.linalg.norm(step_s - seen, axis=1))
-        for k, i in enumerate(idx):
-            if not np.isfinite(distance[k]):
-                continue  # the model cannot locate it: nothing to compare with
+        # NaN (the model cannot locate the measurement): nothing to compare with
+        far = np.flatnonzero(np.nan_to_num(distance, nan=0.0) > GROSS_LIMIT_M)
+        if far.size == 0:
+            continue
+        rows_far = idx[far]
+        step_l = _located(sensor, line[rows_far] + 1.0, sample[rows_far], h[rows_far])
+        step_s = _located(sensor, line[rows_far], sample[rows_far] + 1.0, h[rows_far])
+        gsd = 0.5 * (
+            np.linalg.norm(step_l - seen[far], axis=1) + np.linalg.norm(step_s - seen[far], axis=1)
+        )
+        for k, i in enumerate(rows_far):
             limit = gross_limit_m(sensor, float(gsd[k]) if np.isfinite(gsd[k]) else 0.0)
-            if distance[k] > limit:
+            d = float(distance[far[k]])
+            if d > limit:
                 raise InputError(
                     f"{source}: row {rows[i]}, columns lon_deg, lat_deg: {KINDS[kind]} "
                     f"{str(table['id'][i]).strip()!r} ({lon[i]:.7f}, {lat[i]:.7f}, "
-                    f"{h[i]:.1f} m) is {distance[k] / 1000.0:.1f} km from where image {name!r} "
+                    f"{h[i]:.1f} m) is {d / 1000.0:.1f} km from where image {name!r} "
                     f"measures it (line {line[i]:.1f}, sample {sample[i]:.1f}), more than the "
                     f"{limit / 1000.0:.1f} km the system-level model's pointing error allows "
                     "(lon_deg and lat_deg swapped? wrong image or id?)"
