@@ -128,3 +128,80 @@ def test_bad_samples_raise_input_error():
         )
     with pytest.raises(InputError, match="missing field 'orbit'"):
         Trajectory.from_dict({"epoch_j2000_s": 0.0, "attitude_frame": "orbit"})
+
+
+# ----------------------------------------------------------------------------- plausibility
+def _samples(span_s: float = 10.0, step_s: float = 0.125):
+    t = np.arange(-span_s, span_s + 1e-9, step_s)
+    p, v = circular_orbit(t)
+    q = frames.matrix_to_quat(frames.rpy_to_matrix(0.01 + 0 * t, -0.2 + 1e-3 * t, 0 * t))
+    return t, p, v, q
+
+
+def test_quaternions_within_the_tolerance_are_renormalised_silently():
+    t, p, v, q = _samples()
+    wobble = 1.0 + 1e-9 * np.sin(np.arange(t.size))
+    att = AttitudeSamples(t, q * wobble[:, None])
+    np.testing.assert_allclose(np.linalg.norm(att.quaternion_wxyz, axis=1), 1.0, atol=1e-15)
+    a = Trajectory.from_samples(EPOCH, EphemerisSamples(t, p, v), AttitudeSamples(t, q))
+    b = Trajectory.from_samples(EPOCH, EphemerisSamples(t, p, v), att)
+    tt = np.linspace(-9, 9, 7)
+    np.testing.assert_allclose(a.evaluate(tt)[1], b.evaluate(tt)[1], atol=1e-12)
+
+
+@pytest.mark.parametrize(("factor", "shown"), [(0.0, "0"), (3.0, "3"), (1.0 + 2e-6, "1.000002")])
+def test_a_non_unit_quaternion_is_refused_with_sample_and_norm(factor, shown):
+    t, _, _, q = _samples()
+    q[12] *= factor
+    with pytest.raises(InputError) as err:
+        AttitudeSamples(t, q)
+    assert str(err.value) == (
+        f"attitude.quaternion_wxyz: sample 12 is not a unit quaternion: |q| = {shown} "
+        "(allowed 1 +- 1e-06)"
+    )
+
+
+def test_a_unit_quaternion_that_is_not_the_attitude_is_refused():
+    t, _, _, q = _samples()
+    q[30] = q[30][[1, 0, 3, 2]]  # components swapped: still unit
+    with pytest.raises(InputError, match=r"turns at .* deg/s between samples 29 and 30"):
+        AttitudeSamples(t, q)
+
+
+def test_positions_in_kilometres_and_wrong_velocities_are_refused():
+    t, p, v, _ = _samples()
+    with pytest.raises(
+        InputError, match=r"\|r\| = 7(\.\d+)?e3 at sample 0, expected 6\.45e6-4\.5e7"
+    ):
+        EphemerisSamples(t, p / 1e3, v)
+    with pytest.raises(InputError, match=r"velocities must be m/s: \|v\| = 7\.\d+ at sample 0"):
+        EphemerisSamples(t, p, v / 1e3, "eci")
+    p_e, v_e = frames.eci_to_ecef(EPOCH + t, p, v)
+    EphemerisSamples(t, p_e, v_e, "ecef")
+    with pytest.raises(InputError, match=r"ephemeris.velocity_m_s: samples 0-1 move at 7\d{3}"):
+        EphemerisSamples(t, p_e, v_e / 1e3, "ecef")
+    # an inertial velocity given as an Earth-fixed one is off by omega x r
+    inertial_on_ecef_axes = v_e + np.cross([0.0, 0.0, frames.OMEGA_EARTH_RAD_S], p_e)
+    with pytest.raises(InputError, match=r"ecef velocities must be Earth-relative"):
+        EphemerisSamples(t, p_e, inertial_on_ecef_axes, "ecef")
+    v_e[40] *= 1.05  # one damaged sample
+    with pytest.raises(InputError, match=r"samples 39-40 move at"):
+        EphemerisSamples(t, p_e, v_e, "ecef")
+
+
+def test_sparse_ephemeris_samples_pass_the_velocity_check():
+    """30 s apart (Pleiades): the chord of the arc differs from the mean velocity by ~1e-4."""
+    t = np.arange(-120.0, 121.0, 30.0)
+    p, v = circular_orbit(t)
+    EphemerisSamples(t, p, v)
+
+
+def test_times_name_the_first_sample_out_of_order():
+    t, p, v, q = _samples()
+    t[5] = t[3]
+    with pytest.raises(InputError, match=r"ephemeris.dt_s: times must be strictly increasing: "):
+        EphemerisSamples(t, p, v)
+    with pytest.raises(
+        InputError, match=r"attitude.dt_s: .* sample 5 \(t = -9.625 s\) follows t = -9.5 s"
+    ):
+        AttitudeSamples(t, q)
