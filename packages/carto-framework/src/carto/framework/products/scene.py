@@ -53,7 +53,14 @@ class Scene:
         return self.root / relative
 
     def raster(self, image: str) -> Path:
-        return self.path(self.manifest["images"][image]["raster"])
+        """The raster file of ``image``."""
+        images = self.manifest["images"]
+        if image not in images:
+            raise InputError(
+                f"{self.root / 'scene.json'}: images: no image {image!r} "
+                f"(the scene has {', '.join(images)})"
+            )
+        return self.path(images[image]["raster"])
 
     def sensors(self, **fit_options: Any) -> dict[str, LineScanner]:
         """The images' line-scanner models from their ancillary files, as delivered (images
@@ -74,10 +81,15 @@ class Scene:
 
     def truth_sensors(self) -> dict[str, LineScanner]:
         """The true models the images were rendered with (``truth/``)."""
-        return {
-            n: LineScanner.load(self.path(i["truth_model"]))
-            for n, i in self.manifest["images"].items()
-        }
+        out = {}
+        for n, i in self.manifest["images"].items():
+            if "truth_model" not in i:
+                raise InputError(
+                    f"{self.root / 'scene.json'}: missing field 'images.{n}.truth_model' (the "
+                    "scene has no truth; only simulated scenes have)"
+                )
+            out[n] = LineScanner.load(self.path(i["truth_model"]))
+        return out
 
     def control(self, which: str = "checkpoints") -> dict[str, Any]:
         """The ``gcps`` or ``checkpoints`` table (long format), checked
