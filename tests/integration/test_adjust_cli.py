@@ -86,8 +86,8 @@ def test_adjust_errors_are_one_line(run_carto, tmp_path, cartosat1_scene):
         ["adjust", str(cartosat1_scene), "--gcp-offset-sigma", "0", "--out", str(tmp_path / "z")],
         with_test_plugins=False,
     )
-    assert res.returncode == 1
-    assert "gcp_offset_sigma_px must be > 0, got 0.0" in res.stderr
+    assert res.returncode == 2  # a usage error
+    assert "--gcp-offset-sigma must be > 0, got 0" in res.stderr
     assert "Traceback" not in res.stderr
 
 

@@ -17,6 +17,11 @@ class InputError(CartoError, ValueError):
     """An argument, a file or a field in a file is missing, malformed or out of range."""
 
 
+class UsageError(InputError):
+    """A command-line argument or option value that cannot be used (an empty or unwritable
+    ``--out``, ``--workers 0`` ...): the command line exits 2, as for a usage error."""
+
+
 class PluginError(CartoError):
     """A plugin could not be loaded or registered, or it broke the plugin contract."""
 

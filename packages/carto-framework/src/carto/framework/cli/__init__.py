@@ -11,6 +11,8 @@ One module per command (group); this package assembles the parser and runs it.
 from __future__ import annotations
 
 import argparse
+import contextlib
+import signal
 import sys
 import textwrap
 from collections.abc import Sequence
@@ -23,7 +25,7 @@ from carto.framework.cli.demo_command import add_demo
 from carto.framework.cli.geometry_commands import add_project_locate
 from carto.framework.cli.plugins_command import add_plugins
 from carto.framework.cli.simulate_command import add_simulate
-from carto.framework.errors import CartoError
+from carto.framework.errors import CartoError, UsageError
 from carto.framework.plugins.registry import get_registry
 
 __all__ = ["build_parser", "main"]
@@ -58,6 +60,49 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _one_line(exc: BaseException) -> str:
+    """The exception's message and notes (e.g. the state of ``--out``) on one line."""
+    parts = [" ".join(str(exc).split())]
+    parts += [" ".join(str(n).split()) for n in getattr(exc, "__notes__", ())]
+    return "; ".join(p for p in parts if p)
+
+
+def _interrupt_in(exc: BaseException) -> KeyboardInterrupt | None:
+    """The KeyboardInterrupt behind ``exc``, if any (compiled code, e.g. numba's, turns a
+    Ctrl-C into a ``SystemError`` whose context is the interrupt)."""
+    seen: set[int] = set()
+    current: BaseException | None = exc
+    while current is not None and id(current) not in seen:
+        if isinstance(current, KeyboardInterrupt):
+            return current
+        seen.add(id(current))
+        current = current.__cause__ or current.__context__
+    return None
+
+
+def _terminate(signum: int, frame: object) -> None:
+    raise KeyboardInterrupt(f"signal {signum}")
+
+
+def _quiet_libraries(debug: bool) -> None:
+    """Library chatter stays off stderr: NumPy's RuntimeWarnings (NaN arithmetic on voids),
+    GDAL messages that rasterio logs (``_tiffWriteProc`` ...); Carto's own warnings are
+    printed as one ``carto: warning:`` line. ``--debug`` shows everything."""
+    if debug:
+        return
+    import logging
+    import warnings
+
+    warnings.simplefilter("ignore", RuntimeWarning)
+    for name in ("rasterio", "numba", "distributed", "fiona"):
+        logging.getLogger(name).setLevel(logging.CRITICAL)
+
+    def show(message, category, filename, lineno, file=None, line=None):  # type: ignore[no-untyped-def]
+        print(f"{PROG}: warning: {' '.join(str(message).split())}", file=sys.stderr)
+
+    warnings.showwarning = show
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ``carto`` with ``argv`` (default ``sys.argv[1:]``); return the exit code."""
     parser = build_parser()
@@ -66,25 +111,54 @@ def main(argv: Sequence[str] | None = None) -> int:
     if handler is None:
         parser.print_help(sys.stderr)
         return 2
+    _quiet_libraries(args.debug)
+    with contextlib.suppress(ValueError):  # not in the main thread: leave SIGTERM alone
+        signal.signal(signal.SIGTERM, _terminate)
     try:
         if getattr(args, "needs_registry", True):
             warn_broken(get_registry())
         return handler(args)
+    except UsageError as exc:
+        print(f"{PROG}: error: {_one_line(exc)}", file=sys.stderr)
+        return 2
     except CartoError as exc:
-        print(f"{PROG}: error: {' '.join(str(exc).split())}", file=sys.stderr)
+        print(f"{PROG}: error: {_one_line(exc)}", file=sys.stderr)
         return 1
-    except KeyboardInterrupt:
-        print(f"{PROG}: interrupted", file=sys.stderr)
+    except KeyboardInterrupt as exc:
+        notes = "; ".join(getattr(exc, "__notes__", ()))
+        print(f"{PROG}: interrupted" + (f"; {notes}" if notes else ""), file=sys.stderr)
         return 130
-    except Exception as exc:
+    except MemoryError as exc:
         if args.debug:
             raise
         print(
-            f"{PROG}: internal error: {type(exc).__name__}: {' '.join(str(exc).split())} "
+            f"{PROG}: error: out of memory; {_one_line(exc) or 'the work is too large'}",
+            file=sys.stderr,
+        )
+        return 1
+    except OSError as exc:
+        if args.debug:
+            raise
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"{PROG}: error: {where}{exc.strerror or exc}{_notes(exc)}", file=sys.stderr)
+        return 1
+    except Exception as exc:
+        if _interrupt_in(exc) is not None:
+            print(f"{PROG}: interrupted{_notes(exc)}", file=sys.stderr)
+            return 130
+        if args.debug:
+            raise
+        print(
+            f"{PROG}: internal error: {type(exc).__name__}: {_one_line(exc)} "
             "(run with --debug for the traceback)",
             file=sys.stderr,
         )
         return 3
+
+
+def _notes(exc: BaseException) -> str:
+    notes = getattr(exc, "__notes__", ())
+    return "".join(f"; {' '.join(str(n).split())}" for n in notes)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import argparse
+import math
 
 from carto.framework.cli.common import examples, formatter
+from carto.framework.errors import UsageError
 from carto.framework.matching.gcp_transfer import GCP_OFFSET_SIGMA_PX
 
 
@@ -26,6 +28,19 @@ def cmd_adjust(args: argparse.Namespace) -> int:
         options["height_offset_sigma_m"] = args.dem_offset_sigma
     if args.calibration:
         options["calibration"] = list(args.calibration)
+    for option, value in (
+        ("--dem-heights", args.dem_heights),
+        ("--dem-offset-sigma", args.dem_offset_sigma),
+        ("--gcp-offset-sigma", args.gcp_offset_sigma),
+    ):
+        if value is not None and not (math.isfinite(value) and value >= 0):
+            raise UsageError(f"{option} must be a number >= 0, got {value}")
+    if args.gcp_offset_sigma is not None and args.gcp_offset_sigma == 0:
+        raise UsageError("--gcp-offset-sigma must be > 0, got 0")
+    if args.gcps is not None and args.gcps < 0:
+        raise UsageError(f"--gcps must be >= 0, got {args.gcps}")
+    if args.attitude_order is not None and not 0 <= args.attitude_order <= 10:
+        raise UsageError(f"--attitude-order must be 0..10, got {args.attitude_order}")
     if args.no_gcp_transfer:
         options["gcp_transfer"] = False
     if args.gcp_offset_sigma is not None:
@@ -41,6 +56,7 @@ def cmd_adjust(args: argparse.Namespace) -> int:
         matcher=args.matcher,
         trajectory=args.trajectory,
         quiet=args.quiet,
+        allow_poor=args.allow_poor,
     )
     print(
         f"{report['adjuster']}: {report['gcps_used']} GCPs, {report['tie_points']} tie points, "
@@ -159,5 +175,11 @@ def add_adjust(sub: argparse._SubParsersAction) -> None:
         "files name, polynomial; carto plugins --kind trajectory)",
     )
     p.add_argument("--no-robust", action="store_true", help="no outlier rejection")
+    p.add_argument(
+        "--allow-poor",
+        action="store_true",
+        help="write the outputs of a poor adjustment (no tie point found, sigma0 > 5) with "
+        "warnings, instead of failing",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress messages")
     p.set_defaults(handler=cmd_adjust)

@@ -61,8 +61,16 @@ def _accuracy_summary(report: dict[str, Any]) -> str:
 def cmd_evaluate(args: argparse.Namespace) -> int:
     from carto.framework.evaluation.dem_accuracy import dem_difference, difference_accuracy
     from carto.framework.files.atomic import atomic_output
+    from carto.framework.files.staging import check_output_file
     from carto.framework.raster.dem import DEM, Geoid
 
+    for option, value in (
+        ("--out", args.out),
+        ("--plot", args.plot),
+        ("--hillshade", args.hillshade),
+    ):
+        if value is not None:
+            check_output_file(value, option)
     dem = DEM.open(args.dem)
     reference = DEM.open(args.reference)
     geoid = None if args.geoid is None else Geoid.open(args.geoid)
@@ -166,6 +174,7 @@ def cmd_dem(args: argparse.Namespace) -> int:
         reference=args.reference,
         options=options,
         quiet=args.quiet,
+        allow_poor=args.allow_poor,
     )
     print(_dem_summary(report))
     grid = report["dem_grid"]
@@ -254,5 +263,11 @@ def add_dem(sub: argparse._SubParsersAction) -> None:
         help="dense matcher the generator uses (default ncc; carto plugins --kind matcher)",
     )
     p.add_argument("--reference", metavar="DEM", help="reference DEM to evaluate against")
+    p.add_argument(
+        "--allow-poor",
+        action="store_true",
+        help="write a DEM that matched almost nothing (< 5 %% of the nodes) with a warning, "
+        "instead of failing",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress messages")
     p.set_defaults(handler=cmd_dem)

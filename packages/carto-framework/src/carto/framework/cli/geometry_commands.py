@@ -15,8 +15,10 @@ def _transform_points(
 ) -> int:
     """Read a point table, project or locate it with the model, write it with new columns."""
     from carto.framework.files.point_table import read_point_table, write_point_table
+    from carto.framework.files.staging import check_output_file
     from carto.framework.workflows.opening import open_sensor
 
+    check_output_file(args.out)
     sensor = open_sensor(args.model, args.sensor)
     source = args.ground if forward else args.image
     table = read_point_table(source, numeric=inputs)

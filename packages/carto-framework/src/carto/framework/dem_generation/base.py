@@ -113,6 +113,10 @@ class DEMProduct:
         extras: generator-specific results for ``report.json`` (JSON-able values: numbers,
             strings, lists, mappings; e.g. ``b_over_h`` for ``ior``). Keys must not collide
             with the report's own fields.
+        matched_fraction: share (0-1) of the DEM nodes inside the images' common footprint
+            that the last pass measured by matching (a DEM filled from the starting surface
+            holds heights everywhere, so :attr:`measured_fraction` cannot tell); ``None``
+            when the generator does not know. ``carto dem`` fails when it is tiny.
     """
 
     dem: DEM
@@ -123,6 +127,7 @@ class DEMProduct:
     iterations: tuple[IterationRecord, ...] = attrs.field(converter=_tuple)
     converged: bool | None = None
     extras: Mapping[str, Any] = attrs.field(factory=dict, converter=dict)
+    matched_fraction: float | None = None
 
     def __attrs_post_init__(self) -> None:
         if self.dem.heights.shape != tuple(self.dem_grid.shape):

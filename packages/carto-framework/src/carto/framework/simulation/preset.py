@@ -84,7 +84,14 @@ class ScenePreset(Component):
     def simulate(
         self, out_dir: str | os.PathLike[str], options: SimulationOptions, *, quiet: bool = False
     ) -> Path:
-        """Render the scene into ``out_dir``; return the path of its ``scene.json``."""
+        """Render the scene into ``out_dir``; return the path of its ``scene.json``.
+
+        The scene is rendered into a staging folder that replaces ``out_dir`` when complete
+        (:func:`carto.framework.files.staging.staged_folder`)."""
+        from carto.framework.files.staging import staged_folder
         from carto.framework.simulation.simulate import simulate_scene
 
-        return simulate_scene(self.plan(options), out_dir, options, quiet=quiet)
+        with staged_folder(out_dir, "simulate", inputs=[options.dem_path]) as stage:
+            plan = self.plan(options)
+            manifest = simulate_scene(plan, stage, options, quiet=quiet)
+        return Path(out_dir) / manifest.relative_to(stage)

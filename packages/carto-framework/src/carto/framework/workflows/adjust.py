@@ -21,10 +21,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from carto.framework.adjustment.base import AdjustmentResult
+from carto.framework.adjustment.control_checks import check_control, check_tie_points
 from carto.framework.adjustment.observations import Observations
-from carto.framework.errors import InputError
+from carto.framework.errors import AdjustmentError, InputError
+from carto.framework.files.control_table import read_control_table, read_tie_table
 from carto.framework.files.documents import read_json, write_json_atomic
-from carto.framework.files.point_table import read_point_table, write_point_table
+from carto.framework.files.point_table import write_point_table
+from carto.framework.files.staging import staged_folder
 from carto.framework.geometry import frames
 from carto.framework.geometry.sensor import Sensor, SensorType
 from carto.framework.matching.gcp_transfer import (
@@ -166,6 +169,7 @@ def adjust_product(
     matcher: str | None = None,
     trajectory: str | None = None,
     quiet: bool = False,
+    allow_poor: bool = False,
 ) -> dict[str, Any]:
     """Adjust a scene or configured product and write the outputs; return the report.
 
@@ -184,7 +188,45 @@ def adjust_product(
             default: the configuration's ``"matcher"``, else ``"ncc"``).
         trajectory: the trajectory model to fit the products' trajectories with (a registry
             name; default: the one the ancillary data name).
+        allow_poor: write the outputs of a poor adjustment (no tie point found when they were
+            asked for, sigma0 above :data:`POOR_SIGMA0`) with warnings in the report, instead
+            of failing with :class:`~carto.framework.errors.AdjustmentError`.
+
+    The outputs are written into a staging folder that replaces ``out_dir`` only when all are
+    complete (:func:`carto.framework.files.staging.staged_folder`).
     """
+    src = Path(source)
+    with staged_folder(out_dir, "adjust", inputs=[src]) as stage:
+        return _adjust_into(
+            stage,
+            src,
+            n_gcps=n_gcps,
+            adjuster=adjuster,
+            ties=ties,
+            options=options,
+            sensor_type=sensor_type,
+            matcher=matcher,
+            trajectory=trajectory,
+            quiet=quiet,
+            allow_poor=allow_poor,
+        )
+
+
+def _adjust_into(
+    out: Path,
+    src: Path,
+    *,
+    n_gcps: int | None,
+    adjuster: str | None,
+    ties: str,
+    options: Mapping[str, Any] | None,
+    sensor_type: str | None,
+    matcher: str | None,
+    trajectory: str | None,
+    quiet: bool,
+    allow_poor: bool,
+) -> dict[str, Any]:
+    """:func:`adjust_product` writing into the folder ``out`` (its staging folder)."""
     from carto.framework.evaluation.checkpoints import (
         checkpoint_accuracy,
         monoplot_accuracy,
@@ -193,8 +235,6 @@ def adjust_product(
     from carto.framework.products.scene import Scene
 
     t0 = time.perf_counter()
-    src = Path(source)
-    out = Path(out_dir)
     options = dict(options or {})
     gcp_transfer = _auto_flag(options.pop("gcp_transfer", "auto"), "gcp_transfer")
     offset_sigma_px = float(options.pop("gcp_offset_sigma_px", GCP_OFFSET_SIGMA_PX))
@@ -209,6 +249,10 @@ def adjust_product(
         sensors, types = opened.sensors, opened.types
         gcps = scene.control("gcps")
         checkpoints = scene.control("checkpoints")
+        if gcps is not None:
+            check_control(gcps, sensors, "gcps")
+        if checkpoints is not None:
+            check_control(checkpoints, sensors, "checkpoints")
         rasters = {n: scene.raster(n) for n in scene.image_names}
         init = scene.manifest.get("init_dem")
         if init:
@@ -239,7 +283,8 @@ def adjust_product(
         progress("adjust", "matching tie points on system-level ortho-images", quiet)
         tie_table = block_tie_points(rasters, sensors, dem, matcher=chosen_matcher)
     elif ties != "none":
-        tie_table = read_point_table(ties, numeric=("line", "sample"), text=("id", "image"))
+        tie_table = read_tie_table(ties, images=list(sensors))
+        check_tie_points(tie_table, sensors)
     n_ties = len(set(tie_table["id"].tolist())) if tie_table is not None else 0
     obs = Observations.from_tables(gcps, tie_table)
     # a DEM height on a tie point fixes what tie points cannot: a shift along the stereo
@@ -275,6 +320,7 @@ def adjust_product(
         quiet,
     )
     result = component.adjust(sensors, obs, dem=dem, **options)
+    first_outliers: list[str] = []  # the first adjustment's, kept out of the second
     offsets = dropped_offsets = None
     if "why_not" not in transfer:
         # matched on chips orthorectified with the adjusted models (the system-level ones
@@ -303,9 +349,16 @@ def adjust_product(
             obs = obs.with_offsets(
                 *(offsets[c] for c in GCP_OFFSET_COLUMNS if c != "score")  # as with_offsets
             )
+            if rejected:
+                first_outliers = sorted(rejected)
+                obs = obs.without_points(first_outliers)
             result = component.adjust(sensors, obs, dem=dem, **options)
+    warnings = _poor_adjustment(result.sigma0, ties, n_ties, len(sensors))
+    if warnings and not allow_poor:
+        raise AdjustmentError(f"{src}: {'; '.join(warnings)} (--allow-poor writes it anyway)")
+    for warning in warnings:
+        progress("adjust", f"warning: {warning}", quiet)
     # outputs
-    out.mkdir(parents=True, exist_ok=True)
     files = _write_models(result, types, out, quiet)
     for product, document in result.products.items():
         if product in RESERVED_OUTPUTS or not product.isidentifier():
@@ -338,7 +391,8 @@ def adjust_product(
         "sigma0_px": result.sigma0 * float(np.sqrt(np.mean(obs.sigma_px**2)))
         if obs.sigma_px.size
         else None,
-        "outliers": list(result.outliers),
+        "outliers": list(dict.fromkeys([*first_outliers, *result.outliers])),
+        "warnings": warnings,
         "converged": result.converged,
         "iterations": result.iterations,
         "adjustment": result.summary(),
@@ -397,6 +451,28 @@ def adjust_product(
             report["files"]["gcp_offsets"] = "gcp_offsets.csv"
     write_report(out / "report.json", report)
     return report
+
+
+POOR_SIGMA0 = 5.0
+"""An adjustment whose sigma0 exceeds this fails (``--allow-poor`` writes it): its residuals
+are several times the measurement sigmas, a corrupt input or a model that does not fit. Real
+blocks with unmodelled jitter reach 1.5-3."""
+
+
+def _poor_adjustment(sigma0: float, ties: str, n_ties: int, n_images: int) -> list[str]:
+    """Why an adjustment is too poor to deliver (empty when it is not)."""
+    reasons = []
+    if ties == "auto" and n_images > 1 and n_ties == 0:
+        reasons.append(
+            "no tie point was found between the images (do they overlap? are the models and "
+            "the DEM right?)"
+        )
+    if math.isfinite(sigma0) and sigma0 > POOR_SIGMA0:
+        reasons.append(
+            f"sigma0 {sigma0:.3g} is far above 1 (> {POOR_SIGMA0:g}): the measurements do "
+            "not fit the models (wrong control, a corrupt model or image?)"
+        )
+    return reasons
 
 
 def _auto_flag(value: Any, name: str) -> str | bool:
@@ -548,12 +624,11 @@ def read_configuration(
             sensor = sensor.for_raster(rasters[name])
         sensors[name] = sensor
     gcps = None
-    if doc.get("gcps"):
-        gcps = read_point_table(
-            base / doc["gcps"],
-            numeric=("lon_deg", "lat_deg", "h_m", "line", "sample"),
-            text=("id", "image"),
-        )
+    if doc.get("gcps") is not None:
+        if not isinstance(doc["gcps"], str) or not doc["gcps"]:
+            raise InputError(f"{path}: field 'gcps' must be a CSV file name, got {doc['gcps']!r}")
+        gcps = read_control_table(base / doc["gcps"], "gcps", images=list(sensors))
+        check_control(gcps, sensors, "gcps")
     dem = None
     if doc.get("dem"):
         geoid = Geoid.open(base / doc["geoid"]) if doc.get("geoid") else None

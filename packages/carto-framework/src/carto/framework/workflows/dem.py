@@ -18,7 +18,8 @@ from typing import Any
 import attrs
 import numpy as np
 
-from carto.framework.errors import InputError
+from carto.framework.errors import InputError, UsageError
+from carto.framework.files.staging import require_complete_output, staged_folder
 from carto.framework.geometry.sensor import Sensor, SensorType
 from carto.framework.plugins.registry import get_registry
 from carto.framework.raster.dem import DEM, ELLIPSOID, Geoid
@@ -105,7 +106,9 @@ def open_pair(inputs: StereoInputs) -> StereoPair:
     crop's pixel offset applied to a full-scene RPC)."""
 
     source, pair, sensor_type = inputs.source, inputs.pair, inputs.sensor_type
-    models_dir = Path(inputs.models) if inputs.models is not None else None
+    models_dir = (
+        require_complete_output(inputs.models, "adjust") if inputs.models is not None else None
+    )
     if source is not None:
         from carto.framework.products.scene import Scene
         from carto.framework.workflows.opening import open_product
@@ -115,9 +118,14 @@ def open_pair(inputs: StereoInputs) -> StereoPair:
         sensors = product.sensors
         names = list(pair) if pair else list(sensors)[:2]
         if len(names) != 2 or any(n not in sensors for n in names):
-            raise InputError(
-                f"{source}: --pair must name two of the images {', '.join(sensors)}, got {names}"
+            raise UsageError(
+                f"{source}: --pair must name two of the images {', '.join(sensors)}, got "
+                f"{' '.join(names)}"
             )
+        if names[0] == names[1]:
+            raise UsageError(f"--pair {names[0]} {names[1]}: a stereo pair needs two images")
+        if len(sensors) < 2:
+            raise InputError(f"{source}: a DEM needs two images, the scene has {len(sensors)}")
         if not pair:
             names.sort(key=lambda n: _off_nadir_deg(sensors[n]))
         chosen = {n: _adjusted(models_dir, n, sensors[n]) for n in names}
@@ -158,6 +166,20 @@ def _off_nadir_deg(sensor: Sensor) -> float:
     return float(np.degrees(np.arccos(np.clip(np.dot(np.ravel(d), up) / np.linalg.norm(d), -1, 1))))
 
 
+def _poor_dem(product: Any) -> list[str]:
+    """Why a DEM is too poor to deliver (empty when it is not)."""
+    matched = product.matched_fraction
+    share = product.measured_fraction if matched is None else matched
+    if share < MIN_MATCHED_FRACTION:
+        what = "matched" if matched is not None else "measured"
+        return [
+            f"only {100 * share:.1f} % of the DEM nodes were {what} (< "
+            f"{100 * MIN_MATCHED_FRACTION:g} %): the images did not match (no texture, "
+            "clouds, no overlap or wrong models?)"
+        ]
+    return []
+
+
 def initial_dem(
     init_dem: str | os.PathLike[str] | None,
     geoid: str | os.PathLike[str] | None,
@@ -171,8 +193,11 @@ def initial_dem(
     if init_dem is not None:
         return DEM.open(init_dem, geoid=Geoid.open(geoid) if geoid else None)
     if init_height_m is not None:
-        if not np.isfinite(init_height_m):
-            raise InputError(f"dem: --init-height must be a number, got {init_height_m}")
+        if not (np.isfinite(init_height_m) and -1000.0 <= init_height_m <= 10000.0):
+            raise UsageError(
+                f"--init-height {init_height_m:g}: expected an ellipsoidal height in metres "
+                "between -1000 and 10000"
+            )
         return DEM.constant(float(init_height_m))
     if scene_dem is not None:
         return scene_dem
@@ -186,7 +211,7 @@ def tile_scheduler(workers: int) -> Any:
     import dask
 
     if workers < 1:
-        raise InputError(f"dem: workers must be >= 1, got {workers}")
+        raise UsageError(f"--workers must be >= 1, got {workers}")
 
     def run(tasks: Sequence[Any]) -> list[Any]:
         delayed = [dask.delayed(task)() for task in tasks]
@@ -227,6 +252,7 @@ def dem_product(
     reference: str | os.PathLike[str] | None = None,
     options: Mapping[str, Any] | None = None,
     quiet: bool = False,
+    allow_poor: bool = False,
 ) -> dict[str, Any]:
     """Generate a DEM and ortho-images and write them to ``out_dir``; return the report.
 
@@ -238,13 +264,85 @@ def dem_product(
     :class:`~carto.framework.dem_generation.base.DEMProduct` alone. With ``reference`` (a
     DEM file), the report gets its accuracy
     (:func:`carto.framework.evaluation.dem_accuracy.dem_accuracy`) and a difference map is drawn.
+    A run that matched less than :data:`MIN_MATCHED_FRACTION` of the nodes fails unless
+    ``allow_poor``. The outputs are written into a staging folder that replaces ``out_dir``
+    only when all are complete (:func:`carto.framework.files.staging.staged_folder`).
     """
+    settings = dict(options or {})
+    _check_options(settings)
+    sources = [
+        inputs.source,
+        inputs.left,
+        inputs.right,
+        inputs.left_model,
+        inputs.right_model,
+        inputs.models,
+        init_dem,
+        geoid,
+        reference,
+    ]
+    with staged_folder(out_dir, "dem", inputs=sources) as stage:
+        return _dem_into(
+            stage,
+            inputs,
+            init_dem=init_dem,
+            geoid=geoid,
+            init_height_m=init_height_m,
+            generator=generator,
+            matcher=matcher,
+            reference=reference,
+            settings=settings,
+            quiet=quiet,
+            allow_poor=allow_poor,
+        )
+
+
+MIN_MATCHED_FRACTION = 0.05
+"""A DEM run that measured less than this share of the nodes fails (``--allow-poor`` writes
+it): the images did not match (no texture, no overlap, clouds, wrong models)."""
+
+_POSITIVE_OPTIONS = ("posting_m", "ortho_res_m")
+
+
+def _check_options(settings: Mapping[str, Any]) -> None:
+    """The generic options, checked before any work (a generator checks its own too)."""
+    for key in _POSITIVE_OPTIONS:
+        value = settings.get(key)
+        if value is None:
+            continue
+        flag = "--" + key.removesuffix("_m").replace("_", "-")
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise UsageError(f"{flag} must be a number of metres, got {value!r}")
+        if not (np.isfinite(value) and value > 0):
+            raise UsageError(f"{flag} must be > 0 m, got {value:g}")
+    for key, flag in (("max_iterations", "--max-iterations"), ("workers", "--workers")):
+        value = settings.get(key)
+        if value is None:
+            continue
+        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+            raise UsageError(f"{flag} must be an integer >= 1, got {value!r}")
+
+
+def _dem_into(
+    out: Path,
+    inputs: StereoInputs,
+    *,
+    init_dem: str | os.PathLike[str] | None,
+    geoid: str | os.PathLike[str] | None,
+    init_height_m: float | None,
+    generator: str | None,
+    matcher: str,
+    reference: str | os.PathLike[str] | None,
+    settings: dict[str, Any],
+    quiet: bool,
+    allow_poor: bool,
+) -> dict[str, Any]:
+    """:func:`dem_product` writing into ``out`` (its staging folder)."""
     from carto.framework.dem_generation.base import DEMProduct
     from carto.framework.imaging.ortho import write_ortho
     from carto.framework.raster.images import read_raster
 
     t0 = time.perf_counter()
-    out = Path(out_dir)
     pair = open_pair(inputs)
     rasters, sensors, scene_dem = pair.rasters, pair.sensors, pair.init_dem
     if inputs.source is not None and inputs.models is None:
@@ -261,7 +359,6 @@ def dem_product(
     registry = get_registry()
     component = registry.get("dem-generator", generator)
     chosen_matcher = registry.get("matcher", matcher)
-    settings = dict(options or {})
     posting = settings.get("posting_m")
     progress(
         "dem",
@@ -270,7 +367,7 @@ def dem_product(
         + f", matcher {matcher}",
         quiet,
     )
-    workers = int(settings.pop("workers", 1) or 1)
+    workers = int(settings.pop("workers", 1))
     extra: dict[str, Any] = {}
     if workers > 1:
         extra["scheduler"] = tile_scheduler(workers)
@@ -292,7 +389,11 @@ def dem_product(
             f"DEM generator {generator!r} returned {len(product.orthos)} ortho-images for "
             f"{len(names)} images"
         )
-    out.mkdir(parents=True, exist_ok=True)
+    warnings = _poor_dem(product)
+    if warnings and not allow_poor:
+        raise InputError(f"dem: {'; '.join(warnings)} (--allow-poor writes it anyway)")
+    for warning in warnings:
+        progress("dem", f"warning: {warning}", quiet)
     files = {
         "dem": write_ortho(
             out / "dem.tif",
@@ -332,6 +433,8 @@ def dem_product(
         "vertical_reference": "ellipsoid WGS84",
         "quality_bands": [layer.name for layer in product.quality],
         "converged": product.converged,
+        "matched_fraction": product.matched_fraction,
+        "warnings": warnings,
         "iterations": product.iteration_dicts(),
         "files": files,
     }

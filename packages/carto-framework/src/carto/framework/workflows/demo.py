@@ -10,6 +10,7 @@ framework names no component: everything comes from the registry and the preset.
 
 from __future__ import annotations
 
+import json
 import os
 import sys
 import time
@@ -18,7 +19,9 @@ from typing import Any
 
 from carto.framework.errors import InputError
 from carto.framework.evaluation.checkpoints import checkpoint_accuracy
+from carto.framework.files.atomic import atomic_output
 from carto.framework.files.documents import write_json_atomic
+from carto.framework.files.staging import staged_folder
 from carto.framework.plugins.registry import Registry, get_registry
 from carto.framework.products.scene import Scene
 from carto.framework.simulation.plan import SimulationOptions
@@ -120,8 +123,36 @@ def run_demo(
     terrain: str | None = None,
     quiet: bool = False,
 ) -> dict[str, Any]:
-    """Run the demo into ``out_dir``; return the report (also written as ``report.json``)."""
-    out = Path(out_dir)
+    """Run the demo into ``out_dir``; return the report (also written as ``report.json``).
+
+    The whole demo is written into a staging folder that replaces ``out_dir`` when every
+    stage is done (:func:`carto.framework.files.staging.staged_folder`)."""
+    with staged_folder(out_dir, "demo") as stage:
+        report = _demo_into(stage, seed=seed, size=size, terrain=terrain, quiet=quiet)
+        _relocate_reports(stage, Path(out_dir))
+    report["scene"] = str(Path(out_dir) / Path(report["scene"]).relative_to(stage))
+    return report
+
+
+def _relocate_reports(stage: Path, out: Path) -> None:
+    """The reports of the stages name their inputs (the scene, the tie points of an earlier
+    stage) by path: inside the staging folder, they become the final folder's."""
+    for path in stage.rglob("report.json"):
+        text = path.read_text()
+        moved = text.replace(json.dumps(str(stage))[1:-1], json.dumps(str(out))[1:-1])
+        if moved != text:
+            with atomic_output(path) as tmp:
+                tmp.write_text(moved)
+
+
+def _demo_into(
+    out: Path,
+    *,
+    seed: int,
+    size: tuple[int, int] | None,
+    terrain: str | None,
+    quiet: bool,
+) -> dict[str, Any]:
     registry = get_registry()
     preset = default_demo_preset(registry)
     chain = preset.demo

@@ -1,0 +1,351 @@
+"""Bad input and faults through the ``carto`` command, as a demanding user tries them: every
+case ends with exit 1 (bad data) or 2 (usage) and a one-line cause naming the file, field or
+value, or with exit 130 for an interruption, never an internal error (exit 3) or a silent
+exit 0; and an earlier output folder is left byte for byte as it was (checked against a
+snapshot of its bytes)."""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from carto.framework.files.staging import MARKER
+
+
+def snapshot(folder: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(folder)): p.read_bytes() for p in folder.rglob("*") if p.is_file()}
+
+
+def one_line_error(res: subprocess.CompletedProcess[str], code: int, *words: str) -> str:
+    """The run failed with ``code`` and a single ``carto: error:`` line holding ``words``."""
+    assert res.returncode == code, (res.returncode, res.stderr)
+    lines = [line for line in res.stderr.splitlines() if line.strip()]
+    errors = [line for line in lines if line.startswith("carto: error:")]
+    assert len(errors) == 1, res.stderr
+    assert "Traceback" not in res.stderr, res.stderr
+    for word in words:
+        assert word in errors[0], (word, errors[0])
+    return errors[0]
+
+
+@pytest.fixture(scope="module")
+def good_adjust(tmp_path_factory, cartosat1_scene: Path, carto_exe: str) -> Path:
+    """A good ``carto adjust`` output of the Cartosat-1 scene (one GCP)."""
+    out = tmp_path_factory.mktemp("good") / "adj"
+    res = subprocess.run(
+        [carto_exe, "adjust", str(cartosat1_scene), "--gcps", "1", "--out", str(out), "--quiet"],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert res.returncode == 0, res.stderr
+    return out
+
+
+@pytest.fixture
+def earlier(tmp_path: Path, good_adjust: Path) -> Path:
+    """A copy of the good adjust output, to be run over."""
+    out = tmp_path / "adj"
+    shutil.copytree(good_adjust, out)
+    return out
+
+
+@pytest.fixture
+def scene_copy(tmp_path: Path, cartosat1_scene: Path) -> Path:
+    copy = tmp_path / "scene"
+    shutil.copytree(cartosat1_scene, copy)
+    return copy
+
+
+# --------------------------------------------------------------------------- output folders
+def test_a_failed_adjust_leaves_the_earlier_output_as_it_was(
+    run_carto, earlier: Path, scene_copy: Path
+) -> None:
+    """A GCP without height: refused, and nothing of the new run reaches the folder."""
+    before = snapshot(earlier)
+    gcps = scene_copy / "gcps.csv"
+    lines = gcps.read_text().splitlines()
+    header = lines[0].split(",")
+    row = lines[1].split(",")
+    row[header.index("h_m")] = ""
+    gcps.write_text("\n".join([lines[0], ",".join(row), *lines[2:]]) + "\n")
+    res = run_carto(
+        ["adjust", str(scene_copy), "--gcps", "1", "--out", str(earlier), "--quiet"],
+        with_test_plugins=False,
+    )
+    one_line_error(res, 1, "gcps.csv", "h_m", "left as it was")
+    assert snapshot(earlier) == before
+
+
+def test_an_interrupted_adjust_leaves_the_earlier_output_as_it_was(
+    earlier: Path, cartosat1_scene: Path, carto_exe: str
+) -> None:
+    before = snapshot(earlier)
+    proc = subprocess.Popen(
+        [carto_exe, "adjust", str(cartosat1_scene), "--gcps", "1", "--out", str(earlier)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    # wait for the work to start (the progress line of the tie-point matching), then Ctrl-C
+    assert proc.stderr is not None
+    for line in proc.stderr:
+        if "matching tie points" in line:
+            break
+    time.sleep(1.0)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    assert "carto: interrupted" in err
+    assert "internal error" not in err
+    assert snapshot(earlier) == before
+    assert sorted(p.name for p in earlier.parent.iterdir()) == ["adj"]
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL])
+def test_a_killed_dem_run_leaves_the_earlier_output_as_it_was(
+    tmp_path: Path, good_adjust: Path, cartosat1_scene: Path, carto_exe: str, sig: int
+) -> None:
+    out = tmp_path / "dem"
+    out.mkdir()
+    (out / MARKER).write_text(json.dumps({"command": "dem", "files": ["report.json"]}))
+    (out / "report.json").write_text('{"earlier": true}\n')
+    before = snapshot(out)
+    proc = subprocess.Popen(
+        [
+            carto_exe,
+            "dem",
+            str(cartosat1_scene),
+            "--models",
+            str(good_adjust),
+            "--posting",
+            "10",
+            "--out",
+            str(out),
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    assert proc.stderr is not None
+    for line in proc.stderr:
+        if "iteration" in line:
+            break
+    proc.send_signal(sig)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode in (130, -signal.SIGKILL), err
+    assert snapshot(out) == before
+    # a later run into the same folder removes what the killed one left beside it
+    res = subprocess.run(
+        [
+            carto_exe,
+            "dem",
+            str(cartosat1_scene),
+            "--models",
+            str(good_adjust),
+            "--posting",
+            "20",
+            "--max-iterations",
+            "1",
+            "--out",
+            str(out),
+            "--quiet",
+        ],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert res.returncode == 0, res.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["dem"]
+    assert json.loads((out / "report.json").read_text())["generator"]
+
+
+def test_dem_refuses_an_incomplete_adjust_folder(
+    run_carto, tmp_path: Path, good_adjust: Path, cartosat1_scene: Path
+) -> None:
+    half = tmp_path / "half"
+    shutil.copytree(good_adjust, half)
+    (half / MARKER).unlink()
+    res = run_carto(
+        ["dem", str(cartosat1_scene), "--models", str(half), "--out", str(tmp_path / "d")],
+        with_test_plugins=False,
+    )
+    one_line_error(res, 1, str(half), "not a complete carto adjust output")
+    assert not (tmp_path / "d").exists()
+
+
+@pytest.mark.parametrize(
+    ("command", "words"),
+    [
+        (["adjust", "{scene}", "--out", "{file}"], ("exists and is not a folder",)),
+        (["adjust", "{scene}", "--out", ""], ("--out: empty path",)),
+        (["adjust", "{scene}", "--out", "/proc/carto-out"], ("cannot write",)),
+        (["adjust", "{scene}", "--out", "{mine}"], ("not a carto output",)),
+        (["adjust", "{scene}", "--out", "{scene}"], ("holds the input",)),
+        (["dem", "{scene}", "--out", "{file}"], ("exists and is not a folder",)),
+        (["simulate", "cartosat1-pair", "--out", "{file}"], ("exists and is not a folder",)),
+        (["simulate", "cartosat1-pair", "--out", ""], ("empty path",)),
+        (["demo", "--out", "{file}"], ("exists and is not a folder",)),
+        (
+            ["project", "{scene}/fore_RPC.TXT", "--ground", "{file}", "--out", "{tmp}"],
+            ("is a folder",),
+        ),
+    ],
+)
+def test_an_output_that_cannot_be_written_is_refused_before_any_work(
+    run_carto, tmp_path: Path, cartosat1_scene: Path, command: list[str], words: tuple[str, ...]
+) -> None:
+    (tmp_path / "file").write_text("x")
+    (tmp_path / "mine").mkdir()
+    (tmp_path / "mine" / "notes.txt").write_text("mine")
+    names = {
+        "scene": str(cartosat1_scene),
+        "file": str(tmp_path / "file"),
+        "mine": str(tmp_path / "mine"),
+        "tmp": str(tmp_path),
+    }
+    args = [a.format(**names) for a in command]
+    t0 = time.perf_counter()
+    res = run_carto(args, with_test_plugins=False)
+    one_line_error(res, 2, *words)
+    assert time.perf_counter() - t0 < 30  # refused at once, not after the work
+    assert (tmp_path / "mine" / "notes.txt").read_text() == "mine"
+    assert (tmp_path / "file").read_text() == "x"
+
+
+# --------------------------------------------------------------------------- options
+@pytest.mark.parametrize(
+    ("command", "words"),
+    [
+        (["dem", "{scene}", "--workers", "0"], ("--workers", "0")),
+        (["dem", "{scene}", "--posting", "0"], ("--posting", "0")),
+        (["dem", "{scene}", "--posting", "nan"], ("--posting",)),
+        (["dem", "{scene}", "--ortho-res", "-1"], ("--ortho-res", "-1")),
+        (["dem", "{scene}", "--max-iterations", "0"], ("--max-iterations",)),
+        (["dem", "{scene}", "--pair", "fore", "fore"], ("--pair fore fore",)),
+        (["dem", "{scene}", "--pair", "fore", "nadir"], ("--pair", "nadir")),
+        (["dem", "{scene}", "--init-height", "1e7"], ("--init-height", "1e+07")),
+        (["adjust", "{scene}", "--dem-heights", "-1"], ("--dem-heights", "-1")),
+        (["adjust", "{scene}", "--dem-offset-sigma", "nan"], ("--dem-offset-sigma", "nan")),
+        (["adjust", "{scene}", "--gcp-offset-sigma", "0"], ("--gcp-offset-sigma",)),
+        (["adjust", "{scene}", "--gcps", "-2"], ("--gcps", "-2")),
+    ],
+)
+def test_bad_option_values_are_usage_errors(
+    run_carto, tmp_path: Path, cartosat1_scene: Path, command: list[str], words: tuple[str, ...]
+) -> None:
+    args = [a.format(scene=str(cartosat1_scene)) for a in command]
+    res = run_carto([*args, "--out", str(tmp_path / "o"), "--quiet"], with_test_plugins=False)
+    one_line_error(res, 2, *words)
+    assert not (tmp_path / "o").exists()
+
+
+def test_ctrl_c_in_compiled_code_is_an_interruption() -> None:
+    """A KeyboardInterrupt that compiled code wraps (numba's SystemError) ends as one."""
+    code = (
+        "import sys\n"
+        "from carto.framework import cli\n"
+        "def handler(args):\n"
+        "    try:\n"
+        "        raise KeyboardInterrupt\n"
+        "    except KeyboardInterrupt as exc:\n"
+        "        raise SystemError('<built-in function x> returned a result with an "
+        "exception set') from exc\n"
+        "cli.cmd = handler\n"
+        "p = cli.build_parser()\n"
+        "import argparse\n"
+        "ns = argparse.Namespace(handler=handler, debug=False, needs_registry=False)\n"
+        "cli.build_parser = lambda: type('P', (), {'parse_args': lambda self, a: ns})()\n"
+        "sys.exit(cli.main([]))\n"
+    )
+    res = subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        check=False,
+        env={**os.environ},
+    )
+    assert res.returncode == 130, res.stderr
+    assert res.stderr.strip() == "carto: interrupted"
+
+
+# --------------------------------------------------------------------------- control
+def edited_gcps(scene: Path, edit) -> None:  # type: ignore[no-untyped-def]
+    path = scene / "gcps.csv"
+    rows = list(csv.reader(path.open(newline="")))
+    edit(rows)
+    with path.open("w", newline="") as fh:
+        csv.writer(fh).writerows(rows)
+
+
+def test_swapped_lat_lon_is_refused(run_carto, tmp_path: Path, scene_copy: Path) -> None:
+    def swap(rows: list[list[str]]) -> None:
+        i, j = rows[0].index("lat_deg"), rows[0].index("lon_deg")
+        for row in rows[1:]:
+            row[i], row[j] = row[j], row[i]
+
+    edited_gcps(scene_copy, swap)
+    res = run_carto(
+        ["adjust", str(scene_copy), "--out", str(tmp_path / "o"), "--quiet"],
+        with_test_plugins=False,
+    )
+    one_line_error(res, 1, "gcps.csv", "row 2", "lon_deg, lat_deg")
+
+
+def test_a_gcp_outside_its_image_is_refused(run_carto, tmp_path: Path, scene_copy: Path) -> None:
+    edited_gcps(scene_copy, lambda rows: rows[1].__setitem__(rows[0].index("line"), "5000"))
+    res = run_carto(
+        ["adjust", str(scene_copy), "--out", str(tmp_path / "o"), "--quiet"],
+        with_test_plugins=False,
+    )
+    one_line_error(res, 1, "gcps.csv", "row 2", "5000")
+
+
+def test_a_gcp_given_twice_is_refused(run_carto, tmp_path: Path, scene_copy: Path) -> None:
+    def twice(rows: list[list[str]]) -> None:
+        row = list(rows[1])
+        k = rows[0].index("line")
+        row[k] = str(float(row[k]) + 40)
+        rows.append(row)
+
+    edited_gcps(scene_copy, twice)
+    res = run_carto(
+        ["adjust", str(scene_copy), "--out", str(tmp_path / "o"), "--quiet"],
+        with_test_plugins=False,
+    )
+    one_line_error(res, 1, "gcps.csv", "rows 2 and 4")
+
+
+def test_one_wrong_gcp_among_several_is_flagged(tmp_path: Path) -> None:
+    """A GCP 50 m off on the ground among 4 is listed as an outlier, not absorbed: the
+    checkpoint accuracy stays as without it."""
+    from carto.framework.workflows.adjust import adjust_product
+
+    from ..scenes import simulate
+
+    scene = simulate(
+        "cartosat1-pair", tmp_path / "s", seed=11, size=(400, 400), n_gcps=4, terrain="plains"
+    )
+
+    def moved(rows: list[list[str]]) -> None:
+        ids = [r[rows[0].index("id")] for r in rows[1:]]
+        wrong = sorted(set(ids))[1]
+        k = rows[0].index("lat_deg")
+        for row in rows[1:]:
+            if row[rows[0].index("id")] == wrong:
+                row[k] = repr(float(row[k]) + 50.0 / 111320.0)
+
+    edited_gcps(scene, moved)
+    report = adjust_product(scene, tmp_path / "o", quiet=True)
+    assert len(report["outliers"]) == 1, report["outliers"]
+    assert report["outliers"][0].startswith("G")
+    assert report["checkpoints"]["rmse_planimetric_m"] < 1.0
