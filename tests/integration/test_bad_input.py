@@ -349,3 +349,59 @@ def test_one_wrong_gcp_among_several_is_flagged(tmp_path: Path) -> None:
     assert len(report["outliers"]) == 1, report["outliers"]
     assert report["outliers"][0].startswith("G")
     assert report["checkpoints"]["rmse_planimetric_m"] < 1.0
+
+
+# --------------------------------------------------------------------------- configurations
+@pytest.fixture
+def configuration(tmp_path: Path, good_adjust: Path, cartosat1_scene: Path):  # type: ignore[no-untyped-def]
+    """A valid ``carto adjust`` configuration of the scene's images and adjusted models, and a
+    function that writes it with changes."""
+
+    def write(**changes: object) -> Path:
+        doc: dict[str, object] = {
+            "images": {
+                name: {
+                    "model": str(good_adjust / f"{name}.model.json"),
+                    "raster": str(cartosat1_scene / f"{name}.tif"),
+                }
+                for name in ("fore", "aft")
+            },
+            "gcps": str(cartosat1_scene / "gcps.csv"),
+            "dem": str(cartosat1_scene / "init_dem.tif"),
+        }
+        doc.update(changes)
+        path = tmp_path / "pair.json"
+        path.write_text(json.dumps(doc))
+        return path
+
+    return write
+
+
+def test_configuration_cases(run_carto, tmp_path: Path, configuration, cartosat1_scene) -> None:  # type: ignore[no-untyped-def]
+    good = json.loads(configuration().read_text())
+    gcps = (cartosat1_scene / "gcps.csv").read_text().replace(",fore,", ",nadir,")
+    (tmp_path / "nadir.csv").write_text(gcps)
+    cases = [
+        ({"images": {"fore": 5, "aft": good["images"]["aft"]}}, ("pair.json", "images.fore")),
+        ({"gcps": 5}, ("pair.json", "'gcps'", "5")),
+        (
+            {"images": {**good["images"], "fore": {**good["images"]["fore"], "raster": "x.tif"}}},
+            ("images.fore.raster", "no such file"),
+        ),
+        ({"gcps": str(tmp_path / "nadir.csv")}, ("nadir.csv", "nadir", "fore")),
+    ]
+    for changes, words in cases:
+        res = run_carto(
+            [
+                "adjust",
+                str(configuration(**changes)),
+                "--ties",
+                "none",
+                "--out",
+                str(tmp_path / "o"),
+                "--quiet",
+            ],
+            with_test_plugins=False,
+        )
+        one_line_error(res, 1, *words)
+        assert not (tmp_path / "o").exists()

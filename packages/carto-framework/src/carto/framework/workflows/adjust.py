@@ -614,13 +614,23 @@ def read_configuration(
     types: dict[str, SensorType] = {}
     rasters: dict[str, Path] = {}
     for name, spec in images.items():
-        if not isinstance(spec, dict) or "model" not in spec:
-            raise InputError(f"{path}: images.{name} has no 'model'")
+        if not isinstance(spec, dict):
+            raise InputError(
+                f"{path}: images.{name} must be an object with 'model' and 'raster', got {spec!r}"
+            )
+        for key in ("model", "raster", "sensor"):
+            value = spec.get(key)
+            if (key == "model" or value is not None) and (not isinstance(value, str) or not value):
+                raise InputError(f"{path}: images.{name}.{key} must be a file name, got {value!r}")
         model = base / spec["model"]
+        if not model.exists():
+            raise InputError(f"{path}: images.{name}.model: no such file {model}")
         types[name] = sensor_type_for(model, sensor_type or spec.get("sensor"), "file")
         sensor = types[name].open(model, **open_options(trajectory))
         if "raster" in spec:
             rasters[name] = base / spec["raster"]
+            if not rasters[name].is_file():
+                raise InputError(f"{path}: images.{name}.raster: no such file {rasters[name]}")
             sensor = sensor.for_raster(rasters[name])
         sensors[name] = sensor
     gcps = None
@@ -630,6 +640,10 @@ def read_configuration(
         gcps = read_control_table(base / doc["gcps"], "gcps", images=list(sensors))
         check_control(gcps, sensors, "gcps")
     dem = None
+    for key in ("dem", "geoid"):
+        value = doc.get(key)
+        if value is not None and (not isinstance(value, str) or not value):
+            raise InputError(f"{path}: field {key!r} must be a file name, got {value!r}")
     if doc.get("dem"):
         geoid = Geoid.open(base / doc["geoid"]) if doc.get("geoid") else None
         dem = DEM.open(base / doc["dem"], geoid=geoid)
