@@ -18,7 +18,7 @@ from rasterio.transform import Affine
 from carto.framework.errors import InputError
 from carto.framework.imaging.ortho_grid import MAX_GRID_CELLS, check_dem, check_grid_size
 from carto.framework.raster.dem import DEM, EGM96, Geoid
-from carto.framework.raster.dem_measures import slope_deg
+from carto.framework.raster.dem_measures import fill_voids, slope_deg
 from carto.framework.raster.images import check_image, read_raster
 
 GEO = Affine(0.01, 0.0, 5.0, 0.0, -0.01, 44.6)  # lon 5.0.., lat ..44.6, 0.01 degree posts
@@ -119,7 +119,7 @@ def test_heights_of_1e30_or_nan_in_some_cells_break_nothing():
     assert np.isfinite(np.delete(h, [3, 4])).all()
     slope = slope_deg(dem)
     assert np.nanmax(slope) < 1.0  # no wild slope next to the 1e30 cell
-    filled, n = dem.filled()
+    filled, n = fill_voids(dem)
     assert n == 3
     assert np.isfinite(filled.heights).all()
 
@@ -139,14 +139,14 @@ def test_filled_heights_of_a_plane_agree_with_the_plane():
     holed[15:21, 20:28] = np.nan
     holed[0:3, 0:3] = np.nan  # at a corner too
     dem = DEM.from_array(holed, GEO, "EPSG:4326")
-    filled, n = dem.filled()
+    filled, n = fill_voids(dem)
     assert n == 48 + 9
     assert filled.shape == dem.shape
     assert np.isfinite(filled.heights).all()
     np.testing.assert_array_equal(filled.heights[np.isfinite(holed)], holed[np.isfinite(holed)])
     assert np.max(np.abs(filled.heights - truth)) < 5.0
     # a window: only the posts around the bounds, their voids filled the same way
-    window, n_window = dem.filled(bounds=(5.18, 44.35, 5.30, 44.45))
+    window, n_window = fill_voids(dem, bounds=(5.18, 44.35, 5.30, 44.45))
     assert window.shape[0] < 40
     assert window.shape[1] < 50
     assert n_window == 48

@@ -26,9 +26,7 @@ Conventions
       vertical reference in the tag ``VERTICAL_REFERENCE`` (``"ellipsoid WGS84"`` or
       ``"geoid EGM96"``...).
     * Heights outside ``MIN_HEIGHT_M..MAX_HEIGHT_M`` (-1000..10000 m) and non-finite heights
-      are nodata: voids a file does not declare (-9999, -32768 where the file declares no
-      nodata or another value), fill values such as 1e30. A file with no valid height, or
-      smaller than 2 x 2 posts, is refused.
+      are nodata (undeclared voids: -9999, -32768; fill values: 1e30).
     * Bounds are ``(west, south, east, north)``.
 """
 
@@ -75,9 +73,8 @@ MAX_UNDULATION_M = 150.0
 """Largest plausible |geoid undulation|, metres (EGM96 and EGM2008 stay within -107..+86 m)."""
 MIN_DEM_POSTS = 2
 """A DEM needs at least 2 x 2 posts: bilinear sampling and gradients need two per axis."""
+# what to do about geoid heights (SRTM .hgt) where ellipsoidal heights are needed
 GEOID_ADVICE = 'give the geoid grid with --geoid GTX (configuration key "geoid"), e.g. egm96_15.gtx'
-"""What a user does about a DEM of geoid heights (SRTM ``.hgt``) where ellipsoidal heights
-are needed."""
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -150,8 +147,7 @@ def _plausible_heights(array: ArrayLike) -> FloatArray:
     return out
 
 
-def _fmt_height_range() -> str:
-    return f"{MIN_HEIGHT_M:g}..{MAX_HEIGHT_M:g} m"
+_HEIGHT_RANGE = f"{MIN_HEIGHT_M:g}..{MAX_HEIGHT_M:g} m"
 
 
 def _is_wgs84_lonlat(crs: pyproj.CRS) -> bool:
@@ -390,7 +386,7 @@ class DEM:
             raise InputError(f"DEM.constant: bounds {bounds} must be (west, south, east, north)")
         if not MIN_HEIGHT_M <= float(h_m) <= MAX_HEIGHT_M:
             raise InputError(
-                f"DEM.constant: height {h_m} m is outside the plausible range {_fmt_height_range()}"
+                f"DEM.constant: height {h_m} m is outside the plausible range {_HEIGHT_RANGE}"
             )
         dx, dy = east - west, north - south
         transform = Affine(dx, 0.0, west - dx / 2, 0.0, -dy, north + dy / 2)
@@ -485,7 +481,7 @@ class DEM:
             where = "" if bounds is None else " in the requested bounds"
             raise InputError(
                 f"DEM {path}: no valid height{where} (all {grid.shape[1]} x {grid.shape[0]} "
-                f"posts are nodata or outside {_fmt_height_range()})"
+                f"posts are nodata or outside {_HEIGHT_RANGE})"
             )
         if geoid is not None:
             dem = dem.to_ellipsoid(geoid)
@@ -508,11 +504,6 @@ class DEM:
     def is_ellipsoidal(self) -> bool:
         """True when the heights are above the WGS84 ellipsoid (what sensors take)."""
         return self.vertical == ELLIPSOID
-
-    @property
-    def valid_fraction(self) -> float:
-        """Share of the posts that hold a height (0..1)."""
-        return float(np.isfinite(self.heights).mean())
 
     def check_ellipsoidal(self, purpose: str = "Carto") -> DEM:
         """``self`` if its heights are ellipsoidal; else InputError (one line) naming the file
@@ -600,53 +591,6 @@ class DEM:
                 f"lat {lat[uncovered][0]:.6f})"
             )
         return attrs.evolve(self, heights=self.heights + undulation, vertical=ELLIPSOID)
-
-    def filled(self, bounds: Bounds | None = None) -> tuple[DEM, int]:
-        """This DEM with its voids filled, and the number of posts filled.
-
-        GDAL's fill (:func:`rasterio.fill.fillnodata`: inverse-distance weighting from the
-        valid posts around each void, searched in four directions; no smoothing) fills every
-        void, at the edges too. With ``bounds`` (WGS84 ``(west, south, east, north)``), only
-        the posts around them (two more on each side) are filled and returned: a DEM made to
-        start from, not a measurement. A DEM without voids, or without any valid post in the
-        window, is returned as it is (cropped to the window).
-        """
-        from rasterio.fill import fillnodata
-        from rasterio.transform import Affine
-
-        n_rows, n_cols = self.shape
-        r0, r1, c0, c1 = 0, n_rows, 0, n_cols
-        if bounds is not None:
-            west, south, east, north = (float(v) for v in bounds)
-            t = np.linspace(0.0, 1.0, 17)
-            lon = np.concatenate([west + t * (east - west), west + t * (east - west)])
-            lon = np.concatenate([lon, np.full_like(t, west), np.full_like(t, east)])
-            lat = np.concatenate([np.full_like(t, south), np.full_like(t, north)])
-            lat = np.concatenate([lat, south + t * (north - south), south + t * (north - south)])
-            row, col = self.lonlat_to_pixel(lon, lat)
-            ok = np.isfinite(row) & np.isfinite(col)
-            if not ok.any():
-                return self, 0
-            r0 = int(np.clip(math.floor(row[ok].min()) - 2, 0, n_rows))
-            r1 = int(np.clip(math.ceil(row[ok].max()) + 3, 0, n_rows))
-            c0 = int(np.clip(math.floor(col[ok].min()) - 2, 0, n_cols))
-            c1 = int(np.clip(math.ceil(col[ok].max()) + 3, 0, n_cols))
-            if r1 - r0 < 1 or c1 - c0 < 1:
-                return self, 0
-        sub = self.heights[r0:r1, c0:c1]
-        valid = np.isfinite(sub)
-        n_filled = 0
-        if valid.any() and not valid.all():
-            reach = float(math.hypot(*sub.shape)) + 1.0
-            sub = fillnodata(
-                np.where(valid, sub, 0.0),
-                mask=valid.astype(np.uint8),
-                max_search_distance=reach,
-                smoothing_iterations=0,
-            )
-            n_filled = int((~valid & np.isfinite(sub)).sum())
-        window = self.transform @ Affine.translation(c0, r0)
-        return attrs.evolve(self, heights=sub, transform=window), n_filled
 
     def write(self, path: str | os.PathLike[str]) -> Path:
         """Write a float32 GeoTIFF (CRS, NaN nodata, ``VERTICAL_REFERENCE`` tag); return path.
@@ -761,6 +705,3 @@ def _split_crs(crs: pyproj.CRS) -> tuple[pyproj.CRS, str | None]:
     if crs.is_geographic and len(crs.axis_info) == 3:  # e.g. EPSG:4979: ellipsoidal heights
         return crs.geodetic_crs.to_2d() if crs.geodetic_crs else crs, ELLIPSOID
     return crs, vertical
-
-
-# ----------------------------------------------------------------------------- location

@@ -1,13 +1,15 @@
-"""Measures of a DEM grid: ground pixel size, height gradient and slope (any CRS)."""
+"""Measures of a DEM grid: ground pixel size, height gradient and slope (any CRS); its voids
+filled (:func:`fill_voids`)."""
 
 from __future__ import annotations
 
 import math
 
+import attrs
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from carto.framework.raster.dem import DEM
+from carto.framework.raster.dem import DEM, Bounds
 
 FloatArray = NDArray[np.float64]
 
@@ -73,3 +75,51 @@ def slope_deg(dem: DEM) -> FloatArray:
     dx, dy = dem_pixel_size_m(dem)
     gx, gy = height_gradient(dem.heights, dx, dy)
     return np.degrees(np.arctan(np.hypot(gx, gy)))
+
+
+def fill_voids(dem: DEM, bounds: Bounds | None = None) -> tuple[DEM, int]:
+    """``dem`` with its voids filled, and the number of posts filled.
+
+    GDAL's fill (:func:`rasterio.fill.fillnodata`: inverse-distance weighting from the
+    valid posts around each void, searched in four directions; no smoothing) fills every
+    void, at the edges too. With ``bounds`` (WGS84 ``(west, south, east, north)``), only
+    the posts around them (two more on each side) are filled and returned: a DEM made to
+    start from, not a measurement. A DEM without voids, or without any valid post in the
+    window, is returned as it is (cropped to the window).
+    """
+    from rasterio.fill import fillnodata
+    from rasterio.transform import Affine
+
+    n_rows, n_cols = dem.shape
+    r0, r1, c0, c1 = 0, n_rows, 0, n_cols
+    if bounds is not None:
+        west, south, east, north = (float(v) for v in bounds)
+        t = np.linspace(0.0, 1.0, 17)
+        lon = np.concatenate([west + t * (east - west), west + t * (east - west)])
+        lon = np.concatenate([lon, np.full_like(t, west), np.full_like(t, east)])
+        lat = np.concatenate([np.full_like(t, south), np.full_like(t, north)])
+        lat = np.concatenate([lat, south + t * (north - south), south + t * (north - south)])
+        row, col = dem.lonlat_to_pixel(lon, lat)
+        ok = np.isfinite(row) & np.isfinite(col)
+        if not ok.any():
+            return dem, 0
+        r0 = int(np.clip(math.floor(row[ok].min()) - 2, 0, n_rows))
+        r1 = int(np.clip(math.ceil(row[ok].max()) + 3, 0, n_rows))
+        c0 = int(np.clip(math.floor(col[ok].min()) - 2, 0, n_cols))
+        c1 = int(np.clip(math.ceil(col[ok].max()) + 3, 0, n_cols))
+        if r1 - r0 < 1 or c1 - c0 < 1:
+            return dem, 0
+    sub = dem.heights[r0:r1, c0:c1]
+    valid = np.isfinite(sub)
+    n_filled = 0
+    if valid.any() and not valid.all():
+        reach = float(math.hypot(*sub.shape)) + 1.0
+        sub = fillnodata(
+            np.where(valid, sub, 0.0),
+            mask=valid.astype(np.uint8),
+            max_search_distance=reach,
+            smoothing_iterations=0,
+        )
+        n_filled = int((~valid & np.isfinite(sub)).sum())
+    window = dem.transform @ Affine.translation(c0, r0)
+    return attrs.evolve(dem, heights=sub, transform=window), n_filled

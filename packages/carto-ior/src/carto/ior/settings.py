@@ -1,0 +1,167 @@
+"""The settings of the IOR generator (:class:`IORSettings`), each checked: a bad value is a
+one-line :class:`~carto.framework.errors.InputError` naming the option (and its ``carto dem``
+flag) and the value."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import attrs
+import numpy as np
+
+from carto.framework.errors import InputError
+from carto.framework.imaging.ortho_grid import MAX_GRID_CELLS
+
+_FLAGS = {
+    "posting_m": "--posting",
+    "ortho_res_m": "--ortho-res",
+    "crs": "--crs",
+    "max_iterations": "--max-iterations",
+}
+"""The ``carto dem`` option of each setting that has one (named in the messages)."""
+
+
+def option_label(name: str) -> str:
+    """``"ior: option NAME (--flag)"``: how messages name a setting."""
+    flag = _FLAGS.get(name)
+    return f"ior: option {name}" + (f" ({flag})" if flag else "")
+
+
+def _number(name: str, low: float, high: float = math.inf, *, low_open: bool = False) -> Any:
+    """A converter to float that refuses (one-line InputError) what is not a finite number in
+    ``low..high`` (``low`` excluded with ``low_open``)."""
+
+    def convert(value: Any) -> float:
+        bad = isinstance(value, bool) or not isinstance(
+            value, int | float | np.integer | np.floating
+        )
+        number = math.nan if bad else float(value)
+        ok = math.isfinite(number) and number <= high
+        ok = ok and (number > low if low_open else number >= low)
+        if not ok:
+            bound = f"> {low:g}" if low_open else f">= {low:g}"
+            if math.isfinite(high):
+                bound += f" and <= {high:g}"
+            raise InputError(f"{option_label(name)} must be a finite number {bound}, got {value!r}")
+        return number
+
+    return convert
+
+
+def _optional_number(name: str, low: float) -> Any:
+    inner = _number(name, low, low_open=True)
+    return lambda value: None if value is None else inner(value)
+
+
+def _integer(name: str, low: int, high: int) -> Any:
+    """A converter to int that refuses what is not a whole number in ``low..high``."""
+
+    def convert(value: Any) -> int:
+        ok = not isinstance(value, bool) and isinstance(
+            value, int | float | np.integer | np.floating
+        )
+        ok = ok and math.isfinite(float(value)) and float(value).is_integer()
+        if not (ok and low <= int(value) <= high):
+            raise InputError(
+                f"{option_label(name)} must be a whole number within {low}..{high}, got {value!r}"
+            )
+        return int(value)
+
+    return convert
+
+
+def _map_crs(value: Any) -> Any:
+    """``None`` (the scene's UTM zone) or a projected CRS in metres (:class:`pyproj.CRS`)."""
+    if value is None:
+        return None
+    import pyproj
+
+    try:
+        crs = pyproj.CRS.from_user_input(value)
+    except pyproj.exceptions.CRSError as exc:
+        raise InputError(f"{option_label('crs')}: {value!r} is not a CRS pyproj knows") from exc
+    if crs.is_compound:
+        crs = crs.sub_crs_list[0]
+    unit = crs.axis_info[0].unit_name if crs.axis_info else "?"
+    factor = crs.axis_info[0].unit_conversion_factor if crs.axis_info else None
+    if not crs.is_projected or factor != 1.0:
+        kind = "geographic (degrees)" if crs.is_geographic else f"in {unit}"
+        raise InputError(
+            f"{option_label('crs')}: {value!r} is {kind}; the DEM posting is in metres, so IOR "
+            "needs a projected CRS in metres (e.g. a UTM zone such as EPSG:32643), or no "
+            "--crs for the scene's UTM zone"
+        )
+    return crs
+
+
+@attrs.frozen
+class IORSettings:
+    """Settings of :func:`refine_dem`. Every value is checked: a bad one (not a number, not
+    finite, out of range, a CRS that is not projected in metres) is an InputError naming the
+    option and the value.
+
+    Attributes:
+        posting_m: DEM posting (node spacing), metres of the map CRS.
+        ortho_res_m: ortho-image pixel size, metres (the posting is rounded to a whole
+            number of ortho pixels).
+        max_iterations: most DEM updates.
+        threshold_px: converged when the median |mismatch| of the ortho-images on the current
+            DEM is below this, ortho pixels ...
+        min_improvement: ... or when it improved by less than this fraction over the previous
+            iteration (what is left is matching noise).
+        window, levels, min_score: dense matching (:func:`dense_offsets`); ``levels`` in the
+            first iteration (the starting DEM may be tens of metres off), ``refine_levels``
+            once the median mismatch is under 2 px, searched around the previous
+            iteration's offset across the base (what the relative orientation leaves; what
+            is left along the base is then a few pixels, and coarse levels of low-contrast
+            images would only add wrong guesses).
+        smoothing_nodes: sigma of the Gaussian that regularises the height changes, nodes.
+        outlier_m: a height change more than ``max(outlier_m, 4 NMAD)`` from the median of its
+            5 x 5 neighbourhood is an outlier.
+        tile_px, overlap_px: tile side and overlap on each side, ortho pixels (rounded to
+            whole DEM nodes): tiles large enough for the matching pyramid, overlaps wider
+            than its reach.
+        crs: map CRS of the DEM and orthos, projected in metres (default: the UTM zone of
+            the scene).
+        min_init_coverage: the initial DEM must give a height at this share of the images'
+            common footprint (its voids are filled for the starting surface; a DEM mostly
+            void, or a tile of another place, is refused).
+        max_cells: most cells of the DEM grid and of the ortho grid (checked before anything
+            is allocated).
+    """
+
+    posting_m: float = attrs.field(default=10.0, converter=_number("posting_m", 0.0, low_open=True))
+    ortho_res_m: float | None = attrs.field(
+        default=None, converter=_optional_number("ortho_res_m", 0.0)
+    )
+    max_iterations: int = attrs.field(default=6, converter=_integer("max_iterations", 1, 50))
+    threshold_px: float = attrs.field(
+        default=0.06, converter=_number("threshold_px", 0.0, low_open=True)
+    )
+    min_improvement: float = attrs.field(
+        default=0.05, converter=_number("min_improvement", 0.0, 1.0)
+    )
+    window: int = attrs.field(default=11, converter=_integer("window", 3, 101))
+    levels: int = attrs.field(default=5, converter=_integer("levels", 1, 12))
+    refine_levels: int = attrs.field(default=3, converter=_integer("refine_levels", 1, 12))
+    min_score: float = attrs.field(default=0.5, converter=_number("min_score", -1.0, 1.0))
+    smoothing_nodes: float = attrs.field(
+        default=1.0, converter=_number("smoothing_nodes", 0.0, low_open=True)
+    )
+    outlier_m: float = attrs.field(default=3.0, converter=_number("outlier_m", 0.0, low_open=True))
+    tile_px: int = attrs.field(default=2048, converter=_integer("tile_px", 64, 1 << 20))
+    overlap_px: int = attrs.field(default=128, converter=_integer("overlap_px", 0, 1 << 20))
+    crs: Any = attrs.field(default=None, converter=_map_crs)
+    min_init_coverage: float = attrs.field(
+        default=0.75, converter=_number("min_init_coverage", 0.0, 1.0)
+    )
+    max_cells: float = attrs.field(default=MAX_GRID_CELLS, converter=_number("max_cells", 1.0))
+
+    def __attrs_post_init__(self) -> None:
+        if self.ortho_res_m is not None and self.ortho_res_m > self.posting_m:
+            raise InputError(
+                f"{option_label('ortho_res_m')} must be at most the posting "
+                f"({self.posting_m:g} m), "
+                f"got {self.ortho_res_m:g}"
+            )
