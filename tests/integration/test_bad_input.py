@@ -37,6 +37,23 @@ def one_line_error(res: subprocess.CompletedProcess[str], code: int, *words: str
     return errors[0]
 
 
+@pytest.fixture
+def carto_main(capsys: pytest.CaptureFixture[str]):  # type: ignore[no-untyped-def]
+    """``carto ARGS`` run in this process (the usage checks need no fresh interpreter)."""
+    from carto.framework.cli import main
+
+    def run(args: list[str]) -> subprocess.CompletedProcess[str]:
+        capsys.readouterr()
+        try:
+            code = main(args)
+        except SystemExit as exc:  # argparse
+            code = int(exc.code or 0)
+        out, err = capsys.readouterr()
+        return subprocess.CompletedProcess(args, code, out, err)
+
+    return run
+
+
 @pytest.fixture(scope="module")
 def good_adjust(tmp_path_factory, cartosat1_scene: Path, carto_exe: str) -> Path:
     """A good ``carto adjust`` output of the Cartosat-1 scene (one GCP)."""
@@ -202,7 +219,7 @@ def test_dem_refuses_an_incomplete_adjust_folder(
     ],
 )
 def test_an_output_that_cannot_be_written_is_refused_before_any_work(
-    run_carto, tmp_path: Path, cartosat1_scene: Path, command: list[str], words: tuple[str, ...]
+    carto_main, tmp_path: Path, cartosat1_scene: Path, command: list[str], words: tuple[str, ...]
 ) -> None:
     (tmp_path / "file").write_text("x")
     (tmp_path / "mine").mkdir()
@@ -215,7 +232,7 @@ def test_an_output_that_cannot_be_written_is_refused_before_any_work(
     }
     args = [a.format(**names) for a in command]
     t0 = time.perf_counter()
-    res = run_carto(args, with_test_plugins=False)
+    res = carto_main(args)
     one_line_error(res, 2, *words)
     assert time.perf_counter() - t0 < 30  # refused at once, not after the work
     assert (tmp_path / "mine" / "notes.txt").read_text() == "mine"
@@ -241,10 +258,10 @@ def test_an_output_that_cannot_be_written_is_refused_before_any_work(
     ],
 )
 def test_bad_option_values_are_usage_errors(
-    run_carto, tmp_path: Path, cartosat1_scene: Path, command: list[str], words: tuple[str, ...]
+    carto_main, tmp_path: Path, cartosat1_scene: Path, command: list[str], words: tuple[str, ...]
 ) -> None:
     args = [a.format(scene=str(cartosat1_scene)) for a in command]
-    res = run_carto([*args, "--out", str(tmp_path / "o"), "--quiet"], with_test_plugins=False)
+    res = carto_main([*args, "--out", str(tmp_path / "o"), "--quiet"])
     one_line_error(res, 2, *words)
     assert not (tmp_path / "o").exists()
 

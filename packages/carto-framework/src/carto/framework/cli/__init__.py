@@ -15,7 +15,7 @@ import contextlib
 import signal
 import sys
 import textwrap
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 
 from carto.framework import __version__
 from carto.framework.cli.adjust_command import add_adjust
@@ -84,23 +84,39 @@ def _terminate(signum: int, frame: object) -> None:
     raise KeyboardInterrupt(f"signal {signum}")
 
 
-def _quiet_libraries(debug: bool) -> None:
-    """Library chatter stays off stderr: NumPy's RuntimeWarnings (NaN arithmetic on voids),
-    GDAL messages that rasterio logs (``_tiffWriteProc`` ...); Carto's own warnings are
-    printed as one ``carto: warning:`` line. ``--debug`` shows everything."""
+@contextlib.contextmanager
+def _quiet_libraries(debug: bool) -> Iterator[None]:
+    """Library chatter stays off stderr while a command runs: NumPy's RuntimeWarnings (NaN
+    arithmetic on voids), GDAL messages that rasterio logs (``_tiffWriteProc`` ...); Carto's
+    own warnings are printed as one ``carto: warning:`` line. ``--debug`` shows everything.
+    SIGTERM ends the command as Ctrl-C does (its outputs are cleaned up). Everything is
+    restored afterwards (``main`` may be called in-process)."""
     if debug:
+        yield
         return
     import logging
     import warnings
 
-    warnings.simplefilter("ignore", RuntimeWarning)
-    for name in ("rasterio", "numba", "distributed", "fiona"):
-        logging.getLogger(name).setLevel(logging.CRITICAL)
-
     def show(message, category, filename, lineno, file=None, line=None):  # type: ignore[no-untyped-def]
         print(f"{PROG}: warning: {' '.join(str(message).split())}", file=sys.stderr)
 
-    warnings.showwarning = show
+    loggers = [logging.getLogger(n) for n in ("rasterio", "numba", "distributed", "fiona")]
+    levels = [logger.level for logger in loggers]
+    previous = None
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        warnings.showwarning = show
+        for logger in loggers:
+            logger.setLevel(logging.CRITICAL)
+        with contextlib.suppress(ValueError):  # not in the main thread: leave SIGTERM alone
+            previous = signal.signal(signal.SIGTERM, _terminate)
+        try:
+            yield
+        finally:
+            for logger, level in zip(loggers, levels, strict=True):
+                logger.setLevel(level)
+            if previous is not None:
+                signal.signal(signal.SIGTERM, previous)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -111,9 +127,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     if handler is None:
         parser.print_help(sys.stderr)
         return 2
-    _quiet_libraries(args.debug)
-    with contextlib.suppress(ValueError):  # not in the main thread: leave SIGTERM alone
-        signal.signal(signal.SIGTERM, _terminate)
+    with _quiet_libraries(args.debug):
+        return _run(handler, args)
+
+
+def _run(handler: Handler, args: argparse.Namespace) -> int:
     try:
         if getattr(args, "needs_registry", True):
             warn_broken(get_registry())
