@@ -55,17 +55,22 @@ _UNITS = frozenset(("pixels", "pixel", "degrees", "degree", "meters", "metres", 
 """Unit words allowed after a value in ``KEY: value`` text (IKONOS: ``+005124.00 pixels``)."""
 
 
+_NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?|[+-]?(?i:nan|inf|infinity)")
+"""A decimal number as RPC files write it (``float`` alone also takes ``1_000``, non-ASCII
+digits and surrounding control characters)."""
+_TOKENS = re.compile(r"[^ \t\r\n\f\v]+")
+
+
 def _to_float(text: str | None, path: Path | str, field: str, *, units: bool = False) -> float:
     """The number in ``text``: one token, and with ``units`` an optional unit word after it
     (:data:`_UNITS`); anything else (a second number, garbage) is refused."""
     if text is None:
         raise file_error(path, f"missing RPC field {field}")
-    tokens = text.split()
+    tokens = _TOKENS.findall(text)
     shown = " ".join(tokens)[:40]
-    try:
-        value = float(tokens[0]) if tokens else float("")
-    except ValueError:
-        raise file_error(path, f"RPC field {field}: not a number: {shown!r}") from None
+    if not tokens or not _NUMBER.fullmatch(tokens[0]):
+        raise file_error(path, f"RPC field {field}: not a number: {shown!r}")
+    value = float(tokens[0])
     if len(tokens) > 1 and not (units and len(tokens) == 2 and tokens[1].lower() in _UNITS):
         raise file_error(path, f"RPC field {field}: unexpected text after the number: {shown!r}")
     if not math.isfinite(value):
@@ -148,7 +153,9 @@ def _key_values(
     fields: dict[str, str] = {}
     where: dict[str, int] = {}
     last_key = None
-    lines = text.splitlines()
+    lines = re.split(r"\r\n|\r|\n", text)  # not splitlines(): \x1c-\x1e, \x85... are data
+    if lines[-1] == "":
+        lines.pop()
     for number, raw in enumerate(lines, 1):
         key, sep, value = raw.partition(":")
         if not sep:
@@ -163,7 +170,7 @@ def _key_values(
             continue
         if key in fields:
             raise file_error(path, f"duplicate key {key} at lines {where[key]} and {number}")
-        fields[key] = value.strip()
+        fields[key] = value.strip(" \t\f\v")  # str.strip() also eats \x1c-\x1f
         where[key] = number
         last_key = key
     if last_key is None:
@@ -206,7 +213,7 @@ def _fields_to_model(
         if name in fields:  # GDAL metadata style: all 20 on one line
             if any(f"{name}_{i}" in fields for i in range(1, 21)):
                 raise file_error(path, f"RPC field {name}: given both in one line and one by one")
-            coeffs[name] = _to_floats(fields[name].split(), path, name)
+            coeffs[name] = _to_floats(_TOKENS.findall(fields[name]), path, name)
         else:
             coeffs[name] = [
                 _to_float(fields.get(f"{name}_{i}"), path, f"{name}_{i}") for i in range(1, 21)
@@ -275,6 +282,9 @@ def _load_rpb(path: Path) -> tuple[RPCCoefficients, None]:
         where[key] = line
     if "linenumcoef" not in fields:
         raise file_error(path, "not an .RPB file (no lineNumCoef)")
+    stray = _RPB_ASSIGN.sub(" ", text).replace("END;", " ").split()
+    if stray:
+        raise file_error(path, f"unexpected text outside the assignments: {' '.join(stray)[:40]!r}")
     scalars = {
         name: _to_float(fields.get(_RPB_KEYS[name]), path, _RPB_KEYS[name])
         for name in SCALAR_FIELDS
@@ -427,7 +437,7 @@ def _load_dimap_v1(path: Path) -> tuple[RPCCoefficients, tuple[int, int] | None]
     inv = _children(inverse, path)
     rows = {}
     for tag in ("F_ROW", "F_COL"):
-        values = inv.get(tag, "").split()
+        values = _TOKENS.findall(inv.get(tag, ""))
         if len(values) != 40:
             raise file_error(
                 path, f"Inverse_Model/{tag}: expected 40 coefficients, got {len(values)}"
@@ -473,7 +483,9 @@ def _load_worldview(path: Path) -> tuple[RPCCoefficients, tuple[int, int] | None
     for name in COEFF_FIELDS:
         tag = name.replace("_COEFF", "COEF").replace("_", "")  # LINENUMCOEF
         el = _find(image, tag, path)
-        coeffs[name] = _to_floats((el.text or "").split() if el is not None else [], path, tag)
+        coeffs[name] = _to_floats(
+            _TOKENS.findall(el.text or "") if el is not None else [], path, tag
+        )
     err = [_to_float(vals[k], path, k) if k in vals else None for k in ("ERRBIAS", "ERRRAND")]
     shape = None
     imd = _find(root, "IMD", path)
