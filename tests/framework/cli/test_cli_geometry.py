@@ -124,10 +124,18 @@ def test_project_an_rpc_geotiff_like_gdal(run_carto, tmp_path, shared_data):
     image = shared_data / "pleiades-reunion-pair" / "img_01.tif"
     with rasterio.open(image) as ds:
         rpcs = ds.rpcs
+        n_lines, n_samples = ds.height, ds.width
+    # ground points seen from pixels inside the image and up to half an image beyond it
     rng = np.random.default_rng(5)
-    lon = rpcs.long_off + rng.uniform(-0.5, 0.5, 50) * rpcs.long_scale
-    lat = rpcs.lat_off + rng.uniform(-0.5, 0.5, 50) * rpcs.lat_scale
     h = rpcs.height_off + rng.uniform(-0.5, 0.5, 50) * rpcs.height_scale
+    with RPCTransformer(rpcs) as tr:
+        lon, lat = tr.xy(
+            rng.uniform(-0.5, 1.5, 50) * n_lines,
+            rng.uniform(-0.5, 1.5, 50) * n_samples,
+            h,
+            offset="center",
+        )
+    lon, lat = np.asarray(lon), np.asarray(lat)
     write_point_table(tmp_path / "g.csv", {"lon_deg": lon, "lat_deg": lat, "h_m": h}, precision=17)
     res = run_carto(
         [
@@ -144,6 +152,12 @@ def test_project_an_rpc_geotiff_like_gdal(run_carto, tmp_path, shared_data):
     got = read_point_table(tmp_path / "p.csv", numeric=("line", "sample"))
     with RPCTransformer(rpcs) as tr:
         row, col = tr.rowcol(lon, lat, h, op=lambda x: x)
-    # GDAL's rowcol returns continuous pixel coordinates, first pixel centre at 0.5
-    np.testing.assert_allclose(got["line"], row, atol=1e-6)
-    np.testing.assert_allclose(got["sample"], col, atol=1e-6)
+    # GDAL's rowcol returns continuous pixel coordinates, first pixel centre at 0.5; points
+    # more than 10 % of the image beyond its edges come back as nan (GDAL extrapolates)
+    inside = (np.abs(row / n_lines - 0.5) < 0.6) & (np.abs(col / n_samples - 0.5) < 0.6)
+    far = (np.abs(row / n_lines - 0.5) > 0.61) | (np.abs(col / n_samples - 0.5) > 0.61)
+    assert inside.sum() >= 5 and far.sum() >= 5
+    np.testing.assert_allclose(got["line"][inside], row[inside], atol=1e-6)
+    np.testing.assert_allclose(got["sample"][inside], col[inside], atol=1e-6)
+    assert np.isnan(got["line"][far]).all() and np.isnan(got["sample"][far]).all()
+    assert "outside the image" in res.stdout

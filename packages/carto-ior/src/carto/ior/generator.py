@@ -60,6 +60,9 @@ def ior_product(result: IORResult) -> DEMProduct:
         quality=quality,
         iterations=iterations,
         converged=result.converged,
+        matched_fraction=(
+            result.iterations[-1].matched_percent / 100.0 if result.iterations else None
+        ),
         extras={
             "b_over_h": result.b_over_h,
             "init_dem_coverage_percent": round(100.0 * result.init_coverage, 2),

@@ -18,7 +18,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from carto.framework.errors import InputError
-from carto.framework.geometry.rpc_model import RPCCoefficients, monomials
+from carto.framework.geometry.rpc_model import (
+    MIN_DENOMINATOR_RATIO,
+    SANITY_GRID,
+    RPCCoefficients,
+    monomials,
+)
 from carto.framework.geometry.sensor import Sensor
 
 FloatArray = NDArray[np.float64]
@@ -147,6 +152,34 @@ def _solve_rational(
     return best_x[:20], np.concatenate([[1.0], best_x[20:]]), iterations
 
 
+def _pole_free(den: FloatArray) -> bool:
+    """Whether a fitted denominator stays well away from zero over the whole normalised cube
+    (the criterion of :func:`carto.framework.geometry.rpc_model.validate_model`, with a
+    margin)."""
+    axis = np.linspace(-1.0, 1.0, SANITY_GRID + 2)
+    lon, lat, h = (a.ravel() for a in np.meshgrid(axis, axis, axis, indexing="ij"))
+    terms = np.empty((20, lon.size))
+    monomials(lon, lat, h, terms)
+    values = den @ terms
+    return bool(np.all(values > 2.0 * MIN_DENOMINATOR_RATIO * abs(den[0])))
+
+
+def _solve_polynomial(
+    terms: FloatArray, target: FloatArray, regularisation: float
+) -> tuple[FloatArray, FloatArray]:
+    """Least squares ``target ~ num(terms)`` with the denominator 1 (a cubic polynomial)."""
+    a = terms.T
+    rhs = target
+    damp = regularisation * float(np.mean(np.sum(a * a, axis=0)))
+    if damp > 0:
+        a = np.concatenate([a, math.sqrt(damp) * np.eye(20)])
+        rhs = np.concatenate([rhs, np.zeros(20)])
+    num = np.linalg.lstsq(a, rhs, rcond=None)[0]
+    den = np.zeros(20)
+    den[0] = 1.0
+    return num, den
+
+
 def fit_rpc(
     sensor: Sensor,
     *,
@@ -233,6 +266,13 @@ def fit_rpc(
     target_s = (samp - 0.5 - image_norm[2]) / image_norm[3]
     ln, ld, it_l = _solve_rational(terms, target_l, regularisation, max_iterations)
     sn, sd, it_s = _solve_rational(terms, target_s, regularisation, max_iterations)
+    # the points that do not project (beyond the image) do not constrain the denominators:
+    # one may vanish in a corner of the domain, which no RPC reader accepts; a cubic
+    # polynomial (denominator 1) has no pole and fits a smooth sensor as well
+    if not _pole_free(ld):
+        ln, ld = _solve_polynomial(terms, target_l, regularisation)
+    if not _pole_free(sd):
+        sn, sd = _solve_polynomial(terms, target_s, regularisation)
     rpc = RPCCoefficients(
         line_off=image_norm[0],
         samp_off=image_norm[2],

@@ -255,11 +255,8 @@ def _locate(
     from carto.framework.geometry.linescan_raycast import is_lonlat_grid, locate_pixels
     from carto.framework.raster.dem import DEM
 
-    if isinstance(dem, DEM) and not dem.is_ellipsoidal:
-        raise InputError(
-            f"DEM {dem.name}: heights are {dem.vertical}, sensors need ellipsoidal heights; "
-            "convert with DEM.to_ellipsoid(geoid)"
-        )
+    if isinstance(dem, DEM):
+        dem.check_ellipsoidal("the stagger merge")
     if is_lonlat_grid(dem):  # the compiled ray casting (the generic search to 1e-4 m)
         lon, lat, h = locate_pixels(sensor, line, sample, dem)
     elif isinstance(dem, DEM):  # projected or rotated grids: the generic search

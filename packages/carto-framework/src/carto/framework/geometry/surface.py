@@ -14,7 +14,6 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from carto.framework.arrays import as_float_arrays
-from carto.framework.errors import InputError
 from carto.framework.raster.dem import DEM, bilinear_sample
 
 if TYPE_CHECKING:  # any sensor: used through its methods only
@@ -71,11 +70,7 @@ def dem_surface_locate(
     Raises:
         InputError: the DEM heights are not ellipsoidal, or the DEM holds no valid height.
     """
-    if not dem.is_ellipsoidal:
-        raise InputError(
-            f"DEM {dem.name}: heights are {dem.vertical}, sensors need ellipsoidal heights; "
-            "convert with DEM.to_ellipsoid(geoid) or DEM.open(..., geoid=...)"
-        )
+    dem.check_ellipsoidal("locating image points")
     line_a, sample_a = as_float_arrays(line, sample)
     shape = line_a.shape
     lines, samples = line_a.ravel(), sample_a.ravel()

@@ -490,11 +490,7 @@ def terrain_from_dem(dem: DEM, bounds_lonlat: Bounds, posting_m: float) -> DEM:
     """
     if not isinstance(dem, DEM):
         raise InputError(f"terrain_from_dem: expected a DEM, got {type(dem).__name__}")
-    if not dem.is_ellipsoidal:
-        raise InputError(
-            f"DEM {dem.name}: heights are {dem.vertical}; terrain needs ellipsoidal heights, "
-            "convert with DEM.to_ellipsoid(geoid)"
-        )
+    dem.check_ellipsoidal("the simulator's terrain")
     transform, shape = geographic_grid(bounds_lonlat, posting_m)
     _, south, east, _ = check_bounds(bounds_lonlat)
     lon, lat = grid_centres(transform, shape)

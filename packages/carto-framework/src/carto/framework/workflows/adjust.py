@@ -646,7 +646,7 @@ def read_configuration(
             raise InputError(f"{path}: field {key!r} must be a file name, got {value!r}")
     if doc.get("dem"):
         geoid = Geoid.open(base / doc["geoid"]) if doc.get("geoid") else None
-        dem = DEM.open(base / doc["dem"], geoid=geoid)
+        dem = DEM.open(base / doc["dem"], geoid=geoid, require_ellipsoidal=True)
     elif doc.get("height_m") is not None:
         h = doc["height_m"]
         if isinstance(h, bool) or not isinstance(h, int | float) or not math.isfinite(h):

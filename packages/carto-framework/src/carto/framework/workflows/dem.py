@@ -170,6 +170,8 @@ def _poor_dem(product: Any) -> list[str]:
     """Why a DEM is too poor to deliver (empty when it is not)."""
     matched = product.matched_fraction
     share = product.measured_fraction if matched is None else matched
+    if not np.isfinite(share):
+        share = 0.0
     if share < MIN_MATCHED_FRACTION:
         what = "matched" if matched is not None else "measured"
         return [
@@ -191,7 +193,9 @@ def initial_dem(
     if init_dem is not None and init_height_m is not None:
         raise InputError("dem: give --init-dem or --init-height, not both")
     if init_dem is not None:
-        return DEM.open(init_dem, geoid=Geoid.open(geoid) if geoid else None)
+        return DEM.open(
+            init_dem, geoid=Geoid.open(geoid) if geoid else None, require_ellipsoidal=True
+        )
     if init_height_m is not None:
         if not (np.isfinite(init_height_m) and -1000.0 <= init_height_m <= 10000.0):
             raise UsageError(
