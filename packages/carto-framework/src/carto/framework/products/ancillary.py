@@ -249,7 +249,7 @@ MAX_TAN_HALF_FIELD = 1.0
 """Largest tangent of the half field of view of a camera (45 deg: a pushbroom imager sees far
 less, Cartosat-1 1.2 deg, Pleiades 0.8 deg)."""
 MAX_ANGLE_DEG = 360.0
-"""Largest mounting or alignment angle (a larger one is a unit slip: radians expected?)."""
+"""Largest mounting or alignment angle, degrees (beyond a full turn it is not an angle)."""
 
 
 def _fail(source: str, field: str, problem: str) -> InputError:
