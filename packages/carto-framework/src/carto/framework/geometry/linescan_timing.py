@@ -20,9 +20,13 @@ FloatArray = NDArray[np.float64]
 
 
 def _tuple_of_floats(value: Any) -> tuple[float, ...]:
-    if value is None or isinstance(value, (str, bytes, bool, dict)) or (
-        isinstance(value, (list, tuple))
-        and any(isinstance(v, (str, bytes, bool)) or v is None for v in value)
+    if (
+        value is None
+        or isinstance(value, (str, bytes, bool, dict))
+        or (
+            isinstance(value, (list, tuple))
+            and any(isinstance(v, (str, bytes, bool)) or v is None for v in value)
+        )
     ):
         raise InputError(f"line timing: expected a list of numbers, got {value!r:.60}")
     try:
