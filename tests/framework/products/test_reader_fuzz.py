@@ -43,7 +43,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from carto.framework.errors import InputError
-from carto.framework.geometry import trajectory as traj_limits
+from carto.framework.geometry import trajectory_samples as traj_limits
 from carto.framework.geometry.linescan import LineScanner
 from carto.framework.products import ancillary as anc_limits
 from carto.framework.products.ancillary import read_ancillary

@@ -174,6 +174,8 @@ def test_same_seed_same_bytes_and_another_seed_differs(tmp_path):
     files = sorted(p.relative_to(a) for p in a.rglob("*") if p.is_file())
     assert files == sorted(p.relative_to(b) for p in b.rglob("*") if p.is_file())
     for f in files:
+        if f.name == ".carto-output.json":  # the completion marker holds the time
+            continue
         assert (a / f).read_bytes() == (b / f).read_bytes(), f
     assert _read(a / "fore.tif").shape == (100, 120)
     assert not np.array_equal(_read(a / "fore.tif"), _read(c / "fore.tif"))

@@ -435,9 +435,9 @@ def parse_ancillary(doc: Mapping[str, Any], source: str = "ancillary") -> Ancill
 
     Beyond the structure (every field of ``docs/formats.md`` of the right type), values must
     be plausible: ephemeris in metres and m/s of an Earth-orbiting satellite, consistent with
-    each other (:func:`~carto.framework.geometry.trajectory.check_orbit_plausible`), unit
+    each other (:func:`~carto.framework.geometry.trajectory_samples.check_orbit_plausible`), unit
     attitude quaternions (renormalised when within
-    :data:`~carto.framework.geometry.trajectory.QUATERNION_NORM_TOLERANCE`), strictly
+    :data:`~carto.framework.geometry.trajectory_samples.QUATERNION_NORM_TOLERANCE`), strictly
     increasing finite times, camera constants of a pushbroom camera, image windows inside the
     detector line, line periods in :data:`LINE_PERIOD_RANGE_S`, and image lines within the
     time span of the ephemeris and of the attitude.
