@@ -122,6 +122,24 @@ def test_grids_too_large_or_too_small_are_refused_before_allocating(pair):
     assert ortho_grid.shape == (dem_grid.shape[0] * k, dem_grid.shape[1] * k)
 
 
+def test_a_model_that_does_not_locate_its_image_centre_is_refused(pair):
+    """A model giving NaN at the image centre (outside its validity domain): a one-line error
+    naming the image, not ``round(nan)`` (an internal error)."""
+    _, (left, _), init = pair
+
+    class Lost:
+        image_shape = left.image_shape
+
+        def image_to_ground(self, line, sample, h):
+            nan = np.full(np.shape(line), np.nan)
+            return nan, nan
+
+    _refused(
+        lambda: _grids(left, Lost(), init, IORSettings(posting_m=10.0)),
+        "the centre of the right image does not locate on the ground",
+    )
+
+
 # ----------------------------------------------------------------------------- generator inputs
 def test_generator_refuses_unusable_images_and_dems(pair):
     images, sensors, init = pair

@@ -302,6 +302,26 @@ def test_a_small_digit_change_is_a_valid_model() -> None:
     assert 1.0 < abs(changed.project(lon, lat, h)[0] - base.project(lon, lat, h)[0]) < 10.0
 
 
+@pytest.mark.parametrize(
+    "field", ["LINE_NUM_COEFF_3", "SAMP_NUM_COEFF_2", "LINE_DEN_COEFF_1", "SAMP_DEN_COEFF_1"]
+)
+@pytest.mark.parametrize("factor", [1e3, 1e-3])
+def test_changed_exponent_of_a_dominant_coefficient_is_refused(
+    field: str, factor: float, tmp_path: Path
+) -> None:
+    """Smooth and one-to-one, but a ground pixel about 1000 times longer than wide (the
+    synthetic model's pixels are 1.1 x 1.0 m): refused by the readers with the file's name
+    (or as the fold or pole such a change may also make)."""
+    rpc = synthetic_rpc()
+    row, term = rpc_mod.COEFF_FIELDS.index(field.rsplit("_", 1)[0]), int(field[-1]) - 1
+    text = txt_text(rpc, tmp_path)
+    bad = tmp_path / "exp_RPC.TXT"
+    bad.write_text(set_field(text, field, repr(float(rpc.coefficients[row, term]) * factor)))
+    message = refused(bad, "RPC field ")
+    assert any(w in message for w in ("times longer than wide", "folds over", "pole")), message
+    rpc_mod.check_pixel_aspect(rpc)  # the original is fine
+
+
 @pytest.mark.realdata
 @pytest.mark.parametrize("rel", REAL_PRODUCTS)
 def test_every_real_product_still_reads(rel: str, shared_data: Path) -> None:

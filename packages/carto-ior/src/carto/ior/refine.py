@@ -149,7 +149,19 @@ def _grids(
 
     h_mid = float(np.nanmedian(init_dem.heights))
     posting = float(settings.posting_m)
-    res = settings.ortho_res_m or max(ground_sampling_m(s, h_mid) for s in (left, right))
+    res = settings.ortho_res_m
+    if res is None:
+        sampling = {
+            side: ground_sampling_m(s, h_mid) for side, s in (("left", left), ("right", right))
+        }
+        for side, value in sampling.items():
+            if not (np.isfinite(value) and value > 0.0):
+                raise InputError(
+                    f"dem: the centre of the {side} image does not locate on the ground at "
+                    f"{h_mid:.0f} m (its model gives no ground sampling there: a model outside "
+                    "its validity domain, or not this image's?)"
+                )
+        res = max(sampling.values())
     k = max(1, round(posting / res))
     crs = settings.crs
     if crs is None:  # the UTM zone of the two footprints' centre

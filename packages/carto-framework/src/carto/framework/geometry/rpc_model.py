@@ -39,7 +39,9 @@ of the
 * **Validation.** Every :class:`RPCCoefficients` is checked when built (so by every reader):
   :func:`validate_fields` (each field within its domain: RPC00B's ranges, widened) and
   :func:`validate_model` (no pole, no fold, no absurd values over the normalised cube); the
-  readers add :meth:`RPCCoefficients.check_image_shape` when the file gives the image size.
+  readers add :meth:`RPCCoefficients.check_image_shape` when the file gives the image size,
+  then :func:`check_pixel_aspect` (no ground pixel 20 times longer than wide: an exponent
+  changed in a dominant coefficient).
 
 Contents: the RPC00B and RPC00A term orders, the monomial evaluation shared with the fitting,
 and :class:`RPCCoefficients` (projection with analytic partials, Newton location, rasterio
@@ -200,6 +202,12 @@ MAX_NORMALISED_IMAGE = 1e4
 """Largest normalised ``|line|``/``|sample|`` accepted on the sanity grid (real products: 1.5
 to 77, and 2640 for SkySat's oversized cube): catches garbage that sends the model's own domain
 millions of scales away."""
+MAX_PIXEL_ASPECT = 20.0
+"""Largest length-to-width ratio of a ground pixel at the centre of the model (the ratio of the
+singular values of ``d(line, sample)/d(east, north)``, metres). Real products: 1.00 to 1.4
+(WorldView-2); a view 45 degrees off nadir stretches pixels about 2 times. A coefficient of a
+dominant term whose exponent changed (x1000) gives about 1000: the model is still smooth and
+one-to-one, only this tells."""
 DOMAIN_MARGIN = 2.0
 """Ground validity domain of the RPC sensor: ``|L|, |P| <= DOMAIN_MARGIN``. Not the usual 1.1:
 real images reach beyond their cube at the ends of their height range, e.g. the corners of the
@@ -323,6 +331,47 @@ def validate_model(rpc: RPCCoefficients) -> None:
             f"the model folds over: d(line, sample)/d(lon, lat) has determinant {det[i]:.3g} "
             f"at {_at(lnorm, pnorm, hnorm, i)}, {np.nanmedian(det):.3g} typically "
             "(the ground must map one-to-one onto the image)",
+        )
+
+
+def check_pixel_aspect(rpc: RPCCoefficients) -> None:
+    """Check that a ground pixel at the centre of ``rpc`` is not :data:`MAX_PIXEL_ASPECT` times
+    longer than wide (the singular values of ``d(line, sample)/d(east, north)``, pixels per
+    metre). The readers call it after the image-size check (whose message is the more precise
+    one when a scale is absurd for the image).
+
+    Raises:
+        InputError: ``"RPC field LINE_NUM_COEFF/SAMP_NUM_COEFF: a ground pixel N times longer
+            than wide ..."``.
+    """
+    zero = np.zeros(1)
+    with np.errstate(all="ignore"):
+        v = _poly_values(rpc._derivative_coefficients((0, 1)), zero, zero, zero)[:, 0]
+        rl, rs = v[0] / v[1], v[2] / v[3]
+        metres_lon = abs(rpc.long_scale) * 111320.0 * math.cos(math.radians(rpc.lat_off))
+        metres_lat = abs(rpc.lat_scale) * 110574.0
+        jacobian = np.array(
+            [
+                [
+                    (v[4] - rl * v[5]) / v[1] * rpc.line_scale / metres_lon,
+                    (v[8] - rl * v[9]) / v[1] * rpc.line_scale / metres_lat,
+                ],
+                [
+                    (v[6] - rs * v[7]) / v[3] * rpc.samp_scale / metres_lon,
+                    (v[10] - rs * v[11]) / v[3] * rpc.samp_scale / metres_lat,
+                ],
+            ]
+        )
+    if not (np.isfinite(jacobian).all() and metres_lon > 0.0 and metres_lat > 0.0):
+        return
+    singular = np.linalg.svd(jacobian, compute_uv=False)
+    aspect = singular[0] / singular[1] if singular[1] > 0.0 else math.inf
+    if not aspect <= MAX_PIXEL_ASPECT:
+        raise _field_error(
+            "LINE_NUM_COEFF/SAMP_NUM_COEFF",
+            f"a ground pixel {aspect:.3g} times longer than wide at the model's centre "
+            f"(<= {MAX_PIXEL_ASPECT:g} expected: a coefficient with a changed exponent or "
+            "digit?)",
         )
 
 

@@ -29,6 +29,7 @@ from carto.framework.geometry.rpc_model import (
     RPC00A_TO_B,
     SCALAR_FIELDS,
     RPCCoefficients,
+    check_pixel_aspect,
 )
 
 __all__ = [
@@ -575,13 +576,15 @@ def read_rpc_and_shape(
 
 
 def _load(kind: str, path: Path) -> tuple[RPCCoefficients, tuple[int, int] | None]:
-    """The loader of ``kind``, then the scales against the image size the file gives."""
+    """The loader of ``kind``, then the scales against the image size the file gives and the
+    shape of a ground pixel (:func:`~carto.framework.geometry.rpc_model.check_pixel_aspect`)."""
     rpc, shape = _LOADERS[kind](path)
-    if shape is not None:
-        try:
+    try:
+        if shape is not None:
             rpc.check_image_shape(shape)
-        except InputError as err:
-            raise file_error(path, str(err)) from None
+        check_pixel_aspect(rpc)
+    except InputError as err:
+        raise file_error(path, str(err)) from None
     return rpc, shape
 
 
