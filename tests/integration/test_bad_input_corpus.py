@@ -713,11 +713,12 @@ def test_half_void_hgt(
 
 # --------------------------------------------------------------------------- dem options
 @pytest.mark.parametrize(
-    ("option", "value", "words"),
+    ("option", "value", "code", "words"),
     [
-        ("--posting", "0.001", ("--posting", "0.001", "cells", "at least")),
-        ("--posting", "1e9", ("--posting", "1e+09", "footprint", "2 x 2 nodes")),
-        ("--crs", "EPSG:4326", ("--crs", "EPSG:4326", "geographic", "projected CRS")),
+        ("--posting", "0.001", 1, ("--posting", "0.001", "cells", "at least")),
+        ("--posting", "1e9", 1, ("--posting", "1e+09", "footprint", "2 x 2 nodes")),
+        # a CRS IOR cannot use whatever the scene: a usage error
+        ("--crs", "EPSG:4326", 2, ("--crs", "EPSG:4326", "geographic", "projected CRS")),
     ],
 )
 def test_dem_option_values_absurd_for_the_scene(
@@ -727,9 +728,10 @@ def test_dem_option_values_absurd_for_the_scene(
     adjusted: Path,
     option: str,
     value: str,
+    code: int,
     words: tuple[str, ...],
 ) -> None:
     out = tmp_path / "o"
     res = carto(dem_run(cartosat1_scene, adjusted, out, option, value))
-    line = refused(res, 1, out, *words)
+    line = refused(res, code, out, *words)
     assert "does not cover" not in line, line

@@ -10,7 +10,7 @@ from typing import Any
 import attrs
 import numpy as np
 
-from carto.framework.errors import InputError
+from carto.framework.errors import UsageError
 from carto.framework.imaging.ortho_grid import MAX_GRID_CELLS
 
 _FLAGS = {
@@ -43,7 +43,7 @@ def _number(name: str, low: float, high: float = math.inf, *, low_open: bool = F
             bound = f"> {low:g}" if low_open else f">= {low:g}"
             if math.isfinite(high):
                 bound += f" and <= {high:g}"
-            raise InputError(f"{option_label(name)} must be a finite number {bound}, got {value!r}")
+            raise UsageError(f"{option_label(name)} must be a finite number {bound}, got {value!r}")
         return number
 
     return convert
@@ -63,7 +63,7 @@ def _integer(name: str, low: int, high: int) -> Any:
         )
         ok = ok and math.isfinite(float(value)) and float(value).is_integer()
         if not (ok and low <= int(value) <= high):
-            raise InputError(
+            raise UsageError(
                 f"{option_label(name)} must be a whole number within {low}..{high}, got {value!r}"
             )
         return int(value)
@@ -80,14 +80,14 @@ def _map_crs(value: Any) -> Any:
     try:
         crs = pyproj.CRS.from_user_input(value)
     except pyproj.exceptions.CRSError as exc:
-        raise InputError(f"{option_label('crs')}: {value!r} is not a CRS pyproj knows") from exc
+        raise UsageError(f"{option_label('crs')}: {value!r} is not a CRS pyproj knows") from exc
     if crs.is_compound:
         crs = crs.sub_crs_list[0]
     unit = crs.axis_info[0].unit_name if crs.axis_info else "?"
     factor = crs.axis_info[0].unit_conversion_factor if crs.axis_info else None
     if not crs.is_projected or factor != 1.0:
         kind = "geographic (degrees)" if crs.is_geographic else f"in {unit}"
-        raise InputError(
+        raise UsageError(
             f"{option_label('crs')}: {value!r} is {kind}; the DEM posting is in metres, so IOR "
             "needs a projected CRS in metres (e.g. a UTM zone such as EPSG:32643), or no "
             "--crs for the scene's UTM zone"
@@ -160,7 +160,7 @@ class IORSettings:
 
     def __attrs_post_init__(self) -> None:
         if self.ortho_res_m is not None and self.ortho_res_m > self.posting_m:
-            raise InputError(
+            raise UsageError(
                 f"{option_label('ortho_res_m')} must be at most the posting "
                 f"({self.posting_m:g} m), "
                 f"got {self.ortho_res_m:g}"
