@@ -3,6 +3,7 @@ GCP-transfer tests (``tests/integration/matching``)."""
 
 from __future__ import annotations
 
+import subprocess
 from pathlib import Path
 
 import pytest
@@ -29,3 +30,19 @@ def pair(tmp_path_factory) -> Scene:
     out: Path = tmp_path_factory.mktemp("tp_c1")
     simulate("cartosat1-pair", out, seed=3, size=(SIZE, SIZE), terrain="hilly")
     return Scene.open(out)
+
+
+@pytest.fixture(scope="session")
+def cartosat1_adjusted(tmp_path_factory, cartosat1_scene: Path, carto_exe: str) -> Path:
+    """A good ``carto adjust`` output of the Cartosat-1 scene of tests/conftest.py (one GCP),
+    made by the command: the earlier output that bad runs must leave as it was, and the
+    models of DEM runs."""
+    out = tmp_path_factory.mktemp("adjusted") / "adj"
+    res = subprocess.run(
+        [carto_exe, "adjust", str(cartosat1_scene), "--gcps", "1", "--out", str(out), "--quiet"],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert res.returncode == 0, res.stderr
+    return out

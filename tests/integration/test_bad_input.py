@@ -54,25 +54,11 @@ def carto_main(capsys: pytest.CaptureFixture[str]):  # type: ignore[no-untyped-d
     return run
 
 
-@pytest.fixture(scope="module")
-def good_adjust(tmp_path_factory, cartosat1_scene: Path, carto_exe: str) -> Path:
-    """A good ``carto adjust`` output of the Cartosat-1 scene (one GCP)."""
-    out = tmp_path_factory.mktemp("good") / "adj"
-    res = subprocess.run(
-        [carto_exe, "adjust", str(cartosat1_scene), "--gcps", "1", "--out", str(out), "--quiet"],
-        capture_output=True,
-        text=True,
-        check=False,
-    )
-    assert res.returncode == 0, res.stderr
-    return out
-
-
 @pytest.fixture
-def earlier(tmp_path: Path, good_adjust: Path) -> Path:
+def earlier(tmp_path: Path, cartosat1_adjusted: Path) -> Path:
     """A copy of the good adjust output, to be run over."""
     out = tmp_path / "adj"
-    shutil.copytree(good_adjust, out)
+    shutil.copytree(cartosat1_adjusted, out)
     return out
 
 
@@ -130,7 +116,7 @@ def test_an_interrupted_adjust_leaves_the_earlier_output_as_it_was(
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL])
 def test_a_killed_dem_run_leaves_the_earlier_output_as_it_was(
-    tmp_path: Path, good_adjust: Path, cartosat1_scene: Path, carto_exe: str, sig: int
+    tmp_path: Path, cartosat1_adjusted: Path, cartosat1_scene: Path, carto_exe: str, sig: int
 ) -> None:
     out = tmp_path / "dem"
     out.mkdir()
@@ -143,7 +129,7 @@ def test_a_killed_dem_run_leaves_the_earlier_output_as_it_was(
             "dem",
             str(cartosat1_scene),
             "--models",
-            str(good_adjust),
+            str(cartosat1_adjusted),
             "--posting",
             "10",
             "--out",
@@ -168,7 +154,7 @@ def test_a_killed_dem_run_leaves_the_earlier_output_as_it_was(
             "dem",
             str(cartosat1_scene),
             "--models",
-            str(good_adjust),
+            str(cartosat1_adjusted),
             "--posting",
             "20",
             "--max-iterations",
@@ -187,10 +173,10 @@ def test_a_killed_dem_run_leaves_the_earlier_output_as_it_was(
 
 
 def test_dem_refuses_an_incomplete_adjust_folder(
-    run_carto, tmp_path: Path, good_adjust: Path, cartosat1_scene: Path
+    run_carto, tmp_path: Path, cartosat1_adjusted: Path, cartosat1_scene: Path
 ) -> None:
     half = tmp_path / "half"
-    shutil.copytree(good_adjust, half)
+    shutil.copytree(cartosat1_adjusted, half)
     (half / MARKER).unlink()
     res = run_carto(
         ["dem", str(cartosat1_scene), "--models", str(half), "--out", str(tmp_path / "d")],
@@ -370,7 +356,7 @@ def test_one_wrong_gcp_among_several_is_flagged(tmp_path: Path) -> None:
 
 # --------------------------------------------------------------------------- configurations
 @pytest.fixture
-def configuration(tmp_path: Path, good_adjust: Path, cartosat1_scene: Path):  # type: ignore[no-untyped-def]
+def configuration(tmp_path: Path, cartosat1_adjusted: Path, cartosat1_scene: Path):  # type: ignore[no-untyped-def]
     """A valid ``carto adjust`` configuration of the scene's images and adjusted models, and a
     function that writes it with changes."""
 
@@ -378,7 +364,7 @@ def configuration(tmp_path: Path, good_adjust: Path, cartosat1_scene: Path):  # 
         doc: dict[str, object] = {
             "images": {
                 name: {
-                    "model": str(good_adjust / f"{name}.model.json"),
+                    "model": str(cartosat1_adjusted / f"{name}.model.json"),
                     "raster": str(cartosat1_scene / f"{name}.tif"),
                 }
                 for name in ("fore", "aft")

@@ -151,22 +151,6 @@ def ground_csv(path: Path, points: list[tuple[float, float, float]]) -> Path:
     return path
 
 
-@pytest.fixture(scope="module")
-def adjusted(
-    tmp_path_factory: pytest.TempPathFactory, cartosat1_scene: Path, carto_exe: str
-) -> Path:
-    """A good ``carto adjust`` output of the scene (one GCP): the models of the DEM runs."""
-    out = tmp_path_factory.mktemp("corpus-adj") / "adj"
-    res = subprocess.run(
-        [carto_exe, "adjust", str(cartosat1_scene), "--gcps", "1", "--out", str(out), "--quiet"],
-        capture_output=True,
-        text=True,
-        check=False,
-    )
-    assert res.returncode == 0, res.stderr
-    return out
-
-
 # --------------------------------------------------------------------------- RPC models
 def _ikonos_layout(rpc: Any) -> str:
     """``rpc`` as an ``_RPC.TXT`` in the IKONOS / Cartosat orthokit layout (every coefficient
@@ -490,7 +474,7 @@ def test_scene_whose_image_entry_is_a_number(carto: Run, tmp_path: Path, variant
 
 
 def test_gcp_table_with_a_bom_works(
-    carto: Run, tmp_path: Path, variant: Any, adjusted: Path
+    carto: Run, tmp_path: Path, variant: Any, cartosat1_adjusted: Path
 ) -> None:
     """A UTF-8 BOM (Excel's "CSV UTF-8") is read: the same adjustment as without it."""
     scene = variant("gcps.csv")
@@ -499,7 +483,7 @@ def test_gcp_table_with_a_bom_works(
     res = carto(["adjust", scene, "--gcps", "1", "--out", tmp_path / "o", "--quiet"])
     ok(res)
     report = json.loads((tmp_path / "o" / "report.json").read_text())
-    normal = json.loads((adjusted / "report.json").read_text())
+    normal = json.loads((cartosat1_adjusted / "report.json").read_text())
     assert report["outliers"] == []
     assert report["checkpoints"] == pytest.approx(normal["checkpoints"], rel=1e-6)
 
@@ -515,7 +499,7 @@ def _image_cases(shape: tuple[int, int]) -> dict[str, tuple[np.ndarray, tuple[st
 
 @pytest.mark.parametrize("case", ["all-nan", "textureless", "1x1"])
 def test_unusable_left_image(
-    carto: Run, tmp_path: Path, variant: Any, adjusted: Path, case: str
+    carto: Run, tmp_path: Path, variant: Any, cartosat1_adjusted: Path, case: str
 ) -> None:
     """The left image of the pair (aft, closer to nadir) replaced."""
     import rasterio
@@ -528,7 +512,7 @@ def test_unusable_left_image(
     data, words = _image_cases(shape)[case]
     (scene / "aft.tif").unlink()
     write_tif(scene / "aft.tif", data, tags=tags)
-    res = carto(["dem", scene, "--models", adjusted, "--out", tmp_path / "o", "--quiet"])
+    res = carto(["dem", scene, "--models", cartosat1_adjusted, "--out", tmp_path / "o", "--quiet"])
     line = refused(res, 1, tmp_path / "o", "aft.tif", *words)
     assert "matched" not in line, line
 
@@ -560,8 +544,8 @@ def geotiff_dem(path: Path, heights: np.ndarray, like: Path, **profile: Any) -> 
     return write_tif(path, heights, crs=crs, transform=transform, tags=tags, **profile)
 
 
-def dem_run(scene: Path, adjusted: Path, out: Path, *extra: Any) -> list[Any]:
-    return ["dem", scene, "--models", adjusted, "--out", out, "--quiet", *extra]
+def dem_run(scene: Path, cartosat1_adjusted: Path, out: Path, *extra: Any) -> list[Any]:
+    return ["dem", scene, "--models", cartosat1_adjusted, "--out", out, "--quiet", *extra]
 
 
 @pytest.mark.realdata
@@ -569,7 +553,12 @@ def dem_run(scene: Path, adjusted: Path, out: Path, *extra: Any) -> list[Any]:
     "case", ["1x1", "1e30", "all-void-hgt", "misnamed-hgt", "hgt-without-geoid", "zero-geoid"]
 )
 def test_bad_initial_dem_or_geoid(
-    carto: Run, tmp_path: Path, cartosat1_scene: Path, adjusted: Path, shared_data: Path, case: str
+    carto: Run,
+    tmp_path: Path,
+    cartosat1_scene: Path,
+    cartosat1_adjusted: Path,
+    shared_data: Path,
+    case: str,
 ) -> None:
     like = cartosat1_scene / "init_dem.tif"
     geoid = shared_data / GEOID
@@ -596,7 +585,7 @@ def test_bad_initial_dem_or_geoid(
         bad.write_bytes(header + np.full(81, -30.0, ">f4").tobytes())
         extra, words = ["--init-dem", dem, "--geoid", bad], (str(bad),)
     out = tmp_path / "o"
-    line = refused(carto(dem_run(cartosat1_scene, adjusted, out, *extra)), 1, out, *words)
+    line = refused(carto(dem_run(cartosat1_scene, cartosat1_adjusted, out, *extra)), 1, out, *words)
     assert "do not overlap" not in line, line
     if case == "hgt-without-geoid":
         assert "--geoid GTX" in line, line
@@ -608,14 +597,19 @@ def _accuracy(out: Path) -> dict[str, float]:
 
 @pytest.fixture(scope="module")
 def normal_accuracy(
-    tmp_path_factory: pytest.TempPathFactory, cartosat1_scene: Path, adjusted: Path
+    tmp_path_factory: pytest.TempPathFactory, cartosat1_scene: Path, cartosat1_adjusted: Path
 ) -> dict[str, float]:
     """The accuracy of the DEM run of the corpus with the scene's own initial DEM."""
     from carto.framework.cli import main
 
     out = tmp_path_factory.mktemp("corpus-dem") / "dem"
     args = dem_run(
-        cartosat1_scene, adjusted, out, *DEM_RUN, "--reference", cartosat1_scene / TRUTH_DEM
+        cartosat1_scene,
+        cartosat1_adjusted,
+        out,
+        *DEM_RUN,
+        "--reference",
+        cartosat1_scene / TRUTH_DEM,
     )
     assert main([str(a) for a in args]) == 0
     return _accuracy(out)
@@ -632,7 +626,7 @@ def _partly_nan(heights: np.ndarray) -> np.ndarray:
 
 
 def test_mostly_void_initial_dem_is_refused(
-    carto: Run, tmp_path: Path, cartosat1_scene: Path, adjusted: Path
+    carto: Run, tmp_path: Path, cartosat1_scene: Path, cartosat1_adjusted: Path
 ) -> None:
     """Two thirds void over the images: less than 75 % of their footprint covered, refused
     naming the DEM (the voids are not filled over that much)."""
@@ -644,7 +638,7 @@ def test_mostly_void_initial_dem_is_refused(
     heights[:, : 2 * heights.shape[1] // 3] = np.nan
     dem = geotiff_dem(tmp_path / "init.tif", heights, like)
     out = tmp_path / "o"
-    res = carto(dem_run(cartosat1_scene, adjusted, out, "--init-dem", dem, *DEM_RUN))
+    res = carto(dem_run(cartosat1_scene, cartosat1_adjusted, out, "--init-dem", dem, *DEM_RUN))
     line = refused(res, 1, out, str(dem), "covers", "footprint")
     assert "do not overlap" not in line, line
 
@@ -660,7 +654,7 @@ def test_initial_dem_with_voids_is_measured(
     carto: Run,
     tmp_path: Path,
     cartosat1_scene: Path,
-    adjusted: Path,
+    cartosat1_adjusted: Path,
     normal_accuracy: dict[str, float],
     case: str,
 ) -> None:
@@ -677,7 +671,7 @@ def test_initial_dem_with_voids_is_measured(
     res = carto(
         dem_run(
             cartosat1_scene,
-            adjusted,
+            cartosat1_adjusted,
             out,
             "--init-dem",
             dem,
@@ -695,7 +689,7 @@ def test_initial_dem_with_voids_is_measured(
 
 @pytest.mark.realdata
 def test_half_void_hgt(
-    carto: Run, tmp_path: Path, cartosat1_scene: Path, adjusted: Path, shared_data: Path
+    carto: Run, tmp_path: Path, cartosat1_scene: Path, cartosat1_adjusted: Path, shared_data: Path
 ) -> None:
     """An SRTM tile void east of 77.95 E (the scene's centre): refused naming the tile and how
     much of the footprint it covers, not "the images do not overlap"."""
@@ -704,7 +698,15 @@ def test_half_void_hgt(
     dem = write_hgt(tmp_path / SCENE_TILE, heights)
     out = tmp_path / "o"
     res = carto(
-        dem_run(cartosat1_scene, adjusted, out, "--init-dem", dem, "--geoid", shared_data / GEOID)
+        dem_run(
+            cartosat1_scene,
+            cartosat1_adjusted,
+            out,
+            "--init-dem",
+            dem,
+            "--geoid",
+            shared_data / GEOID,
+        )
         + DEM_RUN
     )
     line = refused(res, 1, out, str(dem), "covers 46 %", "footprint")
@@ -725,13 +727,13 @@ def test_dem_option_values_absurd_for_the_scene(
     carto: Run,
     tmp_path: Path,
     cartosat1_scene: Path,
-    adjusted: Path,
+    cartosat1_adjusted: Path,
     option: str,
     value: str,
     code: int,
     words: tuple[str, ...],
 ) -> None:
     out = tmp_path / "o"
-    res = carto(dem_run(cartosat1_scene, adjusted, out, option, value))
+    res = carto(dem_run(cartosat1_scene, cartosat1_adjusted, out, option, value))
     line = refused(res, code, out, *words)
     assert "does not cover" not in line, line

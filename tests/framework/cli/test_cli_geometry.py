@@ -156,8 +156,10 @@ def test_project_an_rpc_geotiff_like_gdal(run_carto, tmp_path, shared_data):
     # more than 10 % of the image beyond its edges come back as nan (GDAL extrapolates)
     inside = (np.abs(row / n_lines - 0.5) < 0.6) & (np.abs(col / n_samples - 0.5) < 0.6)
     far = (np.abs(row / n_lines - 0.5) > 0.61) | (np.abs(col / n_samples - 0.5) > 0.61)
-    assert inside.sum() >= 5 and far.sum() >= 5
+    assert inside.sum() >= 5
+    assert far.sum() >= 5
     np.testing.assert_allclose(got["line"][inside], row[inside], atol=1e-6)
     np.testing.assert_allclose(got["sample"][inside], col[inside], atol=1e-6)
-    assert np.isnan(got["line"][far]).all() and np.isnan(got["sample"][far]).all()
+    assert np.isnan(got["line"][far]).all()
+    assert np.isnan(got["sample"][far]).all()
     assert "outside the image" in res.stdout
