@@ -182,7 +182,7 @@ def test_project_shapes_and_nan() -> None:
 def test_large_inputs_are_chunked_consistently() -> None:
     rpc = synthetic_rpc()
     rng = np.random.default_rng(3)
-    n = 3 * rpc_mod._CHUNK + 17
+    n = 3 * rpc_mod.CHUNK + 17
     lon = rpc.long_off + rpc.long_scale * rng.uniform(-1, 1, n)
     lat = rpc.lat_off + rpc.lat_scale * rng.uniform(-1, 1, n)
     h = rpc.height_off + rpc.height_scale * rng.uniform(-1, 1, n)
@@ -232,7 +232,7 @@ def test_derivative_matrices_are_exact() -> None:
         tp, tm = np.empty((20, 10)), np.empty((20, 10))
         rpc_mod.monomials(*(x + eps), tp)
         rpc_mod.monomials(*(x - eps), tm)
-        assert np.allclose(rpc_mod._D_LPH[axis] @ t, (tp - tm) / 2e-6, atol=1e-8)
+        assert np.allclose(rpc_mod.DERIVATIVE_MATRICES[axis] @ t, (tp - tm) / 2e-6, atol=1e-8)
 
 
 def test_coefficients_validation_and_equality() -> None:

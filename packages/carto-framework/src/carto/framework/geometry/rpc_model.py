@@ -43,9 +43,11 @@ of the
   then :func:`check_pixel_aspect` (no ground pixel 20 times longer than wide: an exponent
   changed in a dominant coefficient).
 
-Contents: the RPC00B and RPC00A term orders, the monomial evaluation shared with the fitting,
-and :class:`RPCCoefficients` (projection with analytic partials, Newton location, rasterio
-conversions). The rest of the RPC support is in sibling modules:
+Contents: :class:`RPCCoefficients` (projection with analytic partials, Newton location,
+rasterio conversions) and its checks. The rest of the RPC support is in sibling modules:
+
+* :mod:`~carto.framework.geometry.rpc_terms`: the RPC00B and RPC00A term orders and the
+  monomial evaluation shared with the fitting;
 
 * :mod:`~carto.framework.geometry.rpc_sensor`: the sensor
   :class:`~carto.framework.geometry.rpc_sensor.RPCSensor` (with Grodecki & Dial's image-space
@@ -68,89 +70,28 @@ from numpy.typing import ArrayLike, NDArray
 
 from carto.framework.arrays import as_float_arrays
 from carto.framework.errors import InputError
+from carto.framework.geometry.rpc_terms import (
+    CHUNK,
+    DERIVATIVE_MATRICES,
+    RPC00A_TERMS,
+    RPC00A_TO_B,
+    RPC00B_TERMS,
+    monomials,
+    poly_values,
+)
 
 FloatArray = NDArray[np.float64]
 
 __all__ = [
     "RPC00A_TERMS",
+    "RPC00A_TO_B",
     "RPC00B_TERMS",
     "RPCCoefficients",
+    "monomials",
 ]
 
-# ----------------------------------------------------------------------------- RPC00B terms
-RPC00B_TERMS: tuple[str, ...] = (
-    "1", "L", "P", "H", "LP", "LH", "PH", "LL", "PP", "HH",
-    "LPH", "LLL", "LPP", "LHH", "LLP", "PPP", "PHH", "LLH", "PPH", "HHH",
-)  # fmt: skip
-"""The 20 monomials of RPC00B in order (L: longitude, P: latitude, H: height, normalised)."""
-
-_EXPONENTS = np.array([[t.count(v) for v in "LPH"] for t in RPC00B_TERMS], dtype=np.int64)
-
-RPC00A_TERMS: tuple[str, ...] = (
-    "1", "L", "P", "H", "LP", "LH", "PH", "LPH", "LL", "PP",
-    "HH", "LLL", "LLP", "LLH", "LPP", "PPP", "PPH", "LHH", "PHH", "HHH",
-)  # fmt: skip
-"""The RPC00A term order, as OSSIM evaluates ``polynomial_format: A`` (``ossimRpcModel``)."""
-
-RPC00A_TO_B = tuple(RPC00A_TERMS.index(t) for t in RPC00B_TERMS)
-"""``coeff_B[i] = coeff_A[RPC00A_TO_B[i]]``."""
-
-
-def _derivative_matrix(axis: int) -> FloatArray:
-    """``D`` with ``d(term_k)/d(var_axis) = sum_j D[k, j] term_j`` (exact, terms up to cubic)."""
-    index = {tuple(e): j for j, e in enumerate(_EXPONENTS.tolist())}
-    d = np.zeros((20, 20))
-    for k, e in enumerate(_EXPONENTS.tolist()):
-        if e[axis]:
-            lowered = list(e)
-            lowered[axis] -= 1
-            d[k, index[tuple(lowered)]] = e[axis]
-    return d
-
-
-_D_LPH = tuple(_derivative_matrix(a) for a in range(3))
-
-_CHUNK = 8192
-"""Points evaluated at a time: keeps the 20 x chunk monomial block in cache."""
 
 _MAX_LON_DIFF_DEG = 270.0
-
-
-def monomials(lnorm: FloatArray, pnorm: FloatArray, hnorm: FloatArray, out: FloatArray) -> None:
-    """Fill ``out`` (20, n) with the RPC00B terms, sharing the quadratic products."""
-    out[0] = 1.0
-    out[1] = lnorm
-    out[2] = pnorm
-    out[3] = hnorm
-    np.multiply(lnorm, pnorm, out=out[4])
-    np.multiply(lnorm, hnorm, out=out[5])
-    np.multiply(pnorm, hnorm, out=out[6])
-    np.multiply(lnorm, lnorm, out=out[7])
-    np.multiply(pnorm, pnorm, out=out[8])
-    np.multiply(hnorm, hnorm, out=out[9])
-    np.multiply(out[4], hnorm, out=out[10])
-    np.multiply(out[7], lnorm, out=out[11])
-    np.multiply(out[8], lnorm, out=out[12])
-    np.multiply(out[9], lnorm, out=out[13])
-    np.multiply(out[7], pnorm, out=out[14])
-    np.multiply(out[8], pnorm, out=out[15])
-    np.multiply(out[9], pnorm, out=out[16])
-    np.multiply(out[7], hnorm, out=out[17])
-    np.multiply(out[8], hnorm, out=out[18])
-    np.multiply(out[9], hnorm, out=out[19])
-
-
-def _poly_values(matrix: FloatArray, lnorm: FloatArray, pnorm: FloatArray, hnorm: FloatArray):
-    """``matrix @ terms(L, P, H)`` for 1-D normalised inputs, shape ``(k, n)``, in chunks."""
-    n = lnorm.size
-    out = np.empty((matrix.shape[0], n))
-    terms = np.empty((20, min(n, _CHUNK)))
-    for start in range(0, n, _CHUNK):
-        stop = min(start + _CHUNK, n)
-        t = terms[:, : stop - start]
-        monomials(lnorm[start:stop], pnorm[start:stop], hnorm[start:stop], t)
-        out[:, start:stop] = matrix @ t
-    return out
 
 
 # ----------------------------------------------------------------------------- coefficients
@@ -296,7 +237,7 @@ def validate_model(rpc: RPCCoefficients) -> None:
     u = np.linspace(-1.0, 1.0, SANITY_GRID)
     lnorm, pnorm, hnorm = (a.ravel() for a in np.meshgrid(u, u, u, indexing="ij"))
     with np.errstate(all="ignore"):
-        v = _poly_values(rpc._derivative_coefficients((0, 1)), lnorm, pnorm, hnorm)
+        v = poly_values(rpc._derivative_coefficients((0, 1)), lnorm, pnorm, hnorm)
         for k, name, axis in ((1, "LINE_DEN_COEFF", "line"), (3, "SAMP_DEN_COEFF", "sample")):
             c0 = rpc.coefficients[k, 0]
             ratio = v[k] / c0
@@ -346,7 +287,7 @@ def check_pixel_aspect(rpc: RPCCoefficients) -> None:
     """
     zero = np.zeros(1)
     with np.errstate(all="ignore"):
-        v = _poly_values(rpc._derivative_coefficients((0, 1)), zero, zero, zero)[:, 0]
+        v = poly_values(rpc._derivative_coefficients((0, 1)), zero, zero, zero)[:, 0]
         rl, rs = v[0] / v[1], v[2] / v[3]
         metres_lon = abs(rpc.long_scale) * 111320.0 * math.cos(math.radians(rpc.lat_off))
         metres_lat = abs(rpc.lat_scale) * 110574.0
@@ -487,14 +428,14 @@ class RPCCoefficients:
         n = lon.size
         line = np.empty(n)
         samp = np.empty(n)
-        m = min(n, _CHUNK)
+        m = min(n, CHUNK)
         norm = np.empty((3, m))
         terms = np.empty((20, m))
         values = np.empty((4, m))
         coeffs = self.coefficients
         with np.errstate(divide="ignore", invalid="ignore"):
-            for start in range(0, n, _CHUNK):
-                stop = min(start + _CHUNK, n)
+            for start in range(0, n, CHUNK):
+                stop = min(start + CHUNK, n)
                 k = stop - start
                 ln, pn, hn = norm[0, :k], norm[1, :k], norm[2, :k]
                 np.subtract(lon[start:stop], self.long_off, out=ln)
@@ -531,7 +472,7 @@ class RPCCoefficients:
     def _derivative_coefficients(self, axes: Sequence[int]) -> FloatArray:
         """Rows: the 4 polynomials, then their derivatives along each of ``axes`` (0 L, 1 P,
         2 H), all in the RPC00B term basis: ``(4 + 4 len(axes), 20)``."""
-        blocks = [self.coefficients] + [self.coefficients @ _D_LPH[a] for a in axes]
+        blocks = [self.coefficients] + [self.coefficients @ DERIVATIVE_MATRICES[a] for a in axes]
         return np.concatenate(blocks, axis=0)
 
     def project_with_partials(
@@ -546,7 +487,7 @@ class RPCCoefficients:
             px/deg and px/m.
         """
         lnorm, pnorm, hnorm = (a.ravel() for a in self.normalise(lon_deg, lat_deg, h_m))
-        v = _poly_values(self._derivative_coefficients((0, 1, 2)), lnorm, pnorm, hnorm)
+        v = poly_values(self._derivative_coefficients((0, 1, 2)), lnorm, pnorm, hnorm)
         with np.errstate(divide="ignore", invalid="ignore"):
             rl = v[0] / v[1]
             rs = v[2] / v[3]
@@ -602,7 +543,7 @@ class RPCCoefficients:
                 if active.size == 0:
                     break
                 li, pi = lnorm[active], pnorm[active]
-                v = _poly_values(matrix, li, pi, hnorm[active])
+                v = poly_values(matrix, li, pi, hnorm[active])
                 rl = v[0] / v[1]
                 rs = v[2] / v[3]
                 el = rl - target_l[active]
