@@ -44,7 +44,10 @@ def build_parser() -> argparse.ArgumentParser:
         epilog=examples(
             "carto plugins                 # what is installed",
             "carto COMMAND --help          # options and examples of a command",
-        ),
+        )
+        + "\n\nexit codes: 0 done, 1 bad data or failed work, 2 usage error, 130 interrupted;"
+        "\noutput folders are replaced only when a run completes (an earlier one is kept"
+        "\nas it was otherwise).",
         formatter_class=formatter,
     )
     parser.add_argument("--version", action="version", version=f"{PROG} {__version__}")
