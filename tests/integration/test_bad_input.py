@@ -408,3 +408,48 @@ def test_configuration_cases(run_carto, tmp_path: Path, configuration, cartosat1
         )
         one_line_error(res, 1, *words)
         assert not (tmp_path / "o").exists()
+
+
+def test_a_full_disk_during_the_dem_write_leaves_the_earlier_output_as_it_was(
+    tmp_path: Path, cartosat1_adjusted: Path, cartosat1_scene: Path, carto_exe: str
+) -> None:
+    """The disk fills up while the outputs are written (a file size limit makes every write
+    past 64 KiB fail, as ENOSPC would): one line, exit 1, the earlier folder untouched."""
+    import resource
+
+    out = tmp_path / "dem"
+    out.mkdir()
+    (out / MARKER).write_text(json.dumps({"command": "dem", "files": ["report.json"]}))
+    (out / "report.json").write_text('{"earlier": true}\n')
+    before = snapshot(out)
+
+    def small_disk() -> None:
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a failed write, not a killed process
+        resource.setrlimit(resource.RLIMIT_FSIZE, (64 * 1024, 64 * 1024))
+
+    res = subprocess.run(
+        [
+            carto_exe,
+            "dem",
+            str(cartosat1_scene),
+            "--models",
+            str(cartosat1_adjusted),
+            "--posting",
+            "10",
+            "--max-iterations",
+            "1",
+            "--ortho-res",
+            "1",
+            "--out",
+            str(out),
+            "--quiet",
+        ],
+        capture_output=True,
+        text=True,
+        check=False,
+        preexec_fn=small_disk,
+    )
+    one_line_error(res, 1, "left as it was")
+    assert res.stderr.strip().count("\n") == 0, res.stderr  # no GDAL/libtiff lines
+    assert snapshot(out) == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["dem"]

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import os
 import signal
 import sys
 import textwrap
@@ -87,6 +88,28 @@ def _terminate(signum: int, frame: object) -> None:
     raise KeyboardInterrupt(f"signal {signum}")
 
 
+def _silence_libtiff() -> None:
+    """Turn off the global message printers of the libtiff that rasterio's wheel bundles (GDAL
+    reports the same failures as errors); nothing happens where it cannot be found."""
+    import ctypes
+    import glob
+
+    try:  # after GDAL has set up its own handlers, which loading rasterio does
+        import rasterio
+    except ImportError:
+        return
+    libs = os.path.join(os.path.dirname(rasterio.__file__), os.pardir, "rasterio.libs")
+    for path in glob.glob(os.path.join(libs, "libtiff*.so*")):
+        try:
+            libtiff = ctypes.CDLL(path)
+            libtiff.TIFFSetErrorHandler.restype = ctypes.c_void_p
+            libtiff.TIFFSetWarningHandler.restype = ctypes.c_void_p
+            libtiff.TIFFSetErrorHandler(None)
+            libtiff.TIFFSetWarningHandler(None)
+        except (OSError, AttributeError):
+            continue
+
+
 @contextlib.contextmanager
 def _quiet_libraries(debug: bool) -> Iterator[None]:
     """Library chatter stays off stderr while a command runs: NumPy's RuntimeWarnings (NaN
@@ -103,6 +126,10 @@ def _quiet_libraries(debug: bool) -> Iterator[None]:
     def show(message, category, filename, lineno, file=None, line=None):  # type: ignore[no-untyped-def]
         print(f"{PROG}: warning: {' '.join(str(message).split())}", file=sys.stderr)
 
+    # GDAL's default error printer and libtiff's ("_tiffWriteProc: File too large." on a full
+    # disk): the failure reaches us as an exception, which the one-line error names
+    os.environ.setdefault("CPL_LOG", os.devnull)
+    _silence_libtiff()
     loggers = [logging.getLogger(n) for n in ("rasterio", "numba", "distributed", "fiona")]
     levels = [logger.level for logger in loggers]
     previous = None
