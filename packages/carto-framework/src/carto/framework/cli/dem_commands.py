@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import textwrap
 from pathlib import Path
 from typing import Any
@@ -150,7 +151,7 @@ def cmd_dem(args: argparse.Namespace) -> int:
         ("ortho_res_m", args.ortho_res),
         ("crs", args.crs),
         ("max_iterations", args.max_iterations),
-        ("workers", args.workers),
+        ("workers", args.workers if args.workers is not None else (os.cpu_count() or 1)),
     ):
         if value is not None:
             options[key] = value
@@ -249,7 +250,12 @@ def add_dem(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--ortho-res", type=float, metavar="M", help="ortho pixel (default: GSD)")
     p.add_argument("--crs", metavar="CRS", help="output CRS (default: the UTM zone)")
     p.add_argument("--max-iterations", type=int, metavar="N", help="most DEM updates (6)")
-    p.add_argument("--workers", type=int, metavar="N", help="tiles processed in parallel (1)")
+    p.add_argument(
+        "--workers",
+        type=int,
+        metavar="N",
+        help=f"tiles processed in parallel, threads (default: all cores, {os.cpu_count() or 1})",
+    )
     p.add_argument(
         "--generator",
         metavar="NAME",

@@ -427,6 +427,7 @@ def _dem_into(
         "matcher": matcher,
         "images": {n: str(rasters[n]) for n in names},
         "settings": {k: v for k, v in settings.items() if isinstance(v, str | int | float)},
+        "workers": workers,
         "initial_dem": start.name,
         "dem_grid": {
             "crs": product.dem_grid.crs.to_string(),
