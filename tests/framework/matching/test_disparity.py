@@ -81,3 +81,33 @@ def test_bad_options(pair, kwargs, message):
 def test_bad_images():
     with pytest.raises(InputError, match="2-D"):
         dense_offsets(np.zeros(10), np.zeros((10, 10)))
+
+
+def test_hole_filling_near_and_far() -> None:
+    """Near valid offsets the fill is the normalised Gaussian convolution (checked against
+    its direct evaluation); far from them (a tile mostly outside the footprint) every value is
+    a weighted average of valid ones, within their range, and a constant field stays
+    constant."""
+    import cv2
+
+    from carto.framework.matching.disparity import NEAR_FILL_SIGMAS, _fill
+
+    n = 600
+    rows, cols = np.mgrid[0:n, 0:n]
+    d = (0.01 * rows + 0.02 * cols).astype(np.float32)
+    d[:, 60:] = np.nan  # valid only in a strip 60 px wide
+    d[::7, :60] = np.nan
+    filled = _fill(d)
+    valid = np.isfinite(d)
+    w = valid.astype(np.float32)
+    v = np.where(valid, d, 0).astype(np.float32)
+    num = cv2.GaussianBlur(v, (0, 0), NEAR_FILL_SIGMAS[0], borderType=cv2.BORDER_REPLICATE)
+    den = cv2.GaussianBlur(w, (0, 0), NEAR_FILL_SIGMAS[0], borderType=cv2.BORDER_REPLICATE)
+    first = ~valid & (den > 1e-3)
+    np.testing.assert_allclose(filled[first], num[first] / den[first], rtol=1e-6)
+    np.testing.assert_array_equal(filled[valid], d[valid])
+    assert np.isfinite(filled).all()
+    assert filled.min() >= np.nanmin(d) - 1e-5
+    assert filled.max() <= np.nanmax(d) + 1e-5
+    constant = np.where(valid, np.float32(2.5), np.nan).astype(np.float32)
+    np.testing.assert_allclose(_fill(constant), 2.5, rtol=1e-6)

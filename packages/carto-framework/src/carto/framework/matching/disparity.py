@@ -173,9 +173,16 @@ def _search_bands(
     return out[0], out[1], out[2]
 
 
+NEAR_FILL_SIGMAS = (1.0, 3.0, 9.0)
+"""Widths (px) of the normalised Gaussian convolutions that fill holes near valid offsets;
+what they leave is filled by a push-pull pyramid, whose cost does not grow with the hole."""
+
+
 def _fill(d: FloatArray) -> FloatArray:
     """Holes (NaN) filled from their valid neighbours: normalised Gaussian convolutions of
-    growing width."""
+    growing width (:data:`NEAR_FILL_SIGMAS`) near valid offsets, then a push-pull pyramid
+    (:func:`_push_pull`) for what lies farther: the cost is proportional to the pixels, not
+    to the size of the holes (a tile mostly outside the footprint of a long strip)."""
     import cv2
 
     valid = np.isfinite(d)
@@ -187,16 +194,47 @@ def _fill(d: FloatArray) -> FloatArray:
     w = valid.astype(np.float32)
     filled = out.copy()
     missing = ~valid
-    sigma = 1.0
-    while missing.any() and sigma < 4 * max(d.shape):
+    for sigma in NEAR_FILL_SIGMAS:
+        if not missing.any():
+            break
         num = cv2.GaussianBlur(out, (0, 0), sigma, borderType=cv2.BORDER_REPLICATE)
         den = cv2.GaussianBlur(w, (0, 0), sigma, borderType=cv2.BORDER_REPLICATE)
         ok = missing & (den > 1e-3)
         filled[ok] = num[ok] / den[ok]
         missing &= ~ok
-        sigma *= 3.0
-    filled[missing] = float(np.mean(d[valid]))
+    if missing.any():
+        far = _push_pull(out, w)
+        filled[missing] = far[missing]
     return filled
+
+
+def _push_pull(values: FloatArray, weights: FloatArray) -> FloatArray:
+    """Weighted averages of growing extent (Gortler et al. 1996): push the weighted sums down
+    a 2 x 2 pyramid until every pixel of the coarsest level has weight, then pull the averages
+    back up, each level keeping its own where it has weight and taking the coarser level's
+    elsewhere. About 4/3 of the pixels' work, whatever the holes."""
+    import cv2
+
+    levels = [(values * weights, weights)]
+    while levels[-1][1].min() <= 1e-6 and min(levels[-1][1].shape) > 1:
+        num, den = levels[-1]
+        size = (max(1, (num.shape[1] + 1) // 2), max(1, (num.shape[0] + 1) // 2))
+        levels.append(
+            (
+                cv2.resize(num, size, interpolation=cv2.INTER_AREA),
+                cv2.resize(den, size, interpolation=cv2.INTER_AREA),
+            )
+        )
+    num, den = levels[-1]
+    total = float(den.sum())
+    mean = float(num.sum()) / total if total > 0 else 0.0
+    estimate = np.where(den > 1e-6, num / np.maximum(den, 1e-12), mean).astype(np.float32)
+    for num, den in reversed(levels[:-1]):
+        coarse = cv2.resize(estimate, (num.shape[1], num.shape[0]), interpolation=cv2.INTER_LINEAR)
+        own = num / np.maximum(den, 1e-12)
+        blend = np.clip(den, 0.0, 1.0)  # full weight: its own average; none: the coarser one
+        estimate = (blend * own + (1.0 - blend) * coarse).astype(np.float32)
+    return estimate
 
 
 def _clean(d: FloatArray, tolerance: float) -> FloatArray:
