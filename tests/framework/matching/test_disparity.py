@@ -90,14 +90,14 @@ def test_hole_filling_near_and_far() -> None:
     constant."""
     import cv2
 
-    from carto.framework.matching.disparity import NEAR_FILL_SIGMAS, _fill
+    from carto.framework.matching.disparity import NEAR_FILL_SIGMAS, fill_holes
 
     n = 600
     rows, cols = np.mgrid[0:n, 0:n]
     d = (0.01 * rows + 0.02 * cols).astype(np.float32)
     d[:, 60:] = np.nan  # valid only in a strip 60 px wide
     d[::7, :60] = np.nan
-    filled = _fill(d)
+    filled = fill_holes(d)
     valid = np.isfinite(d)
     w = valid.astype(np.float32)
     v = np.where(valid, d, 0).astype(np.float32)
@@ -110,4 +110,4 @@ def test_hole_filling_near_and_far() -> None:
     assert filled.min() >= np.nanmin(d) - 1e-5
     assert filled.max() <= np.nanmax(d) + 1e-5
     constant = np.where(valid, np.float32(2.5), np.nan).astype(np.float32)
-    np.testing.assert_allclose(_fill(constant), 2.5, rtol=1e-6)
+    np.testing.assert_allclose(fill_holes(constant), 2.5, rtol=1e-6)

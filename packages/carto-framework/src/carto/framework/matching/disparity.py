@@ -178,7 +178,7 @@ NEAR_FILL_SIGMAS = (1.0, 3.0, 9.0)
 what they leave is filled by a push-pull pyramid, whose cost does not grow with the hole."""
 
 
-def _fill(d: FloatArray) -> FloatArray:
+def fill_holes(d: FloatArray) -> FloatArray:
     """Holes (NaN) filled from their valid neighbours: normalised Gaussian convolutions of
     growing width (:data:`NEAR_FILL_SIGMAS`) near valid offsets, then a push-pull pyramid
     (:func:`_push_pull`) for what lies farther: the cost is proportional to the pixels, not
@@ -242,7 +242,7 @@ def _clean(d: FloatArray, tolerance: float) -> FloatArray:
     3 x 3 median replaced by it."""
     import cv2
 
-    filled = _fill(d)
+    filled = fill_holes(d)
     med = cv2.medianBlur(filled, 3)
     return np.where(np.abs(filled - med) <= tolerance, filled, med).astype(np.float32)
 
