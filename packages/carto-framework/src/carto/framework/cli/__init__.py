@@ -173,8 +173,7 @@ def _run(handler: Handler, args: argparse.Namespace) -> int:
         print(f"{PROG}: error: {_one_line(exc)}", file=sys.stderr)
         return 1
     except KeyboardInterrupt as exc:
-        notes = "; ".join(getattr(exc, "__notes__", ()))
-        print(f"{PROG}: interrupted" + (f"; {notes}" if notes else ""), file=sys.stderr)
+        print(f"{PROG}: interrupted{_notes(exc)}", file=sys.stderr)
         return 130
     except MemoryError as exc:
         if args.debug:

@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from carto.framework.errors import InputError, UsageError
+from carto.framework.files.atomic import current_umask
 
 __all__ = [
     "MARKER",
@@ -132,14 +133,8 @@ def _make_stage(out: Path) -> Path:
         stage = tempfile.mkdtemp(prefix=f".{out.name}{_STAGING}{os.getpid()}-", dir=parent)
     except OSError as exc:
         raise UsageError(f"--out {out}: cannot write in {parent}: {exc.strerror or exc}") from None
-    os.chmod(stage, 0o777 & ~_umask())
+    os.chmod(stage, 0o777 & ~current_umask())  # mkdtemp makes it 0o700
     return Path(stage)
-
-
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
 
 
 _RENAME_EXCHANGE = 2
