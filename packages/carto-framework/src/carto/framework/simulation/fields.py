@@ -1,20 +1,26 @@
-"""Random fields and sparse resampling for the terrain and texture synthesis.
+"""Random fields, hashed noise and sparse resampling for the terrain and texture synthesis.
 
-* :func:`spectral_field`: a stationary Gaussian random field of unit variance with a given
-  power spectrum, seeded (the terrain synthesis of :mod:`carto.framework.simulation.terrain`;
-  land use and natural cover in :mod:`carto.framework.simulation.texture`).
-* :class:`NoisePyramid`: multi-scale white noise, strip by strip (the fine texture of
-  :func:`carto.framework.simulation.texture.make_texture`).
+Everything here can be evaluated window by window with the same value at a grid node whatever
+the window, so the simulator never holds a whole-scene grid:
+
+* :class:`LatticeField`: a stationary Gaussian random field of unit variance with a given
+  power spectrum, seeded, synthesised once on a bounded lattice and interpolated per window
+  (the terrain synthesis of :mod:`carto.framework.simulation.terrain`; land use, natural
+  cover and water in :mod:`carto.framework.simulation.texture`).
+* :func:`hashed_noise` and :func:`pyramid_noise`: white and multi-scale noise at integer
+  lattice nodes from a hash of the node (the fine texture).
 * :func:`linear_matrix` and :func:`resample`: separable bilinear resampling of a grid by two
-  sparse matrices (a DEM onto the terrain grid, the DEM's surface onto the coarse texture grid).
+  sparse matrices (a user's DEM onto the terrain grid).
 """
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 from typing import Any
 
+import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -59,11 +65,22 @@ def _filtered_noise(
     return scipy.fft.irfft2(spectrum, s=shape, workers=-1).astype(np.float32, copy=False)
 
 
-def _keys_matrix(positions: FloatArray, n_nodes: int) -> Any:
-    """Sparse ``(len(positions), n_nodes)`` matrix of Keys cubic interpolation (a = -0.5) at
-    fractional node ``positions`` (all within ``[1, n_nodes - 3]``)."""
-    from scipy import sparse
+MAX_LATTICE_NODES = 1024
+"""Default bound of the lattice of a :class:`LatticeField`: about twice this a side on a
+single grid, about this a side on a coarse one (a 2048 x 2048 float32 lattice is 16 MB),
+whatever the size of the area."""
 
+
+def _skip_normals(rng: np.random.Generator, shape: tuple[int, int]) -> None:
+    """Advance ``rng`` past ``standard_normal(shape, float32)`` without holding it."""
+    rows = max(1, 4_000_000 // max(shape[1], 1))
+    for r in range(0, shape[0], rows):
+        rng.standard_normal((min(rows, shape[0] - r), shape[1]), dtype=np.float32)
+
+
+def _keys_weights(positions: FloatArray) -> tuple[NDArray[np.intp], FloatArray]:
+    """Base node (the second of the four) and the four Keys cubic weights (a = -0.5) at
+    fractional node ``positions``."""
     base = np.floor(positions).astype(np.intp)
     t = positions - base
     weights = np.stack(
@@ -75,137 +92,179 @@ def _keys_matrix(positions: FloatArray, n_nodes: int) -> Any:
         ],
         axis=1,
     )
-    cols = base[:, None] + np.arange(-1, 3)[None, :]
-    rows = np.repeat(np.arange(positions.size), 4)
-    return sparse.csr_matrix(
-        (weights.ravel(), (rows, cols.ravel())), shape=(positions.size, n_nodes)
-    )
+    return base, weights
 
 
-def spectral_field(
-    rng: np.random.Generator,
-    shape: tuple[int, int],
-    posting_m: float,
-    components: Sequence[tuple[float, float, float]],
-) -> Float32Array:
-    """A stationary Gaussian random field of unit variance (float32, ``shape``, ``posting_m``)
-    with the power spectrum of :func:`_spectrum` (``components = [(beta, outer_m, w)...]``).
+class LatticeField:
+    """A stationary Gaussian random field of unit variance over a grid, evaluated window by
+    window: the same value at a grid node whatever the window (tiling independent).
 
-    White noise of unit variance per pixel filtered in the Fourier domain by
-    ``sqrt(S(k)) / posting`` has the variance ``integral S d2k = 1`` whatever the grid, so the
-    statistics do not depend on the size of the area. The grid is padded by twice the largest
-    outer scale on every side, then cropped. When that padded grid would be large, the field
-    is split into a low band ``S exp(-(k/ks)^2)`` synthesised on a coarse grid (at most about
-    1024 nodes a side, ``ks`` a sixth of its node frequency) and interpolated by Keys cubic
-    convolution, plus the complementary high band on the fine grid with a small padding.
+    The field is synthesised once on a lattice that covers the whole grid plus twice the
+    largest outer scale on every side (so opposite edges are unrelated): white noise from
+    ``rng`` filtered by ``sqrt(S(k)) / spacing`` in the Fourier domain (the power spectrum
+    of :func:`_spectrum`, ``components = [(beta, outer_m, w)...]``). The lattice spacing is
+    the grid's posting (the lattice is then the grid padded by twice the outer scale), or
+    ``extent / max_nodes`` when that would be more than twice the posting (then wavelengths
+    shorter than a few lattice spacings are missing: the lattice field is what the former
+    whole-grid synthesis made of the same noise as its low band). Grid values
+    are Keys cubic interpolations of the lattice (exactly the lattice values when the spacing
+    is the posting), computed separably in a fixed order.
     """
-    import scipy.fft
 
-    n_rows, n_cols = shape
-    outer = max(c[1] for c in components)
-    extent_m = max(n_rows, n_cols) * posting_m + 4.0 * outer
-    coarse_m = extent_m / 1024.0
-    if coarse_m <= 2.0 * posting_m:  # one grid
-        pad = math.ceil(2.0 * outer / posting_m)
-        p_shape = (
-            scipy.fft.next_fast_len(n_rows + 2 * pad, real=True),
-            scipy.fft.next_fast_len(n_cols + 2 * pad, real=True),
+    def __init__(
+        self,
+        rng: np.random.Generator,
+        shape: tuple[int, int],
+        posting_m: float,
+        components: Sequence[tuple[float, float, float]],
+        *,
+        max_nodes: int = MAX_LATTICE_NODES,
+    ) -> None:
+        import scipy.fft
+
+        n_rows, n_cols = shape
+        outer = max(c[1] for c in components)
+        extent_m = max(n_rows, n_cols) * posting_m + 4.0 * outer
+        coarse_m = extent_m / max_nodes
+        if coarse_m <= 2.0 * posting_m:  # one grid, padded by twice the outer scale
+            pad = math.ceil(2.0 * outer / posting_m)
+            spacing = posting_m
+            n_lattice = tuple(scipy.fft.next_fast_len(n + 2 * pad, real=True) for n in shape)
+        else:  # a coarse lattice
+            spacing = coarse_m
+            n_lattice = tuple(
+                scipy.fft.next_fast_len(math.ceil((n * posting_m + 4.0 * outer) / coarse_m) + 8)
+                for n in shape
+            )
+        self.values = _filtered_noise(
+            rng,
+            (n_lattice[0], n_lattice[1]),
+            spacing,
+            lambda k2: np.sqrt(_spectrum(components, k2)) / np.float32(spacing),
         )
-        field = _filtered_noise(
-            rng, p_shape, posting_m, lambda k2: np.sqrt(_spectrum(components, k2)) / posting_m
-        )
-        r0, c0 = (p_shape[0] - n_rows) // 2, (p_shape[1] - n_cols) // 2
-        return np.ascontiguousarray(field[r0 : r0 + n_rows, c0 : c0 + n_cols])
+        if spacing != posting_m:
+            # the draws of the fine band of the former whole-grid synthesis: later fields of
+            # the same generator keep their noise (and a seed its large-scale relief)
+            ks = 1.0 / (6.0 * coarse_m)
+            pad = math.ceil(3.0 / (ks * posting_m))
+            _skip_normals(
+                rng, tuple(scipy.fft.next_fast_len(n + 2 * pad, real=True) for n in shape)
+            )
+        self.shape = (int(n_rows), int(n_cols))
+        self.ratio = posting_m / spacing
+        self._n = n_lattice
 
-    ks2 = np.float32((1.0 / (6.0 * coarse_m)) ** 2)
-    # low band on the coarse grid, its centre on the centre of the fine grid
-    n_coarse = [
-        scipy.fft.next_fast_len(math.ceil((n * posting_m + 4.0 * outer) / coarse_m) + 8)
-        for n in shape
-    ]
-    low = _filtered_noise(
-        rng,
-        (n_coarse[0], n_coarse[1]),
-        coarse_m,
-        lambda k2: np.sqrt(_spectrum(components, k2) * np.exp(-k2 / ks2)) / np.float32(coarse_m),
-    )
-    interp = [
-        _keys_matrix((np.arange(n) + 0.5 - 0.5 * n) * (posting_m / coarse_m) + 0.5 * nc, nc)
-        for n, nc in zip(shape, n_coarse, strict=True)
-    ]
-    field = np.asarray(interp[0] @ (interp[1] @ low.T).T, dtype=np.float32)
-    # high band on the fine grid
-    pad = math.ceil(3.0 / (math.sqrt(float(ks2)) * posting_m))
-    p_shape = (
-        scipy.fft.next_fast_len(n_rows + 2 * pad, real=True),
-        scipy.fft.next_fast_len(n_cols + 2 * pad, real=True),
-    )
-    high = _filtered_noise(
-        rng,
-        p_shape,
-        posting_m,
-        lambda k2: (
-            np.sqrt(_spectrum(components, k2) * -np.expm1(-k2 / ks2)) / np.float32(posting_m)
-        ),
-    )
-    r0, c0 = (p_shape[0] - n_rows) // 2, (p_shape[1] - n_cols) // 2
-    field += high[r0 : r0 + n_rows, c0 : c0 + n_cols]
-    return field
+    def _positions(self, index: ArrayLike, axis: int) -> FloatArray:
+        """Fractional lattice node of grid node ``index`` (centres aligned)."""
+        n = self.shape[axis]
+        if self.ratio == 1.0:  # the lattice is the grid: integer nodes, exact values
+            return np.asarray(index, np.float64) + float((self._n[axis] - n) // 2)
+        return (np.asarray(index, np.float64) + 0.5 - 0.5 * n) * self.ratio + (0.5 * self._n[axis])
+
+    def window(self, r0: int, r1: int, c0: int, c1: int) -> FloatArray:
+        """Values (float64) at grid rows ``[r0, r1)`` and columns ``[c0, c1)``."""
+        br, wr = _keys_weights(self._positions(np.arange(r0, r1), 0))
+        bc, wc = _keys_weights(self._positions(np.arange(c0, c1), 1))
+        lr0, lr1 = int(br.min()) - 1, int(br.max()) + 3
+        lc0, lc1 = int(bc.min()) - 1, int(bc.max()) + 3
+        sub = self.values[lr0:lr1, lc0:lc1].astype(np.float64)
+        cols = bc - lc0 - 1
+        along = wc[:, 0] * sub[:, cols]
+        for k in range(1, 4):
+            along += wc[:, k] * sub[:, cols + k]
+        rows = br - lr0 - 1
+        out = wr[:, 0, None] * along[rows]
+        for k in range(1, 4):
+            out += wr[:, k, None] * along[rows + k]
+        return out
 
 
-def _white_u8(rng: np.random.Generator, shape: tuple[int, int]) -> Float32Array:
-    """Uniform white noise of unit variance, float32, from random bytes (fast)."""
-    out = rng.integers(0, 256, size=shape, dtype=np.uint8).astype(np.float32)
-    out -= np.float32(127.5)
-    out *= np.float32(1.0 / 73.9)  # std of the uniform integers 0..255
+# ----------------------------------------------------------------------------- hashed noise
+@numba.njit(cache=True, nogil=True)
+def _mix(z: np.uint64) -> np.uint64:  # pragma: no cover - compiled
+    """The splitmix64 finaliser: a well-mixed 64-bit hash of ``z``."""
+    z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    return z ^ (z >> np.uint64(31))
+
+
+@numba.njit(parallel=True, cache=True, nogil=True)
+def _hashed_uniform(
+    key: np.uint64, r0: int, r1: int, c0: int, c1: int
+) -> NDArray:  # pragma: no cover - compiled
+    out = np.empty((r1 - r0, c1 - c0), np.float32)
+    scale = 3.4641016151377544 / 4294967296.0  # uniform of unit variance: sqrt(12) / 2^32
+    for i in numba.prange(r1 - r0):
+        row = _mix(key ^ np.uint64(np.int64(r0 + i) + np.int64(1 << 40)))
+        for j in range(c1 - c0):
+            h = _mix(row + np.uint64(np.int64(c0 + j) + np.int64(1 << 40)))
+            out[i, j] = np.float32((float(h >> np.uint64(32)) + 0.5) * scale - 1.7320508075688772)
     return out
 
 
-class NoisePyramid:
-    """Multi-scale noise: a Laplacian-pyramid sum of white noise at 1, 2, 4 ... 64 pixels.
+def hashed_noise(key: int, r0: int, r1: int, c0: int, c1: int) -> Float32Array:
+    """Uniform white noise of unit variance (float32) at the integer nodes ``[r0, r1) x
+    [c0, c1)`` of an unbounded lattice: a hash of ``(key, row, column)``, so any window gives
+    the same value at a node."""
+    k = np.uint64(int(_mix(np.uint64(int(key) & 0xFFFFFFFFFFFFFFFF))) & 0xFFFFFFFFFFFFFFFF)
+    return _hashed_uniform(k, int(r0), int(r1), int(c0), int(c1))
 
-    Levels 1..6 are summed at half resolution up front; each strip of the full-resolution field
-    is the 2x Gaussian upsampling (``cv2.pyrUp``) of the half-resolution rows it needs plus
-    per-pixel white noise drawn strip by strip. The result has about unit variance.
-    """
 
-    _AMPS = (0.5, 0.6, 0.7, 0.8, 0.9, 1.0, 1.0)  # level 0 (1 px) ... level 6 (64 px)
+def noise_key(seed: int, *stream: int) -> int:
+    """A 64-bit key of the hashed noise of ``seed`` and a stream (tuple of small ints)."""
+    return int(
+        np.random.SeedSequence([int(seed), *map(int, stream)]).generate_state(1, np.uint64)[0]
+    )
 
-    def __init__(self, rng: np.random.Generator, shape: tuple[int, int]) -> None:
-        import cv2
 
-        n_rows, n_cols = shape
-        levels = len(self._AMPS) - 1
-        sizes = [(-(-n_rows // 2**k), -(-n_cols // 2**k)) for k in range(levels + 1)]
-        field = np.float32(self._AMPS[levels]) * _white_u8(rng, sizes[levels])
-        for k in range(levels - 1, 0, -1):
-            h, w = sizes[k]
-            up = cv2.pyrUp(field, dstsize=(2 * field.shape[1], 2 * field.shape[0]))
-            field = up[:h, :w] + np.float32(self._AMPS[k]) * _white_u8(rng, (h, w))
-        self._half = np.ascontiguousarray(field)
-        self._rng = rng
-        self._cols = n_cols
-        # variance after upsampling, estimated on a sample: the scale to unit variance
-        sample = self._upsampled(0, min(n_rows, 512))
-        var = float(np.var(sample, dtype=np.float64)) + self._AMPS[0] ** 2
-        self._scale = np.float32(1.0 / math.sqrt(var))
+def _up2(field: Float32Array, axis: int, first: int, count: int, lo: int) -> Float32Array:
+    """2x upsampling along ``axis`` by the kernel of ``cv2.pyrUp`` ([1 4 6 4 1] / 8): output
+    node ``first + i`` (``i < count``) of the fine lattice from coarse nodes starting at
+    ``lo`` (fine node ``2 m`` sits on coarse node ``m``)."""
+    f = np.moveaxis(field, axis, 0)
+    idx = np.arange(first, first + count)
+    m = idx // 2 - lo
+    even = (idx % 2 == 0)[:, None] if f.ndim == 2 else idx % 2 == 0
+    e = (f[m - 1] + np.float32(6.0) * f[m] + f[m + 1]) * np.float32(0.125)
+    o = (f[m] + f[m + 1]) * np.float32(0.5)
+    return np.moveaxis(np.where(even, e, o), 0, axis)
 
-    def _upsampled(self, r0: int, r1: int) -> Float32Array:
-        import cv2
 
-        h1 = self._half.shape[0]
-        c0, c1 = max(r0 // 2 - 2, 0), min((r1 + 1) // 2 + 2, h1)
-        sub = self._half[c0:c1]
-        up = cv2.pyrUp(sub, dstsize=(2 * sub.shape[1], 2 * sub.shape[0]))
-        return up[r0 - 2 * c0 : r1 - 2 * c0, : self._cols]
+_PYRAMID_AMPS = (0.5, 0.6, 0.7, 0.8, 0.9, 1.0, 1.0)  # level 0 (1 px) ... level 6 (64 px)
 
-    def strip(self, r0: int, r1: int) -> Float32Array:
-        """Rows ``[r0, r1)`` of the field; call for consecutive strips in order."""
-        out = self._upsampled(r0, r1) + np.float32(self._AMPS[0]) * _white_u8(
-            self._rng, (r1 - r0, self._cols)
-        )
-        out *= self._scale
-        return out
+
+def _pyramid_raw(key: int, r0: int, r1: int, c0: int, c1: int) -> Float32Array:
+    levels = len(_PYRAMID_AMPS) - 1
+    spans = [(r0, r1, c0, c1)]
+    for _ in range(levels):  # coarse nodes each level needs: its nodes // 2, one more each side
+        a0, a1, b0, b1 = spans[-1]
+        spans.append((a0 // 2 - 1, (a1 - 1) // 2 + 2, b0 // 2 - 1, (b1 - 1) // 2 + 2))
+    a0, a1, b0, b1 = spans[levels]
+    field = np.float32(_PYRAMID_AMPS[levels]) * hashed_noise(key + levels, a0, a1, b0, b1)
+    for k in range(levels - 1, -1, -1):
+        f0, f1, g0, g1 = spans[k]
+        lo_r, lo_c = spans[k + 1][0], spans[k + 1][2]
+        field = _up2(field, 0, f0, f1 - f0, lo_r)
+        field = _up2(field, 1, g0, g1 - g0, lo_c)
+        field += np.float32(_PYRAMID_AMPS[k]) * hashed_noise(key + k, f0, f1, g0, g1)
+    return field
+
+
+@functools.cache
+def _pyramid_scale() -> np.float32:
+    """1 / standard deviation of the raw pyramid (estimated once, on a fixed window)."""
+    sample = _pyramid_raw(12345, 0, 768, 0, 768)
+    return np.float32(1.0 / math.sqrt(float(np.var(sample, dtype=np.float64))))
+
+
+def pyramid_noise(key: int, r0: int, r1: int, c0: int, c1: int) -> Float32Array:
+    """Multi-scale noise of about unit variance at pixels ``[r0, r1) x [c0, c1)``: a
+    Laplacian-pyramid sum of hashed white noise at 1, 2, 4 ... 64 pixels (each level
+    upsampled 2x by the ``pyrUp`` kernel and added to the next finer one's noise). Any
+    window gives the same value at a pixel."""
+    out = _pyramid_raw(key, r0, r1, c0, c1)
+    out *= _pyramid_scale()
+    return out
 
 
 # ----------------------------------------------------------------------------- resampling

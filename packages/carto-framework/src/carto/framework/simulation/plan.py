@@ -172,6 +172,9 @@ class SimulationOptions:
     n_gcps: int | None = None
     n_checkpoints: int | None = None
     supersample: int = 2
+    band_lines: int = 256
+    """Image lines rendered at a time (memory and progress granularity; any band size gives
+    the same scene)."""
     point_targets: bool = False
     error_sizes: tuple[tuple[str, float], ...] = ()
     """Overrides of single error sizes on top of ``errors``, e.g. ``(("attitude_bias_deg",

@@ -50,6 +50,7 @@ MAX_STEPS = 4000
 
 @numba.njit(parallel=True, cache=True, nogil=True)
 def _render_kernel(
+    line0: int,
     n_lines: int,
     n_cols: int,
     first_sample: int,
@@ -88,7 +89,7 @@ def _render_kernel(
             acc = 0.0
             count = 0
             for a in range(supersample):
-                line = i + (a + 0.5) * inv
+                line = line0 + i + (a + 0.5) * inv
                 t = interp_time(line, line_nodes, t_nodes)
                 for b in range(supersample):
                     s = k + (b + 0.5) * inv
@@ -161,6 +162,7 @@ def render_reflectance(
     if sensor.camera.array == "even":
         stagger_tan = -stagger_tan if stagger else 0.0
     return _render_kernel(
+        0,
         n_lines,
         n_cols,
         sensor.first_sample,
@@ -183,6 +185,66 @@ def render_reflectance(
         float(np.nanmax(grid)) + 1.0,
         float(np.nanmin(grid)) - 1.0,
         max_terrain_slope(grid, dx, dy, lat_c),
+        tex,
+        tx0,
+        tdx,
+        ty0,
+        tdy,
+    )
+
+
+def render_band(
+    sensor: LineScanner,
+    lines: tuple[int, int],
+    dem: object,
+    texture: object,
+    *,
+    h_range: tuple[float, float],
+    max_slope: float,
+    supersample: int = 2,
+    stagger: bool = True,
+) -> NDArray[np.float32]:
+    """Lines ``[first, last)`` of :func:`render_reflectance`, from windows of the DEM and
+    the texture that hold every ray of those lines, float32 ``(last - first, cols)``.
+
+    The ray search starts and ends at the heights ``h_range`` (widened by 1 m) and steps
+    safely for slopes up to ``max_slope`` (rise/run) whatever the windows, so a band gives
+    the pixels of the whole image rendered at once.
+    """
+    if supersample < 1:
+        raise InputError(f"supersample must be >= 1, got {supersample}")
+    grid, x0, dx, y0, dy = geographic_grid(dem.heights, dem.transform, dem.crs, "DEM")
+    t = texture.transform
+    tex, tx0, tdx, ty0, tdy = np.ascontiguousarray(texture.reflectance), t.c, t.a, t.f, t.e
+    arr = sensor_arrays(sensor)
+    stagger_tan = sensor.camera.stagger_tan if stagger else 0.0
+    if sensor.camera.array == "even":
+        stagger_tan = -stagger_tan if stagger else 0.0
+    first, last = lines
+    return _render_kernel(
+        int(first),
+        int(last - first),
+        sensor.image_shape[1],
+        sensor.first_sample,
+        stagger_tan,
+        supersample,
+        arr["line_nodes"],
+        arr["t_nodes"],
+        arr["node0"],
+        arr["spacing"],
+        arr["pos"],
+        arr["rot"],
+        arr["tan_x"],
+        arr["tan_y"],
+        arr["half"],
+        grid,
+        x0,
+        dx,
+        y0,
+        dy,
+        float(h_range[1]) + 1.0,
+        float(h_range[0]) - 1.0,
+        float(max_slope),
         tex,
         tx0,
         tdx,

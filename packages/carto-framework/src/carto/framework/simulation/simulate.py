@@ -38,7 +38,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from carto.framework.errors import InputError
-from carto.framework.files.atomic import atomic_output
 from carto.framework.files.documents import write_json_atomic
 from carto.framework.files.point_table import write_point_table
 from carto.framework.geometry import frames, orbit
@@ -48,7 +47,6 @@ from carto.framework.geometry.linescan_timing import LineTiming
 from carto.framework.geometry.trajectory import AttitudeSamples, EphemerisSamples, Trajectory
 from carto.framework.products.ancillary import Ancillary, CameraSpec, ImageSpec
 from carto.framework.products.scene import SCENE_FORMAT, SCENE_VERSION
-from carto.framework.raster.crs import utm_crs
 from carto.framework.simulation import acquisition
 from carto.framework.simulation.control import control_points
 from carto.framework.simulation.plan import (
@@ -245,46 +243,6 @@ def _radiometry(
     return np.clip(np.rint(dn), 0, DN_MAX).astype(np.uint16)
 
 
-def _blurred(texture: Any, sigma_m: float) -> Any:
-    """The texture convolved with a Gaussian of ``sigma_m`` metres on the ground."""
-    import cv2
-
-    sigma_px = sigma_m / float(texture.posting_m)
-    values = cv2.GaussianBlur(
-        np.asarray(texture.reflectance, np.float32), (0, 0), sigma_px, borderType=cv2.BORDER_REFLECT
-    )
-    return attrs.evolve(texture, reflectance=values)
-
-
-def _write_raster(path: Path, data: NDArray, **profile: Any) -> Path:
-    """Tiled, compressed GeoTIFF written atomically (images without CRS are allowed)."""
-    import warnings
-
-    import rasterio
-    from rasterio.errors import NotGeoreferencedWarning
-
-    base = {
-        "driver": "GTiff",
-        "height": data.shape[0],
-        "width": data.shape[1],
-        "count": 1,
-        "dtype": data.dtype,
-        "compress": "deflate",
-        "tiled": True,
-        "blockxsize": 256,
-        "blockysize": 256,
-    }
-    base.update(profile)
-    tags = base.pop("tags", {})
-    with atomic_output(path) as tmp, warnings.catch_warnings():
-        warnings.simplefilter("ignore", NotGeoreferencedWarning)
-        with rasterio.open(tmp, "w", **base) as dst:
-            dst.write(data, 1)
-            if tags:
-                dst.update_tags(**tags)
-    return path
-
-
 def simulate_scene(
     plan: ScenePlan,
     out_dir: str | os.PathLike[str],
@@ -294,9 +252,9 @@ def simulate_scene(
 ) -> Path:
     """Render ``plan`` into the scene folder ``out_dir``; return the path of ``scene.json``."""
     from carto.framework.raster.dem import DEM
+    from carto.framework.simulation import scene_tiles
     from carto.framework.simulation import terrain as terrain_mod
-    from carto.framework.simulation import texture as texture_mod
-    from carto.framework.simulation.render import render_reflectance
+    from carto.framework.simulation.texture import GroundTexture
 
     out = Path(out_dir)
     if options.errors not in ("realistic", "none"):
@@ -408,13 +366,15 @@ def simulate_scene(
     dem_posting = max(2.0 * plan.gsd_m, 1.0)
     with _Stage(f"terrain {terrain_name if options.dem_path is None else options.dem_path}", quiet):
         if options.dem_path is not None:
-            dem = terrain_mod.terrain_from_dem(DEM.open(options.dem_path), bounds, dem_posting)
+            terrain: Any = terrain_mod.GridTerrain(
+                terrain_mod.terrain_from_dem(DEM.open(options.dem_path), bounds, dem_posting)
+            )
             terrain_name = f"file:{Path(options.dem_path).name}"
         else:
-            dem = terrain_mod.make_terrain(
+            terrain = terrain_mod.ProceduralTerrain(
                 terrain_name, bounds, dem_posting, int(rng_terrain.integers(2**31))
             )
-    h_target = float(dem.height(*plan.target))
+    h_target = float(terrain.height(*plan.target))
     true_sensors = place(h_target if np.isfinite(h_target) else h_mid)
     if any(v.target is not None for v in views.values()):
         true_sensors = place(h_mid)  # several targets: centre on the middle height
@@ -431,37 +391,48 @@ def simulate_scene(
         )
         for name, s in true_sensors.items()
     }
+    truth_dir = out / "truth"
+    truth_dir.mkdir(parents=True, exist_ok=True)
+    with _Stage("truth DEM", quiet):
+        h_lo, h_hi, max_slope = scene_tiles.write_truth_dem(
+            truth_dir / "dem.tif", terrain, quiet=quiet
+        )
     with _Stage("ground texture", quiet):
-        texture = texture_mod.make_texture(dem, 0.5 * plan.gsd_m, int(rng_tex.integers(2**31)))
+        ground = GroundTexture(terrain, 0.5 * plan.gsd_m, int(rng_tex.integers(2**31)))
 
     # --- control points (before rendering: point targets may mark them)
     with _Stage("control points", quiet):
         gcp_rows, check_rows, targets = control_points(
-            true_sensors, dem, n_gcps, n_check, errors, rng_ctl, plan.control_min_views
+            true_sensors, terrain, n_gcps, n_check, errors, rng_ctl, plan.control_min_views
         )
     if options.point_targets and targets[0].size:
-        texture = texture_mod.add_point_targets(
-            texture, targets[0], targets[1], radius_m=2.5 * plan.gsd_m, contrast=0.8
+        ground = ground.with_targets(
+            targets[0], targets[1], radius_m=2.5 * plan.gsd_m, contrast=0.8
         )
-
     if plan.blur_sigma_px > 0:
-        texture = _blurred(texture, plan.blur_sigma_px * plan.gsd_m)
+        ground = ground.blurred(plan.blur_sigma_px * plan.gsd_m / ground.posting_m)
 
-    # --- render
+    # --- render, band by band
     for name, sensor in true_sensors.items():
         with _Stage(
             f"rendered {name} ({sensor.image_shape[1]} x {sensor.image_shape[0]} px)", quiet
         ):
-            refl = render_reflectance(sensor, dem, texture, supersample=options.supersample)
-            dn = _radiometry(refl, plan, rng_noise)
-            _write_raster(
+            scene_tiles.render_image(
                 out / specs[name].raster,
-                dn,
+                sensor,
+                terrain,
+                ground,
+                h_range=(h_lo, h_hi),
+                max_slope=max_slope,
+                supersample=options.supersample,
+                band_lines=options.band_lines,
+                to_dn=lambda refl: _radiometry(refl, plan, rng_noise),
                 tags={
                     "NBITS_USED": "10",
                     "CARTO_IMAGE": name,
                     "CARTO_ARRAYS": "odd/even staggered (raw)",
                 },
+                quiet=quiet,
             )
 
     # --- products
@@ -474,14 +445,13 @@ def simulate_scene(
                 anc_files[v.name] = path.name
         write_point_table(out / "gcps.csv", gcp_rows, precision=15)
         write_point_table(out / "checkpoints.csv", check_rows, precision=15)
-        _write_init_dem(out / "init_dem.tif", dem, rng_init)
-        truth_dir = out / "truth"
-        truth_dir.mkdir(parents=True, exist_ok=True)
-        dem.write(truth_dir / "dem.tif")
+        scene_tiles.write_init_dem(out / "init_dem.tif", terrain, rng_init)
         models = {}
         for name, sensor in true_sensors.items():
             models[name] = sensor.save(truth_dir / f"{name}.model.json").relative_to(out)
-        ortho = _write_true_ortho(truth_dir / "ortho.tif", texture, dem, plan.gsd_m)
+        ortho = scene_tiles.write_true_ortho(
+            truth_dir / "ortho.tif", ground, terrain.bounds_lonlat, plan.gsd_m, quiet=quiet
+        )
         write_json_atomic(
             truth_dir / "errors.json",
             {
@@ -542,87 +512,3 @@ def _terrain_range(name: str, dem_path: Path | None) -> tuple[float, float]:
         return float(lo), float(hi)
     preset = terrain_mod.TERRAINS[name]
     return float(preset.h_min_m), float(preset.h_max_m)
-
-
-def _write_init_dem(path: Path, dem: Any, rng: np.random.Generator) -> Path:
-    """SRTM-like coarse DEM: the truth averaged to 3 arc-seconds (~90 m), plus a bias and
-    correlated noise; ellipsoidal heights (as the truth)."""
-    import cv2
-    from affine import Affine
-
-    from carto.framework.raster.dem import DEM
-
-    west, south, east, north = dem.bounds_lonlat
-    step = 3.0 / 3600.0
-    # one cell beyond the truth on every side, so bilinear sampling covers all of it
-    x0 = (math.floor(west / step) - 1) * step
-    y0 = (math.ceil(north / step) + 1) * step
-    nx = math.ceil((east - x0) / step) + 1
-    ny = math.ceil((y0 - south) / step) + 1
-    # block average of the truth: sample it on a fine sub-grid of each 3" cell
-    k = 9
-    sub = (np.arange(k) + 0.5) / k
-    xs = x0 + (np.arange(nx)[:, None] + sub[None, :]).ravel() * step
-    ys = y0 - (np.arange(ny)[:, None] + sub[None, :]).ravel() * step
-    gx, gy = np.meshgrid(xs, ys)
-    fine = dem.height(gx.ravel(), gy.ravel()).reshape(ny * k, nx * k)
-    blocks = fine.reshape(ny, k, nx, k)
-    valid = np.isfinite(blocks).sum(axis=(1, 3))
-    coarse = np.where(valid > 0, np.nansum(blocks, axis=(1, 3)) / np.maximum(valid, 1), np.nan)
-    if np.isnan(coarse).any():  # cells beyond the truth: nearest valid cell (SRTM covers all)
-        from scipy import ndimage
-
-        _, (iy, ix) = ndimage.distance_transform_edt(np.isnan(coarse), return_indices=True)
-        coarse = coarse[iy, ix]
-    noise = cv2.GaussianBlur(rng.normal(0.0, 1.0, coarse.shape).astype(np.float32), (0, 0), 1.0)
-    noise *= 2.5 / max(float(noise.std()), 1e-6)
-    bias = float(rng.normal(0.0, 4.0))
-    heights = coarse + bias + noise.astype(np.float64)
-    init = DEM.from_array(
-        heights, Affine(step, 0.0, x0, 0.0, -step, y0), "EPSG:4326", vertical="ellipsoid"
-    )
-    return init.write(path)
-
-
-def _write_true_ortho(path: Path, texture: Any, dem: Any, gsd_m: float) -> Path:
-    """The texture (reflectance) resampled to a UTM grid at the GSD over the common footprint."""
-    import pyproj
-    from affine import Affine
-    from rasterio.warp import Resampling, reproject
-
-    west, south, east, north = dem.bounds_lonlat
-    lon_c, lat_c = 0.5 * (west + east), 0.5 * (south + north)
-    crs = utm_crs(lon_c, lat_c)
-    to_utm = pyproj.Transformer.from_crs("EPSG:4326", crs, always_xy=True)
-    xs, ys = to_utm.transform([west, east, west, east], [south, south, north, north])
-    x0 = math.floor(min(xs) / gsd_m) * gsd_m
-    y1 = math.ceil(max(ys) / gsd_m) * gsd_m
-    nx = math.ceil((max(xs) - x0) / gsd_m)
-    ny = math.ceil((y1 - min(ys)) / gsd_m)
-    dst_transform = Affine(gsd_m, 0.0, x0, 0.0, -gsd_m, y1)
-    data = np.full((ny, nx), np.nan, np.float32)
-    values = getattr(texture, "reflectance", None)
-    if values is None:
-        values = texture.values
-    reproject(
-        np.asarray(values, np.float32),
-        data,
-        src_transform=texture.transform,
-        src_crs="EPSG:4326",
-        dst_transform=dst_transform,
-        dst_crs=crs.to_wkt(),
-        resampling=Resampling.average,
-        src_nodata=np.nan,
-        dst_nodata=np.nan,
-    )
-    return _write_raster(
-        path,
-        data,
-        crs=crs.to_wkt(),
-        transform=dst_transform,
-        nodata=np.nan,
-        tags={
-            "CARTO_CONTENT": "true ground reflectance (no terrain shading "
-            "beyond the texture's), ortho on truth"
-        },
-    )

@@ -83,7 +83,7 @@ from numpy.typing import NDArray
 from carto.framework.errors import InputError
 from carto.framework.geometry.frames import WGS84_A_M, WGS84_E2
 from carto.framework.raster.dem import DEM, ELLIPSOID
-from carto.framework.simulation.fields import linear_matrix, resample, spectral_field
+from carto.framework.simulation.fields import LatticeField, linear_matrix, resample
 
 if TYPE_CHECKING:
     from affine import Affine
@@ -96,7 +96,13 @@ Bounds = tuple[float, float, float, float]
 MAX_GRID_SIDE_PX = 30000
 """Largest number of rows or columns of a grid (OpenCV's warps take at most 32767)."""
 MAX_GRID_PX = 400_000_000
-"""Largest number of pixels of a grid (a float32 texture of this size is 1.6 GB)."""
+"""Largest number of pixels of a grid held whole in memory (a float32 texture of this size is
+1.6 GB): :func:`make_terrain`, :func:`terrain_from_dem`, ``make_texture``."""
+MAX_TILED_GRID_SIDE_PX = 400_000
+MAX_TILED_GRID_PX = 20_000_000_000
+"""Limits of a grid evaluated window by window (:class:`ProceduralTerrain` and the simulator's
+texture): 20e9 pixels (about 30 full Cartosat-1 scenes' textures); only absurd areas reach
+them."""
 
 
 # ----------------------------------------------------------------------------- presets
@@ -284,7 +290,13 @@ def check_seed(seed: Any) -> int:
     return int(seed)
 
 
-def geographic_grid(bounds_lonlat: Bounds, posting_m: float) -> tuple[Affine, tuple[int, int]]:
+def geographic_grid(
+    bounds_lonlat: Bounds,
+    posting_m: float,
+    *,
+    max_side: int = MAX_GRID_SIDE_PX,
+    max_px: int = MAX_GRID_PX,
+) -> tuple[Affine, tuple[int, int]]:
     """The EPSG:4326 grid of :func:`make_terrain`: ``(transform, (rows, cols))``.
 
     The spacing is :func:`grid_spacing_deg` at the centre latitude of the bounds; the first
@@ -293,8 +305,8 @@ def geographic_grid(bounds_lonlat: Bounds, posting_m: float) -> tuple[Affine, tu
 
     Raises:
         InputError: bounds not ``(west, south, east, north)`` within -85..85 degrees of latitude
-            and 10 degrees in extent, posting not > 0, or a grid larger than
-            :data:`MAX_GRID_SIDE_PX` / :data:`MAX_GRID_PX`.
+            and 10 degrees in extent, posting not > 0, or a grid larger than ``max_side`` /
+            ``max_px`` (default :data:`MAX_GRID_SIDE_PX` / :data:`MAX_GRID_PX`).
     """
     from rasterio.transform import Affine
 
@@ -303,11 +315,11 @@ def geographic_grid(bounds_lonlat: Bounds, posting_m: float) -> tuple[Affine, tu
     dlon, dlat = grid_spacing_deg(posting, 0.5 * (south + north))
     n_cols = math.ceil((east - west) / dlon - 1e-9) + 1
     n_rows = math.ceil((north - south) / dlat - 1e-9) + 1
-    if max(n_rows, n_cols) > MAX_GRID_SIDE_PX or n_rows * n_cols > MAX_GRID_PX:
+    if max(n_rows, n_cols) > max_side or n_rows * n_cols > max_px:
         raise InputError(
             f"posting_m {posting:g} over bounds {(west, south, east, north)} makes a grid of "
-            f"{n_rows} x {n_cols} pixels, more than {MAX_GRID_SIDE_PX} per side or "
-            f"{MAX_GRID_PX} in all; use a coarser posting or a smaller area"
+            f"{n_rows} x {n_cols} pixels, more than {max_side} per side or "
+            f"{max_px:.3g} in all; use a coarser posting or a smaller area"
         )
     transform = Affine(dlon, 0.0, west - 0.5 * dlon, 0.0, -dlat, north + 0.5 * dlat)
     return transform, (n_rows, n_cols)
@@ -376,58 +388,184 @@ def _ridged_moments() -> tuple[float, float]:
     return mean, math.sqrt(float((prob * (total - mean) ** 2).sum()))
 
 
-def _ridged_multifractal(
-    rng: np.random.Generator, shape: tuple[int, int], posting_m: float, wavelength_m: float
-) -> Float32Array:
-    """Ridged multifractal noise (Musgrave), standardised to zero mean and unit variance.
+def _ridged_multifractal(fields: list[FloatArray]) -> FloatArray:
+    """Ridged multifractal noise (Musgrave) from the smooth unit fields ``g_k`` of its
+    octaves, standardised to zero mean and unit variance.
 
-    Octave ``k`` (outer scale ``wavelength_m / 2^k``) contributes ``0.5^k`` times the crest
-    signal ``exp(-|g_k|)`` of a smooth unit Gaussian field ``g_k`` (spectral exponent 6),
-    weighted by twice the previous octave's signal (clipped to 1): small crests branch off
-    the large ones, giving a network of sharp ridges with spurs between broader valleys.
+    Octave ``k`` (outer scale ``wavelength_m / 2^k``, spectral exponent 6) contributes
+    ``0.5^k`` times the crest signal ``exp(-|g_k|)``, weighted by twice the previous octave's
+    signal (clipped to 1): small crests branch off the large ones, giving a network of sharp
+    ridges with spurs between broader valleys.
     """
-    total = np.zeros(shape, np.float32)
-    signal: Float32Array | None = None
-    for k in range(_RIDGE_OCTAVES):
-        g = spectral_field(rng, shape, posting_m, [(6.0, wavelength_m / 2**k, 1.0)])
+    total = np.zeros(fields[0].shape)
+    signal: FloatArray | None = None
+    for k, g in enumerate(fields):
         current = _ridge_signal(g)
-        del g
         if signal is not None:
-            current *= np.clip(signal * np.float32(_RIDGE_GAIN), 0.0, 1.0)
-        total += np.float32(0.5**k) * current
+            current *= np.clip(signal * _RIDGE_GAIN, 0.0, 1.0)
+        total += 0.5**k * current
         signal = current
     mean, std = _ridged_moments()
-    total -= np.float32(mean)
-    total *= np.float32(1.0 / std)
-    return total
+    return (total - mean) / std
 
 
-def _terrain_heights(
-    preset: TerrainPreset, rng: np.random.Generator, shape: tuple[int, int], posting_m: float
-) -> FloatArray:
-    """Heights (float64, metres) of ``preset`` on a grid of ``shape`` at ``posting_m``."""
+def _heights_from_field(preset: TerrainPreset, z: FloatArray) -> FloatArray:
+    """The fixed law from the unit field ``z`` to heights (metres) of ``preset``."""
     from scipy.special import ndtri
 
-    beta = preset.spectral_exponent
-    components = [(beta, preset.correlation_length_m, 1.0)]
-    if preset.detail_weight > 0.0:
-        components.append((beta, preset.detail_length_m, preset.detail_weight))
-    z = spectral_field(rng, shape, posting_m, components)
-    if preset.ridge_weight > 0.0:
-        ridged = _ridged_multifractal(rng, shape, posting_m, preset.ridge_wavelength_m)
-        w = preset.ridge_weight
-        z *= np.float32((1.0 - w) / math.hypot(w, 1.0 - w))
-        z += np.float32(w / math.hypot(w, 1.0 - w)) * ridged
-        del ridged
-    z64 = z.astype(np.float64)
     s = preset.spread_sigma
     if preset.uniform_fraction > 0.0:
         q = float(ndtri(preset.uniform_fraction))
-        frac = _softclip((np.maximum(z64, q) - q) / (s - q), lower=False)
-        frac[z64 <= q] = 0.0  # exactly flat
+        frac = _softclip((np.maximum(z, q) - q) / (s - q), lower=False)
+        frac[z <= q] = 0.0  # exactly flat
     else:
-        frac = _softclip(0.5 + 0.5 * z64 / s)
+        frac = _softclip(0.5 + 0.5 * z / s)
     return preset.h_min_m + (preset.h_max_m - preset.h_min_m) * frac
+
+
+class ProceduralTerrain:
+    """A synthetic terrain of a preset, evaluated window by window on its grid.
+
+    The grid is :func:`geographic_grid` of the bounds (up to :data:`MAX_TILED_GRID_PX`
+    nodes); its heights never exist whole in memory: :meth:`window` computes any window from
+    a few bounded lattices (:class:`~carto.framework.simulation.fields.LatticeField`), with the
+    same value at a node whatever the window.
+
+    Attributes:
+        preset: the terrain preset.
+        transform, shape: the grid (EPSG:4326, pixel-is-area).
+        source: ``"terrain 'hilly' seed 3"``.
+    """
+
+    crs = "EPSG:4326"
+
+    def __init__(
+        self, name: str | TerrainPreset, bounds_lonlat: Bounds, posting_m: float, seed: int
+    ) -> None:
+        self.preset = preset = _preset(name)
+        self.transform, self.shape = geographic_grid(
+            bounds_lonlat, posting_m, max_side=MAX_TILED_GRID_SIDE_PX, max_px=MAX_TILED_GRID_PX
+        )
+        rng = np.random.default_rng(check_seed(seed))
+        posting = float(posting_m)
+        beta = preset.spectral_exponent
+        components = [(beta, preset.correlation_length_m, 1.0)]
+        if preset.detail_weight > 0.0:
+            components.append((beta, preset.detail_length_m, preset.detail_weight))
+        self._main = LatticeField(rng, self.shape, posting, components)
+        self._ridges = [
+            LatticeField(rng, self.shape, posting, [(6.0, preset.ridge_wavelength_m / 2**k, 1.0)])
+            for k in range(_RIDGE_OCTAVES if preset.ridge_weight > 0.0 else 0)
+        ]
+        self.source = f"terrain {preset.name!r} seed {int(seed)}"
+
+    @property
+    def height_range(self) -> tuple[float, float]:
+        """Bounds of the heights (the preset's range), metres."""
+        return self.preset.h_min_m, self.preset.h_max_m
+
+    @property
+    def bounds_lonlat(self) -> Bounds:
+        """``(west, south, east, north)`` of the span of the node centres."""
+        return centre_bounds(self.transform, self.shape)
+
+    def window(self, r0: int, r1: int, c0: int, c1: int) -> FloatArray:
+        """Heights (float64, metres) at rows ``[r0, r1)`` and columns ``[c0, c1)``."""
+        z = self._main.window(r0, r1, c0, c1)
+        if self._ridges:
+            w = self.preset.ridge_weight
+            norm = math.hypot(w, 1.0 - w)
+            ridged = _ridged_multifractal([f.window(r0, r1, c0, c1) for f in self._ridges])
+            z = z * ((1.0 - w) / norm) + ridged * (w / norm)
+        return _heights_from_field(self.preset, z)
+
+    def height(self, lon_deg: Any, lat_deg: Any) -> FloatArray:
+        """Bilinear height at WGS84 lon/lat (NaN outside the node centres), as
+        :meth:`DEM.height` of the whole grid."""
+        return bilinear_heights(self, lon_deg, lat_deg)
+
+    def to_dem(self) -> DEM:
+        """The whole grid as a :class:`DEM` (small areas only)."""
+        n_rows, n_cols = self.shape
+        if n_rows * n_cols > MAX_GRID_PX:
+            raise InputError(
+                f"terrain grid of {n_rows} x {n_cols} nodes is too large to hold whole "
+                f"(more than {MAX_GRID_PX}); evaluate it by windows"
+            )
+        heights = self.window(0, n_rows, 0, n_cols)
+        return DEM(heights, self.transform, "EPSG:4326", vertical=ELLIPSOID, source=self.source)
+
+
+class GridTerrain:
+    """A terrain held whole in memory (a DEM on the simulator's grid), with the interface of
+    :class:`ProceduralTerrain` (user DEMs, tests)."""
+
+    crs = "EPSG:4326"
+
+    def __init__(self, dem: DEM) -> None:
+        self.dem = dem
+        self.transform, self.shape, self.source = dem.transform, dem.shape, dem.source
+        lo, hi = np.nanmin(dem.heights), np.nanmax(dem.heights)
+        self.height_range = (float(lo), float(hi))
+
+    @property
+    def bounds_lonlat(self) -> Bounds:
+        return centre_bounds(self.transform, self.shape)
+
+    def window(self, r0: int, r1: int, c0: int, c1: int) -> FloatArray:
+        return np.array(self.dem.heights[r0:r1, c0:c1], dtype=np.float64)
+
+    def height(self, lon_deg: Any, lat_deg: Any) -> FloatArray:
+        return bilinear_heights(self, lon_deg, lat_deg)
+
+
+def centre_bounds(transform: Affine, shape: tuple[int, int]) -> Bounds:
+    n_rows, n_cols = shape
+    t = transform
+    west, north = t.c + 0.5 * t.a, t.f + 0.5 * t.e
+    return (west, north + (n_rows - 1) * t.e, west + (n_cols - 1) * t.a, north)
+
+
+def bilinear_heights(terrain: Any, lon_deg: Any, lat_deg: Any) -> FloatArray:
+    """Bilinear heights of a windowed terrain at WGS84 lon/lat (NaN outside the node
+    centres): the points are taken in groups of nearby rows, each from one window."""
+    lon, lat = np.broadcast_arrays(np.asarray(lon_deg, np.float64), np.asarray(lat_deg, np.float64))
+    shape_out = lon.shape
+    lon, lat = lon.ravel(), lat.ravel()
+    t = terrain.transform
+    n_rows, n_cols = terrain.shape
+    row = (lat - t.f) / t.e - 0.5
+    col = (lon - t.c) / t.a - 0.5
+    out = np.full(lon.size, np.nan)
+    ok = np.flatnonzero(
+        np.isfinite(row)
+        & np.isfinite(col)
+        & (row >= 0)
+        & (row <= n_rows - 1)
+        & (col >= 0)
+        & (col <= n_cols - 1)
+    )
+    if ok.size == 0:
+        return out.reshape(shape_out)
+    i = np.clip(np.floor(row[ok]).astype(np.intp), 0, max(n_rows - 2, 0))
+    j = np.clip(np.floor(col[ok]).astype(np.intp), 0, max(n_cols - 2, 0))
+    order = np.argsort(i, kind="stable")
+    start = 0
+    while start < order.size:
+        first = i[order[start]]
+        stop = int(np.searchsorted(i[order], first + 62, side="left"))
+        sel = order[start:stop]
+        r0, r1 = int(first), min(int(i[sel].max()) + 2, n_rows)
+        c0, c1 = int(j[sel].min()), min(int(j[sel].max()) + 2, n_cols)
+        h = terrain.window(r0, r1, c0, c1)
+        ii, jj = i[sel] - r0, j[sel] - c0
+        fr, fc = row[ok][sel] - i[sel], col[ok][sel] - j[sel]
+        i1, j1 = np.minimum(ii + 1, h.shape[0] - 1), np.minimum(jj + 1, h.shape[1] - 1)
+        out[ok[sel]] = (1.0 - fr) * ((1.0 - fc) * h[ii, jj] + fc * h[ii, j1]) + fr * (
+            (1.0 - fc) * h[i1, jj] + fc * h[i1, j1]
+        )
+        start = stop
+    return out.reshape(shape_out)
 
 
 def _preset(name: str | TerrainPreset) -> TerrainPreset:
@@ -459,17 +597,8 @@ def make_terrain(
         InputError: unknown terrain name (the message lists the known ones), invalid bounds,
             posting or seed.
     """
-    preset = _preset(name)
-    transform, shape = geographic_grid(bounds_lonlat, posting_m)
-    rng = np.random.default_rng(check_seed(seed))
-    heights = _terrain_heights(preset, rng, shape, float(posting_m))
-    return DEM(
-        heights,
-        transform,
-        "EPSG:4326",
-        vertical=ELLIPSOID,
-        source=f"terrain {preset.name!r} seed {int(seed)}",
-    )
+    geographic_grid(bounds_lonlat, posting_m)  # the limits of a grid held whole
+    return ProceduralTerrain(name, bounds_lonlat, posting_m, seed).to_dem()
 
 
 def terrain_from_dem(dem: DEM, bounds_lonlat: Bounds, posting_m: float) -> DEM:
@@ -540,8 +669,12 @@ def uniform_mask_from_dem(dem: DEM) -> BoolArray:
 __all__ = [
     "MAX_GRID_PX",
     "MAX_GRID_SIDE_PX",
+    "MAX_TILED_GRID_PX",
     "TERRAINS",
+    "GridTerrain",
+    "ProceduralTerrain",
     "TerrainPreset",
+    "bilinear_heights",
     "geographic_grid",
     "grid_spacing_deg",
     "make_terrain",

@@ -49,6 +49,7 @@ the full-resolution stage runs in strips of 256 rows and every intermediate is f
 
 from __future__ import annotations
 
+import copy
 import math
 from typing import TYPE_CHECKING, Any
 
@@ -59,21 +60,20 @@ from numpy.typing import ArrayLike, NDArray
 from carto.framework.arrays import as_float_arrays
 from carto.framework.errors import InputError
 from carto.framework.raster.dem import DEM, bilinear_sample, to_affine
-from carto.framework.simulation.fields import (
-    NoisePyramid,
-    linear_matrix,
-    resample,
-    spectral_field,
-)
+from carto.framework.simulation.cover import Parcels, make_roads, paint_roads
+from carto.framework.simulation.fields import LatticeField, pyramid_noise
 from carto.framework.simulation.terrain import (
+    MAX_GRID_PX,
+    MAX_TILED_GRID_PX,
+    MAX_TILED_GRID_SIDE_PX,
     Bounds,
+    GridTerrain,
+    centre_bounds,
     check_posting,
     check_seed,
     geographic_grid,
-    grid_centres,
     is_north_up_lonlat,
     radii_m,
-    uniform_mask_from_dem,
 )
 
 if TYPE_CHECKING:
@@ -84,7 +84,7 @@ FloatArray = NDArray[np.float64]
 Float32Array = NDArray[np.float32]
 BoolArray = NDArray[np.bool_]
 
-_STRIP_ROWS = 256  # rows of the full-resolution texture computed at a time
+_STRIP_PX = 2_000_000  # texture pixels computed at a time
 _COARSE = 4  # texture pixels per node of the coarse texture grid (shading, land use)
 _AMBIENT = 0.2  # sky-light share of the illumination of flat ground
 
@@ -196,179 +196,280 @@ def _smoothstep(edge0: float, edge1: float, x: Float32Array) -> Float32Array:
     return t * t * (np.float32(3.0) - np.float32(2.0) * t)
 
 
-def _parcels(
-    rng: np.random.Generator, shape: tuple[int, int], posting_m: float
-) -> tuple[list[NDArray[np.int32]], FloatArray]:
-    """Field parcels: Voronoi cells of irregular brick lattices, one lattice per ~2.5 km zone
-    (random orientation, parcel sizes 60-140 m x 30-70 m). Returns the polygons in texture
-    pixel coordinates as fixed-point (4 fractional bits) int32 ``(n, 2)`` arrays (x = col,
-    y = row) and their brightness."""
-    from scipy.spatial import Voronoi, cKDTree
-
-    n_rows, n_cols = shape
-    width_m, height_m = n_cols * posting_m, n_rows * posting_m
-    zone_m = 2500.0
-    margin_m = 400.0
-    gx = np.arange(-zone_m, width_m + 2 * zone_m, zone_m)
-    gy = np.arange(-zone_m, height_m + 2 * zone_m, zone_m)
-    zx, zy = np.meshgrid(gx, gy)
-    zones = np.column_stack([zx.ravel(), zy.ravel()])
-    zones += rng.uniform(-0.35, 0.35, zones.shape) * zone_m
-    candidates = []
-    owner = []
-    radius = 1.6 * zone_m
-    for index, (cx, cy) in enumerate(zones):
-        theta = rng.uniform(0.0, math.pi)
-        a_m, b_m = rng.uniform(60.0, 140.0), rng.uniform(30.0, 70.0)
-        n_u, n_v = math.ceil(2 * radius / (0.6 * a_m)) + 1, math.ceil(2 * radius / (0.6 * b_m)) + 1
-        u = np.cumsum(a_m * rng.uniform(0.6, 1.4, n_u)) - radius
-        v = np.cumsum(b_m * rng.uniform(0.6, 1.4, (n_u, n_v)), axis=1) - radius
-        v -= rng.uniform(0.0, b_m, (n_u, 1))
-        uu = np.broadcast_to(u[:, None], v.shape) + rng.normal(0.0, 0.08 * a_m, v.shape)
-        vv = v + rng.normal(0.0, 0.08 * b_m, v.shape)
-        keep = (np.abs(uu) <= radius) & (np.abs(vv) <= radius)
-        uu, vv = uu[keep], vv[keep]
-        c, s = math.cos(theta), math.sin(theta)
-        candidates.append(np.column_stack([cx + c * uu - s * vv, cy + s * uu + c * vv]))
-        owner.append(np.full(uu.size, index))
-    points = np.concatenate(candidates)
-    owners = np.concatenate(owner)
-    nearest = cKDTree(zones).query(points)[1]
-    points = points[nearest == owners]
-    inside = (
-        (points[:, 0] > -margin_m)
-        & (points[:, 0] < width_m + margin_m)
-        & (points[:, 1] > -margin_m)
-        & (points[:, 1] < height_m + margin_m)
-    )
-    points = points[inside]
-    vor = Voronoi(points)
-    vertices_px = vor.vertices / posting_m - 0.5  # metres from the grid corner -> centre index
-    fixed = np.round(vertices_px * 16.0)
-    polygons: list[NDArray[np.int32]] = []
-    for region_index in vor.point_region:
-        region = vor.regions[region_index]
-        if not region or -1 in region:
-            continue
-        poly = fixed[region]
-        if (
-            poly[:, 0].max() < -32
-            or poly[:, 1].max() < -32
-            or poly[:, 0].min() > 16 * (n_cols + 2)
-            or poly[:, 1].min() > 16 * (n_rows + 2)
-        ):
-            continue
-        polygons.append(poly.astype(np.int32))
-    # brightness: crops (dark), bare soil (bright), fallow / grass (between)
-    kind = rng.choice(3, size=len(polygons), p=[0.45, 0.35, 0.20])
-    low = np.array([0.12, 0.24, 0.18])[kind]
-    high = np.array([0.22, 0.40, 0.30])[kind]
-    brightness = rng.uniform(low, high)
-    return polygons, brightness
+def _linear_window(
+    grid: FloatArray,
+    first: tuple[int, int],
+    pos_r: FloatArray,
+    pos_c: FloatArray,
+    n_nodes: tuple[int, int],
+    extrapolate: bool,
+) -> FloatArray:
+    """Bilinear values of a grid (given by its window ``grid`` starting at node ``first``) at
+    fractional node positions ``pos_r x pos_c`` of the whole grid of ``n_nodes``: clamped
+    (or extended linearly) at the whole grid's edges, columns first, in a fixed order."""
+    out = []
+    for pos, n in zip((pos_r, pos_c), n_nodes, strict=True):
+        p = pos if extrapolate else np.clip(pos, 0.0, n - 1.0)
+        base = np.clip(np.floor(p).astype(np.intp), 0, max(n - 2, 0))
+        out.append((base, p - base, np.minimum(base + 1, n - 1)))
+    (br, fr, br1), (bc, fc, bc1) = out
+    cols, cols1 = bc - first[1], bc1 - first[1]
+    along = (1.0 - fc) * grid[:, cols] + fc * grid[:, cols1]
+    rows, rows1 = br - first[0], br1 - first[0]
+    return (1.0 - fr)[:, None] * along[rows] + fr[:, None] * along[rows1]
 
 
-def _roads(
-    rng: np.random.Generator, shape: tuple[int, int], posting_m: float
-) -> list[tuple[NDArray[np.int32], int, float]]:
-    """Roads and tracks as gently curving polylines: ``(points, thickness_px, reflectance)``;
-    points fixed-point (4 fractional bits) texture pixel coordinates, x = col, y = row."""
-    n_rows, n_cols = shape
-    width_m, height_m = n_cols * posting_m, n_rows * posting_m
-    n_roads = max(2, round((width_m + height_m) / 1500.0))
-    step_m = 20.0
-    n_steps = math.ceil(math.hypot(width_m, height_m) / step_m) + 2
-    roads = []
-    for _ in range(n_roads):
-        # a smooth random walk of 2 n_steps steps whose middle is near a random point
-        x0, y0 = rng.uniform(0.0, width_m), rng.uniform(0.0, height_m)
-        heading = rng.uniform(0.0, 2.0 * math.pi)
-        # heading changes: white noise smoothed over 10 steps (200 m), a few degrees per km
-        curvature = np.convolve(
-            rng.normal(0.0, math.radians(0.6), 2 * n_steps + 9), np.full(10, 0.1), "valid"
+def _upsample4(coarse: Float32Array, r0: int, r1: int, c0: int, c1: int, a0: int, b0: int):
+    """Texture pixels ``[r0, r1) x [c0, c1)`` linearly between coarse nodes (pixel ``r`` at
+    node ``r / 4 + 1``; ``coarse`` starts at node ``(a0, b0)``), columns first."""
+    out = []
+    for lo, hi, first in ((r0, r1, a0), (c0, c1, b0)):
+        idx = np.arange(lo, hi)
+        out.append((idx // _COARSE + 1 - first, (idx % _COARSE).astype(np.float32) * 0.25))
+    (nr, fr), (nc, fc) = out
+    along = (np.float32(1.0) - fc) * coarse[:, nc] + fc * coarse[:, nc + 1]
+    return (np.float32(1.0) - fr)[:, None] * along[nr] + fr[:, None] * along[nr + 1]
+
+
+class GroundTexture:
+    """The procedural ground reflectance of a terrain, computed window by window on its grid
+    (see the module docstring): the same value at a pixel whatever the window, so a scene's
+    texture never needs to exist whole.
+
+    Args:
+        terrain: a windowed terrain (:class:`~carto.framework.simulation.terrain.ProceduralTerrain`
+            or :class:`~carto.framework.simulation.terrain.GridTerrain`) on a north-up
+            EPSG:4326 grid.
+        posting_m, seed, sun_elevation_deg, sun_azimuth_deg, uniform_mask: as
+            :func:`make_texture`.
+        targets: point targets ``(lon_deg, lat_deg)`` painted as :func:`add_point_targets`
+            does, with ``target_radius_m`` and ``target_contrast``.
+        blur_sigma_px: Gaussian blur (texture pixels) applied last (0: none).
+    """
+
+    def __init__(
+        self,
+        terrain: Any,
+        posting_m: float,
+        seed: int,
+        *,
+        sun_elevation_deg: float = 55.0,
+        sun_azimuth_deg: float = 135.0,
+        uniform_mask: ArrayLike | None = None,
+        max_px: int = MAX_TILED_GRID_PX,
+    ) -> None:
+        posting = check_posting(posting_m)
+        rng = np.random.default_rng(check_seed(seed))
+        if not (0.0 < float(sun_elevation_deg) <= 90.0):
+            raise InputError(f"sun_elevation_deg must be in (0, 90], got {sun_elevation_deg!r}")
+        if not math.isfinite(float(sun_azimuth_deg)):
+            raise InputError(f"sun_azimuth_deg must be finite, got {sun_azimuth_deg!r}")
+        if uniform_mask is not None:
+            uniform_mask = np.asarray(uniform_mask)
+            if uniform_mask.shape != terrain.shape or uniform_mask.dtype != np.bool_:
+                raise InputError(
+                    f"uniform_mask must be a bool array of the DEM's shape {terrain.shape}, "
+                    f"got {uniform_mask.dtype} {uniform_mask.shape}"
+                )
+        west, south, east, north = terrain.bounds_lonlat
+        if west == east or south == north:
+            raise InputError("make_texture: the DEM must have at least 2 x 2 pixels")
+        self.terrain = terrain
+        self.posting_m = posting
+        self.transform, self.shape = geographic_grid(
+            (west, south, east, north), posting, max_side=MAX_TILED_GRID_SIDE_PX, max_px=max_px
         )
-        angle = heading + np.cumsum(curvature)
-        angle -= angle[n_steps] - heading
-        x = np.cumsum(step_m * np.cos(angle))
-        y = np.cumsum(step_m * np.sin(angle))
-        x += x0 - x[n_steps]
-        y += y0 - y[n_steps]
-        pts = np.column_stack([x / posting_m - 0.5, y / posting_m - 0.5])
-        kind = rng.choice(3, p=[0.3, 0.2, 0.5])  # asphalt, concrete, track
-        width = rng.uniform(*((5.0, 10.0), (5.0, 8.0), (2.5, 4.0))[kind])
-        albedo = rng.uniform(*((0.08, 0.13), (0.38, 0.48), (0.32, 0.42))[kind])
-        thickness = max(1, round(width / posting_m))
-        roads.append((np.round(pts * 16.0).astype(np.int32), thickness, float(albedo)))
-    return roads
+        n_rows, n_cols = self.shape
+        self._coarse_shape = (-(-(n_rows - 1) // _COARSE) + 3, -(-(n_cols - 1) // _COARSE) + 3)
+        self._sun = (float(sun_elevation_deg), float(sun_azimuth_deg))
+        self._mask = uniform_mask
+        t = terrain.transform
+        dem_posting = math.radians(-t.e) * radii_m(0.5 * (south + north))[0]
+        c_post = _COARSE * posting
+        fine = {"max_nodes": 2048}
+        self._land_use = LatticeField(rng, self._coarse_shape, c_post, [(3.6, 600.0, 1.0)], **fine)
+        self._patches = LatticeField(rng, self._coarse_shape, c_post, [(3.0, 150.0, 1.0)], **fine)
+        self._water = LatticeField(rng, terrain.shape, dem_posting, [(6.0, 4000.0, 1.0)])
+        self._level = LatticeField(rng, terrain.shape, dem_posting, [(6.0, 2000.0, 1.0)])
+        self._parcels = Parcels(int(rng.integers(2**31)), posting)
+        self._roads = make_roads(np.random.default_rng([int(seed), 7]), self.shape, posting)
+        self._noise_key = int(rng.integers(2**62))
+        self.targets: tuple[FloatArray, FloatArray] | None = None
+        self.target_radius_m = 0.0
+        self.target_contrast = 0.0
+        self.blur_sigma_px = 0.0
 
+    def with_targets(
+        self, lon_deg: ArrayLike, lat_deg: ArrayLike, radius_m: float, contrast: float
+    ) -> GroundTexture:
+        """This texture with point targets (a shallow copy sharing the caches)."""
+        other = copy.copy(self)
+        lon, lat = as_float_arrays(lon_deg, lat_deg)
+        other.targets = (lon.ravel(), lat.ravel())
+        other.target_radius_m, other.target_contrast = float(radius_m), float(contrast)
+        return other
 
-def _coarse_fields(
-    dem: DEM,
-    rng: np.random.Generator,
-    lon_c: FloatArray,
-    lat_c: FloatArray,
-    posting_c_m: float,
-    sun_elevation_deg: float,
-    sun_azimuth_deg: float,
-    uniform: BoolArray,
-) -> tuple[Float32Array, Float32Array | None]:
-    """Shading, field weight, natural-cover albedo, uniform weight (4 channels, float32) and
-    the uniform reflectance pre-multiplied by the uniform weight (or None) on the coarse grid
-    ``lat_c x lon_c``."""
-    import cv2
-    from scipy import ndimage
+    def blurred(self, sigma_px: float) -> GroundTexture:
+        """This texture convolved with a Gaussian of ``sigma_px`` texture pixels."""
+        other = copy.copy(self)
+        other.blur_sigma_px = float(sigma_px)
+        return other
 
-    # the DEM's bilinear surface at the coarse nodes, extended linearly over the margin
-    t = dem.transform
-    rows_f, cols_f = (lat_c - t.f) / t.e - 0.5, (lon_c - t.c) / t.a - 0.5
-    heights = resample(
-        dem.heights,
-        linear_matrix(rows_f, dem.shape[0], extrapolate=True),
-        linear_matrix(cols_f, dem.shape[1], extrapolate=True),
-    )
-    rows_m, cols_m = linear_matrix(rows_f, dem.shape[0]), linear_matrix(cols_f, dem.shape[1])
-    # gradient in metres: east and north
-    dlon = abs(float(lon_c[1] - lon_c[0])) if lon_c.size > 1 else 1.0
-    dlat = abs(float(lat_c[1] - lat_c[0])) if lat_c.size > 1 else 1.0
-    radii = np.array([radii_m(v) for v in lat_c])
-    dx_m = np.radians(dlon) * radii[:, 1] * np.cos(np.radians(lat_c))
-    dy_m = np.radians(dlat) * radii[:, 0]
-    d_row, d_col = np.gradient(heights)
-    hx = (d_col / dx_m[:, None]).astype(np.float32)
-    hy = (-d_row / dy_m[:, None]).astype(np.float32)
-    del d_row, d_col, heights
-    el, az = math.radians(sun_elevation_deg), math.radians(sun_azimuth_deg)
-    se, sn, su = math.sin(az) * math.cos(el), math.cos(az) * math.cos(el), math.sin(el)
-    norm = np.sqrt(np.float32(1.0) + hx * hx + hy * hy)
-    cos_i = (np.float32(su) - np.float32(se) * hx - np.float32(sn) * hy) / norm
-    shade = np.float32(_AMBIENT) + np.float32((1.0 - _AMBIENT) / su) * np.maximum(cos_i, 0.0)
-    slope_deg = np.degrees(np.arctan(np.sqrt(hx * hx + hy * hy)))
-    del hx, hy, norm, cos_i
-    # land use: fields on gentle slopes, with irregular gaps (villages, groves, scrub)
-    land_use = spectral_field(rng, slope_deg.shape, posting_c_m, [(3.6, 600.0, 1.0)])
-    field_w = _smoothstep(12.0, 4.0, slope_deg) * _smoothstep(-1.2, -0.6, land_use)
-    del land_use
-    # natural cover: dark vegetation / brighter soil patches, bare rock on steep slopes
-    patches = spectral_field(rng, slope_deg.shape, posting_c_m, [(3.0, 150.0, 1.0)])
-    natural = np.float32(0.14) + np.float32(0.10) * _smoothstep(-0.5, 0.5, patches)
-    del patches
-    rock = _smoothstep(20.0, 32.0, slope_deg)
-    natural += rock * (np.float32(0.28) - natural)
-    del rock, slope_deg
-    # uniform ground: water or sand per connected area
-    premult = None
-    uniform_w = np.zeros(field_w.shape, np.float32)
-    if uniform.any():
-        labels, n_labels = ndimage.label(uniform, structure=np.ones((3, 3), bool))
-        is_water = rng.random(n_labels + 1) < 0.75
-        level = np.where(is_water, rng.uniform(0.05, 0.09, n_labels + 1), 0.0)
-        level = np.where(is_water, level, rng.uniform(0.30, 0.40, n_labels + 1))
-        level[0] = 0.0
-        # a slightly blurred mask: smooth shorelines instead of the DEM's pixel staircase
-        blurred = cv2.GaussianBlur(uniform.astype(np.float32), (0, 0), 1.0)
-        uniform_w = resample(blurred, rows_m, cols_m).astype(np.float32)
-        premult = resample(level[labels] * blurred, rows_m, cols_m).astype(np.float32)
-    channels = np.ascontiguousarray(np.stack([shade, field_w, natural, uniform_w], axis=-1))
-    return channels, premult
+    # ------------------------------------------------------------------ windows
+    def window(self, r0: int, r1: int, c0: int, c1: int) -> tuple[Float32Array, BoolArray]:
+        """Reflectance (float32) and uniform-ground mask at pixels ``[r0, r1) x [c0, c1)``
+        (clipped to the grid)."""
+        n_rows, n_cols = self.shape
+        r0, r1, c0, c1 = max(r0, 0), min(r1, n_rows), max(c0, 0), min(c1, n_cols)
+        blur_r = math.ceil(4.0 * self.blur_sigma_px) + 1 if self.blur_sigma_px > 0 else 0
+        halo, chosen = blur_r, None
+        if self.targets is not None and self.targets[0].size:
+            chosen, reach = self._targets_near(r0, r1, c0, c1, blur_r)
+            if chosen.size:
+                halo = 2 * reach
+        if halo == 0:
+            return self._base(r0, r1, c0, c1)
+        e0, e1 = max(r0 - halo, 0), min(r1 + halo, n_rows)
+        f0, f1 = max(c0 - halo, 0), min(c1 + halo, n_cols)
+        values, mask = self._base(e0, e1, f0, f1)
+        if chosen is not None and chosen.size:
+            paint_targets(
+                values,
+                (e0, f0),
+                self.transform,
+                self.targets[0][chosen],
+                self.targets[1][chosen],
+                np.full(chosen.size, self.target_radius_m),
+                np.full(chosen.size, self.target_contrast),
+            )
+        if blur_r:
+            from scipy import ndimage
+
+            for axis in (0, 1):
+                values = ndimage.gaussian_filter1d(
+                    values, self.blur_sigma_px, axis=axis, mode="reflect", truncate=4.0
+                )
+        s = np.s_[r0 - e0 : r1 - e0, c0 - f0 : c1 - f0]
+        return np.ascontiguousarray(values[s]), np.ascontiguousarray(mask[s])
+
+    def _targets_near(
+        self, r0: int, r1: int, c0: int, c1: int, blur_r: int
+    ) -> tuple[NDArray[np.intp], int]:
+        lon, lat = self.targets  # type: ignore[misc]
+        t = self.transform
+        rows = (lat - t.f) / t.e - 0.5
+        cols = (lon - t.c) / t.a - 0.5
+        m_m = radii_m(float(np.mean(lat)))[0]
+        half = math.ceil(5.5 * self.target_radius_m / (math.radians(-t.e) * m_m)) + 2
+        reach = 2 * half + blur_r + 2
+        near = (rows > r0 - reach) & (rows < r1 + reach) & (cols > c0 - reach) & (cols < c1 + reach)
+        return np.flatnonzero(near), reach
+
+    def _base(self, r0: int, r1: int, c0: int, c1: int) -> tuple[Float32Array, BoolArray]:
+        values = np.empty((r1 - r0, c1 - c0), np.float32)
+        mask = np.empty((r1 - r0, c1 - c0), np.bool_)
+        step = max(16, _STRIP_PX // max(c1 - c0, 1))
+        for a in range(r0, r1, step):
+            b = min(a + step, r1)
+            values[a - r0 : b - r0], mask[a - r0 : b - r0] = self._strip(a, b, c0, c1)
+        return values, mask
+
+    def _coarse(self, a0: int, a1: int, b0: int, b1: int) -> tuple[list[Float32Array], bool]:
+        """Shading, field weight, natural cover, uniform weight and the pre-multiplied uniform
+        reflectance at coarse nodes ``[a0, a1) x [b0, b1)``; False when no uniform ground."""
+        from scipy import ndimage
+
+        t = self.transform
+        lon0, lat0 = t.c + 0.5 * t.a, t.f + 0.5 * t.e
+        # one node of halo for the gradient
+        lon_c = lon0 + t.a * _COARSE * (np.arange(b0 - 1, b1 + 1) - 1.0)
+        lat_c = lat0 + t.e * _COARSE * (np.arange(a0 - 1, a1 + 1) - 1.0)
+        d = self.terrain.transform
+        n_dem = self.terrain.shape
+        rows_f, cols_f = (lat_c - d.f) / d.e - 0.5, (lon_c - d.c) / d.a - 0.5
+        pad = 7  # nodes: bilinear (1), the uniform mask (2) and its blur (4)
+        w0 = max(int(np.floor(rows_f.min())) - pad, 0)
+        w1 = min(int(np.ceil(rows_f.max())) + pad + 2, n_dem[0])
+        v0 = max(int(np.floor(cols_f.min())) - pad, 0)
+        v1 = min(int(np.ceil(cols_f.max())) + pad + 2, n_dem[1])
+        dem = self.terrain.window(w0, w1, v0, v1)
+        heights = _linear_window(dem, (w0, v0), rows_f, cols_f, n_dem, True)
+        dlon, dlat = abs(t.a) * _COARSE, abs(t.e) * _COARSE
+        radii = np.array([radii_m(v) for v in lat_c])
+        dx_m = np.radians(dlon) * radii[:, 1] * np.cos(np.radians(lat_c))
+        dy_m = np.radians(dlat) * radii[:, 0]
+        d_row, d_col = np.gradient(heights)
+        hx = (d_col / dx_m[:, None]).astype(np.float32)[1:-1, 1:-1]
+        hy = (-d_row / dy_m[:, None]).astype(np.float32)[1:-1, 1:-1]
+        el, az = (math.radians(v) for v in self._sun)
+        se, sn, su = math.sin(az) * math.cos(el), math.cos(az) * math.cos(el), math.sin(el)
+        norm = np.sqrt(np.float32(1.0) + hx * hx + hy * hy)
+        cos_i = (np.float32(su) - np.float32(se) * hx - np.float32(sn) * hy) / norm
+        shade = np.float32(_AMBIENT) + np.float32((1.0 - _AMBIENT) / su) * np.maximum(cos_i, 0.0)
+        slope_deg = np.degrees(np.arctan(np.sqrt(hx * hx + hy * hy)))
+        # land use: fields on gentle slopes, with irregular gaps (villages, groves, scrub)
+        land_use = self._land_use.window(a0, a1, b0, b1).astype(np.float32)
+        field_w = _smoothstep(12.0, 4.0, slope_deg) * _smoothstep(-1.2, -0.6, land_use)
+        # natural cover: dark vegetation / brighter soil patches, bare rock on steep slopes
+        patches = self._patches.window(a0, a1, b0, b1).astype(np.float32)
+        natural = np.float32(0.14) + np.float32(0.10) * _smoothstep(-0.5, 0.5, patches)
+        rock = _smoothstep(20.0, 32.0, slope_deg)
+        natural += rock * (np.float32(0.28) - natural)
+        # uniform ground (water or sand): exactly flat DEM areas, smooth shorelines
+        if self._mask is None:
+            flat = ndimage.maximum_filter(dem, size=3, mode="nearest") == ndimage.minimum_filter(
+                dem, size=3, mode="nearest"
+            )
+            uniform = ndimage.binary_dilation(flat, structure=np.ones((3, 3), bool))
+        else:
+            uniform = self._mask[w0:w1, v0:v1]
+        zeros = np.zeros(shade.shape, np.float32)
+        if not uniform.any():
+            return [shade, field_w, natural, zeros, zeros], False
+        blurred = ndimage.gaussian_filter(
+            uniform.astype(np.float64), 1.0, mode="mirror", truncate=4.0
+        )
+        # water, or sand where a smooth field is high (about a quarter), with wide gradual
+        # transitions (shallows, wet sand) so that uniform ground stays nearly uniform
+        sand = np.clip((self._water.window(w0, w1, v0, v1) - 0.2) / 1.2, 0.0, 1.0)
+        sand = sand * sand * (3.0 - 2.0 * sand)
+        tone = np.tanh(self._level.window(w0, w1, v0, v1))
+        level = (0.07 + 0.02 * tone) * (1.0 - sand) + (0.35 + 0.05 * tone) * sand
+        inner_r, inner_c = rows_f[1:-1], cols_f[1:-1]
+        uniform_w = _linear_window(blurred, (w0, v0), inner_r, inner_c, n_dem, False)
+        premult = _linear_window(level * blurred, (w0, v0), inner_r, inner_c, n_dem, False)
+        channels = [shade, field_w, natural, uniform_w.astype(np.float32)]
+        return [*channels, premult.astype(np.float32)], True
+
+    def _strip(self, r0: int, r1: int, c0: int, c1: int) -> tuple[Float32Array, BoolArray]:
+        a0, a1 = r0 // _COARSE + 1, (r1 - 1) // _COARSE + 3
+        b0, b1 = c0 // _COARSE + 1, (c1 - 1) // _COARSE + 3
+        coarse, has_uniform = self._coarse(a0, a1, b0, b1)
+        shade, field_w, natural, uniform_w, premult = (
+            _upsample4(ch, r0, r1, c0, c1, a0, b0) for ch in coarse
+        )
+        one = np.float32(1.0)
+        n = pyramid_noise(self._noise_key, r0, r1, c0, c1)
+        # fields: parcels with boundaries and fine texture
+        land, outline = self._parcels.window(r0, r1, c0, c1)
+        land *= one + np.float32(0.10) * n
+        land *= one - np.float32(0.3 * min(1.0, 1.5 / self.posting_m)) * outline
+        # natural cover, blended by the field weight
+        natural *= one + np.float32(0.20) * n
+        land -= natural
+        land *= field_w
+        land += natural
+        paint_roads(land, r0, c0, self._roads)
+        land *= shade
+        mask = np.zeros(land.shape, np.bool_)
+        if has_uniform:
+            level = premult / np.maximum(uniform_w, np.float32(1e-6))
+            level += np.float32(0.003) * n
+            u = np.clip((uniform_w - np.float32(0.5)) * np.float32(4.0) + np.float32(0.5), 0, 1)
+            land += (level - land) * u
+            mask = u >= 0.5
+        np.clip(land, 0.0, 1.0, out=land)
+        return land, mask
 
 
 def make_texture(
@@ -397,156 +498,29 @@ def make_texture(
 
     Returns:
         A :class:`Texture` whose pixel centres start at the DEM's first pixel centre and cover
-        the DEM's pixel centres (overhanging by less than one texture pixel).
+        the DEM's pixel centres (overhanging by less than one texture pixel); the same values
+        as :class:`GroundTexture` windows.
 
     Raises:
         InputError: not a north-up EPSG:4326 DEM, nodata in the DEM, a bad posting, seed, sun
             angle or mask shape, or a texture larger than
             :data:`~carto.framework.simulation.terrain.MAX_GRID_PX`.
     """
-    import cv2
-
     dem = _check_lonlat_dem(dem, "make_texture")
-    posting = check_posting(posting_m)
-    rng = np.random.default_rng(check_seed(seed))
-    if not (0.0 < float(sun_elevation_deg) <= 90.0):
-        raise InputError(f"sun_elevation_deg must be in (0, 90], got {sun_elevation_deg!r}")
-    if not math.isfinite(float(sun_azimuth_deg)):
-        raise InputError(f"sun_azimuth_deg must be finite, got {sun_azimuth_deg!r}")
-    if uniform_mask is None:
-        uniform = uniform_mask_from_dem(dem)
-    else:
-        uniform = np.asarray(uniform_mask)
-        if uniform.shape != dem.shape or uniform.dtype != np.bool_:
-            raise InputError(
-                f"uniform_mask must be a bool array of the DEM's shape {dem.shape}, "
-                f"got {uniform.dtype} {uniform.shape}"
-            )
-    west, south, east, north = dem.bounds_lonlat
-    if west == east or south == north:
-        raise InputError(f"make_texture: DEM {dem.name} must have at least 2 x 2 pixels")
-    transform, shape = geographic_grid((west, south, east, north), posting)
-    n_rows, n_cols = shape
-
-    # coarse grid: node i <-> texture centre index _COARSE * (i - 1), one node of margin
-    lon_t, lat_t = grid_centres(transform, shape)
-    rows_c = -(-(n_rows - 1) // _COARSE) + 3
-    cols_c = -(-(n_cols - 1) // _COARSE) + 3
-    lon_c = lon_t[0] + transform.a * _COARSE * (np.arange(cols_c) - 1.0)
-    lat_c = lat_t[0] + transform.e * _COARSE * (np.arange(rows_c) - 1.0)
-    del lon_t, lat_t
-    channels, premult = _coarse_fields(
-        dem,
-        rng,
-        lon_c,
-        lat_c,
-        _COARSE * posting,
-        float(sun_elevation_deg),
-        float(sun_azimuth_deg),
-        uniform,
+    ground = GroundTexture(
+        GridTerrain(dem),
+        posting_m,
+        seed,
+        sun_elevation_deg=sun_elevation_deg,
+        sun_azimuth_deg=sun_azimuth_deg,
+        uniform_mask=uniform_mask,
+        max_px=MAX_GRID_PX,
     )
-    polygons, brightness = _parcels(rng, shape, posting)
-    roads = _roads(rng, shape, posting)
-    noise = NoisePyramid(rng, shape)
-
-    # parcels by strip, grouped by quantised brightness (one fillPoly call per level)
-    n_strips = -(-n_rows // _STRIP_ROWS)
-    levels = np.linspace(0.12, 0.40, 29)
-    level_of = np.clip(np.round((brightness - 0.12) / 0.01).astype(int), 0, levels.size - 1)
-    by_strip: list[dict[int, list[NDArray[np.int32]]]] = [{} for _ in range(n_strips)]
-    for poly, lev in zip(polygons, level_of, strict=True):
-        first = max(int(poly[:, 1].min()) // 16 - 2, 0) // _STRIP_ROWS
-        last = min(int(poly[:, 1].max()) // 16 + 2, n_rows - 1) // _STRIP_ROWS
-        for k in range(max(first, 0), min(last, n_strips - 1) + 1):
-            by_strip[k].setdefault(int(lev), []).append(poly)
-    boundary_weight = np.float32(0.3 * min(1.0, 1.5 / posting) / 255.0)
-
-    # roads cut in pieces of 16 segments, bucketed by strip like the parcels
-    road_pieces: list[list[tuple[NDArray[np.int32], int, float]]] = [[] for _ in range(n_strips)]
-    for pts, thickness, albedo in roads:
-        for i in range(0, len(pts) - 1, 16):
-            piece = pts[i : i + 17]
-            y_lo = int(piece[:, 1].min()) // 16 - thickness - 2
-            y_hi = int(piece[:, 1].max()) // 16 + thickness + 2
-            if y_hi < 0 or y_lo >= n_rows:
-                continue
-            for k in range(max(y_lo, 0) // _STRIP_ROWS, min(y_hi, n_rows - 1) // _STRIP_ROWS + 1):
-                road_pieces[k].append((piece, thickness, albedo))
-
-    reflectance = np.empty(shape, dtype=np.float32)
-    mask = np.zeros(shape, dtype=np.bool_)
-    one = np.float32(1.0)
-    for k in range(n_strips):
-        r0, r1 = k * _STRIP_ROWS, min((k + 1) * _STRIP_ROWS, n_rows)
-        rows = r1 - r0
-        warp = np.array(
-            [[1.0 / _COARSE, 0.0, 1.0], [0.0, 1.0 / _COARSE, r0 / _COARSE + 1.0]], np.float64
-        )
-        flags = cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP
-        fields = cv2.warpAffine(
-            channels, warp, (n_cols, rows), flags=flags, borderMode=cv2.BORDER_REPLICATE
-        )
-        shade, field_w, natural, uniform_w = cv2.split(fields)
-        del fields
-        n = noise.strip(r0, r1)
-        # fields: parcels with boundaries and fine texture
-        land = np.full((rows, n_cols), np.float32(0.26))
-        outline = np.zeros((rows, n_cols), np.uint8)
-        shift = np.array([0, 16 * r0], np.int32)
-        for lev, polys in by_strip[k].items():
-            cv2.fillPoly(land, polys, float(levels[lev]), cv2.LINE_8, 4, (0, -16 * r0))
-        shifted = [p - shift for ps in by_strip[k].values() for p in ps]
-        if shifted:
-            cv2.polylines(outline, shifted, True, 255, 1, cv2.LINE_AA, 4)
-        land *= one + np.float32(0.10) * n
-        land *= one - boundary_weight * outline.astype(np.float32)
-        del outline
-        # natural cover, blended by the field weight
-        natural *= one + np.float32(0.20) * n
-        land -= natural
-        land *= field_w
-        land += natural
-        del natural, field_w
-        # roads
-        cover = np.zeros((rows, n_cols), np.uint8)
-        for piece, thickness, albedo in road_pieces[k]:
-            local = piece - shift
-            cv2.polylines(cover, [local], False, 255, thickness, cv2.LINE_AA, 4)
-            y_lo = max(int(local[:, 1].min()) // 16 - thickness - 2, 0)
-            y_hi = min(int(local[:, 1].max()) // 16 + thickness + 3, rows)
-            x_lo = max(int(local[:, 0].min()) // 16 - thickness - 2, 0)
-            x_hi = min(int(local[:, 0].max()) // 16 + thickness + 3, n_cols)
-            if y_lo >= y_hi or x_lo >= x_hi:
-                continue
-            c = cover[y_lo:y_hi, x_lo:x_hi].astype(np.float32) * np.float32(1.0 / 255.0)
-            window = land[y_lo:y_hi, x_lo:x_hi]
-            window += c * (np.float32(albedo) - window)
-            cover[y_lo:y_hi, x_lo:x_hi] = 0
-        del cover
-        land *= shade
-        del shade
-        # uniform ground
-        if premult is not None:
-            level = cv2.warpAffine(
-                premult, warp, (n_cols, rows), flags=flags, borderMode=cv2.BORDER_REPLICATE
-            )
-            level /= np.maximum(uniform_w, np.float32(1e-6))
-            level += np.float32(0.003) * n
-            u = uniform_w
-            u -= np.float32(0.5)
-            u *= np.float32(4.0)
-            u += np.float32(0.5)
-            np.clip(u, 0.0, 1.0, out=u)
-            level -= land
-            level *= u
-            land += level
-            mask[r0:r1] = u >= 0.5
-            del level, u
-        np.clip(land, 0.0, 1.0, out=land)
-        reflectance[r0:r1] = land
-    reflectance.flags.writeable = False
+    n_rows, n_cols = ground.shape
+    values, mask = ground.window(0, n_rows, 0, n_cols)
+    values.flags.writeable = False
     mask.flags.writeable = False
-    return Texture(reflectance, transform, mask, posting)
+    return Texture(values, ground.transform, mask, ground.posting_m)
 
 
 # ----------------------------------------------------------------------------- targets
@@ -583,10 +557,31 @@ def add_point_targets(
         raise InputError(f"radius_m must be > 0 metres, got {np.asarray(radius_m)!r}")
     if not np.all((peak > 0.0) & (peak <= 1.0)):
         raise InputError(f"contrast must be in (0, 1], got {np.asarray(contrast)!r}")
-    rows, cols = texture.lonlat_to_pixel(lon, lat)
-    t = texture.transform
-    n_rows, n_cols = texture.shape
     out = np.array(texture.reflectance)
+    paint_targets(out, (0, 0), texture.transform, lon, lat, radius, peak, strict=True)
+    np.clip(out, 0.0, 1.0, out=out)
+    out.flags.writeable = False
+    return Texture(out, texture.transform, texture.uniform_mask, texture.posting_m)
+
+
+def paint_targets(
+    out: Float32Array,
+    first: tuple[int, int],
+    transform: Affine,
+    lon: FloatArray,
+    lat: FloatArray,
+    radius: FloatArray,
+    peak: FloatArray,
+    *,
+    strict: bool = False,
+) -> None:
+    """Paint targets (see :func:`add_point_targets`) into ``out``, the texture pixels from
+    ``first`` (row, col) of the grid of ``transform``, in place; a target whose pad is not
+    inside ``out`` raises with ``strict``, else is skipped."""
+    t = transform
+    rows = (lat - t.f) / t.e - 0.5 - first[0]
+    cols = (lon - t.c) / t.a - 0.5 - first[1]
+    n_rows, n_cols = out.shape
     for i in range(lon.size):
         inside = False
         if np.isfinite(rows[i]) and np.isfinite(cols[i]) and abs(lat[i]) < 90.0:
@@ -598,10 +593,12 @@ def add_point_targets(
             c_lo, c_hi = math.floor(cols[i]) - half_c, math.ceil(cols[i]) + half_c + 1
             inside = r_lo >= 0 and c_lo >= 0 and r_hi <= n_rows and c_hi <= n_cols
         if not inside:
+            if not strict:
+                continue
             raise InputError(
                 f"point target {i} at lon {lon[i]:.7f}, lat {lat[i]:.7f} with radius_m "
-                f"{radius[i]:g} is not inside texture bounds {texture.bounds_lonlat} "
-                "(with a pad of 5 radii)"
+                f"{radius[i]:g} is not inside texture bounds "
+                f"{centre_bounds(transform, out.shape)} (with a pad of 5 radii)"
             )
         rr = (np.arange(r_lo, r_hi) - rows[i])[:, None] / sy
         cc = (np.arange(c_lo, c_hi) - cols[i])[None, :] / sx
@@ -612,13 +609,14 @@ def add_point_targets(
         weight = np.where(rho <= 4.0, 1.0, np.cos(0.5 * np.pi * np.clip(rho - 4.0, 0.0, 1.0)) ** 2)
         blob = pad + peak[i] * np.exp(-0.5 * rho * rho)
         out[r_lo:r_hi, c_lo:c_hi] = (window + weight * (blob - window)).astype(np.float32)
-    np.clip(out, 0.0, 1.0, out=out)
-    out.flags.writeable = False
-    return Texture(out, texture.transform, texture.uniform_mask, texture.posting_m)
+    if not strict:
+        np.clip(out, 0.0, 1.0, out=out)
 
 
 __all__ = [
+    "GroundTexture",
     "Texture",
     "add_point_targets",
     "make_texture",
+    "paint_targets",
 ]
