@@ -65,15 +65,19 @@ def _nearest_two(
             k1 = -1
             # the pixel's own bucket first, then the neighbours that can hold a nearer point
             for step in range(9):
-                u = by + (0, -1, 1, 0, 0, -1, -1, 1, 1)[step]
-                v = bx + (0, 0, 0, -1, 1, -1, 1, -1, 1)[step]
-                if u < 0 or u >= nby or v < 0 or v >= nbx:
-                    continue
-                if step > 0:
+                if step == 0:
+                    u, v = by, bx
+                else:
+                    u = by - 1 + (step - 1) // 3 if step < 5 else by - 1 + step // 3
+                    v = bx - 1 + (step - 1) % 3 if step < 5 else bx - 1 + step % 3
+                    if u < 0 or u >= nby or v < 0 or v >= nbx:
+                        continue
                     ex = max((bx0 + v) * bucket - x, 0.0, x - (bx0 + v + 1) * bucket)
                     ey = max((by0 + u) * bucket - y, 0.0, y - (by0 + u + 1) * bucket)
                     if ex * ex + ey * ey >= q2:
                         continue
+                if u < 0 or u >= nby or v < 0 or v >= nbx:
+                    continue
                 b = u * nbx + v
                 for k in range(start[b], start[b + 1]):
                     dx = px[k] - x

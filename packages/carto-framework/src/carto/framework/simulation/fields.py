@@ -217,17 +217,33 @@ def noise_key(seed: int, *stream: int) -> int:
     )
 
 
-def _up2(field: Float32Array, axis: int, first: int, count: int, lo: int) -> Float32Array:
-    """2x upsampling along ``axis`` by the kernel of ``cv2.pyrUp`` ([1 4 6 4 1] / 8): output
-    node ``first + i`` (``i < count``) of the fine lattice from coarse nodes starting at
-    ``lo`` (fine node ``2 m`` sits on coarse node ``m``)."""
-    f = np.moveaxis(field, axis, 0)
-    idx = np.arange(first, first + count)
-    m = idx // 2 - lo
-    even = (idx % 2 == 0)[:, None] if f.ndim == 2 else idx % 2 == 0
-    e = (f[m - 1] + np.float32(6.0) * f[m] + f[m + 1]) * np.float32(0.125)
-    o = (f[m] + f[m + 1]) * np.float32(0.5)
-    return np.moveaxis(np.where(even, e, o), 0, axis)
+@numba.njit(parallel=True, cache=True, nogil=True)
+def _up2(
+    field: NDArray, f0: int, f1: int, g0: int, g1: int, lo_r: int, lo_c: int
+) -> NDArray:  # pragma: no cover - compiled
+    """2x upsampling by the kernel of ``cv2.pyrUp`` ([1 4 6 4 1] / 8 per axis): fine nodes
+    ``[f0, f1) x [g0, g1)`` from coarse nodes starting at ``(lo_r, lo_c)`` (fine node ``2 m``
+    sits on coarse node ``m``)."""
+    out = np.empty((f1 - f0, g1 - g0), np.float32)
+    for i in numba.prange(f1 - f0):
+        fi = f0 + i
+        m = fi // 2 - lo_r
+        for j in range(g1 - g0):
+            gj = g0 + j
+            n = gj // 2 - lo_c
+            if gj % 2 == 0:
+                a = (field[m - 1, n - 1] + 6.0 * field[m - 1, n] + field[m - 1, n + 1]) * 0.125
+                b = (field[m, n - 1] + 6.0 * field[m, n] + field[m, n + 1]) * 0.125
+                c = (field[m + 1, n - 1] + 6.0 * field[m + 1, n] + field[m + 1, n + 1]) * 0.125
+            else:
+                a = (field[m - 1, n] + field[m - 1, n + 1]) * 0.5
+                b = (field[m, n] + field[m, n + 1]) * 0.5
+                c = (field[m + 1, n] + field[m + 1, n + 1]) * 0.5
+            if fi % 2 == 0:
+                out[i, j] = (a + 6.0 * b + c) * 0.125
+            else:
+                out[i, j] = (b + c) * 0.5
+    return out
 
 
 _PYRAMID_AMPS = (0.5, 0.6, 0.7, 0.8, 0.9, 1.0, 1.0)  # level 0 (1 px) ... level 6 (64 px)
@@ -244,8 +260,7 @@ def _pyramid_raw(key: int, r0: int, r1: int, c0: int, c1: int) -> Float32Array:
     for k in range(levels - 1, -1, -1):
         f0, f1, g0, g1 = spans[k]
         lo_r, lo_c = spans[k + 1][0], spans[k + 1][2]
-        field = _up2(field, 0, f0, f1 - f0, lo_r)
-        field = _up2(field, 1, g0, g1 - g0, lo_c)
+        field = _up2(field, f0, f1, g0, g1, lo_r, lo_c)
         field += np.float32(_PYRAMID_AMPS[k]) * hashed_noise(key + k, f0, f1, g0, g1)
     return field
 

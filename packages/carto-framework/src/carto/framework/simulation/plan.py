@@ -172,7 +172,7 @@ class SimulationOptions:
     n_gcps: int | None = None
     n_checkpoints: int | None = None
     supersample: int = 2
-    band_lines: int = 256
+    band_lines: int = 512
     """Image lines rendered at a time (memory and progress granularity; any band size gives
     the same scene)."""
     point_targets: bool = False

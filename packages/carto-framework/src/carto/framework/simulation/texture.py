@@ -54,6 +54,7 @@ import math
 from typing import TYPE_CHECKING, Any
 
 import attrs
+import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -219,16 +220,31 @@ def _linear_window(
     return (1.0 - fr)[:, None] * along[rows] + fr[:, None] * along[rows1]
 
 
-def _upsample4(coarse: Float32Array, r0: int, r1: int, c0: int, c1: int, a0: int, b0: int):
+@numba.njit(parallel=True, cache=True, nogil=True)
+def _lerp4(
+    coarse: NDArray, r0: int, r1: int, c0: int, c1: int, a0: int, b0: int
+) -> NDArray:  # pragma: no cover - compiled
+    out = np.empty((r1 - r0, c1 - c0), np.float32)
+    for i in numba.prange(r1 - r0):
+        r = r0 + i
+        m = r // 4 + 1 - a0
+        fr = (r % 4) * 0.25
+        for j in range(c1 - c0):
+            c = c0 + j
+            n = c // 4 + 1 - b0
+            fc = (c % 4) * 0.25
+            top = (1.0 - fc) * coarse[m, n] + fc * coarse[m, n + 1]
+            bottom = (1.0 - fc) * coarse[m + 1, n] + fc * coarse[m + 1, n + 1]
+            out[i, j] = (1.0 - fr) * top + fr * bottom
+    return out
+
+
+def _upsample4(
+    coarse: Float32Array, r0: int, r1: int, c0: int, c1: int, a0: int, b0: int
+) -> Float32Array:
     """Texture pixels ``[r0, r1) x [c0, c1)`` linearly between coarse nodes (pixel ``r`` at
-    node ``r / 4 + 1``; ``coarse`` starts at node ``(a0, b0)``), columns first."""
-    out = []
-    for lo, hi, first in ((r0, r1, a0), (c0, c1, b0)):
-        idx = np.arange(lo, hi)
-        out.append((idx // _COARSE + 1 - first, (idx % _COARSE).astype(np.float32) * 0.25))
-    (nr, fr), (nc, fc) = out
-    along = (np.float32(1.0) - fc) * coarse[:, nc] + fc * coarse[:, nc + 1]
-    return (np.float32(1.0) - fr)[:, None] * along[nr] + fr[:, None] * along[nr + 1]
+    node ``r / 4 + 1``; ``coarse`` starts at node ``(a0, b0)``)."""
+    return _lerp4(np.ascontiguousarray(coarse, np.float32), r0, r1, c0, c1, a0, b0)
 
 
 class GroundTexture:
