@@ -7,9 +7,11 @@ attitude laws, cameras, views); :func:`simulate_scene` renders it:
 1. the **true** platform motion: the orbit propagated with two-body + J2 and sampled densely
    (every 25 ms), the attitude law plus optional jitter; Lagrange interpolation of these
    samples is the true trajectory;
-2. terrain (a procedural preset or a user DEM) and a seeded ground texture covering the views;
+2. terrain (a procedural preset or a user DEM) and a seeded ground texture covering the views,
+   both evaluated window by window (:mod:`carto.framework.simulation.scene_tiles`): memory is
+   bounded by a band of lines, not by the scene, and any band size gives the same bytes;
 3. each view rendered through its true model as the detectors see it (odd/even arrays
-   staggered), blurred, with noise, quantised to 10 bits;
+   staggered), blurred, with noise, quantised to 10 bits, band by band into its GeoTIFF;
 4. the **product**: ancillary files with ephemeris and attitude every 125 ms *as measured*,
    i.e. with the errors of :class:`~carto.framework.simulation.plan.ErrorModel` (ephemeris
    bias, attitude bias and drift, smooth higher-order attitude error, camera misalignment), the

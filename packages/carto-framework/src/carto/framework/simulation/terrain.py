@@ -30,22 +30,24 @@ Terrain synthesis (:func:`make_terrain`)
     A stationary Gaussian random field ``z`` of unit variance with the power spectral density
     ``S(k) ~ (k^2 + k0^2)^(-beta/2)`` (``k`` in cycles per metre, ``k0 = 1 /
     correlation_length_m``, ``beta = spectral_exponent``), optionally plus a smaller-scale
-    component: white noise from the seeded generator filtered by ``sqrt(S(k)) / posting`` in
-    the Fourier domain (:func:`carto.framework.simulation.fields.spectral_field`). ``S`` is
-    normalised in continuous wavenumber, so the statistics are the same whatever the posting
-    and the size of the area. The field is synthesised on a grid
-    padded by twice the correlation length on every side and cropped, so its opposite edges
-    are unrelated (no wrap-around); when that grid would be large, wavelengths longer than
-    ~6 coarse nodes are synthesised on a coarse grid (<= ~1024 nodes a side) and interpolated
-    by Keys cubic convolution, the rest on the fine grid (the two spectral bands are
-    complementary). Hills and mountains mix in ridged multifractal noise (four octaves of
-    crests ``exp(-|g|)`` along the zero lines of smooth fields, each octave weighted by the one
-    before): a network of sharp ridges with spurs. ``z`` is mapped to heights by a fixed
-    (not per-area) law: ``[-s, s]`` standard deviations (``s = spread_sigma``, 3) map
-    linearly onto ``[h_min_m, h_max_m]`` with a smooth tanh saturation of the outer quarter at
-    both ends, so heights never leave the preset's range. Presets with a ``uniform_fraction``
-    clamp ``z`` from below at that quantile of the unit normal: those areas (water, sand) are
-    exactly flat at ``h_min_m``, and the clamped range ``[q, s]`` maps onto the height range.
+    component: white noise from the seeded generator filtered by ``sqrt(S(k)) / spacing`` in the
+    Fourier domain (:class:`carto.framework.simulation.fields.LatticeField`). ``S`` is
+    normalised in continuous wavenumber, so the statistics are the same whatever the posting and
+    the size of the area. The field is synthesised once on a lattice that covers the grid padded
+    by twice the correlation length on every side, so its opposite edges are unrelated (no
+    wrap-around): the grid itself when that is small, else a coarse lattice of at most ~1024
+    nodes a side (the former low band; wavelengths shorter than a few coarse nodes, a few per
+    cent of the slope variance, are missing), and any window of the grid is its Keys cubic
+    interpolation (:class:`ProceduralTerrain`: a scene's DEM never exists whole, and a node has
+    the same height whatever the window). Hills and mountains mix in ridged multifractal noise
+    (four octaves of crests ``exp(-|g|)`` along the zero lines of smooth fields, each octave
+    weighted by the one before): a network of sharp ridges with spurs. ``z`` is mapped to
+    heights by a fixed (not per-area) law: ``[-s, s]`` standard deviations (``s =
+    spread_sigma``, 3) map linearly onto ``[h_min_m, h_max_m]`` with a smooth tanh saturation of
+    the outer quarter at both ends, so heights never leave the preset's range. Presets with a
+    ``uniform_fraction`` clamp ``z`` from below at that quantile of the unit normal: those areas
+    (water, sand) are exactly flat at ``h_min_m``, and the clamped range ``[q, s]`` maps onto
+    the height range.
 
     Statistics on 12 km x 12 km at 5 m posting, seed 1 (slopes by central differences over
     the ground distances; over 10 seeds of 20 km x 20 km at 50 m the heights span 0.75-0.96
@@ -63,8 +65,10 @@ Terrain synthesis (:func:`make_terrain`)
     with the seed (at 5 m, p95 29-47 deg for mountains, 1.3-2.7 deg for plains). Slopes grow
     slowly with finer postings (mountains p95 37 deg at 50 m, 42 deg at 5 m).
 
-Memory and speed (2 cores): :func:`make_terrain` on 2400 x 2400 pixels (12 km at 5 m) takes
-0.3-1.7 s (mountains, with five fields, the slowest) and about 170 MB besides the DEM.
+The table was measured with the former whole-grid synthesis (the same large-scale relief for a
+seed; the tests bound the same statistics). Memory: the lattices of a terrain take at most
+~5 x 4 MB (mountains), whatever the area; a window costs about 100 bytes per node while it
+is computed.
 """
 
 from __future__ import annotations
