@@ -8,7 +8,6 @@ import pytest
 from carto.framework import get_registry
 from carto.framework.errors import InputError
 from carto.framework.geometry import frames
-from carto.framework.products.scene import Scene
 from carto.framework.raster.dem import DEM
 from carto.framework.raster.images import read_raster
 from carto.ior.refine import (
@@ -18,21 +17,6 @@ from carto.ior.refine import (
     refine_dem,
     regularise,
 )
-from tests.scenes import simulate
-
-
-@pytest.fixture(scope="module")
-def hilly(tmp_path_factory):
-    return Scene.open(
-        simulate(
-            "cartosat1-pair",
-            tmp_path_factory.mktemp("ior"),
-            seed=2,
-            size=(500, 500),
-            n_checkpoints=5,
-            terrain="hilly",
-        )
-    )
 
 
 def _horizontal_shift(sensor, lon, lat, h, e):

@@ -19,7 +19,7 @@ from carto.framework.errors import InputError
 from carto.framework.geometry.sensor import Sensor
 from carto.framework.matching.base import Matcher
 from carto.framework.raster.dem import DEM, MIN_DEM_POSTS
-from carto.framework.raster.images import check_image
+from carto.framework.raster.image_source import as_image_source, check_image_source
 from carto.ior.refine import IORResult, IORSettings, refine_dem
 
 _SETTINGS = {f.name for f in attrs.fields(IORSettings)}
@@ -50,7 +50,7 @@ def ior_product(result: IORResult) -> DEMProduct:
     ]
     quality = [
         QualityLayer("score", "correlation score", result.score),
-        QualityLayer("valid", "valid match (1) or not (0)", result.valid.astype(np.float32)),
+        QualityLayer("valid", "valid match (1) or not (0)", _as_float(result.valid)),
     ]
     return DEMProduct(
         dem=result.dem,
@@ -60,6 +60,7 @@ def ior_product(result: IORResult) -> DEMProduct:
         quality=quality,
         iterations=iterations,
         converged=result.converged,
+        failed_tiles=result.failed_tiles,
         matched_fraction=(
             result.iterations[-1].matched_percent / 100.0 if result.iterations else None
         ),
@@ -69,6 +70,15 @@ def ior_product(result: IORResult) -> DEMProduct:
             "init_dem_filled_percent": round(100.0 * result.init_filled, 2),
         },
     )
+
+
+def _as_float(layer: Any) -> Any:
+    """A 0/1 layer as float32 (tiled layers are converted when they are read)."""
+    from carto.framework.raster.tiled_layer import TiledLayer
+
+    if isinstance(layer, TiledLayer):
+        return attrs.evolve(layer, dtype=np.float32, fill=0.0)
+    return np.asarray(layer, np.float32)
 
 
 class IORGenerator(DEMGenerator):
@@ -83,7 +93,8 @@ class IORGenerator(DEMGenerator):
         """``images``: the left and right prepared raw images (2-D arrays);
         ``sensors``: their models. Options: ``init_dem`` (a :class:`DEM`, required),
         ``matcher`` (a matcher with dense matching, default ``"ncc"``), ``progress``
-        (callable taking a line), ``scheduler`` (see :func:`refine_dem`) and the fields of
+        (callable taking a line), ``scheduler``, ``work_dir``, ``keep_failed_tiles`` (see
+        :func:`refine_dem`) and the fields of
         :class:`IORSettings` (``posting_m``, ``ortho_res_m``, ``crs``, ``max_iterations``
         ...)."""
         if len(images) != 2 or len(sensors) != 2:
@@ -112,14 +123,17 @@ class IORGenerator(DEMGenerator):
             )
         progress = options.pop("progress", None)
         scheduler = options.pop("scheduler", None)
+        work_dir = options.pop("work_dir", None)
+        keep_failed = bool(options.pop("keep_failed_tiles", False))
         unknown = sorted(set(options) - _SETTINGS)
         if unknown:
             known = ", ".join(sorted(_SETTINGS))
             raise InputError(f"ior: unknown option(s) {', '.join(unknown)} (known: {known})")
         settings = IORSettings(**{k: v for k, v in options.items() if v is not None})
-        left, right = (np.asarray(i) for i in images)
+        left, right = (as_image_source(i) for i in images)
         for side, image, sensor in (("left", left, sensors[0]), ("right", right, sensors[1])):
-            check_image(image, f"ior: {side} image ({getattr(sensor, 'name', None) or side})")
+            name = f"ior: {side} image ({getattr(sensor, 'name', None) or side})"
+            check_image_source(image, name)
         result = refine_dem(
             left,
             right,
@@ -130,5 +144,7 @@ class IORGenerator(DEMGenerator):
             progress,
             scheduler,
             matcher=matcher,
+            work_dir=work_dir,
+            keep_failed_tiles=keep_failed,
         )
         return ior_product(result)

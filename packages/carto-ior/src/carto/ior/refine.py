@@ -37,11 +37,14 @@ the regularisation then runs on the assembled DEM grid.
 
 from __future__ import annotations
 
+import contextlib
 import functools
-import math
+import os
+import tempfile
 import time
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from pathlib import Path
 from typing import Any
 
 import attrs
@@ -50,17 +53,20 @@ from numpy.typing import NDArray
 
 from carto.framework.errors import InputError
 from carto.framework.geometry.sensor import Sensor
-from carto.framework.imaging.ortho import orthorectify
 from carto.framework.imaging.ortho_grid import OrthoGrid, check_grid_size, footprint_box
-from carto.framework.matching.base import DenseSettings, Matcher
+from carto.framework.matching.base import Matcher
 from carto.framework.raster.dem import DEM, ELLIPSOID
-from carto.framework.raster.dem_measures import fill_voids
 from carto.ior.settings import IORSettings, option_label
+from carto.ior.start import StartingSurface, seen_by_both, starting_surface
+from carto.ior.tiles import NODE_LAYERS, ORTHO_LAYERS, TileJob, refine_tile, run_tile, tile_arrays
+from carto.ior.workspace import RunState, Workspace
 
 __all__ = [
     "IORResult",
     "IORSettings",
     "IterationReport",
+    "StartingSurface",
+    "TileFailure",
     "b_over_h",
     "base_direction",
     "first_order_height_change",
@@ -111,8 +117,11 @@ class IORResult:
     Attributes:
         dem: the refined DEM (ellipsoidal heights, NaN outside the common area).
         dem_grid, ortho_grid: the grids of the DEM and of the ortho-images.
-        ortho_left, ortho_right: float32 ortho-images on the final DEM (NaN = no data).
-        score, valid: the last matching's correlation score and validity, per ortho pixel.
+        ortho_left, ortho_right: float32 ortho-images on the final DEM (NaN = no data):
+            arrays, or tiles in the run's work folder
+            (:class:`~carto.framework.raster.tiled_layer.TiledLayer`).
+        score, valid: the last matching's correlation score and validity, per ortho pixel
+            (arrays or tiled layers).
         iterations: one report per iteration.
         converged: the mismatch fell below the threshold.
         b_over_h: base-to-height ratio at the scene centre.
@@ -120,20 +129,23 @@ class IORResult:
             height.
         init_filled: share of that footprint whose starting height was filled (voids of
             the initial DEM, :func:`starting_surface`).
+        failed_tiles: the tiles that failed (``"tile R,C: cause"``; their nodes have no
+            height).
     """
 
     dem: DEM
     dem_grid: OrthoGrid
     ortho_grid: OrthoGrid
-    ortho_left: NDArray[np.float32]
-    ortho_right: NDArray[np.float32]
-    score: NDArray[np.float32]
-    valid: NDArray[np.bool_]
+    ortho_left: Any
+    ortho_right: Any
+    score: Any
+    valid: Any
     iterations: tuple[IterationReport, ...]
     converged: bool
     b_over_h: float
     init_coverage: float = 1.0
     init_filled: float = 0.0
+    failed_tiles: tuple[str, ...] = ()
 
 
 def _grids(
@@ -213,117 +225,6 @@ def _grids(
     return dem_grid, ortho_grid, k
 
 
-@attrs.frozen
-class StartingSurface:
-    """The starting heights on the DEM grid and what the initial DEM gave.
-
-    Attributes:
-        heights: heights of every DEM node (no NaN): the initial DEM's, its voids filled.
-        coverage: share of the images' common footprint where the initial DEM has a height.
-        filled: share of the footprint whose starting height was filled (interpolated).
-        footprint: share of the DEM grid's nodes that both images see.
-    """
-
-    heights: FloatArray = attrs.field(eq=False)
-    coverage: float
-    filled: float
-    footprint: float
-
-
-def _seen_by_both(
-    sensors: tuple[Sensor, Sensor], lon: FloatArray, lat: FloatArray, h: FloatArray
-) -> NDArray[np.bool_]:
-    """Whether both images see the ground points (inside both images' extents)."""
-    inside = np.ones(lon.shape, bool)
-    for sensor in sensors:
-        n_l, n_s = sensor.image_shape
-        with warnings.catch_warnings(), np.errstate(invalid="ignore"):
-            warnings.simplefilter("ignore", RuntimeWarning)
-            line, sample = sensor.ground_to_image(lon, lat, h)
-            line, sample = np.asarray(line), np.asarray(sample)
-            inside &= (line >= 0) & (line <= n_l) & (sample >= 0) & (sample <= n_s)
-    return inside
-
-
-def _nearest_post_valid(dem: DEM, lon: FloatArray, lat: FloatArray) -> NDArray[np.bool_]:
-    """Whether the post of ``dem`` nearest to each point exists and holds a height."""
-    row, col = dem.lonlat_to_pixel(lon, lat)
-    n_rows, n_cols = dem.shape
-    with np.errstate(invalid="ignore"):
-        inside = (row > -0.5) & (row < n_rows - 0.5) & (col > -0.5) & (col < n_cols - 0.5)
-    r = np.clip(np.rint(np.where(inside, row, 0)), 0, n_rows - 1).astype(np.intp)
-    c = np.clip(np.rint(np.where(inside, col, 0)), 0, n_cols - 1).astype(np.intp)
-    return inside & np.isfinite(dem.heights[r, c])
-
-
-_FOOTPRINT_SAMPLES = 250_000  # nodes at most on which the footprint and coverage are measured
-
-
-def starting_surface(
-    init_dem: DEM,
-    grid: OrthoGrid,
-    sensors: tuple[Sensor, Sensor],
-    min_coverage: float = 0.75,
-) -> StartingSurface:
-    """The starting heights of IOR on ``grid``: the initial DEM, its voids (and the nodes just
-    outside it) filled by GDAL's inverse-distance interpolation
-    (:func:`~carto.framework.raster.dem_measures.fill_voids`), so the
-    first ortho-images have no holes and the first heights no jumps.
-
-    Raises:
-        InputError: the initial DEM gives a height at less than ``min_coverage`` of the
-            images' common footprint (mostly void, or a tile of another place).
-    """
-    rows, cols = np.mgrid[0 : grid.shape[0], 0 : grid.shape[1]]
-    lon, lat = grid.lonlat(rows, cols)
-    raw = init_dem.height(lon, lat)
-    covered = np.isfinite(raw)
-    step = max(1, math.ceil(math.sqrt(raw.size / _FOOTPRINT_SAMPLES)))
-    pick = (slice(None, None, step), slice(None, None, step))
-    h_mid = float(np.nanmedian(raw)) if covered.any() else float(np.nanmedian(init_dem.heights))
-    h_fp = np.where(covered[pick], raw[pick], h_mid)
-    seen = _seen_by_both(sensors, lon[pick], lat[pick], h_fp)
-    if not seen.any():  # a sliver: measure over the whole grid
-        seen = np.ones_like(seen)
-    # coverage: the nearest post has a height (bilinear sampling would also lose the ring of
-    # cells around each void, which overstates a void of a coarse DEM)
-    post = _nearest_post_valid(init_dem, lon[pick], lat[pick])
-    coverage = float(post[seen].mean())
-    if coverage < min_coverage:
-        raise InputError(
-            f"dem: initial DEM {init_dem.name} covers {100.0 * coverage:.0f} % of the images' "
-            f"footprint (at least {100.0 * min_coverage:.0f} % needed: a DEM mostly void, or "
-            "a tile of another place; check the file, or start from --init-height M)"
-        )
-    heights = raw
-    if not covered.all():
-        bounds = (float(lon.min()), float(lat.min()), float(lon.max()), float(lat.max()))
-        filled_dem, _ = fill_voids(init_dem, bounds)
-        heights = np.where(covered, raw, filled_dem.height(lon, lat))
-        still = ~np.isfinite(heights)
-        if still.any():  # beyond the initial DEM: fill on the grid itself
-            from rasterio.fill import fillnodata
-
-            heights = fillnodata(
-                np.where(still, 0.0, heights),
-                mask=(~still).astype(np.uint8),
-                max_search_distance=float(math.hypot(*heights.shape)) + 1.0,
-                smoothing_iterations=0,
-            )
-        heights = np.where(np.isfinite(heights), heights, h_mid)
-    filled = float((~post & seen).sum()) / max(int(seen.sum()), 1)
-    return StartingSurface(np.asarray(heights, np.float64), coverage, filled, float(seen.mean()))
-
-
-def _dem_on(grid: OrthoGrid, heights: FloatArray) -> DEM:
-    return DEM.from_array(
-        np.where(np.isfinite(heights), heights, np.nanmedian(heights)),
-        grid.transform,
-        grid.crs.to_wkt(),
-        vertical=ELLIPSOID,
-    )
-
-
 def base_direction(
     left: Sensor, right: Sensor, lon: float, lat: float, h: float
 ) -> tuple[float, FloatArray]:
@@ -350,139 +251,7 @@ def b_over_h(left: Sensor, right: Sensor, lon: float, lat: float, h: float) -> f
     return base_direction(left, right, lon, lat, h)[0]
 
 
-def _block_mean(values: NDArray, k: int, shape: tuple[int, int]) -> FloatArray:
-    """Mean of the finite values of each ``k x k`` block (NaN for an empty block)."""
-    v = np.asarray(values, np.float64)[: shape[0] * k, : shape[1] * k]
-    blocks = v.reshape(shape[0], k, shape[1], k)
-    finite = np.isfinite(blocks)
-    count = finite.sum(axis=(1, 3))
-    total = np.where(finite, blocks, 0.0).sum(axis=(1, 3))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(count > 0, total / np.maximum(count, 1), np.nan)
-
-
-@attrs.frozen(eq=False)
-class TileResult:
-    """What :func:`refine_tile` returns for its interior nodes: the height each matched node
-    should have (NaN: no valid match), the node offsets right minus left (ortho pixels, rows
-    and columns), whether both images cover the node, and the ortho-images and matching
-    layers of the tile interior."""
-
-    rows: slice
-    cols: slice
-    new_height: FloatArray
-    d_row_px: FloatArray
-    d_col_px: FloatArray
-    covered: NDArray[np.bool_]
-    ortho_left: NDArray[np.float32]
-    ortho_right: NDArray[np.float32]
-    score: NDArray[np.float32]
-    valid: NDArray[np.bool_]
-
-
-def _default_matcher() -> Matcher:
-    from carto.framework.matching.ncc_matcher import NCCMatcher
-
-    return NCCMatcher()
-
-
-def refine_tile(
-    images: tuple[NDArray, NDArray],
-    sensors: tuple[Sensor, Sensor],
-    heights: FloatArray,
-    dem_grid: OrthoGrid,
-    k: int,
-    rows: slice,
-    cols: slice,
-    overlap: int,
-    settings: IORSettings,
-    levels: int | None = None,
-    guess: tuple[float, float] = (0.0, 0.0),
-    matcher: Matcher | None = None,
-) -> TileResult:
-    """One tile of one iteration: orthos on the current DEM, dense matching, intersection.
-
-    ``heights`` is the whole current DEM grid (the tile reads its window plus ``overlap``
-    nodes around it); the result covers ``rows, cols`` (DEM node slices) only.
-    """
-    from carto.framework.geometry.intersection import intersect_sensors
-
-    n_r, n_c = dem_grid.shape
-    r0, r1 = max(0, rows.start - overlap), min(n_r, rows.stop + overlap)
-    c0, c1 = max(0, cols.start - overlap), min(n_c, cols.stop + overlap)
-    sub = dem_grid.window(r0, c0, r1 - r0, c1 - c0)
-    dem = _dem_on(sub, heights[r0:r1, c0:c1])
-    t = sub.transform
-    from affine import Affine
-
-    ogrid = OrthoGrid(
-        sub.crs, Affine(t.a / k, 0.0, t.c, 0.0, t.e / k, t.f), ((r1 - r0) * k, (c1 - c0) * k)
-    )
-    left, right = sensors
-    ortho = [orthorectify(img, s, ogrid, dem) for img, s in zip(images, sensors, strict=True)]
-    field = (matcher or _default_matcher()).match_dense(
-        ortho[0],
-        ortho[1],
-        settings=DenseSettings(
-            levels=settings.levels if levels is None else levels,
-            guess=guess,
-            window=settings.window,
-            min_score=settings.min_score,
-        ),
-    )
-    # node offsets: the mean of the valid offsets of the node's k x k ortho pixels
-    shape = (r1 - r0, c1 - c0)
-    d_row = _block_mean(field.d_row, k, shape)
-    d_col = _block_mean(field.d_col, k, shape)
-    covered = np.isfinite(_block_mean(ortho[0], k, shape)) & np.isfinite(
-        _block_mean(ortho[1], k, shape)
-    )
-    ok = np.isfinite(d_row) & np.isfinite(d_col) & covered
-    nr, nc = np.nonzero(ok)
-    # left ray: the node's ground point on the current DEM; right ray: the matched position
-    h_node = heights[r0:r1, c0:c1][nr, nc]
-    lon_l, lat_l = sub.lonlat(nr, nc)
-    line_l, sample_l = left.ground_to_image(lon_l, lat_l, h_node)
-    rr = (nr + 0.5) * k - 0.5 + d_row[nr, nc]  # ortho pixel index of the match
-    cc = (nc + 0.5) * k - 0.5 + d_col[nr, nc]
-    lon_r, lat_r = ogrid.lonlat(rr, cc)
-    h_r = dem.height(lon_r, lat_r)
-    line_r, sample_r = right.ground_to_image(lon_r, lat_r, h_r)
-    h_lo = float(np.nanmin(heights)) - 500.0
-    h_hi = float(np.nanmax(heights)) + 500.0
-    inter = intersect_sensors(
-        [left, right],
-        np.stack([line_l, line_r]),
-        np.stack([sample_l, sample_r]),
-        h_range_m=(h_lo, h_hi),
-    )
-    lon_p, lat_p, h_p = inter.lon_deg, inter.lat_deg, inter.h_m
-    # back to the node: the intersection lies on the left ray, a little off the node
-    # (horizontally); remove the height change of that offset along the current surface
-    x_p, y_p = sub.map_xy(lon_p, lat_p)
-    x_n, y_n = sub.xy(nr, nc)
-    g_row, g_col = np.gradient(heights[r0:r1, c0:c1])
-    px, py = sub.resolution
-    slope_x = g_col[nr, nc] / px
-    slope_y = -g_row[nr, nc] / py
-    new = np.full(shape, np.nan)
-    new[nr, nc] = h_p - slope_x * (x_p - x_n) - slope_y * (y_p - y_n)
-    ir = slice(rows.start - r0, rows.stop - r0)
-    ic = slice(cols.start - c0, cols.stop - c0)
-    orr = slice(ir.start * k, ir.stop * k)
-    occ = slice(ic.start * k, ic.stop * k)
-    return TileResult(
-        rows,
-        cols,
-        new[ir, ic],
-        d_row[ir, ic],
-        d_col[ir, ic],
-        covered[ir, ic],
-        ortho[0][orr, occ],
-        ortho[1][orr, occ],
-        field.score[orr, occ],
-        field.valid[orr, occ],
-    )
+_MEDIAN_ROWS = 256  # DEM rows whose 5 x 5 local median is taken at once
 
 
 def regularise(
@@ -500,9 +269,13 @@ def regularise(
     if not valid.any():
         return heights.copy(), valid
     padded = np.pad(np.where(valid, dh, np.nan), 2, mode="edge")
+    local = np.empty_like(dh)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
-        local = np.nanmedian(sliding_window_view(padded, (5, 5)).reshape(*dh.shape, 25), axis=-1)
+        for r0 in range(0, dh.shape[0], _MEDIAN_ROWS):  # in blocks: memory of 25 x a block
+            r1 = min(r0 + _MEDIAN_ROWS, dh.shape[0])
+            view = sliding_window_view(padded[r0 : r1 + 4], (5, 5))
+            local[r0:r1] = np.nanmedian(view.reshape(r1 - r0, dh.shape[1], 25), axis=-1)
     resid = dh - local
     r = resid[np.isfinite(resid)]
     nmad = 1.4826 * float(np.median(np.abs(r - np.median(r)))) if r.size else 0.0
@@ -523,94 +296,236 @@ def regularise(
     return heights + update, inlier
 
 
+class TileFailure(InputError):
+    """Tiles of an iteration failed after their retries (the cause of the first, and how
+    many)."""
+
+
+def _tile_plan(
+    sensors: tuple[Sensor, Sensor], grid: OrthoGrid, heights: FloatArray, tile_n: int
+) -> list[tuple[slice, slice]]:
+    """The tiles (node slices) that both images see: each tile's nodes sampled on an 9 x 9
+    lattice (edges included) at the starting heights; tiles beyond the common footprint get
+    no task."""
+    n_r, n_c = grid.shape
+    tiles = [
+        (slice(r, min(n_r, r + tile_n)), slice(c, min(n_c, c + tile_n)))
+        for r in range(0, n_r, tile_n)
+        for c in range(0, n_c, tile_n)
+    ]
+    rr, cc, owner = [], [], []
+    for k, (rows, cols) in enumerate(tiles):
+        r = np.unique(np.linspace(rows.start, rows.stop - 1, 9).round().astype(int))
+        c = np.unique(np.linspace(cols.start, cols.stop - 1, 9).round().astype(int))
+        gr, gc = np.meshgrid(r, c, indexing="ij")
+        rr.append(gr.ravel())
+        cc.append(gc.ravel())
+        owner.append(np.full(gr.size, k))
+    rows_all, cols_all, who = np.concatenate(rr), np.concatenate(cc), np.concatenate(owner)
+    lon, lat = grid.lonlat(rows_all, cols_all)
+    seen = seen_by_both(sensors, lon, lat, heights[rows_all, cols_all])
+    keep = np.zeros(len(tiles), bool)
+    keep[np.unique(who[seen])] = True
+    if not keep.any():  # let matching say what is wrong
+        keep[:] = True
+    return [t for t, k in zip(tiles, keep, strict=True) if k]
+
+
+def _run_tiles(scheduler: Any, tasks: list[Any], desc: str, keys: list[str]) -> list[Any]:
+    """Run tile tasks on a :class:`~carto.framework.parallel.engine.TileEngine` (with its
+    progress bar) or on any callable scheduler (results in order)."""
+    run = getattr(scheduler, "run", None)
+    if run is not None:
+        return list(run(tasks, desc=desc, keys=keys))
+    return list(scheduler(tasks))
+
+
+@contextlib.contextmanager
+def _work_folder(work_dir: str | os.PathLike[str] | None) -> Iterator[tuple[Path, bool]]:
+    if work_dir is not None:
+        Path(work_dir).mkdir(parents=True, exist_ok=True)
+        yield Path(work_dir), True
+        return
+    with tempfile.TemporaryDirectory(prefix="carto-ior-") as tmp:
+        yield Path(tmp), False
+
+
 def refine_dem(
-    left_image: NDArray,
-    right_image: NDArray,
+    left_image: Any,
+    right_image: Any,
     left: Sensor,
     right: Sensor,
     init_dem: DEM,
     settings: IORSettings | None = None,
     progress: Callable[[str], None] | None = None,
-    scheduler: Callable[[list[Callable[[], TileResult]]], list[TileResult]] | None = None,
+    scheduler: Any = None,
     matcher: Matcher | None = None,
+    *,
+    work_dir: str | os.PathLike[str] | None = None,
+    keep_failed_tiles: bool = False,
 ) -> IORResult:
     """The IOR loop (see the module docstring).
 
     Args:
-        left_image, right_image: raw images (2-D, the sensors' shapes; staggered arrays
-            already merged).
+        left_image, right_image: the prepared raw images (staggered arrays already merged):
+            2-D arrays, raster paths or
+            :class:`~carto.framework.raster.image_source.ImageSource` s (whole scenes: only
+            the windows each tile needs are read).
         left, right: their models (adjusted, for a DEM of the adjusted accuracy).
         init_dem: the starting DEM (ellipsoidal heights; SRTM with a geoid, or
             :meth:`DEM.constant`).
         settings: :class:`IORSettings`.
         progress: called with one line per iteration.
-        scheduler: runs a list of tile tasks and returns their results (default: in turn;
-            e.g. ``lambda tasks: dask.compute(*map(dask.delayed, tasks))``).
+        scheduler: runs a list of tile tasks and returns their results in order: a
+            :class:`~carto.framework.parallel.engine.TileEngine` (threads, processes or a
+            dask cluster, with retries and progress bars; default: this process) or any
+            callable. Tasks are pure functions of files, windows and settings
+            (:func:`carto.ior.tiles.run_tile`).
         matcher: the dense matcher of the ortho-images (default: the framework's ``"ncc"``,
             hierarchical NCC with a left-right check); any matcher with ``match_dense``.
+        work_dir: the run's work folder (:mod:`carto.ior.workspace`): an iteration's DEM grid
+            and tile files; a folder that holds the state of an interrupted run is continued
+            from its finished tiles. With a work folder, the ortho-images and matching layers
+            of the result stay tiles in it
+            (:class:`~carto.framework.raster.tiled_layer.TiledLayer`); without one (a
+            temporary folder), they are read into arrays.
+        keep_failed_tiles: a tile that fails (after the engine's retries) is left unmatched
+            and listed in :attr:`IORResult.failed_tiles`, instead of stopping the run.
 
     Raises:
         InputError: images that do not overlap, an initial DEM that covers too little of
             them (:func:`starting_surface`), a posting or ortho resolution that makes a grid
-            too large or too small for the footprint, bad settings.
+            too large or too small for the footprint, bad settings, a work folder of another
+            run.
+        TileFailure: tiles failed (without ``keep_failed_tiles``); the finished ones stay in
+            the work folder.
     """
+    from carto.framework.parallel.engine import TaskFailure, TileEngine
+    from carto.framework.raster.image_source import as_image_source
+
     s = settings or IORSettings()
+    images = (as_image_source(left_image), as_image_source(right_image))
     dem_grid, ortho_grid, k = _grids(left, right, init_dem, s)
-    start = starting_surface(init_dem, dem_grid, (left, right), s.min_init_coverage)
-    heights = start.heights
-    if progress and start.filled > 0.0:
-        progress(
-            f"initial DEM {init_dem.name}: {100.0 * start.filled:.1f} % of the footprint "
-            "filled (voids)"
+    engine = scheduler if scheduler is not None else TileEngine(quiet=True)
+    with _work_folder(work_dir) as (folder, kept):
+        space = Workspace(folder)
+        state = space.load(dem_grid.shape)
+        if state is None:
+            start = starting_surface(init_dem, dem_grid, (left, right), s.min_init_coverage)
+            if progress and start.filled > 0.0:
+                progress(
+                    f"initial DEM {init_dem.name}: {100.0 * start.filled:.1f} % of the "
+                    "footprint filled (voids)"
+                )
+            facts = {"init_coverage": start.coverage, "init_filled": start.filled}
+            state = RunState(
+                1, start.heights, np.zeros(dem_grid.shape, bool), (0.0, 0.0), (), facts
+            )
+            space.begin(state)
+        elif progress:
+            progress(f"resuming at iteration {state.iteration} from {folder}")
+        result = _iterate(
+            images,
+            (left, right),
+            dem_grid,
+            ortho_grid,
+            k,
+            s,
+            state,
+            space,
+            engine,
+            matcher,
+            progress,
+            keep_failed_tiles,
+            TaskFailure,
         )
+        if not kept:  # the temporary folder goes: read the layers now
+            result = attrs.evolve(
+                result,
+                ortho_left=np.asarray(result.ortho_left),
+                ortho_right=np.asarray(result.ortho_right),
+                score=np.asarray(result.score),
+                valid=np.asarray(result.valid),
+            )
+        return result
+
+
+def _iterate(
+    images: tuple[Any, Any],
+    sensors: tuple[Sensor, Sensor],
+    dem_grid: OrthoGrid,
+    ortho_grid: OrthoGrid,
+    k: int,
+    s: IORSettings,
+    state: RunState,
+    space: Workspace,
+    engine: Any,
+    matcher: Matcher | None,
+    progress: Callable[[str], None] | None,
+    keep_failed_tiles: bool,
+    failure_type: type,
+) -> IORResult:
+    """The iterations of :func:`refine_dem` from ``state`` on."""
+    from carto.framework.raster.tiled_layer import TiledLayer, TilePiece, piece_path
+
+    left, right = sensors
+    heights = state.heights
     n_r, n_c = dem_grid.shape
     c_lon, c_lat = dem_grid.lonlat(n_r / 2, n_c / 2)
     bh, base_en = base_direction(
         left, right, float(c_lon), float(c_lat), float(np.nanmedian(heights))
     )
     base_rc = np.array([-base_en[1], base_en[0]])  # (row, col) of the north-up grid
-    run = scheduler or (lambda tasks: [task() for task in tasks])
     tile_n = max(16, s.tile_px // k)
     overlap_n = max(2, -(-s.overlap_px // k))
-    reports: list[IterationReport] = []
+    plan = _tile_plan((left, right), dem_grid, heights, tile_n)
+    keys = [f"tile {rows.start // tile_n},{cols.start // tile_n}" for rows, cols in plan]
+    reports = [IterationReport(**r) for r in state.reports]
     converged = False
-    tiles: list[TileResult] = []
-    guess = (0.0, 0.0)
-    ever_matched = np.zeros(dem_grid.shape, bool)
-    for iteration in range(1, s.max_iterations + 2):
+    guess = state.guess
+    ever_matched = state.ever_matched.copy()
+    failed: list[str] = []
+    iteration = state.iteration
+    while True:
         t0 = time.perf_counter()
-        current = heights.copy()
-        tasks = [
-            functools.partial(
-                refine_tile,
-                (left_image, right_image),
-                (left, right),
-                current,
-                dem_grid,
-                k,
-                slice(r, min(n_r, r + tile_n)),
-                slice(c, min(n_c, c + tile_n)),
-                overlap_n,
-                s,
-                s.refine_levels
-                if reports and reports[-1].median_abs_mismatch_px < 2.0
-                else s.levels,
-                guess,
-                matcher,
+        current = heights
+        levels = (
+            s.refine_levels if reports and reports[-1].median_abs_mismatch_px < 2.0 else s.levels
+        )
+        job = TileJob(
+            images,
+            (left, right),
+            space.heights_path(iteration),
+            dem_grid,
+            k,
+            overlap_n,
+            s,
+            levels,
+            guess,
+            matcher,
+            (float(np.nanmin(current)), float(np.nanmax(current))),
+            space.iteration_dir(iteration),
+        )
+        tasks = [functools.partial(run_tile, job, rows, cols) for rows, cols in plan]
+        outcomes = _run_tiles(engine, tasks, f"IOR iteration {iteration}", keys)
+        failed = [str(o) for o in outcomes if isinstance(o, failure_type)]
+        if failed and not keep_failed_tiles:
+            raise TileFailure(
+                f"ior: {len(failed)} of {len(plan)} tiles failed in iteration {iteration} "
+                f"({failed[0]})"
             )
-            for r in range(0, n_r, tile_n)
-            for c in range(0, n_c, tile_n)
-        ]
-        tiles = run(tasks)
         new = np.full(dem_grid.shape, np.nan)
         d_row = np.full(dem_grid.shape, np.nan)
         d_col = np.full(dem_grid.shape, np.nan)
         covered = np.zeros(dem_grid.shape, bool)
-        for tile in tiles:
-            new[tile.rows, tile.cols] = tile.new_height
-            d_row[tile.rows, tile.cols] = tile.d_row_px
-            d_col[tile.rows, tile.cols] = tile.d_col_px
-            covered[tile.rows, tile.cols] = tile.covered
+        for (rows, cols), outcome in zip(plan, outcomes, strict=True):
+            if isinstance(outcome, failure_type):
+                continue
+            arrays = tile_arrays(outcome, NODE_LAYERS)
+            new[rows, cols] = arrays["new_height"]
+            d_row[rows, cols] = arrays["d_row_px"]
+            d_col[rows, cols] = arrays["d_col_px"]
+            covered[rows, cols] = arrays["covered"]
         matched = np.isfinite(d_row) & covered
         ever_matched |= matched
         # the mismatch a height change removes: along the base; across it, what the
@@ -650,32 +565,50 @@ def refine_dem(
                 f"iteration {iteration}: median mismatch {med:.3f} px along the base, "
                 f"{pct:.1f} % matched, median DEM change {med_change:.2f} m"
             )
-    # assemble the last orthos (made on the final DEM) and quality layers
-    shape = ortho_grid.shape
-    out_l = np.full(shape, np.nan, np.float32)
-    out_r = np.full(shape, np.nan, np.float32)
-    score = np.full(shape, np.nan, np.float32)
-    valid = np.zeros(shape, bool)
-    for tile in tiles:
-        rs = slice(tile.rows.start * k, tile.rows.stop * k)
-        cs = slice(tile.cols.start * k, tile.cols.stop * k)
-        out_l[rs, cs], out_r[rs, cs] = tile.ortho_left, tile.ortho_right
-        score[rs, cs], valid[rs, cs] = tile.score, tile.valid
+        iteration += 1
+        space.begin(
+            RunState(
+                iteration,
+                heights,
+                ever_matched,
+                guess,
+                tuple(attrs.asdict(r) for r in reports),
+                state.facts,
+            )
+        )
+    # the last iteration's tiles hold the orthos made on the final DEM and its matching
+    layers = {}
+    for name in ORTHO_LAYERS:
+        pieces = []
+        for (rows, cols), outcome in zip(plan, outcomes, strict=True):
+            if isinstance(outcome, failure_type):
+                continue
+            shape = ((rows.stop - rows.start) * k, (cols.stop - cols.start) * k)
+            path = piece_path(space.iteration_dir(iteration), rows.start, cols.start)
+            pieces.append(TilePiece(path, name, rows.start * k, cols.start * k, shape))
+        is_valid = name == "valid"
+        layers[name] = TiledLayer.of(
+            ortho_grid.shape,
+            pieces,
+            bool if is_valid else np.float32,
+            False if is_valid else float("nan"),
+        )
     final = np.where(covered & _support(ever_matched, s), heights, np.nan)
     dem = DEM.from_array(final, dem_grid.transform, dem_grid.crs.to_wkt(), vertical=ELLIPSOID)
     return IORResult(
         dem,
         dem_grid,
         ortho_grid,
-        out_l,
-        out_r,
-        score,
-        valid,
+        layers["ortho_left"],
+        layers["ortho_right"],
+        layers["score"],
+        layers["valid"],
         tuple(reports),
         converged,
         bh,
-        init_coverage=start.coverage,
-        init_filled=start.filled,
+        init_coverage=float(state.facts.get("init_coverage", 1.0)),
+        init_filled=float(state.facts.get("init_filled", 0.0)),
+        failed_tiles=tuple(failed),
     )
 
 

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import textwrap
 from pathlib import Path
 from typing import Any
@@ -13,6 +12,7 @@ import numpy as np
 
 from carto.framework.cli.common import examples, formatter, table
 from carto.framework.errors import InputError
+from carto.framework.parallel.engine import default_workers
 
 
 # --------------------------------------------------------------------------- evaluate
@@ -151,7 +151,6 @@ def cmd_dem(args: argparse.Namespace) -> int:
         ("ortho_res_m", args.ortho_res),
         ("crs", args.crs),
         ("max_iterations", args.max_iterations),
-        ("workers", args.workers if args.workers is not None else (os.cpu_count() or 1)),
     ):
         if value is not None:
             options[key] = value
@@ -176,6 +175,9 @@ def cmd_dem(args: argparse.Namespace) -> int:
         options=options,
         quiet=args.quiet,
         allow_poor=args.allow_poor,
+        workers=args.workers,
+        scheduler=args.scheduler,
+        resume=args.resume,
     )
     print(_dem_summary(report))
     grid = report["dem_grid"]
@@ -231,6 +233,8 @@ def add_dem(sub: argparse._SubParsersAction) -> None:
             "--ortho-res 0.5 --out dem",
             "carto dem --left left.tif --right right.tif --init-dem N44E005.hgt --geoid "
             "egm96_15.gtx --out dem",
+            "carto dem scene1 --models adj1 --scheduler tcp://10.0.0.5:8786 --out dem1",
+            "carto dem scene1 --models adj1 --out dem1 --resume   # after an interruption",
         ),
         formatter_class=formatter,
     )
@@ -254,7 +258,20 @@ def add_dem(sub: argparse._SubParsersAction) -> None:
         "--workers",
         type=int,
         metavar="N",
-        help=f"tiles processed in parallel, threads (default: all cores, {os.cpu_count() or 1})",
+        help="tiles processed in parallel by a local cluster of N worker processes (default: "
+        f"all cores, {default_workers()}; 1: in this process)",
+    )
+    p.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="run the tiles on a running dask.distributed cluster (e.g. tcp://host:8786; "
+        "see docs/cluster.md); its workers must see the input and output folders",
+    )
+    p.add_argument(
+        "--resume",
+        action="store_true",
+        help="continue an interrupted or failed run into the same --out from its finished "
+        "tiles (same inputs and options)",
     )
     p.add_argument(
         "--generator",
@@ -272,8 +289,8 @@ def add_dem(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--allow-poor",
         action="store_true",
-        help="write a DEM that matched almost nothing (< 5 %% of the nodes) with a warning, "
-        "instead of failing",
+        help="write a DEM that matched almost nothing (< 5 %% of the nodes), or whose failed "
+        "tiles have no heights, with a warning, instead of failing",
     )
     p.add_argument("--quiet", action="store_true", help="no progress messages")
     p.set_defaults(handler=cmd_dem)

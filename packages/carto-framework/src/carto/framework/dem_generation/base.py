@@ -2,10 +2,12 @@
 gets back.
 
 A :class:`DEMGenerator` takes the prepared raw images of a stereo pair (staggered arrays
-merged, see :meth:`carto.framework.geometry.sensor.Sensor.prepare_raw`), their models and a
-starting DEM, and returns a :class:`DEMProduct`. ``carto dem`` writes every output
-(``dem.tif``, the ortho-images, ``quality.tif``, ``report.json``) from the product alone, so a
-generator never writes files itself and any generator's outputs look the same to users.
+merged, see :meth:`carto.framework.geometry.sensor.Sensor.prepare_raw`; arrays or, for whole
+scenes, :class:`~carto.framework.raster.image_source.ImageSource` s read by windows), their
+models and a starting DEM, and returns a :class:`DEMProduct`. ``carto dem`` writes every
+output (``dem.tif``, the ortho-images, ``quality.tif``, ``report.json``) from the product
+alone, so any generator's outputs look the same to users; a generator only writes its
+intermediate files (tiles) in its work folder.
 
 Options every generator receives (``generate(..., **options)``):
 
@@ -20,7 +22,18 @@ Options every generator receives (``generate(..., **options)``):
     ``None`` or a callable taking one line of text per step;
 ``scheduler``
     ``None`` (run tile tasks in this process) or a callable that runs a sequence of
-    argument-less tasks and returns their results in order.
+    argument-less tasks and returns their results in order: ``carto dem`` passes a
+    :class:`~carto.framework.parallel.engine.TileEngine` (worker processes or a dask cluster;
+    ``engine.run(tasks, desc=..., keys=...)`` adds a progress bar, retries, and a
+    :class:`~carto.framework.parallel.engine.TaskFailure` in place of a task that failed);
+``work_dir``
+    ``None`` or a folder for the generator's intermediate files (tiles), kept after an
+    interruption: a generator that finds its own state there continues from it
+    (``carto dem --resume``); ``carto dem`` removes it after a successful run;
+``keep_failed_tiles``
+    ``False``: a tile that fails stops the run with the cause; ``True``
+    (``carto dem --allow-poor``): it is left without heights and listed in the product's
+    ``failed_tiles``.
 
 Every other option is generator specific (``posting_m``, ``ortho_res_m``, ``crs``,
 ``max_iterations`` for ``ior``); unknown options are refused with an
@@ -44,7 +57,11 @@ from carto.framework.imaging.ortho_grid import OrthoGrid
 from carto.framework.raster.dem import DEM
 
 
-def _layer_values(value: Any) -> NDArray[np.float32]:
+def _layer_values(value: Any) -> Any:
+    from carto.framework.raster.tiled_layer import TiledLayer
+
+    if isinstance(value, TiledLayer):  # tiles in files: stays on disk
+        return value
     return np.asarray(value, dtype=np.float32)
 
 
@@ -56,12 +73,14 @@ class QualityLayer:
         name: short identifier (``"score"``, ``"valid"``), written as the band's GDAL
             description.
         description: one line for people (the ``BAND_<k>`` tag of ``quality.tif``).
-        values: float32 array of the ortho grid's shape (NaN = no value).
+        values: float32 array of the ortho grid's shape (NaN = no value), or a
+            :class:`~carto.framework.raster.tiled_layer.TiledLayer` (tiles in files, for
+            whole scenes).
     """
 
     name: str
     description: str
-    values: NDArray[np.float32] = attrs.field(converter=_layer_values)
+    values: Any = attrs.field(converter=_layer_values)
 
     def __attrs_post_init__(self) -> None:
         if self.values.ndim != 2:
@@ -104,7 +123,9 @@ class DEMProduct:
             ``dem_grid``.
         dem_grid: the DEM's map grid.
         orthos: one float32 ortho-image per input image, in the input order, on
-            ``ortho_grid`` (NaN = no data).
+            ``ortho_grid`` (NaN = no data): arrays, or
+            :class:`~carto.framework.raster.tiled_layer.TiledLayer` s (tiles in the run's work
+            folder, written out window by window).
         ortho_grid: the ortho-images' map grid (also the grid of the quality layers).
         quality: the bands of ``quality.tif``.
         iterations: one record per iteration (possibly one for a single-pass generator).
@@ -117,17 +138,20 @@ class DEMProduct:
             that the last pass measured by matching (a DEM filled from the starting surface
             holds heights everywhere, so :attr:`measured_fraction` cannot tell); ``None``
             when the generator does not know. ``carto dem`` fails when it is tiny.
+        failed_tiles: tiles that failed (one line each, ``"tile R,C: cause"``), left without
+            heights.
     """
 
     dem: DEM
     dem_grid: OrthoGrid
-    orthos: tuple[NDArray[np.float32], ...] = attrs.field(converter=_tuple)
+    orthos: tuple[Any, ...] = attrs.field(converter=_tuple)
     ortho_grid: OrthoGrid
     quality: tuple[QualityLayer, ...] = attrs.field(converter=_tuple)
     iterations: tuple[IterationRecord, ...] = attrs.field(converter=_tuple)
     converged: bool | None = None
     extras: Mapping[str, Any] = attrs.field(factory=dict, converter=dict)
     matched_fraction: float | None = None
+    failed_tiles: tuple[str, ...] = attrs.field(default=(), converter=_tuple)
 
     def __attrs_post_init__(self) -> None:
         if self.dem.heights.shape != tuple(self.dem_grid.shape):

@@ -467,6 +467,21 @@ class LineScanner(Sensor):
             return merge_staggered(raw, self, dem, step=8).image
         return np.array(raw, dtype=np.float32)
 
+    @property
+    def raw_needs_preparation(self) -> bool:
+        """True for the odd-array model of a staggered camera (raw Cartosat data)."""
+        return bool(self.camera.stagger_tan) and self.camera.array == "odd"
+
+    def prepare_rows(self, raw: Any, dem: Any, rows: slice) -> NDArray[np.float32]:
+        """Lines ``rows`` of :meth:`prepare_raw`
+        (:func:`~carto.framework.geometry.stagger.merge_staggered_rows`: the same values,
+        reading only the raw lines the window needs)."""
+        if self.raw_needs_preparation:
+            from carto.framework.geometry.stagger import merge_staggered_rows
+
+            return merge_staggered_rows(raw, self, dem, rows, step=8)
+        return super().prepare_rows(raw, dem, rows)
+
     def save(self, path: str | os.PathLike[str]) -> Path:
         """Write the model file (JSON) atomically: temporary name, then rename."""
         return write_json_atomic(path, self.to_dict())

@@ -160,6 +160,23 @@ class Sensor(abc.ABC):
         prepared image."""
         return np.array(raw, dtype=np.float32)
 
+    @property
+    def raw_needs_preparation(self) -> bool:
+        """Whether :meth:`prepare_raw` changes the raw image (default: no; staggered arrays
+        do). Whole-scene workflows then write the prepared image once, band by band
+        (:meth:`prepare_rows`)."""
+        return type(self).prepare_raw is not Sensor.prepare_raw
+
+    def prepare_rows(self, raw: Any, dem: Any, rows: slice) -> NDArray[np.float32]:
+        """Lines ``rows`` of :meth:`prepare_raw`, reading only the windows of ``raw`` they
+        need (``raw``: an array or an
+        :class:`~carto.framework.raster.image_source.ImageSource`, read as
+        ``raw[r0:r1, c0:c1]``). The default: the lines as they are; for a sensor that
+        overrides :meth:`prepare_raw` only, those lines of the whole prepared image."""
+        if type(self).prepare_raw is not Sensor.prepare_raw:
+            return np.asarray(self.prepare_raw(np.asarray(raw), dem)[rows], dtype=np.float32)
+        return np.asarray(raw[rows, 0 : self.image_shape[1]], dtype=np.float32)
+
     def for_raster(self, raster: Path) -> Sensor:
         """This sensor fitted to the raster it comes with (default: ``self``). A model of a
         whole scene opened with a crop of it (an RPC whose crop offset is in the crop's

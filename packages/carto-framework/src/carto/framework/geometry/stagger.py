@@ -76,7 +76,7 @@ Validation (:func:`measure_line_shifts`)
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import attrs
 import numba
@@ -279,6 +279,26 @@ def _locate(
 
 
 # ----------------------------------------------------------------------------- offsets
+def _node_offsets(
+    sensor: LineScanner, dem: object, lines: IntArray, columns: IntArray
+) -> tuple[FloatArray, FloatArray, int]:
+    """Stagger offsets and sample deviations at the pixel centres of ``lines x columns``
+    (image lines and even-array image columns): located on the DEM with the odd-array model,
+    projected with the even-array one; and how many left the DEM."""
+    ll, cc = np.meshgrid(
+        lines.astype(np.float64) + 0.5, columns.astype(np.float64) + 0.5, indexing="ij"
+    )
+    line, sample = ll.ravel(), cc.ravel()
+    lon, lat, h, n_missing = _locate(sensor, line, sample, dem)
+    even = sensor.with_camera(sensor.camera.with_array("even"))
+    line_e, sample_e, _inside = even.project(lon, lat, h)
+    return (
+        (line_e - line).reshape(ll.shape),
+        (sample_e - sample).reshape(ll.shape),
+        n_missing,
+    )
+
+
 def stagger_offsets(sensor: LineScanner, dem: object, *, step: int = 1) -> StaggerField:
     """Per-pixel stagger offsets of the even-array columns of an image.
 
@@ -310,17 +330,7 @@ def stagger_offsets(sensor: LineScanner, dem: object, *, step: int = 1) -> Stagg
         return StaggerField.from_arrays(empty, empty, cols, step)
     line_nodes = _grid_nodes(n_lines, step)
     col_nodes = _grid_nodes(cols.size, step)
-    ll, cc = np.meshgrid(
-        line_nodes.astype(np.float64) + 0.5,
-        cols[col_nodes].astype(np.float64) + 0.5,
-        indexing="ij",
-    )
-    line, sample = ll.ravel(), cc.ravel()
-    lon, lat, h, n_missing = _locate(sensor, line, sample, dem)
-    even = sensor.with_camera(sensor.camera.with_array("even"))
-    line_e, sample_e, _inside = even.project(lon, lat, h)
-    off = (line_e - line).reshape(ll.shape)
-    dev = (sample_e - sample).reshape(ll.shape)
+    off, dev, n_missing = _node_offsets(sensor, dem, line_nodes, cols[col_nodes])
     if step > 1:
         off = _interp_axis(_interp_axis(off, col_nodes, cols.size, 1), line_nodes, n_lines, 0)
         dev = _interp_axis(_interp_axis(dev, col_nodes, cols.size, 1), line_nodes, n_lines, 0)
@@ -471,6 +481,94 @@ def merge_staggered(
     if field is None:
         field = stagger_offsets(sensor, dem, step=step)
     return _merge(raw32, sensor, field, method)
+
+
+def _interp_at(values: FloatArray, nodes: IntArray, x: FloatArray, axis: int) -> FloatArray:
+    """:func:`_interp_axis` at the indices ``x`` only (the same arithmetic, element by
+    element, so a window of lines gets the values the whole image would)."""
+    if nodes.size == 1:
+        return np.repeat(values, x.size, axis=axis)
+    k = np.clip(np.searchsorted(nodes, x, side="right") - 1, 0, nodes.size - 2)
+    w = (x - nodes[k]) / (nodes[k + 1] - nodes[k])
+    shape = [1, 1]
+    shape[axis] = x.size
+    w = w.reshape(shape)
+    return np.take(values, k, axis=axis) * (1.0 - w) + np.take(values, k + 1, axis=axis) * w
+
+
+def merge_staggered_rows(
+    source: Any,
+    sensor: LineScanner,
+    dem: object,
+    rows: slice,
+    *,
+    step: int = 8,
+    method: Method = "cubic",
+) -> Float32Array:
+    """Lines ``rows`` of :func:`merge_staggered`'s image, reading only the raw lines they need.
+
+    ``source`` is the raw image, read by windows (``source[r0:r1, c0:c1]``: an array or a
+    :class:`~carto.framework.raster.image_source.ImageSource`). The stagger field is computed
+    on the nodes of the whole image's grid (every ``step`` lines and even-array columns) that
+    bracket the window, and the raw lines read are the window widened by the field's offsets
+    and the kernel's reach, so the result equals the same lines of the whole-image merge while
+    memory and work depend on the window only.
+
+    Raises:
+        InputError: as :func:`merge_staggered`, or a window outside the image.
+    """
+    _check_sensor(sensor)
+    if method not in _METHODS:
+        raise InputError(f"merge: method must be one of {', '.join(_METHODS)}, got {method!r}")
+    if int(step) != step or step < 1:
+        raise InputError(f"stagger offsets: step must be an integer >= 1, got {step!r}")
+    n_lines, n_cols = sensor.image_shape
+    if tuple(source.shape) != (n_lines, n_cols):
+        raise InputError(
+            f"sensor {sensor.name}: raw image shape {tuple(source.shape)} differs from the "
+            f"model's {sensor.image_shape} (lines, columns)"
+        )
+    r0, r1, _ = rows.indices(n_lines)
+    if r1 <= r0:
+        raise InputError(f"merge: empty window of lines {rows.start}:{rows.stop}")
+    cols = even_columns(sensor)
+    if cols.size == 0:
+        return np.asarray(source[r0:r1, 0:n_cols], dtype=np.float32)
+    all_nodes = _grid_nodes(n_lines, int(step))
+    # the bracketing nodes and one more on each side (the same interpolation cells as the
+    # whole image's, also at a window that ends on a node)
+    i0 = max(int(np.searchsorted(all_nodes, r0, side="right")) - 2, 0)
+    i1 = min(int(np.searchsorted(all_nodes, r1 - 1, side="left")) + 1, all_nodes.size - 1)
+    line_nodes = all_nodes[i0 : i1 + 1]
+    col_nodes = _grid_nodes(cols.size, int(step))
+    off, _dev, _ = _node_offsets(sensor, dem, line_nodes, cols[col_nodes])
+    if col_nodes.size != cols.size:
+        off = _interp_axis(off, col_nodes, cols.size, 1)
+    x = np.arange(r0, r1, dtype=np.float64)
+    if line_nodes.size != (r1 - r0) or line_nodes[0] != r0:
+        off = _interp_at(off, line_nodes, x, 0)
+    off = off.astype(np.float32)  # as StaggerField stores it
+    positions = x[:, None] + off
+    finite = positions[np.isfinite(positions)]
+    reach = 5  # the Lanczos-4 kernel reads 3 lines before and 4 after
+    lo = float(finite.min()) if finite.size else float(r0)
+    hi = float(finite.max()) if finite.size else float(r1 - 1)
+    b0 = max(0, min(r0, math.floor(lo) - reach))
+    b1 = min(n_lines, max(r1, math.ceil(hi) + reach + 1))
+    raw = np.ascontiguousarray(source[b0:b1, 0:n_cols], dtype=np.float32)
+    out = raw[r0 - b0 : r1 - b0].copy()
+    # positions beyond the whole image's ends are NaN, as in the whole-image merge
+    local = positions - b0
+    beyond = (positions < -EDGE_TOLERANCE_LINES) | (positions > n_lines - 1 + EDGE_TOLERANCE_LINES)
+    local[beyond] = np.nan
+    _resample_columns(
+        raw,
+        np.ascontiguousarray(cols, dtype=np.int64),
+        np.ascontiguousarray(local),
+        _METHODS[method],
+        out,
+    )
+    return out
 
 
 def merge_naive(

@@ -478,7 +478,9 @@ def orthorectify(
 
     Args:
         raw: the raw image, 2-D ``sensor.image_shape``, any numeric dtype (NaN = no data:
-            output pixels whose kernel touches it are NaN).
+            output pixels whose kernel touches it are NaN); or an
+            :class:`~carto.framework.raster.image_source.ImageSource`, of which only the
+            windows the grid maps into are read.
         sensor: its geometric model.
         grid: the output grid.
         dem: DEM with ellipsoidal heights.
@@ -491,7 +493,9 @@ def orthorectify(
         InputError: ``raw`` is not 2-D or not of the sensor's shape, unknown resampling, bad
             tile size, or a bad sensor, grid or DEM.
     """
-    image = raw if isinstance(raw, np.ndarray) else np.asarray(raw)
+    from carto.framework.raster.image_source import ImageSource
+
+    image = raw if isinstance(raw, np.ndarray | ImageSource) else np.asarray(raw)
     if image.ndim != 2:
         raise InputError(f"orthorectify: raw image must be 2-D, got shape {image.shape}")
     if tuple(image.shape) != tuple(sensor.image_shape):
@@ -522,6 +526,31 @@ def orthorectify(
 
 
 # ----------------------------------------------------------------------------- output
+_WRITE_ROWS = 1024  # rows written at once (a multiple of the 256-row GeoTIFF tiles)
+
+
+def _bands(data: Any) -> list[Any]:
+    """The bands of ``data``: a 2-D array or tiled layer, a 3-D array, or a sequence of
+    2-D arrays and tiled layers."""
+    from carto.framework.raster.tiled_layer import TiledLayer
+
+    if isinstance(data, TiledLayer):
+        return [data]
+    if isinstance(data, list | tuple) and any(isinstance(b, TiledLayer) for b in data):
+        bands = list(data)
+    else:
+        array = np.asarray(data)
+        if array.ndim == 2:
+            array = array[None]
+        if array.ndim != 3:
+            raise InputError(f"write_ortho: data must be 2-D or 3-D, got shape {array.shape}")
+        bands = list(array)
+    for band in bands:
+        if np.ndim(band) != 2:
+            raise InputError(f"write_ortho: every band must be 2-D, got {np.shape(band)}")
+    return bands
+
+
 def write_ortho(
     path: str | os.PathLike[str],
     data: ArrayLike,
@@ -539,7 +568,9 @@ def write_ortho(
 
     Args:
         path: the output file.
-        data: ``(rows, cols)`` or ``(bands, rows, cols)`` of ``grid.shape``.
+        data: ``(rows, cols)`` or ``(bands, rows, cols)`` of ``grid.shape``, or bands held as
+            tiles in files (:class:`~carto.framework.raster.tiled_layer.TiledLayer`, alone or
+            in a list of bands), written window by window.
         grid: the grid the data are on.
         vertical: when the raster holds heights, their vertical reference (``"ellipsoid"``,
             ``"geoid:EGM96"``...), written in the ``VERTICAL_REFERENCE`` tag as
@@ -558,27 +589,29 @@ def write_ortho(
     import rasterio
     from rasterio.crs import CRS as RioCRS
     from rasterio.errors import RasterioError
+    from rasterio.windows import Window
 
     from carto.framework.raster.dem import VERTICAL_TAG, normalise_vertical
+    from carto.framework.raster.tiled_layer import layer_window
 
     if not isinstance(grid, OrthoGrid):
         raise InputError(f"write_ortho: grid must be an OrthoGrid, got {type(grid).__name__}")
-    array = np.asarray(data)
-    if array.ndim == 2:
-        array = array[None]
-    if array.ndim != 3 or tuple(array.shape[1:]) != tuple(grid.shape):
+    bands = _bands(data)
+    if any(tuple(np.shape(b)) != tuple(grid.shape) for b in bands):
         raise InputError(
-            f"write_ortho: data shape {np.shape(data)} does not match the grid {grid.shape}"
+            f"write_ortho: data shape {[np.shape(b) for b in bands]} does not match the grid "
+            f"{grid.shape}"
         )
-    if band_descriptions is not None and len(band_descriptions) != array.shape[0]:
+    dtype = np.result_type(*[b.dtype for b in bands])
+    if band_descriptions is not None and len(band_descriptions) != len(bands):
         raise InputError(
-            f"write_ortho: {len(band_descriptions)} band descriptions for {array.shape[0]} bands"
+            f"write_ortho: {len(band_descriptions)} band descriptions for {len(bands)} bands"
         )
-    if array.dtype == np.float16:
-        array = array.astype(np.float32)
-    if not (np.issubdtype(array.dtype, np.integer) or np.issubdtype(array.dtype, np.floating)):
-        raise InputError(f"write_ortho: dtype {array.dtype} cannot be written")
-    is_float = np.issubdtype(array.dtype, np.floating)
+    if dtype == np.float16:
+        dtype = np.dtype(np.float32)
+    if not (np.issubdtype(dtype, np.integer) or np.issubdtype(dtype, np.floating)):
+        raise InputError(f"write_ortho: dtype {dtype} cannot be written")
+    is_float = np.issubdtype(dtype, np.floating)
     if nodata is None and is_float:
         nodata = float("nan")
     all_tags = {"AREA_OR_POINT": "Area"}
@@ -594,8 +627,8 @@ def write_ortho(
         "driver": "GTiff",
         "height": rows,
         "width": cols,
-        "count": array.shape[0],
-        "dtype": array.dtype,
+        "count": len(bands),
+        "dtype": dtype,
         "crs": RioCRS.from_wkt(grid.crs.to_wkt()),
         "transform": grid.transform,
         "compress": "deflate",
@@ -609,7 +642,12 @@ def write_ortho(
     path = Path(path)
     try:
         with atomic_output(path) as tmp, rasterio.open(tmp, "w", **profile) as dst:
-            dst.write(array)
+            # by blocks of rows: tiled layers are read window by window, never whole
+            for r0 in range(0, rows, _WRITE_ROWS):
+                window = Window(0, r0, cols, min(_WRITE_ROWS, rows - r0))
+                for k, band in enumerate(bands, 1):
+                    block = layer_window(band, slice(r0, r0 + window.height), slice(0, cols))
+                    dst.write(np.asarray(block, dtype), k, window=window)
             dst.update_tags(**all_tags)
             for k, description in enumerate(band_descriptions or (), 1):
                 dst.set_band_description(k, str(description))

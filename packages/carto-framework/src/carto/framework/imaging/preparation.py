@@ -81,3 +81,70 @@ def prepared_raster(raster: Path | NDArray, sensor: Sensor, dem: Any) -> NDArray
     (:meth:`~carto.framework.geometry.sensor.Sensor.prepare_raw`: staggered arrays merged)."""
     raw = read_raster(Path(raster)) if not isinstance(raster, np.ndarray) else raster
     return sensor.prepare_raw(raw, dem)
+
+
+PREPARE_BAND_LINES = 512
+"""Lines of one task of :func:`prepare_image`."""
+
+
+def _prepare_band(source: Any, sensor: Sensor, dem: Any, path: Path, rows: slice) -> Path:
+    """One band of :func:`prepare_image` (skipped when its file exists: a resumed run)."""
+    from carto.framework.files.atomic import atomic_output
+
+    if path.is_file():
+        return path
+    values = sensor.prepare_rows(source, dem, rows)
+    with atomic_output(path) as tmp, open(tmp, "wb") as stream:
+        np.save(stream, np.ascontiguousarray(values, np.float32))
+    return path
+
+
+def prepare_image(
+    source: Any,
+    sensor: Sensor,
+    dem: Any,
+    folder: Path,
+    engine: Any,
+    *,
+    band_lines: int = PREPARE_BAND_LINES,
+    desc: str = "prepare",
+) -> Any:
+    """The prepared raw image of ``sensor`` (:meth:`Sensor.prepare_raw`) for whole scenes:
+    ``source`` itself when the sensor needs no preparation; else the image prepared band by
+    band (:meth:`Sensor.prepare_rows`), each band a task of ``engine`` (a
+    :class:`~carto.framework.parallel.engine.TileEngine`) that writes one file in ``folder``,
+    read back by windows (:class:`~carto.framework.raster.image_source.BandedImage`). Bands
+    already in ``folder`` are kept (a resumed run).
+
+    Raises:
+        InputError: a band that could not be prepared (the first cause).
+    """
+    import functools
+
+    from carto.framework.parallel.engine import TaskFailure
+    from carto.framework.raster.image_source import BandedImage
+
+    if not sensor.raw_needs_preparation:
+        return source
+    n_lines = int(source.shape[0])
+    image = BandedImage(folder, tuple(source.shape), band_lines)
+    folder.mkdir(parents=True, exist_ok=True)
+    starts = list(range(0, n_lines, band_lines))
+    tasks = [
+        functools.partial(
+            _prepare_band,
+            source,
+            sensor,
+            dem,
+            image.band_path(r0),
+            slice(r0, min(n_lines, r0 + band_lines)),
+        )
+        for r0 in starts
+    ]
+    outcomes = engine.run(tasks, desc=desc, keys=[f"lines {r0}" for r0 in starts])
+    failed = [o for o in outcomes if isinstance(o, TaskFailure)]
+    if failed:
+        raise InputError(
+            f"{desc}: {len(failed)} of {len(tasks)} bands of lines failed ({failed[0]})"
+        )
+    return image

@@ -10,6 +10,7 @@ Every file is written to a temporary name and renamed when complete.
 from __future__ import annotations
 
 import os
+import shutil
 import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -24,7 +25,7 @@ from carto.framework.geometry.sensor import Sensor, SensorType
 from carto.framework.plugins.registry import get_registry
 from carto.framework.raster.dem import DEM, ELLIPSOID, Geoid
 from carto.framework.workflows.opening import open_options, open_sensor, sensor_type_for
-from carto.framework.workflows.reporting import progress, write_report
+from carto.framework.workflows.reporting import jsonable, progress, write_report
 
 __all__ = [
     "StereoInputs",
@@ -244,6 +245,66 @@ def choose_dem_generator(requested: str | None, types: Sequence[SensorType]) -> 
     )
 
 
+def work_folder(out_dir: str | os.PathLike[str]) -> Path:
+    """The work folder of a ``carto dem`` run into ``out_dir``: hidden, beside it
+    (``.NAME.carto-work``); kept when a run fails or is interrupted (``--resume`` continues
+    from it), removed when a run succeeds."""
+    out = Path(out_dir)
+    return out.parent / f".{out.name}.carto-work"
+
+
+_RUN_FILE = "run.json"
+
+
+def _fingerprint(sources: Sequence[Any], facts: Mapping[str, Any]) -> dict[str, Any]:
+    """What a resumed run must share with the interrupted one: its inputs (path, size,
+    modification time) and settings."""
+    files = {}
+    for item in sources:
+        if item is None:
+            continue
+        path = Path(item).resolve()
+        entries = [path] if path.is_file() else sorted(p for p in path.rglob("*") if p.is_file())
+        for entry in entries:
+            st = entry.stat()
+            files[str(entry)] = [st.st_size, st.st_mtime_ns]
+    return jsonable({"inputs": files, **facts})
+
+
+def _open_work(
+    out_dir: str | os.PathLike[str], fingerprint: Mapping[str, Any], resume: bool, quiet: bool
+) -> Path:
+    """The run's work folder: the interrupted run's with ``resume`` (it must be of the same
+    inputs and settings), else a new one."""
+    import json
+
+    work = work_folder(out_dir)
+    run_file = work / _RUN_FILE
+    if resume and run_file.is_file():
+        try:
+            earlier = json.loads(run_file.read_text())
+        except (OSError, ValueError):
+            earlier = None
+        if earlier != fingerprint:
+            changed = (
+                sorted(k for k in fingerprint if earlier.get(k) != fingerprint[k])
+                if isinstance(earlier, dict)
+                else ["unreadable run.json"]
+            )
+            raise UsageError(
+                f"--resume: the interrupted run in {work} had other inputs or settings "
+                f"({', '.join(changed)}); run without --resume to start afresh"
+            )
+        progress("dem", f"resuming the interrupted run from {work}", quiet)
+        return work
+    if resume:
+        progress("dem", f"--resume: no interrupted run in {work}; starting afresh", quiet)
+    shutil.rmtree(work, ignore_errors=True)
+    work.mkdir(parents=True)
+    write_report(run_file, fingerprint)
+    return work
+
+
 def dem_product(
     out_dir: str | os.PathLike[str],
     inputs: StereoInputs,
@@ -257,23 +318,33 @@ def dem_product(
     options: Mapping[str, Any] | None = None,
     quiet: bool = False,
     allow_poor: bool = False,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    resume: bool = False,
 ) -> dict[str, Any]:
     """Generate a DEM and ortho-images and write them to ``out_dir``; return the report.
 
     See :class:`StereoInputs` for the inputs and :func:`initial_dem` for the starting DEM;
     ``generator`` names the DEM generator (default: :func:`choose_dem_generator`),
     ``matcher`` the matcher it uses (a registry name); ``options`` go to the generator
-    (``posting_m``, ``ortho_res_m``, ``crs``, ``max_iterations`` ...; ``workers``: tiles in
-    parallel, :func:`tile_scheduler`). The outputs are written from the generator's
-    :class:`~carto.framework.dem_generation.base.DEMProduct` alone. With ``reference`` (a
-    DEM file), the report gets its accuracy
+    (``posting_m``, ``ortho_res_m``, ``crs``, ``max_iterations`` ...). Tiles run on a
+    :func:`~carto.framework.parallel.engine.open_engine` engine: ``workers`` processes of a
+    local cluster (default: every core; 1: this process) or the ``dask.distributed``
+    cluster at ``scheduler``. Intermediate files go to :func:`work_folder`, kept when the
+    run fails or is interrupted; ``resume`` continues from it. The outputs are written from
+    the generator's :class:`~carto.framework.dem_generation.base.DEMProduct` alone. With
+    ``reference`` (a DEM file), the report gets its accuracy
     (:func:`carto.framework.evaluation.dem_accuracy.dem_accuracy`) and a difference map is drawn.
     A run that matched less than :data:`MIN_MATCHED_FRACTION` of the nodes fails unless
     ``allow_poor``. The outputs are written into a staging folder that replaces ``out_dir``
     only when all are complete (:func:`carto.framework.files.staging.staged_folder`).
     """
+    from carto.framework.parallel.engine import open_engine
+
     settings = dict(options or {})
     _check_options(settings)
+    if "workers" in settings:  # the earlier form of the argument
+        workers = int(settings.pop("workers"))
     sources = [
         inputs.source,
         inputs.left,
@@ -285,20 +356,52 @@ def dem_product(
         geoid,
         reference,
     ]
-    with staged_folder(out_dir, "dem", inputs=sources) as stage:
-        return _dem_into(
-            stage,
-            inputs,
-            init_dem=init_dem,
-            geoid=geoid,
-            init_height_m=init_height_m,
-            generator=generator,
-            matcher=matcher,
-            reference=reference,
-            settings=settings,
-            quiet=quiet,
-            allow_poor=allow_poor,
-        )
+    facts = {
+        "generator": generator,
+        "matcher": matcher,
+        "init_height_m": init_height_m,
+        "pair": list(inputs.pair) if inputs.pair else None,
+        "sensor_type": inputs.sensor_type,
+        "settings": {k: str(v) for k, v in sorted(settings.items())},
+        "allow_poor": allow_poor,
+    }
+    work: Path | None = None
+    try:
+        with staged_folder(out_dir, "dem", inputs=sources) as stage:
+            work = _open_work(out_dir, _fingerprint(sources, facts), resume, quiet)
+            with open_engine(workers, scheduler, quiet=quiet) as engine:
+                report = _dem_into(
+                    stage,
+                    inputs,
+                    init_dem=init_dem,
+                    geoid=geoid,
+                    init_height_m=init_height_m,
+                    generator=generator,
+                    matcher=matcher,
+                    reference=reference,
+                    settings=settings,
+                    quiet=quiet,
+                    allow_poor=allow_poor,
+                    engine=engine,
+                    work=work,
+                )
+    except BaseException as exc:
+        if work is not None and work.is_dir():
+            if _has_finished_work(work):
+                exc.add_note(f"finished tiles kept in {work}: rerun with --resume to continue")
+            else:
+                shutil.rmtree(work, ignore_errors=True)
+        raise
+    shutil.rmtree(work, ignore_errors=True)
+    return report
+
+
+def _has_finished_work(work: Path) -> bool:
+    """Whether a failed run's work folder holds work a resumed run would reuse (prepared
+    bands, an iteration's grid or tiles)."""
+    return any(
+        next(work.rglob(pattern), None) is not None for pattern in ("*.npz", "*.npy", "state.json")
+    )
 
 
 MIN_MATCHED_FRACTION = 0.05
@@ -340,11 +443,15 @@ def _dem_into(
     settings: dict[str, Any],
     quiet: bool,
     allow_poor: bool,
+    engine: Any,
+    work: Path,
 ) -> dict[str, Any]:
-    """:func:`dem_product` writing into ``out`` (its staging folder)."""
+    """:func:`dem_product` writing into ``out`` (its staging folder), tiles on ``engine``,
+    intermediate files in ``work``."""
     from carto.framework.dem_generation.base import DEMProduct
     from carto.framework.imaging.ortho import write_ortho
-    from carto.framework.raster.images import read_raster
+    from carto.framework.imaging.preparation import prepare_image
+    from carto.framework.raster.image_source import RasterImage, check_image_source
 
     t0 = time.perf_counter()
     pair = open_pair(inputs)
@@ -358,7 +465,20 @@ def _dem_into(
         )
     start = initial_dem(init_dem, geoid, init_height_m, scene_dem)
     names = list(sensors)
-    images = [sensors[n].prepare_raw(read_raster(rasters[n]), start) for n in names]
+    images = []
+    for n in names:
+        source = RasterImage.open(rasters[n])
+        check_image_source(source, str(rasters[n]))
+        images.append(
+            prepare_image(
+                source,
+                sensors[n],
+                start,
+                work / "prepared" / n,
+                engine,
+                desc=f"merge staggered arrays of {n}",
+            )
+        )
     generator = choose_dem_generator(generator, pair.types)
     registry = get_registry()
     component = registry.get("dem-generator", generator)
@@ -371,18 +491,17 @@ def _dem_into(
         + f", matcher {matcher}",
         quiet,
     )
-    workers = int(settings.pop("workers", 1))
-    extra: dict[str, Any] = {}
-    if workers > 1:
-        extra["scheduler"] = tile_scheduler(workers)
+    progress("dem", f"tiles on {engine.description}", quiet)
     product = component.generate(
         images,
         [sensors[n] for n in names],
         init_dem=start,
         matcher=chosen_matcher,
         progress=None if quiet else (lambda line: progress("dem", line, False)),
+        scheduler=engine,
+        work_dir=work / "generator",
+        keep_failed_tiles=allow_poor,
         **settings,
-        **extra,
     )
     if not isinstance(product, DEMProduct):
         raise InputError(
@@ -394,6 +513,11 @@ def _dem_into(
             f"{len(names)} images"
         )
     warnings = _poor_dem(product)
+    if product.failed_tiles:
+        warnings.append(
+            f"{len(product.failed_tiles)} tiles failed and have no heights "
+            f"({product.failed_tiles[0]})"
+        )
     if warnings and not allow_poor:
         raise InputError(f"dem: {'; '.join(warnings)} (--allow-poor writes it anyway)")
     for warning in warnings:
@@ -414,7 +538,7 @@ def _dem_into(
     if product.quality:
         files["quality"] = write_ortho(
             out / "quality.tif",
-            np.stack([layer.values for layer in product.quality]),
+            [layer.values for layer in product.quality],
             product.ortho_grid,
             tags={f"BAND_{k}": layer.description for k, layer in enumerate(product.quality, 1)},
             band_descriptions=[layer.name for layer in product.quality],
@@ -427,7 +551,9 @@ def _dem_into(
         "matcher": matcher,
         "images": {n: str(rasters[n]) for n in names},
         "settings": {k: v for k, v in settings.items() if isinstance(v, str | int | float)},
-        "workers": workers,
+        "workers": engine.workers,
+        "engine": engine.description,
+        "failed_tiles": list(product.failed_tiles),
         "initial_dem": start.name,
         "dem_grid": {
             "crs": product.dem_grid.crs.to_string(),

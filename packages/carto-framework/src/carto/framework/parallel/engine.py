@@ -1,0 +1,234 @@
+"""The tile engine: runs a stage's tile tasks in this process, on worker processes of a local
+``dask.distributed`` cluster, or on an existing cluster, with a progress bar, retries and a
+record of the tasks that failed.
+
+A task is an argument-less callable (a ``functools.partial`` of a module-level function over
+paths, windows and settings), so it pickles and runs on any worker that sees the files. A task
+that raises is retried (:data:`RETRIES` times); one that still fails gives a
+:class:`TaskFailure` in its place, and the stage goes on: the caller decides what a missing
+tile means (the DEM marks it nodata and the command fails with the cause). An interruption
+(Ctrl-C, SIGTERM) is never retried.
+
+:func:`open_engine` makes the engine of a command: ``workers=1`` runs in this process,
+``workers=N`` starts a ``LocalCluster`` of ``N`` single-threaded worker processes, and
+``scheduler="tcp://host:8786"`` connects to a running cluster (``dask scheduler`` and
+``dask worker`` on the machines, or ``dask-jobqueue`` on SLURM/PBS; the workers need Carto
+installed and the input and output folders mounted at the same paths).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+from collections.abc import Callable, Iterator, Sequence
+from typing import Any
+
+import attrs
+
+from carto.framework.errors import UsageError
+from carto.framework.parallel.progress import stage_bar
+
+__all__ = [
+    "RETRIES",
+    "TaskFailure",
+    "TileEngine",
+    "default_workers",
+    "open_engine",
+]
+
+RETRIES = 1
+"""How many times a failed task is run again before it is recorded as failed."""
+
+_WORKER_ENV = {  # one thread per worker process: the processes are the parallelism
+    "OMP_NUM_THREADS": "1",
+    "OPENBLAS_NUM_THREADS": "1",
+    "MKL_NUM_THREADS": "1",
+    "NUMBA_NUM_THREADS": "1",
+}
+
+
+@attrs.frozen
+class TaskFailure:
+    """A task that failed after its retries: its key (e.g. ``"tile 3,4"``) and the cause
+    (one line: the exception's type and message)."""
+
+    key: str
+    cause: str
+
+    def __str__(self) -> str:
+        return f"{self.key}: {self.cause}"
+
+
+def _cause(exc: BaseException) -> str:
+    text = str(exc).strip().splitlines()
+    return f"{type(exc).__name__}: {text[0]}" if text else type(exc).__name__
+
+
+def default_workers() -> int:
+    """All the cores this process may use."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # pragma: no cover - not Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def _run_here(task: Callable[[], Any], retries: int) -> Any:
+    for attempt in range(retries + 1):
+        try:
+            return task()
+        except Exception as exc:  # noqa: BLE001 (a task's failure is recorded, not raised)
+            if attempt == retries:
+                return exc
+    return None  # pragma: no cover
+
+
+@attrs.define(eq=False)
+class TileEngine:
+    """Runs lists of tasks (see the module docstring).
+
+    Attributes:
+        workers: the number of tasks that run at once.
+        client: a ``distributed.Client`` (``None``: tasks run in this process).
+        description: what runs the tasks, for reports (``"this process"``,
+            ``"LocalCluster of 2 processes"``, ``"cluster tcp://..."``).
+        quiet: no progress bars.
+    """
+
+    workers: int = 1
+    client: Any = None
+    description: str = "this process"
+    quiet: bool = False
+
+    def run(
+        self,
+        tasks: Sequence[Callable[[], Any]],
+        *,
+        desc: str = "tiles",
+        keys: Sequence[str] | None = None,
+        retries: int = RETRIES,
+    ) -> list[Any]:
+        """Run ``tasks``; their results in order, a :class:`TaskFailure` for each task that
+        still raised after ``retries`` more attempts."""
+        names = list(keys) if keys is not None else [f"task {k}" for k in range(len(tasks))]
+        if len(names) != len(tasks):
+            raise ValueError("run: one key per task")
+        with stage_bar(len(tasks), desc, quiet=self.quiet) as bar:
+            if self.client is None:
+                results = []
+                for task, key in zip(tasks, names, strict=True):
+                    value = _run_here(task, retries)
+                    results.append(
+                        TaskFailure(key, _cause(value)) if isinstance(value, Exception) else value
+                    )
+                    bar.advance()
+                return results
+            return self._run_distributed(tasks, names, retries, bar)
+
+    def __call__(self, tasks: Sequence[Callable[[], Any]]) -> list[Any]:
+        """The DEM generators' ``scheduler`` contract: results in order."""
+        return self.run(tasks)
+
+    def _run_distributed(
+        self, tasks: Sequence[Callable[[], Any]], names: list[str], retries: int, bar: Any
+    ) -> list[Any]:
+        from distributed import as_completed
+
+        futures = [
+            self.client.submit(_call, task, pure=False, retries=retries, key=_key(name))
+            for task, name in zip(tasks, names, strict=True)
+        ]
+        index = {f.key: k for k, f in enumerate(futures)}
+        results: list[Any] = [None] * len(futures)
+        try:
+            for future in as_completed(futures, loop=self.client.loop):
+                k = index[future.key]
+                if future.status == "error":
+                    results[k] = TaskFailure(names[k], _cause(future.exception()))
+                else:
+                    results[k] = future.result()
+                future.release()
+                bar.advance()
+        except BaseException:
+            self.client.cancel(futures)
+            raise
+        return results
+
+
+def _call(task: Callable[[], Any]) -> Any:
+    return task()
+
+
+def _key(name: str) -> str:
+    import uuid
+
+    return f"carto-{name.replace(' ', '-')}-{uuid.uuid4().hex[:12]}"
+
+
+@contextlib.contextmanager
+def open_engine(
+    workers: int | None = None, scheduler: str | None = None, *, quiet: bool = False
+) -> Iterator[TileEngine]:
+    """The engine of a command (see the module docstring); the local cluster it started is
+    closed at the end of the block.
+
+    Args:
+        workers: tasks at once (default: every core, :func:`default_workers`); 1 runs them
+            in this process. Ignored with ``scheduler`` (the cluster has its workers).
+        scheduler: the address of a running ``dask.distributed`` scheduler.
+        quiet: no progress bars.
+
+    Raises:
+        UsageError: ``workers`` < 1, or a scheduler that cannot be reached.
+    """
+    if workers is not None and (isinstance(workers, bool) or int(workers) != workers):
+        raise UsageError(f"--workers must be an integer >= 1, got {workers!r}")
+    if workers is not None and workers < 1:
+        raise UsageError(f"--workers must be >= 1, got {workers}")
+    if scheduler is not None:
+        with _client(scheduler) as client:
+            n = max(1, sum(client.nthreads().values()))
+            yield TileEngine(n, client, f"cluster {scheduler}", quiet)
+        return
+    n = default_workers() if workers is None else int(workers)
+    if n == 1:
+        yield TileEngine(1, None, "this process", quiet)
+        return
+    with _local_cluster(n) as client:
+        yield TileEngine(n, client, f"LocalCluster of {n} processes", quiet)
+
+
+@contextlib.contextmanager
+def _client(address: str) -> Iterator[Any]:
+    from distributed import Client
+
+    try:
+        client = Client(address, timeout="10s", set_as_default=False)
+    except (OSError, TimeoutError) as exc:
+        raise UsageError(f"--scheduler {address}: cannot connect: {_cause(exc)}") from None
+    try:
+        yield client
+    finally:
+        client.close()
+
+
+@contextlib.contextmanager
+def _local_cluster(n: int) -> Iterator[Any]:
+    from distributed import Client, LocalCluster
+
+    for name in ("distributed", "tornado", "bokeh"):
+        logging.getLogger(name).setLevel(logging.ERROR)
+    cluster = LocalCluster(
+        n_workers=n,
+        threads_per_worker=1,
+        processes=True,
+        dashboard_address=None,
+        silence_logs=logging.CRITICAL,
+        env=_WORKER_ENV,
+    )
+    client = Client(cluster, set_as_default=False)
+    try:
+        yield client
+    finally:
+        client.close()
+        cluster.close()

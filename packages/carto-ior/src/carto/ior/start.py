@@ -1,0 +1,123 @@
+"""The starting surface of IOR: the initial DEM on the DEM grid, its voids filled, and how much
+of the images' common footprint it covers (:func:`starting_surface`)."""
+
+from __future__ import annotations
+
+import math
+import warnings
+
+import attrs
+import numpy as np
+from numpy.typing import NDArray
+
+from carto.framework.errors import InputError
+from carto.framework.geometry.sensor import Sensor
+from carto.framework.imaging.ortho_grid import OrthoGrid
+from carto.framework.raster.dem import DEM
+from carto.framework.raster.dem_measures import fill_voids
+
+__all__ = ["StartingSurface", "seen_by_both", "starting_surface"]
+
+FloatArray = NDArray[np.float64]
+
+
+@attrs.frozen
+class StartingSurface:
+    """The starting heights on the DEM grid and what the initial DEM gave.
+
+    Attributes:
+        heights: heights of every DEM node (no NaN): the initial DEM's, its voids filled.
+        coverage: share of the images' common footprint where the initial DEM has a height.
+        filled: share of the footprint whose starting height was filled (interpolated).
+        footprint: share of the DEM grid's nodes that both images see.
+    """
+
+    heights: FloatArray = attrs.field(eq=False)
+    coverage: float
+    filled: float
+    footprint: float
+
+
+def seen_by_both(
+    sensors: tuple[Sensor, Sensor], lon: FloatArray, lat: FloatArray, h: FloatArray
+) -> NDArray[np.bool_]:
+    """Whether both images see the ground points (inside both images' extents)."""
+    inside = np.ones(lon.shape, bool)
+    for sensor in sensors:
+        n_l, n_s = sensor.image_shape
+        with warnings.catch_warnings(), np.errstate(invalid="ignore"):
+            warnings.simplefilter("ignore", RuntimeWarning)
+            line, sample = sensor.ground_to_image(lon, lat, h)
+            line, sample = np.asarray(line), np.asarray(sample)
+            inside &= (line >= 0) & (line <= n_l) & (sample >= 0) & (sample <= n_s)
+    return inside
+
+
+def _nearest_post_valid(dem: DEM, lon: FloatArray, lat: FloatArray) -> NDArray[np.bool_]:
+    """Whether the post of ``dem`` nearest to each point exists and holds a height."""
+    row, col = dem.lonlat_to_pixel(lon, lat)
+    n_rows, n_cols = dem.shape
+    with np.errstate(invalid="ignore"):
+        inside = (row > -0.5) & (row < n_rows - 0.5) & (col > -0.5) & (col < n_cols - 0.5)
+    r = np.clip(np.rint(np.where(inside, row, 0)), 0, n_rows - 1).astype(np.intp)
+    c = np.clip(np.rint(np.where(inside, col, 0)), 0, n_cols - 1).astype(np.intp)
+    return inside & np.isfinite(dem.heights[r, c])
+
+
+_FOOTPRINT_SAMPLES = 250_000  # nodes at most on which the footprint and coverage are measured
+
+
+def starting_surface(
+    init_dem: DEM,
+    grid: OrthoGrid,
+    sensors: tuple[Sensor, Sensor],
+    min_coverage: float = 0.75,
+) -> StartingSurface:
+    """The starting heights of IOR on ``grid``: the initial DEM, its voids (and the nodes just
+    outside it) filled by GDAL's inverse-distance interpolation
+    (:func:`~carto.framework.raster.dem_measures.fill_voids`), so the
+    first ortho-images have no holes and the first heights no jumps.
+
+    Raises:
+        InputError: the initial DEM gives a height at less than ``min_coverage`` of the
+            images' common footprint (mostly void, or a tile of another place).
+    """
+    rows, cols = np.mgrid[0 : grid.shape[0], 0 : grid.shape[1]]
+    lon, lat = grid.lonlat(rows, cols)
+    raw = init_dem.height(lon, lat)
+    covered = np.isfinite(raw)
+    step = max(1, math.ceil(math.sqrt(raw.size / _FOOTPRINT_SAMPLES)))
+    pick = (slice(None, None, step), slice(None, None, step))
+    h_mid = float(np.nanmedian(raw)) if covered.any() else float(np.nanmedian(init_dem.heights))
+    h_fp = np.where(covered[pick], raw[pick], h_mid)
+    seen = seen_by_both(sensors, lon[pick], lat[pick], h_fp)
+    if not seen.any():  # a sliver: measure over the whole grid
+        seen = np.ones_like(seen)
+    # coverage: the nearest post has a height (bilinear sampling would also lose the ring of
+    # cells around each void, which overstates a void of a coarse DEM)
+    post = _nearest_post_valid(init_dem, lon[pick], lat[pick])
+    coverage = float(post[seen].mean())
+    if coverage < min_coverage:
+        raise InputError(
+            f"dem: initial DEM {init_dem.name} covers {100.0 * coverage:.0f} % of the images' "
+            f"footprint (at least {100.0 * min_coverage:.0f} % needed: a DEM mostly void, or "
+            "a tile of another place; check the file, or start from --init-height M)"
+        )
+    heights = raw
+    if not covered.all():
+        bounds = (float(lon.min()), float(lat.min()), float(lon.max()), float(lat.max()))
+        filled_dem, _ = fill_voids(init_dem, bounds)
+        heights = np.where(covered, raw, filled_dem.height(lon, lat))
+        still = ~np.isfinite(heights)
+        if still.any():  # beyond the initial DEM: fill on the grid itself
+            from rasterio.fill import fillnodata
+
+            heights = fillnodata(
+                np.where(still, 0.0, heights),
+                mask=(~still).astype(np.uint8),
+                max_search_distance=float(math.hypot(*heights.shape)) + 1.0,
+                smoothing_iterations=0,
+            )
+        heights = np.where(np.isfinite(heights), heights, h_mid)
+    filled = float((~post & seen).sum()) / max(int(seen.sum()), 1)
+    return StartingSurface(np.asarray(heights, np.float64), coverage, filled, float(seen.mean()))

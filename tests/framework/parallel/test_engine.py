@@ -1,0 +1,86 @@
+"""The tile engine: results in order, retries, failure records, in this process and on a
+LocalCluster of worker processes; usage errors of its options."""
+
+from __future__ import annotations
+
+import functools
+from pathlib import Path
+
+import pytest
+
+from carto.framework.errors import UsageError
+from carto.framework.parallel.engine import TaskFailure, TileEngine, open_engine
+
+
+def square(x: int) -> int:
+    if x == 3:
+        raise ValueError("three is refused\nsecond line")
+    return x * x
+
+
+def flaky(counter: str, x: int) -> int:
+    """Fails on its first call (counted in a file), then succeeds."""
+    path = Path(counter)
+    calls = int(path.read_text()) if path.exists() else 0
+    path.write_text(str(calls + 1))
+    if calls == 0:
+        raise OSError("transient")
+    return x
+
+
+def interrupted() -> None:
+    raise KeyboardInterrupt
+
+
+def _check(engine: TileEngine, tmp_path: Path) -> None:
+    tasks = [functools.partial(square, k) for k in range(6)]
+    keys = [f"tile {k}" for k in range(6)]
+    out = engine.run(tasks, keys=keys)
+    assert out[:3] == [0, 1, 4]
+    assert out[4:] == [16, 25]
+    assert out[3] == TaskFailure("tile 3", "ValueError: three is refused")
+    counter = tmp_path / "count.txt"
+    assert engine.run([functools.partial(flaky, str(counter), 7)]) == [7]
+    assert counter.read_text() == "2"  # failed once, retried once
+
+
+def test_in_this_process(tmp_path):
+    with open_engine(1) as engine:
+        assert engine.client is None
+        assert engine.workers == 1
+        _check(engine, tmp_path)
+        with pytest.raises(KeyboardInterrupt):
+            engine.run([interrupted])
+
+
+def test_on_a_local_cluster_of_processes(tmp_path):
+    with open_engine(2) as engine:
+        assert engine.workers == 2
+        assert "LocalCluster of 2 processes" in engine.description
+        _check(engine, tmp_path)
+
+
+def test_on_a_running_cluster(tmp_path):
+    from distributed import LocalCluster
+
+    with (
+        LocalCluster(n_workers=2, threads_per_worker=1, dashboard_address=None) as cluster,
+        open_engine(scheduler=cluster.scheduler_address) as engine,
+    ):
+        assert engine.workers == 2
+        assert cluster.scheduler_address in engine.description
+        _check(engine, tmp_path)
+
+
+@pytest.mark.parametrize("workers", [0, -2, 1.5, True])
+def test_bad_workers(workers):
+    with pytest.raises(UsageError, match="--workers"), open_engine(workers):
+        pass
+
+
+def test_unreachable_scheduler():
+    with (
+        pytest.raises(UsageError, match=r"--scheduler tcp://127\.0\.0\.1:9"),
+        open_engine(scheduler="tcp://127.0.0.1:9"),
+    ):
+        pass
