@@ -173,8 +173,10 @@ class SimulationOptions:
     n_checkpoints: int | None = None
     supersample: int = 2
     band_lines: int = 512
-    """Image lines rendered at a time (memory and progress granularity; any band size gives
-    the same scene)."""
+    band_samples: int = 2048
+    """Image lines and samples rendered at a time, each block from the terrain and texture
+    windows under it (memory and progress granularity; any block size gives the same
+    scene)."""
     point_targets: bool = False
     error_sizes: tuple[tuple[str, float], ...] = ()
     """Overrides of single error sizes on top of ``errors``, e.g. ``(("attitude_bias_deg",

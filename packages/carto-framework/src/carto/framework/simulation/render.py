@@ -199,13 +199,15 @@ def render_band(
     dem: object,
     texture: object,
     *,
+    samples: tuple[int, int] | None = None,
     h_range: tuple[float, float],
     max_slope: float,
     supersample: int = 2,
     stagger: bool = True,
 ) -> NDArray[np.float32]:
-    """Lines ``[first, last)`` of :func:`render_reflectance`, from windows of the DEM and
-    the texture that hold every ray of those lines, float32 ``(last - first, cols)``.
+    """Lines ``[first, last)`` (and image columns ``samples``, default all) of
+    :func:`render_reflectance`, from windows of the DEM and the texture that hold every ray
+    of those pixels, float32 ``(last - first, cols)``.
 
     The ray search starts and ends at the heights ``h_range`` (widened by 1 m) and steps
     safely for slopes up to ``max_slope`` (rise/run) whatever the windows, so a band gives
@@ -221,11 +223,12 @@ def render_band(
     if sensor.camera.array == "even":
         stagger_tan = -stagger_tan if stagger else 0.0
     first, last = lines
+    s0, s1 = samples or (0, sensor.image_shape[1])
     return _render_kernel(
         int(first),
         int(last - first),
-        sensor.image_shape[1],
-        sensor.first_sample,
+        int(s1 - s0),
+        sensor.first_sample + int(s0),
         stagger_tan,
         supersample,
         arr["line_nodes"],

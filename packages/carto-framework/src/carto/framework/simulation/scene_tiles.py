@@ -39,6 +39,8 @@ DEM_STRIP_ROWS = 256
 """Rows of the truth DEM computed and written at a time."""
 ORTHO_STRIP_ROWS = 256
 """Rows of the true ortho-image computed and written at a time."""
+ORTHO_BLOCK_COLS = 2048
+"""Columns of the true ortho-image resampled from one texture window."""
 
 
 @contextmanager
@@ -144,16 +146,20 @@ def write_truth_dem(path: Path, terrain: Any, *, quiet: bool = False) -> tuple[f
 
 # ----------------------------------------------------------------------------- images
 def band_footprint(
-    sensor: LineScanner, first: int, last: int, h_range: tuple[float, float], margin_m: float
+    sensor: LineScanner,
+    lines: tuple[int, int],
+    samples: tuple[int, int],
+    h_range: tuple[float, float],
+    margin_m: float,
 ) -> Bounds:
-    """Lon/lat bounds of the ground seen by lines ``[first, last)`` (and the staggered
-    array, 8 lines either side) at the heights of ``h_range``, plus ``margin_m``."""
-    n_s = sensor.image_shape[1]
-    lines0, lines1 = first - 8.0, last + 8.0
-    samples = np.linspace(0.0, n_s, 17)
+    """Lon/lat bounds of the ground seen by the block of ``lines`` x ``samples`` (and the
+    staggered array: 8 lines either side) at the heights of ``h_range``, plus ``margin_m``."""
+    lines0, lines1 = lines[0] - 8.0, lines[1] + 8.0
+    s0, s1 = float(samples[0]), float(samples[1])
+    across = np.linspace(s0, s1, 17)
     side = np.linspace(lines0, lines1, 9)
     line = np.concatenate([np.full(17, lines0), np.full(17, lines1), side, side])
-    sample = np.concatenate([samples, samples, np.zeros(9), np.full(9, float(n_s))])
+    sample = np.concatenate([across, across, np.full(9, s0), np.full(9, s1)])
     lons, lats = [], []
     for h in (h_range[0] - 2.0, h_range[1] + 2.0):
         lon, lat = sensor.image_to_ground(line, sample, np.full(line.size, h))
@@ -180,12 +186,15 @@ def render_image(
     max_slope: float,
     supersample: int,
     band_lines: int,
+    band_samples: int,
     to_dn: Callable[[NDArray[np.float32]], NDArray[np.uint16]],
     tags: dict[str, str],
     quiet: bool = False,
 ) -> Path:
     """Render ``sensor``'s image by bands of ``band_lines`` lines (DN from ``to_dn``, called
-    on consecutive bands in order) into a tiled uint16 GeoTIFF."""
+    on consecutive bands in order) into a tiled uint16 GeoTIFF; each band in blocks of
+    ``band_samples`` samples, each from the DEM and texture windows under it (so the memory
+    does not grow with the image width either)."""
     from carto.framework.simulation.render import render_band
 
     n_lines, n_cols = sensor.image_shape
@@ -197,11 +206,14 @@ def render_image(
     ):
         for first in bands:
             last = min(first + band_lines, n_lines)
-            bounds = band_footprint(sensor, first, last, h_range, margin_m)
             refl = np.full((last - first, n_cols), np.nan, np.float32)
-            dem_win = grid_window(terrain.transform, terrain.shape, bounds, 2)
-            tex_win = grid_window(ground.transform, ground.shape, bounds, 3)
-            if dem_win is not None and tex_win is not None:
+            for s0 in range(0, n_cols, band_samples):
+                s1 = min(s0 + band_samples, n_cols)
+                bounds = band_footprint(sensor, (first, last), (s0, s1), h_range, margin_m)
+                dem_win = grid_window(terrain.transform, terrain.shape, bounds, 2)
+                tex_win = grid_window(ground.transform, ground.shape, bounds, 3)
+                if dem_win is None or tex_win is None:
+                    continue
                 dem = types.SimpleNamespace(
                     heights=terrain.window(*dem_win),
                     transform=_sub_transform(terrain.transform, dem_win[0], dem_win[2]),
@@ -212,11 +224,12 @@ def render_image(
                     reflectance=values,
                     transform=_sub_transform(ground.transform, tex_win[0], tex_win[2]),
                 )
-                refl = render_band(
+                refl[:, s0:s1] = render_band(
                     sensor,
                     (first, last),
                     dem,
                     tex,
+                    samples=(s0, s1),
                     h_range=h_range,
                     max_slope=max_slope,
                     supersample=supersample,
@@ -310,30 +323,36 @@ def write_true_ortho(
         for r0 in strips:
             r1 = min(r0 + ORTHO_STRIP_ROWS, ny)
             data = np.full((r1 - r0, nx), np.nan, np.float32)
-            ex = x0 + gsd_m * np.linspace(0.0, nx, 33)
-            ey = y1 - gsd_m * np.linspace(r0, r1, 9)
-            px = np.concatenate([ex, ex, np.full(ey.size, ex[0]), np.full(ey.size, ex[-1])])
-            py = np.concatenate([np.full(ex.size, ey[0]), np.full(ex.size, ey[-1]), ey, ey])
-            lon, lat = to_lonlat.transform(px, py)
-            win = grid_window(
-                ground.transform,
-                ground.shape,
-                (float(np.min(lon)), float(np.min(lat)), float(np.max(lon)), float(np.max(lat))),
-                4,
-            )
-            if win is not None:
+            for c0 in range(0, nx, ORTHO_BLOCK_COLS):
+                c1 = min(c0 + ORTHO_BLOCK_COLS, nx)
+                ex = x0 + gsd_m * np.linspace(c0, c1, 17)
+                ey = y1 - gsd_m * np.linspace(r0, r1, 9)
+                px = np.concatenate([ex, ex, np.full(ey.size, ex[0]), np.full(ey.size, ex[-1])])
+                py = np.concatenate([np.full(ex.size, ey[0]), np.full(ex.size, ey[-1]), ey, ey])
+                lon, lat = to_lonlat.transform(px, py)
+                bounds = (
+                    float(np.min(lon)),
+                    float(np.min(lat)),
+                    float(np.max(lon)),
+                    float(np.max(lat)),
+                )
+                win = grid_window(ground.transform, ground.shape, bounds, 4)
+                if win is None:
+                    continue
                 values, _ = ground.window(*win)
+                block = np.full((r1 - r0, c1 - c0), np.nan, np.float32)
                 reproject(
                     values,
-                    data,
+                    block,
                     src_transform=_sub_transform(ground.transform, win[0], win[2]),
                     src_crs="EPSG:4326",
-                    dst_transform=_sub_transform(dst_transform, r0, 0),
+                    dst_transform=_sub_transform(dst_transform, r0, c0),
                     dst_crs=wkt,
                     resampling=Resampling.average,
                     src_nodata=np.nan,
                     dst_nodata=np.nan,
                 )
+                data[:, c0:c1] = block
             dst.write(data, 1, window=_window(r0, r1, 0, nx))
             bar.advance()
     return path

@@ -428,6 +428,7 @@ def simulate_scene(
                 max_slope=max_slope,
                 supersample=options.supersample,
                 band_lines=options.band_lines,
+                band_samples=options.band_samples,
                 to_dn=lambda refl: _radiometry(refl, plan, rng_noise),
                 tags={
                     "NBITS_USED": "10",
