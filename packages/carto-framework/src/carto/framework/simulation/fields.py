@@ -210,13 +210,6 @@ def hashed_noise(key: int, r0: int, r1: int, c0: int, c1: int) -> Float32Array:
     return _hashed_uniform(k, int(r0), int(r1), int(c0), int(c1))
 
 
-def noise_key(seed: int, *stream: int) -> int:
-    """A 64-bit key of the hashed noise of ``seed`` and a stream (tuple of small ints)."""
-    return int(
-        np.random.SeedSequence([int(seed), *map(int, stream)]).generate_state(1, np.uint64)[0]
-    )
-
-
 @numba.njit(parallel=True, cache=True, nogil=True)
 def _up2(
     field: NDArray, f0: int, f1: int, g0: int, g1: int, lo_r: int, lo_c: int
