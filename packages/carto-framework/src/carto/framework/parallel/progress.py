@@ -41,15 +41,21 @@ def stage_bar(
     if not show:
         yield StageBar(None)
         return
+    import shutil
+
     from tqdm import tqdm
 
+    # the terminal's size, or 80 x 24 when it reports none (a pty without a size, where
+    # tqdm would find no row to draw on)
+    columns, lines = shutil.get_terminal_size((80, 24))
     bar = tqdm(
         total=total,
         desc=desc,
         unit=unit,
         file=sys.stderr,
         leave=False,
-        dynamic_ncols=True,
+        ncols=min(columns, 120),
+        nrows=max(lines, 2),
         smoothing=0.1,
     )
     try:

@@ -1,0 +1,52 @@
+"""Wall time and peak memory of a command and all the processes it starts (a dask
+LocalCluster's workers included): the resident set sizes of the process tree are summed every
+``poll_s`` seconds (psutil) and the peak of that sum is the run's peak memory."""
+
+from __future__ import annotations
+
+import contextlib
+import subprocess
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import psutil
+
+
+def tree_rss(pid: int) -> int:
+    """Resident bytes of ``pid`` and all its descendants (0 when gone)."""
+    try:
+        proc = psutil.Process(pid)
+        procs = [proc, *proc.children(recursive=True)]
+    except psutil.Error:
+        return 0
+    total = 0
+    for p in procs:
+        with contextlib.suppress(psutil.Error):
+            total += p.memory_info().rss
+    return total
+
+
+def run_measured(
+    command: Sequence[str], *, log: Path | None = None, poll_s: float = 0.2
+) -> dict[str, Any]:
+    """Run ``command``; its ``wall_s``, ``peak_rss_gb`` (process tree) and ``returncode``
+    (stdout and stderr go to ``log`` when given)."""
+    sink = open(log, "w") if log else subprocess.DEVNULL  # noqa: SIM115
+    try:
+        t0 = time.perf_counter()
+        proc = subprocess.Popen(list(command), stdout=sink, stderr=subprocess.STDOUT)
+        peak = 0
+        while proc.poll() is None:
+            peak = max(peak, tree_rss(proc.pid))
+            time.sleep(poll_s)
+        wall = time.perf_counter() - t0
+    finally:
+        if log:
+            sink.close()
+    return {
+        "wall_s": round(wall, 1),
+        "peak_rss_gb": round(peak / 2**30, 3),
+        "returncode": proc.returncode,
+    }
