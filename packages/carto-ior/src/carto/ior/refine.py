@@ -42,7 +42,6 @@ import functools
 import os
 import tempfile
 import time
-import warnings
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
@@ -56,6 +55,7 @@ from carto.framework.geometry.sensor import Sensor
 from carto.framework.imaging.ortho_grid import OrthoGrid, check_grid_size, footprint_box
 from carto.framework.matching.base import Matcher
 from carto.framework.raster.dem import DEM, ELLIPSOID
+from carto.framework.raster.focal import focal_nanmedian
 from carto.ior.settings import IORSettings, option_label
 from carto.ior.start import StartingSurface, seen_by_both, starting_surface
 from carto.ior.tiles import NODE_LAYERS, ORTHO_LAYERS, TileJob, refine_tile, run_tile, tile_arrays
@@ -251,9 +251,6 @@ def b_over_h(left: Sensor, right: Sensor, lon: float, lat: float, h: float) -> f
     return base_direction(left, right, lon, lat, h)[0]
 
 
-_MEDIAN_ROWS = 256  # DEM rows whose 5 x 5 local median is taken at once
-
-
 def regularise(
     heights: FloatArray, new_height: FloatArray, settings: IORSettings
 ) -> tuple[FloatArray, NDArray[np.bool_]]:
@@ -261,21 +258,13 @@ def regularise(
     the 5 x 5 local median removed, then a normalised Gaussian convolution (sigma
     ``smoothing_nodes``) that smooths the noise and fills the holes from their neighbours
     (nodes far from any match keep their height). Returns the new heights and the inliers."""
-    from numpy.lib.stride_tricks import sliding_window_view
     from scipy import ndimage
 
     dh = new_height - heights
     valid = np.isfinite(dh)
     if not valid.any():
         return heights.copy(), valid
-    padded = np.pad(np.where(valid, dh, np.nan), 2, mode="edge")
-    local = np.empty_like(dh)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)
-        for r0 in range(0, dh.shape[0], _MEDIAN_ROWS):  # in blocks: memory of 25 x a block
-            r1 = min(r0 + _MEDIAN_ROWS, dh.shape[0])
-            view = sliding_window_view(padded[r0 : r1 + 4], (5, 5))
-            local[r0:r1] = np.nanmedian(view.reshape(r1 - r0, dh.shape[1], 25), axis=-1)
+    local = focal_nanmedian(np.where(valid, dh, np.nan), 2)
     resid = dh - local
     r = resid[np.isfinite(resid)]
     nmad = 1.4826 * float(np.median(np.abs(r - np.median(r)))) if r.size else 0.0

@@ -1,0 +1,61 @@
+"""Focal (moving-window) statistics of rasters with voids, compiled: work proportional to the
+pixels, memory of the output only (a ``sliding_window_view`` with ``numpy.nanmedian`` makes a
+copy of ``window`` values per pixel)."""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from carto.framework.errors import InputError
+
+__all__ = ["focal_nanmedian"]
+
+
+@numba.njit(parallel=True, cache=True, nogil=True)
+def _nanmedian_kernel(values: NDArray, radius: int, out: NDArray) -> None:  # pragma: no cover
+    n_r, n_c = values.shape
+    side = 2 * radius + 1
+    for r in numba.prange(n_r):
+        buf = np.empty(side * side, np.float64)
+        for c in range(n_c):
+            n = 0
+            for dr in range(-radius, radius + 1):
+                rr = min(max(r + dr, 0), n_r - 1)  # edge values repeated
+                for dc in range(-radius, radius + 1):
+                    cc = min(max(c + dc, 0), n_c - 1)
+                    v = values[rr, cc]
+                    if v == v:  # finite or inf, not NaN
+                        # insertion into the sorted buffer
+                        k = n
+                        while k > 0 and buf[k - 1] > v:
+                            buf[k] = buf[k - 1]
+                            k -= 1
+                        buf[k] = v
+                        n += 1
+            if n == 0:
+                out[r, c] = np.nan
+            elif n % 2 == 1:
+                out[r, c] = buf[n // 2]
+            else:
+                out[r, c] = 0.5 * (buf[n // 2 - 1] + buf[n // 2])
+
+
+def focal_nanmedian(values: ArrayLike, radius: int = 2) -> NDArray[np.float64]:
+    """The median of the non-NaN values in the ``(2 radius + 1)²`` window around each pixel
+    (the edge pixels repeated beyond the raster, like ``numpy.pad(mode="edge")``); NaN where
+    the window holds none. Equals ``numpy.nanmedian`` over ``sliding_window_view`` of the
+    edge-padded raster.
+
+    Raises:
+        InputError: not a 2-D array, or a radius < 0."""
+    array = np.ascontiguousarray(values, dtype=np.float64)
+    if array.ndim != 2:
+        raise InputError(f"focal median: values must be 2-D, got shape {array.shape}")
+    if isinstance(radius, bool) or int(radius) != radius or radius < 0:
+        raise InputError(f"focal median: radius must be an integer >= 0, got {radius!r}")
+    out = np.empty_like(array)
+    if array.size:
+        _nanmedian_kernel(array, int(radius), out)
+    return out

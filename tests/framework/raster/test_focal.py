@@ -1,0 +1,40 @@
+"""The compiled focal median against NumPy's nanmedian over sliding windows (an independent
+implementation), with voids, edges and infinities."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+from numpy.lib.stride_tricks import sliding_window_view
+
+from carto.framework.errors import InputError
+from carto.framework.raster.focal import focal_nanmedian
+
+
+def reference(values: np.ndarray, radius: int) -> np.ndarray:
+    side = 2 * radius + 1
+    padded = np.pad(values, radius, mode="edge")
+    windows = sliding_window_view(padded, (side, side)).reshape(*values.shape, side * side)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return np.nanmedian(windows, axis=-1)
+
+
+@pytest.mark.parametrize("radius", [0, 1, 2, 3])
+def test_equals_nanmedian_of_windows(radius):
+    rng = np.random.default_rng(radius)
+    values = rng.normal(size=(57, 43))
+    values[rng.random(values.shape) < 0.3] = np.nan
+    values[10:20, 5:15] = np.nan  # a void larger than the window
+    values[0, 0] = np.inf
+    np.testing.assert_array_equal(focal_nanmedian(values, radius), reference(values, radius))
+
+
+def test_errors_and_empty():
+    assert focal_nanmedian(np.empty((0, 5))).shape == (0, 5)
+    with pytest.raises(InputError, match="2-D"):
+        focal_nanmedian(np.zeros(5))
+    with pytest.raises(InputError, match="radius"):
+        focal_nanmedian(np.zeros((3, 3)), -1)
