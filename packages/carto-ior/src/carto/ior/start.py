@@ -65,6 +65,18 @@ def _nearest_post_valid(dem: DEM, lon: FloatArray, lat: FloatArray) -> NDArray[n
 
 
 _FOOTPRINT_SAMPLES = 250_000  # nodes at most on which the footprint and coverage are measured
+_BLOCK_ROWS = 256  # grid rows located at once
+
+
+def _on_grid(dem: DEM, grid: OrthoGrid) -> FloatArray:
+    """The DEM's heights at every node of ``grid`` (bilinear; NaN off the DEM), block by block
+    of rows (memory of the result only)."""
+    n_r, n_c = grid.shape
+    out = np.empty((n_r, n_c))
+    for r0 in range(0, n_r, _BLOCK_ROWS):
+        rows, cols = np.mgrid[r0 : min(n_r, r0 + _BLOCK_ROWS), 0:n_c]
+        out[r0 : r0 + rows.shape[0]] = dem.height(*grid.lonlat(rows, cols))
+    return out
 
 
 def starting_surface(
@@ -82,20 +94,19 @@ def starting_surface(
         InputError: the initial DEM gives a height at less than ``min_coverage`` of the
             images' common footprint (mostly void, or a tile of another place).
     """
-    rows, cols = np.mgrid[0 : grid.shape[0], 0 : grid.shape[1]]
-    lon, lat = grid.lonlat(rows, cols)
-    raw = init_dem.height(lon, lat)
+    raw = _on_grid(init_dem, grid)
     covered = np.isfinite(raw)
     step = max(1, math.ceil(math.sqrt(raw.size / _FOOTPRINT_SAMPLES)))
     pick = (slice(None, None, step), slice(None, None, step))
+    lon_p, lat_p = grid.lonlat(*np.mgrid[0 : raw.shape[0] : step, 0 : raw.shape[1] : step])
     h_mid = float(np.nanmedian(raw)) if covered.any() else float(np.nanmedian(init_dem.heights))
     h_fp = np.where(covered[pick], raw[pick], h_mid)
-    seen = seen_by_both(sensors, lon[pick], lat[pick], h_fp)
+    seen = seen_by_both(sensors, lon_p, lat_p, h_fp)
     if not seen.any():  # a sliver: measure over the whole grid
         seen = np.ones_like(seen)
     # coverage: the nearest post has a height (bilinear sampling would also lose the ring of
     # cells around each void, which overstates a void of a coarse DEM)
-    post = _nearest_post_valid(init_dem, lon[pick], lat[pick])
+    post = _nearest_post_valid(init_dem, lon_p, lat_p)
     coverage = float(post[seen].mean())
     if coverage < min_coverage:
         raise InputError(
@@ -105,9 +116,13 @@ def starting_surface(
         )
     heights = raw
     if not covered.all():
-        bounds = (float(lon.min()), float(lat.min()), float(lon.max()), float(lat.max()))
+        n_r, n_c = grid.shape
+        edge_r = np.r_[np.zeros(n_c), np.full(n_c, n_r - 1), np.arange(n_r), np.arange(n_r)]
+        edge_c = np.r_[np.arange(n_c), np.arange(n_c), np.zeros(n_r), np.full(n_r, n_c - 1)]
+        lon_e, lat_e = grid.lonlat(edge_r, edge_c)
+        bounds = (float(lon_e.min()), float(lat_e.min()), float(lon_e.max()), float(lat_e.max()))
         filled_dem, _ = fill_voids(init_dem, bounds)
-        heights = np.where(covered, raw, filled_dem.height(lon, lat))
+        heights = np.where(covered, raw, _on_grid(filled_dem, grid))
         still = ~np.isfinite(heights)
         if still.any():  # beyond the initial DEM: fill on the grid itself
             from rasterio.fill import fillnodata
