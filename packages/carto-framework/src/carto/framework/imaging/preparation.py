@@ -148,3 +148,62 @@ def prepare_image(
             f"{desc}: {len(failed)} of {len(tasks)} bands of lines failed ({failed[0]})"
         )
     return image
+
+
+def prepared_sources(
+    rasters: Mapping[str, Any],
+    sensors: Mapping[str, Sensor],
+    dem: Any,
+    folder: Path | None = None,
+    engine: Any = None,
+) -> dict[str, Any]:
+    """Every image of ``sensors`` as a prepared image read by windows
+    (:class:`~carto.framework.raster.image_source.ImageSource`), for whole scenes.
+
+    A raster file is opened by windows (:class:`~carto.framework.raster.image_source.RasterImage`,
+    checked); one whose sensor needs preparation (staggered arrays) is prepared once with
+    :func:`prepare_image` into ``folder / name`` on ``engine`` (default: in this process).
+    An array (or, without ``folder``, a source that needs preparation) is prepared in
+    memory (:func:`prepared_raster`: small images, the Python API).
+
+    Raises:
+        InputError: an image without raster, an unreadable or empty raster, a band that could
+            not be prepared.
+    """
+    from carto.framework.parallel.engine import TileEngine
+    from carto.framework.raster.image_source import (
+        ArrayImage,
+        ImageSource,
+        RasterImage,
+        check_image_source,
+    )
+
+    missing = [n for n in sensors if n not in rasters]
+    if missing:
+        raise InputError(f"no raster for image(s) {', '.join(missing)}")
+    engine = engine if engine is not None else TileEngine(quiet=True)
+    out: dict[str, Any] = {}
+    for name, sensor in sensors.items():
+        raster = rasters[name]
+        if isinstance(raster, np.ndarray):
+            out[name] = ArrayImage(prepared_raster(raster, sensor, dem))
+            continue
+        if isinstance(raster, ImageSource):
+            source = raster
+        else:
+            source = RasterImage.open(raster)
+            check_image_source(source, str(raster))
+        if not sensor.raw_needs_preparation:
+            out[name] = source
+        elif folder is None:
+            out[name] = ArrayImage(sensor.prepare_raw(np.asarray(source), dem))
+        else:
+            out[name] = prepare_image(
+                source,
+                sensor,
+                dem,
+                Path(folder) / name,
+                engine,
+                desc=f"merge staggered arrays of {name}",
+            )
+    return out

@@ -21,7 +21,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from carto.framework.errors import InputError
-from carto.framework.matching.forstner import forstner_points
+from carto.framework.matching.forstner import forstner_points, spread_order
 from carto.framework.matching.inputs import as_image
 
 CANDIDATE_METHODS = ("forstner", "grid")
@@ -117,3 +117,81 @@ def candidate_points(
     empty_r, empty_c = np.nonzero(~occupied)
     centres = np.floor((np.stack([empty_r, empty_c], axis=1) + 0.5) * size) + 0.5
     return np.concatenate([points, centres[_finite_at(img, centres)]])
+
+
+def frame_cells(
+    points: NDArray[np.float64], frame_shape: tuple[int, int], cells: tuple[int, int]
+) -> NDArray[np.intp]:
+    """``(N, 2)`` cell ``(row, col)`` of each point of a frame of ``frame_shape`` divided into
+    ``cells`` equal cells (the rule of :func:`~carto.framework.matching.forstner.spread_order`)."""
+    out = np.empty(points.shape, np.intp)
+    for axis in (0, 1):
+        out[:, axis] = np.clip(
+            (points[:, axis] / frame_shape[axis] * cells[axis]).astype(np.intp), 0, cells[axis] - 1
+        )
+    return out
+
+
+def window_candidates(
+    image: ArrayLike,
+    spacing_px: float,
+    offset: tuple[int, int],
+    frame_shape: tuple[int, int],
+    cell_range: tuple[tuple[int, int], tuple[int, int]],
+    *,
+    method: str = "forstner",
+    per_cell: int = 2,
+    window: int = 5,
+    min_roundness: float = 0.5,
+    weight_quantile: float = 0.5,
+) -> NDArray[np.float64]:
+    """:func:`candidate_points` of one window of a larger frame (a tile of a whole scene's
+    ortho grid): ``image`` is the window at ``offset`` (row, col) of a frame of
+    ``frame_shape``, divided into the frame's cells of about ``spacing_px``
+    (:func:`candidate_cells`); only the cells ``cell_range = ((row0, row1), (col0, col1))``
+    get candidates (the tile's own: tiles with disjoint cell ranges give disjoint candidates).
+    The window must reach beyond those cells by the operator's border (``window + 2``) for
+    the result to equal :func:`candidate_points` on the whole frame; the Forstner weight
+    quantile is the window's. Positions in the window's pixels (first pixel centre 0.5)."""
+    img = as_image(image, "image")
+    if method not in CANDIDATE_METHODS:
+        raise InputError(f"candidates {method!r} is not one of {', '.join(CANDIDATE_METHODS)}")
+    spacing = float(spacing_px)
+    if not spacing >= 4.0:
+        raise InputError(f"spacing_px must be >= 4 pixels, got {spacing_px}")
+    frame = (int(frame_shape[0]), int(frame_shape[1]))
+    cells = candidate_cells(frame, spacing)
+    off = np.asarray(offset, np.float64)
+    (r0, r1), (c0, c1) = cell_range
+
+    def owned(points: NDArray[np.float64]) -> NDArray[np.bool_]:
+        cell = frame_cells(points, frame, cells)
+        return (cell[:, 0] >= r0) & (cell[:, 0] < r1) & (cell[:, 1] >= c0) & (cell[:, 1] < c1)
+
+    def in_window(local: NDArray[np.float64]) -> NDArray[np.bool_]:
+        ok = (local >= 0.5).all(axis=1)
+        ok &= (local[:, 0] < img.shape[0]) & (local[:, 1] < img.shape[1])
+        return ok
+
+    if method == "grid":
+        points = grid_points(frame, spacing, margin=2 * spacing / 3)
+        points = points[owned(points)] - off
+        points = points[in_window(points)]
+        return points[_finite_at(img, points)]
+    found = forstner_points(  # all points, best first
+        img, window=window, min_roundness=min_roundness, weight_quantile=weight_quantile
+    )
+    glob = found + off
+    mine = owned(glob)
+    glob = glob[mine]
+    order = spread_order(glob, -np.arange(glob.shape[0], dtype=np.float64), frame, cells, per_cell)
+    points = glob[order]
+    occupied = np.zeros((r1 - r0, c1 - c0), bool)
+    cell = frame_cells(points, frame, cells)
+    occupied[cell[:, 0] - r0, cell[:, 1] - c0] = True
+    empty_r, empty_c = np.nonzero(~occupied)
+    size = np.array([frame[0] / cells[0], frame[1] / cells[1]])
+    centres = np.floor((np.stack([empty_r + r0, empty_c + c0], axis=1) + 0.5) * size) + 0.5
+    centres = centres - off
+    centres = centres[in_window(centres)]
+    return np.concatenate([points - off, centres[_finite_at(img, centres)]])

@@ -52,6 +52,7 @@ def gcp_offsets(
     max_disagreement: float = 3.5,
     models_agree_px: float = 1.0,
     sigma_px: float = GCP_OFFSET_SIGMA_PX,
+    prepared: bool = False,
     **matching: Any,
 ) -> tuple[dict[str, NDArray], list[dict[str, Any]]]:
     """Image offsets of hand-measured GCPs, by matching (see the module docstring).
@@ -86,6 +87,10 @@ def gcp_offsets(
     (:meth:`~carto.framework.adjustment.observations.Observations.with_offsets`): the hand
     measurements then fix where the point is, and the matching fixes the parallax; a GCP measured
     in one image only is transferred into the others.
+
+    ``prepared``: ``rasters`` are prepared images read by windows already
+    (:func:`~carto.framework.imaging.preparation.prepared_sources`: whole scenes; only the
+    windows of the chips are read); else each raster is read and prepared whole.
 
     Returns:
         ``(table, dropped)``: the offsets (columns :data:`GCP_OFFSET_COLUMNS`, one row per
@@ -139,12 +144,14 @@ def gcp_offsets(
     if not hand or len(names) < 2:
         return as_arrays(), dropped
     full = block_grid(rasters, sensors, dem)
-    prepared: dict[str, NDArray[np.float32]] = {}
+    ready: dict[str, Any] = {}
 
-    def image(name: str) -> NDArray[np.float32]:
-        if name not in prepared:
-            prepared[name] = prepared_raster(rasters[name], sensors[name], dem)
-        return prepared[name]
+    def image(name: str) -> Any:
+        if name not in ready:
+            ready[name] = (
+                rasters[name] if prepared else prepared_raster(rasters[name], sensors[name], dem)
+            )
+        return ready[name]
 
     def match(
         grid: Any, chips: Mapping[str, NDArray], ref: str, other: str, pos: tuple[float, ...]

@@ -62,7 +62,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from carto.framework.errors import InputError
 from carto.framework.geometry.sensor import Sensor
-from carto.framework.imaging.preparation import system_orthos
+from carto.framework.imaging.preparation import block_grid, prepared_sources
 from carto.framework.matching.base import (
     DenseSettings,
     Matcher,
@@ -70,18 +70,27 @@ from carto.framework.matching.base import (
     MatchSettings,
     OffsetField,
 )
-from carto.framework.matching.candidates import candidate_cells, candidate_points
-from carto.framework.matching.forstner import spread_order
+from carto.framework.matching.candidates import candidate_points
 from carto.framework.matching.inputs import as_image
-from carto.framework.matching.multiview import match_views, ortho_parallax
+from carto.framework.matching.multiview import match_views
+from carto.framework.matching.tiled_ties import (
+    TABLE_COLUMNS,
+    TILE_PX,
+    tie_points_on_orthos,
+    tiled_tie_points,
+)
 
-TABLE_COLUMNS = ("id", "image", "line", "sample", "score", "sigma_px")
-"""Columns of the tie-point table (long format: one row per point and image)."""
-
-
-# ----------------------------------------------------------------------------- the pipeline
-def _empty_table() -> dict[str, NDArray]:
-    return {k: np.empty(0, object if k in ("id", "image") else float) for k in TABLE_COLUMNS}
+__all__ = [
+    "MIN_SPACING_PX",
+    "TABLE_COLUMNS",
+    "OrthoTiePointMatcher",
+    "automatic_tie_points",
+    "block_tie_points",
+    "overlap_fraction",
+    "overlapping_pairs",
+    "tie_point_errors",
+    "tie_points_on_orthos",
+]
 
 
 def automatic_tie_points(
@@ -108,6 +117,10 @@ def automatic_tie_points(
     forstner: Mapping[str, Any] | None = None,
     min_points: int = 300,
     matcher: Matcher | None = None,
+    tile_px: int = TILE_PX,
+    engine: Any = None,
+    work_dir: Path | None = None,
+    prepared: bool = False,
 ) -> dict[str, NDArray]:
     """Tie points of ``sensors``' images, as a long table ``id, image, line, sample, score,
     sigma_px`` (raw image coordinates; one row per point and image).
@@ -139,6 +152,15 @@ def automatic_tie_points(
             ``weight_quantile``, ``per_cell``).
         matcher: the matcher of the pairwise matches (default ``"ncc"``; ``carto adjust
             --matcher`` chooses it from the registry), see :func:`match_views`.
+        tile_px: a grid larger than this (ortho pixels) is matched by tiles of this side,
+            tasks of ``engine`` (:mod:`~carto.framework.matching.tiled_ties`: bounded memory
+            whatever the scene); a smaller one in one piece.
+        engine: the :class:`~carto.framework.parallel.engine.TileEngine` of the tiles and of
+            the stagger merge (default: this process).
+        work_dir: folder for the prepared (stagger-merged) images of raster files (default:
+            they are prepared in memory).
+        prepared: ``rasters`` are prepared already
+            (:func:`~carto.framework.imaging.preparation.prepared_sources`).
 
     Returns:
         the table; ``score`` is the correlation score of the point's match in that image
@@ -152,34 +174,40 @@ def automatic_tie_points(
     ref = reference or names[0]
     if ref not in sensors:
         raise InputError(f"tie points: reference {ref!r} is not one of {', '.join(names)}")
-    grid, orthos = system_orthos(rasters, sensors, dem, resolution_m)
+    grid = block_grid(rasters, sensors, dem, resolution_m)
+    images = rasters if prepared else prepared_sources(rasters, sensors, dem, work_dir, engine)
     given = points
     spacing = float(spacing_px)
+    settings = dict(
+        points=given,
+        candidates=candidates,
+        forstner=forstner,
+        matching=dict(
+            template=template,
+            search=search,
+            levels=levels,
+            min_score=min_score,
+            tolerance_px=tolerance_px,
+            closure_px=closure_px,
+            require_closure=require_closure,
+            subpixel=subpixel,
+            matcher=matcher,
+        ),
+        per_cell=per_cell,
+        min_views=min_views,
+        sigma_px=sigma_px,
+    )
     while True:
-        table = tie_points_on_orthos(
-            grid,
-            orthos,
+        table = tiled_tie_points(
+            {n: images[n] for n in sensors},
             sensors,
             dem,
+            grid,
             ref,
             spacing,
-            given,
-            candidates,
-            forstner,
-            dict(
-                template=template,
-                search=search,
-                levels=levels,
-                min_score=min_score,
-                tolerance_px=tolerance_px,
-                closure_px=closure_px,
-                require_closure=require_closure,
-                subpixel=subpixel,
-                matcher=matcher,
-            ),
-            per_cell,
-            min_views,
-            sigma_px,
+            settings,
+            engine=engine,
+            tile_px=tile_px,
         )
         n = len(set(table["id"].tolist()))
         # a small common area (large system-level misregistration, partial overlap) leaves
@@ -191,74 +219,6 @@ def automatic_tie_points(
 
 MIN_SPACING_PX = 16.0
 """Densest candidate spacing :func:`automatic_tie_points` goes to when too few points are kept."""
-
-
-def tie_points_on_orthos(
-    grid: Any,
-    orthos: Mapping[str, NDArray],
-    sensors: Mapping[str, Sensor],
-    dem: Any,
-    ref: str,
-    spacing_px: float,
-    points: NDArray | None,
-    candidates: str,
-    forstner: Mapping[str, Any] | None,
-    matching: Mapping[str, Any],
-    per_cell: int,
-    min_views: int,
-    sigma_px: float,
-) -> dict[str, NDArray]:
-    """Candidates, multi-view matching and selection on orthos already made on ``grid``
-    (steps 3-6 of the module docstring; arguments as :func:`automatic_tie_points`'s, with
-    ``matching`` the options of :func:`match_views`): the tie-point table, raw coordinates
-    computed with the very models that made the orthos. Also used on small ortho chips
-    (:mod:`~carto.framework.matching.gcp_transfer`)."""
-    if points is None:
-        points = candidate_points(
-            orthos[ref], spacing_px, method=candidates, **dict(forstner or {})
-        )
-    points = np.asarray(points, np.float64).reshape(-1, 2)
-    if points.shape[0] == 0:
-        return _empty_table()
-    mv = match_views(
-        orthos,
-        ref,
-        points,
-        **matching,
-        parallax=ortho_parallax(grid, sensors, dem, ref),
-    )
-    # back to raw image coordinates, with the model that made each ortho
-    raw = np.full(mv.positions.shape, np.nan)
-    for k, name in enumerate(mv.views):
-        ok = np.isfinite(mv.positions[k, :, 0])
-        if not ok.any():
-            continue
-        px = mv.positions[k, ok]
-        lon, lat = grid.lonlat(px[:, 0] - 0.5, px[:, 1] - 0.5)
-        line, sample = sensors[name].ground_to_image(lon, lat, dem.height(lon, lat))
-        raw[k, ok] = np.stack([line, sample], axis=1)
-    seen = np.isfinite(raw).all(axis=2)
-    n_seen = seen.sum(axis=0)
-    keep = np.flatnonzero(seen[0] & (n_seen >= max(int(min_views), 2)))
-    if keep.size == 0:
-        return _empty_table()
-    if per_cell:
-        weight = n_seen[keep] + 0.5 * np.nan_to_num(mv.scores[0, keep], nan=-1.0)
-        order = spread_order(
-            points[keep], weight, grid.shape, candidate_cells(grid.shape, spacing_px), per_cell
-        )
-        keep = np.sort(keep[order])
-    point_pos, view_idx = np.nonzero(seen[:, keep].T)  # row-major: by point, then view
-    point_idx = keep[point_pos]
-    ids = np.array([f"A{i:05d}" for i in keep], object)
-    return {
-        "id": ids[point_pos],
-        "image": np.array(mv.views, object)[view_idx],
-        "line": raw[view_idx, point_idx, 0],
-        "sample": raw[view_idx, point_idx, 1],
-        "score": mv.scores[view_idx, point_idx],
-        "sigma_px": np.full(point_idx.size, float(sigma_px)),
-    }
 
 
 def tie_point_errors(
@@ -324,7 +284,7 @@ def tie_point_errors(
 _PIPELINE_DEFAULTS: dict[str, Any] = {
     p.name: p.default
     for p in inspect.signature(automatic_tie_points).parameters.values()
-    if p.kind is inspect.Parameter.KEYWORD_ONLY
+    if p.kind is inspect.Parameter.KEYWORD_ONLY and p.name not in ("engine", "work_dir", "prepared")
 }
 
 
@@ -478,9 +438,21 @@ def block_tie_points(
     swaths, strips): when the first image shares at least half its footprint with every
     other, one multi-view :func:`automatic_tie_points`; otherwise :func:`automatic_tie_points`
     on every overlapping pair (:func:`overlapping_pairs`), with point ids prefixed by the pair
-    so that they stay distinct."""
+    so that they stay distinct.
+
+    ``options`` are :func:`automatic_tie_points`'s; with ``engine`` and ``work_dir`` raster
+    files are prepared once (:func:`~carto.framework.imaging.preparation.prepared_sources`)
+    and matched by tiles on the engine."""
     h_mid = float(np.nanmedian(dem.heights)) if hasattr(dem, "heights") else 0.0
     names = list(sensors)
+    if not options.pop("prepared", False):
+        missing = [n for n in sensors if n not in rasters]
+        if missing:
+            raise InputError(f"no raster for image(s) {', '.join(missing)}")
+        rasters = prepared_sources(
+            rasters, sensors, dem, options.get("work_dir"), options.get("engine")
+        )
+    options["prepared"] = True
     if len(names) <= 2:
         return automatic_tie_points(rasters, sensors, dem, **options)
     # one multi-view matching when the first image shares most of its area with every other
