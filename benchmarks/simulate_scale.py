@@ -13,7 +13,8 @@ Usage::
     .venv/bin/python benchmarks/simulate_scale.py --sizes 3000 --work /tmp/sim  # keep the scenes
 
 Memory should not grow with the scene (the full scene at most 1.3 x the quarter scene) and
-time should grow linearly with the pixels (``s_per_mpx`` about constant).
+time should grow linearly with the pixels (``s_per_mpx`` about constant) on an idle machine:
+``load_avg_1min`` (at the start and the end of a run) tells how busy the 2 cores were.
 """
 
 from __future__ import annotations
@@ -90,6 +91,7 @@ def run(preset: str, size: int, work: Path, terrain: str, seed: int) -> dict:
         str(out),
         "--quiet",
     ]
+    load0 = os.getloadavg()[0]
     t0 = time.perf_counter()
     proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     peak = 0
@@ -109,6 +111,7 @@ def run(preset: str, size: int, work: Path, terrain: str, seed: int) -> dict:
         "wall_s": round(wall, 1),
         "s_per_mpx": round(wall / max(n_images * size * size / 1e6, 1e-9), 3),
         "peak_rss_gb": round(peak / 1e9, 3),
+        "load_avg_1min": [round(load0, 1), round(os.getloadavg()[0], 1)],
         "returncode": proc.returncode,
         "command": " ".join(["carto", *command[1:]]),
     }
