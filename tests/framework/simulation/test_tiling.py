@@ -146,3 +146,20 @@ def test_texture_tiles_with_targets_and_blur_equal_one_piece():
 def test_absurd_areas_are_refused_with_the_posting_named():
     with pytest.raises(InputError, match=r"posting_m 0.01 .* more than"):
         ProceduralTerrain("hilly", (70.0, 20.0, 79.0, 29.0), 0.01, seed=0)
+
+
+def test_a_full_scene_grid_is_accepted_and_its_lattices_are_bounded():
+    """A full Cartosat-1 scene (~31 km a side: a 7000 x 7000 DEM at 5 m, a 27000 x 27000
+    texture at 1.25 m) is beyond what a whole grid may hold, but not beyond windows."""
+    south, west = 30.15, 77.8
+    bounds = (west, south, west + 31_000 / (111_320 * math.cos(math.radians(30.3))), 30.43)
+    with pytest.raises(InputError, match="grid of"):
+        make_terrain("hilly", bounds, 1.25, seed=1)  # a whole grid of 7e8 nodes: refused
+    terrain = ProceduralTerrain("hilly", bounds, 5.0, seed=1)
+    ground = GroundTexture(terrain, 1.25, seed=1)
+    assert ground.shape[0] * ground.shape[1] > 4e8
+    lattices = [terrain._main, *terrain._ridges, ground._land_use, ground._patches]
+    assert max(max(f.values.shape) for f in lattices) <= 4200
+    values, _ = ground.window(10_000, 10_100, 20_000, 20_300)
+    assert values.shape == (100, 300)
+    assert np.isfinite(values).all()
