@@ -8,6 +8,7 @@ import math
 from carto.framework.cli.common import examples, formatter
 from carto.framework.errors import UsageError
 from carto.framework.matching.gcp_transfer import GCP_OFFSET_SIGMA_PX
+from carto.framework.parallel.engine import default_workers
 
 
 # --------------------------------------------------------------------------- adjust
@@ -37,6 +38,8 @@ def cmd_adjust(args: argparse.Namespace) -> int:
             raise UsageError(f"{option} must be a number >= 0, got {value}")
     if args.gcp_offset_sigma is not None and args.gcp_offset_sigma == 0:
         raise UsageError("--gcp-offset-sigma must be > 0, got 0")
+    if args.workers is not None and args.workers < 1:
+        raise UsageError(f"--workers must be >= 1, got {args.workers}")
     if args.gcps is not None and args.gcps < 0:
         raise UsageError(f"--gcps must be >= 0, got {args.gcps}")
     if args.attitude_order is not None and not 0 <= args.attitude_order <= 10:
@@ -57,6 +60,8 @@ def cmd_adjust(args: argparse.Namespace) -> int:
         trajectory=args.trajectory,
         quiet=args.quiet,
         allow_poor=args.allow_poor,
+        workers=args.workers,
+        scheduler=args.scheduler,
     )
     print(
         f"{report['adjuster']}: {report['gcps_used']} GCPs, {report['tie_points']} tie points, "
@@ -98,6 +103,8 @@ def add_adjust(sub: argparse._SubParsersAction) -> None:
             "carto adjust scene1 --gcps 1 --out adj1",
             "carto adjust scene1 --gcps 1 --mode separate --out adj1-separate",
             "carto adjust scene1 --gcps 1 --no-gcp-transfer --out adj1-hand-only",
+            "carto adjust big-scene --gcps 1 --workers 4 --out adj-big   # 4 processes",
+            "carto adjust big-scene --gcps 1 --scheduler tcp://10.0.0.5:8786 --out adj-big",
             "carto adjust calib-scene --mode calibration --out calib   # many GCPs",
             "carto adjust scene2 --gcps 1 --calibration calib/calibration.json --out adj2",
             "carto adjust pair.json --adjuster rpc-bias --out adj",
@@ -173,6 +180,21 @@ def add_adjust(sub: argparse._SubParsersAction) -> None:
         metavar="NAME",
         help="trajectory model fitted to the ancillary data (default: the one the ancillary "
         "files name, polynomial; carto plugins --kind trajectory)",
+    )
+    p.add_argument(
+        "--workers",
+        type=int,
+        metavar="N",
+        help="tie-point tiles (and the stagger merge, the GCP transfer) processed in parallel "
+        f"by a local cluster of N worker processes (default: all cores, {default_workers()}; "
+        "1: in this process); images are read by windows, so memory does not grow with "
+        "the scene",
+    )
+    p.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="run the tiles on a running dask.distributed cluster (e.g. tcp://host:8786; "
+        "see docs/cluster.md); its workers must see the input and output folders",
     )
     p.add_argument("--no-robust", action="store_true", help="no outlier rejection")
     p.add_argument(

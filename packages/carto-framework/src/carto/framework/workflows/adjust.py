@@ -170,6 +170,8 @@ def adjust_product(
     trajectory: str | None = None,
     quiet: bool = False,
     allow_poor: bool = False,
+    workers: int | None = None,
+    scheduler: str | None = None,
 ) -> dict[str, Any]:
     """Adjust a scene or configured product and write the outputs; return the report.
 
@@ -191,25 +193,45 @@ def adjust_product(
         allow_poor: write the outputs of a poor adjustment (no tie point found when they were
             asked for, sigma0 above :data:`POOR_SIGMA0`) with warnings in the report, instead
             of failing with :class:`~carto.framework.errors.AdjustmentError`.
+        workers, scheduler: the tile engine of the tie points, the stagger merge and the GCP
+            transfer (:func:`~carto.framework.parallel.engine.open_engine`: ``workers``
+            processes of a local cluster, default every core, 1 in this process; or the
+            running cluster at ``scheduler``). Images are read by windows and matched by
+            tiles (:mod:`~carto.framework.matching.tiled_ties`): the memory does not grow
+            with the scene. Prepared images go to a work folder in the staging folder,
+            removed at the end.
 
     The outputs are written into a staging folder that replaces ``out_dir`` only when all are
     complete (:func:`carto.framework.files.staging.staged_folder`).
     """
+    import shutil
+
+    from carto.framework.parallel.engine import open_engine
+
     src = Path(source)
-    with staged_folder(out_dir, "adjust", inputs=[src]) as stage:
-        return _adjust_into(
-            stage,
-            src,
-            n_gcps=n_gcps,
-            adjuster=adjuster,
-            ties=ties,
-            options=options,
-            sensor_type=sensor_type,
-            matcher=matcher,
-            trajectory=trajectory,
-            quiet=quiet,
-            allow_poor=allow_poor,
-        )
+    with (
+        staged_folder(out_dir, "adjust", inputs=[src]) as stage,
+        open_engine(workers, scheduler, quiet=quiet) as engine,
+    ):
+        work = stage / ".work"
+        try:
+            return _adjust_into(
+                stage,
+                src,
+                n_gcps=n_gcps,
+                adjuster=adjuster,
+                ties=ties,
+                options=options,
+                sensor_type=sensor_type,
+                matcher=matcher,
+                trajectory=trajectory,
+                quiet=quiet,
+                allow_poor=allow_poor,
+                engine=engine,
+                work=work,
+            )
+        finally:
+            shutil.rmtree(work, ignore_errors=True)
 
 
 def _adjust_into(
@@ -225,8 +247,11 @@ def _adjust_into(
     trajectory: str | None,
     quiet: bool,
     allow_poor: bool,
+    engine: Any,
+    work: Path,
 ) -> dict[str, Any]:
-    """:func:`adjust_product` writing into the folder ``out`` (its staging folder)."""
+    """:func:`adjust_product` writing into the folder ``out`` (its staging folder), tasks on
+    ``engine``, prepared images in ``work``."""
     from carto.framework.evaluation.checkpoints import (
         checkpoint_accuracy,
         monoplot_accuracy,
@@ -270,6 +295,16 @@ def _adjust_into(
     chosen_matcher = get_registry().get("matcher", matcher)
     gcps = select_gcps(gcps, n_gcps) if gcps is not None else None
     n_used = len(set(gcps["id"].tolist())) if gcps is not None else 0
+    images: dict[str, Any] = {}
+
+    def prepared() -> dict[str, Any]:
+        """The images read by windows, stagger-merged once (for the ties and the transfer)."""
+        from carto.framework.imaging.preparation import prepared_sources
+
+        if not images:
+            images.update(prepared_sources(rasters, sensors, dem, work / "prepared", engine))
+        return images
+
     # tie points
     tie_table: Table | None = None
     if ties == "auto":
@@ -280,8 +315,14 @@ def _adjust_into(
                 "automatic tie points need a DEM (the scene's init_dem.tif or "
                 '"dem" in the configuration)'
             )
-        progress("adjust", "matching tie points on system-level ortho-images", quiet)
-        tie_table = block_tie_points(rasters, sensors, dem, matcher=chosen_matcher)
+        progress(
+            "adjust",
+            f"matching tie points on system-level ortho-images ({engine.description})",
+            quiet,
+        )
+        tie_table = block_tie_points(
+            prepared(), sensors, dem, matcher=chosen_matcher, engine=engine, prepared=True
+        )
     elif ties != "none":
         tie_table = read_tie_table(ties, images=list(sensors))
         check_tie_points(tie_table, sensors)
@@ -332,11 +373,12 @@ def _adjust_into(
         try:
             offsets, dropped_offsets = gcp_offsets(
                 {k: np.asarray(v)[kept] for k, v in gcps.items()},
-                rasters,
+                prepared(),
                 result.sensors,
                 dem,
                 sigma_px=offset_sigma_px,
                 matcher=chosen_matcher,
+                prepared=True,
             )
         except InputError as exc:
             if gcp_transfer is True:
@@ -398,6 +440,8 @@ def _adjust_into(
         "adjustment": result.summary(),
         "files": {**files, "residual_plot": plot.name},
         "seconds": round(time.perf_counter() - t0, 1),
+        "workers": engine.workers,
+        "engine": engine.description,
     }
     if checkpoints is not None and len(checkpoints["id"]):
         report["checkpoints_per_image"] = monoplot_accuracy(result.sensors, checkpoints)
