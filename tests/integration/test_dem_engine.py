@@ -17,7 +17,9 @@ import rasterio
 
 from carto.framework.parallel.engine import default_workers
 
-OPTIONS = ["--posting", "20", "--max-iterations", "2", "--quiet"]
+# small tiles: several tasks per stage, so that the local cluster starts (a stage of one task
+# runs in the command's process) and an interrupted iteration has finished and unfinished tiles
+OPTIONS = ["--posting", "20", "--max-iterations", "2", "--tile-size", "256", "--quiet"]
 
 
 def _dem(out: Path) -> np.ndarray:
@@ -57,6 +59,7 @@ def test_the_default_workers_give_the_dem_of_one_process(run_carto, inputs, one_
     assert report["workers"] == n
     if n > 1:
         assert report["engine"] == f"LocalCluster of {n} processes"
+    assert report["settings"]["tile_px"] == 256
     np.testing.assert_array_equal(_dem(out), one_process)
     assert not (tmp_path / ".dem.carto-work").exists()  # removed after success
 

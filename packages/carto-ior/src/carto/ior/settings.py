@@ -18,6 +18,7 @@ _FLAGS = {
     "ortho_res_m": "--ortho-res",
     "crs": "--crs",
     "max_iterations": "--max-iterations",
+    "tile_px": "--tile-size",
 }
 """The ``carto dem`` option of each setting that has one (named in the messages)."""
 

@@ -151,6 +151,7 @@ def cmd_dem(args: argparse.Namespace) -> int:
         ("ortho_res_m", args.ortho_res),
         ("crs", args.crs),
         ("max_iterations", args.max_iterations),
+        ("tile_px", args.tile_size),
     ):
         if value is not None:
             options[key] = value
@@ -254,6 +255,13 @@ def add_dem(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--ortho-res", type=float, metavar="M", help="ortho pixel (default: GSD)")
     p.add_argument("--crs", metavar="CRS", help="output CRS (default: the UTM zone)")
     p.add_argument("--max-iterations", type=int, metavar="N", help="most DEM updates (6)")
+    p.add_argument(
+        "--tile-size",
+        type=int,
+        metavar="PX",
+        help="side of a tile task, ortho pixels (default 2048; memory per worker grows with "
+        "its square)",
+    )
     p.add_argument(
         "--workers",
         type=int,

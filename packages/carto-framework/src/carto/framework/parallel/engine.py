@@ -10,7 +10,8 @@ tile means (the DEM marks it nodata and the command fails with the cause). An in
 (Ctrl-C, SIGTERM) is never retried.
 
 :func:`open_engine` makes the engine of a command: ``workers=1`` runs in this process,
-``workers=N`` starts a ``LocalCluster`` of ``N`` single-threaded worker processes, and
+``workers=N`` starts a ``LocalCluster`` of ``N`` single-threaded worker processes (when a
+stage first has more than one task; a single task runs in this process, on all its threads), and
 ``scheduler="tcp://host:8786"`` connects to a running cluster (``dask scheduler`` and
 ``dask worker`` on the machines, or ``dask-jobqueue`` on SLURM/PBS; the workers need Carto
 installed and the input and output folders mounted at the same paths).
@@ -93,12 +94,16 @@ class TileEngine:
         description: what runs the tasks, for reports (``"this process"``,
             ``"LocalCluster of 2 processes"``, ``"cluster tcp://..."``).
         quiet: no progress bars.
+        connect: makes the client when a stage first has more than one task (a local
+            cluster is started only when there is work to share; a stage of one task runs
+            in this process, on all its threads).
     """
 
     workers: int = 1
     client: Any = None
     description: str = "this process"
     quiet: bool = False
+    connect: Callable[[], Any] | None = None
 
     def run(
         self,
@@ -113,6 +118,8 @@ class TileEngine:
         names = list(keys) if keys is not None else [f"task {k}" for k in range(len(tasks))]
         if len(names) != len(tasks):
             raise ValueError("run: one key per task")
+        if self.client is None and self.connect is not None and len(tasks) > 1:
+            self.client = self.connect()
         with stage_bar(len(tasks), desc, quiet=self.quiet) as bar:
             if self.client is None:
                 results = []
@@ -194,8 +201,14 @@ def open_engine(
     if n == 1:
         yield TileEngine(1, None, "this process", quiet)
         return
-    with _local_cluster(n) as client:
-        yield TileEngine(n, client, f"LocalCluster of {n} processes", quiet)
+    with contextlib.ExitStack() as stack:
+        yield TileEngine(
+            n,
+            None,
+            f"LocalCluster of {n} processes",
+            quiet,
+            connect=lambda: stack.enter_context(_local_cluster(n)),
+        )
 
 
 @contextlib.contextmanager
