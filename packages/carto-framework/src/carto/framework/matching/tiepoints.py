@@ -9,7 +9,10 @@ Radhadevi et al. 2010):
 1. merge the staggered odd/even arrays of raw Cartosat images
    (:mod:`~carto.framework.geometry.stagger`) so that every column follows the image model;
 2. orthorectify every image on one map grid over the DEM with its system-level model
-   (:func:`system_orthos`);
+   (:func:`~carto.framework.imaging.preparation.system_orthos`); a grid larger than
+   ``tile_px`` is processed by tiles, tasks of a tile engine that orthorectify only their
+   windows from images read by windows (:mod:`~carto.framework.matching.tiled_ties`: the
+   memory does not grow with the scene, the points are those of one piece);
 3. candidate points on the reference ortho
    (:func:`~carto.framework.matching.candidates.candidate_points`): the Forstner interest
    operator (:func:`~carto.framework.matching.forstner.forstner_points`), the best two of each
