@@ -103,6 +103,10 @@ def _true_segment(
 ) -> _Truth:
     epoch = frames.utc_to_j2000_s(plan.epoch_utc)
     lo, hi = seg.span_s
+    # the truth also covers a full image beyond the span (long windows of a view near its
+    # end; the samples stay on the same lattice, so the truth inside the span is unchanged)
+    pad = max((v.n_lines_full * v.period_s for v in seg.views), default=0.0)
+    lo, hi = lo - pad, hi + pad
     dt = np.arange(math.floor(lo / TRUTH_STEP_S) - 8, math.ceil(hi / TRUTH_STEP_S) + 9) * (
         TRUTH_STEP_S
     )
@@ -131,6 +135,13 @@ def _measured_ancillary(
     """Ancillary samples every 125 ms as the platform measures them (with the errors)."""
     epoch = frames.utc_to_j2000_s(plan.epoch_utc)
     lo, hi = seg.span_s
+    for image in images:  # windows of many lines may reach beyond the planned span
+        t_first = float(image.timing.time(0.0))
+        t_last = float(image.timing.time(float(image.n_lines)))
+        if t_first < lo + 0.5:  # keep four samples before the first line
+            lo = min(lo, t_first - 1.0)
+        if t_last > hi - 0.5:
+            hi = max(hi, t_last + 1.0)
     step = acquisition.ANCILLARY_STEP_S
     dt = np.arange(math.floor(lo / step), math.ceil(hi / step) + 1) * step
     p_eci, v_eci = truth.trajectory.state_eci(dt)
