@@ -22,11 +22,8 @@ time should grow linearly with the pixels (``s_per_mpx`` about constant) on an i
 from __future__ import annotations
 
 import argparse
-import contextlib
-import datetime
 import json
 import os
-import platform
 import shutil
 import subprocess
 import sys
@@ -34,24 +31,11 @@ import tempfile
 import time
 from pathlib import Path
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from measure import merge_runs, tree_rss
+
 ROOT = Path(__file__).resolve().parent.parent
 RESULT = ROOT / "benchmarks" / "results" / "adjust_scale.json"
-
-
-def _tree_rss(pid: int) -> int:
-    """Resident bytes of ``pid`` and all its descendants (0 when gone)."""
-    import psutil
-
-    try:
-        proc = psutil.Process(pid)
-        procs = [proc, *proc.children(recursive=True)]
-    except psutil.Error:
-        return 0
-    total = 0
-    for p in procs:
-        with contextlib.suppress(psutil.Error):
-            total += p.memory_info().rss
-    return total
 
 
 def run(scene: Path, workers: str, work: Path, gcps: int) -> dict:
@@ -77,7 +61,7 @@ def run(scene: Path, workers: str, work: Path, gcps: int) -> dict:
     proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     peak = 0
     while proc.poll() is None:
-        peak = max(peak, _tree_rss(proc.pid))
+        peak = max(peak, tree_rss(proc.pid))
         time.sleep(0.2)
     wall = time.perf_counter() - t0
     _stdout, stderr = proc.communicate()
@@ -137,26 +121,16 @@ def main() -> int:
     finally:
         if args.work is None:
             shutil.rmtree(work, ignore_errors=True)
-    document: dict = {"runs": []}
-    if args.out.exists():
-        document = json.loads(args.out.read_text())
-    keep = {(tuple(r["size"]), r["workers"]) for r in results}
-    document["runs"] = [
-        r for r in document.get("runs", []) if (tuple(r["size"]), r["workers"]) not in keep
-    ] + results
-    document["runs"].sort(key=lambda r: (r["size"][0], r["workers"]))
-    document["machine"] = {
-        "cpus": os.cpu_count(),
-        "python": platform.python_version(),
-        "platform": platform.platform(),
-    }
-    document["updated"] = datetime.date.today().isoformat()
-    document["method"] = (
-        "benchmarks/adjust_scale.py: carto adjust SCENE --gcps 1 in a subprocess (default "
-        "workers and --workers 1); peak of the summed RSS of the process tree polled every 0.2 s"
+    document = merge_runs(
+        args.out,
+        results,
+        lambda r: (tuple(r["size"]), r["workers"]),
+        (
+            "benchmarks/adjust_scale.py: carto adjust SCENE --gcps 1 in a subprocess (default "
+            "workers and --workers 1); peak of the summed RSS of the process tree polled every "
+            "0.2 s"
+        ),
     )
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(document, indent=2) + "\n")
     print(json.dumps(document, indent=2))
     return 0 if all(r["returncode"] == 0 for r in results) else 1
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 import contextlib
 import subprocess
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -47,6 +47,34 @@ def run_measured(
             sink.close()
     return {
         "wall_s": round(wall, 1),
-        "peak_rss_gb": round(peak / 2**30, 3),
+        "peak_rss_gb": round(peak / 1e9, 3),
         "returncode": proc.returncode,
     }
+
+
+def merge_runs(
+    path: Path, results: list[dict[str, Any]], key: Callable[[dict[str, Any]], Any], method: str
+) -> dict[str, Any]:
+    """Merge ``results`` into the JSON document at ``path`` (a run replaces the earlier run of
+    the same ``key``), with the machine, the date and the ``method``; write and return it."""
+    import datetime
+    import json
+    import os
+    import platform
+
+    document: dict[str, Any] = {"runs": []}
+    if path.exists():
+        document = json.loads(path.read_text())
+    keep = {key(r) for r in results}
+    runs = [r for r in document.get("runs", []) if key(r) not in keep] + results
+    document["runs"] = sorted(runs, key=lambda r: str(key(r)))
+    document["machine"] = {
+        "cpus": os.cpu_count(),
+        "python": platform.python_version(),
+        "platform": platform.platform(),
+    }
+    document["updated"] = datetime.date.today().isoformat()
+    document["method"] = method
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(document, indent=2) + "\n")
+    return document

@@ -20,11 +20,8 @@ time should grow linearly with the pixels (``s_per_mpx`` about constant) on an i
 from __future__ import annotations
 
 import argparse
-import contextlib
-import datetime
 import json
 import os
-import platform
 import shutil
 import subprocess
 import sys
@@ -32,45 +29,11 @@ import tempfile
 import time
 from pathlib import Path
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from measure import merge_runs, tree_rss
+
 ROOT = Path(__file__).resolve().parent.parent
 RESULT = ROOT / "benchmarks" / "results" / "simulate_scale.json"
-
-
-def _tree_rss(pid: int) -> int:
-    """Resident bytes of ``pid`` and all its descendants (0 when gone)."""
-    try:
-        import psutil
-    except ImportError:  # pragma: no cover - /proc fallback
-        return _proc_tree_rss(pid)
-    try:
-        proc = psutil.Process(pid)
-        procs = [proc, *proc.children(recursive=True)]
-    except psutil.Error:
-        return 0
-    total = 0
-    for p in procs:
-        with contextlib.suppress(psutil.Error):
-            total += p.memory_info().rss
-    return total
-
-
-def _proc_tree_rss(pid: int) -> int:  # pragma: no cover - without psutil
-    children: dict[int, list[int]] = {}
-    for entry in os.listdir("/proc"):
-        if entry.isdigit():
-            try:
-                ppid = int(Path(f"/proc/{entry}/stat").read_text().rsplit(")", 1)[1].split()[1])
-            except (OSError, IndexError, ValueError):
-                continue
-            children.setdefault(ppid, []).append(int(entry))
-    total, todo = 0, [pid]
-    page = os.sysconf("SC_PAGE_SIZE")
-    while todo:
-        p = todo.pop()
-        with contextlib.suppress(OSError, IndexError, ValueError):
-            total += int(Path(f"/proc/{p}/statm").read_text().split()[1]) * page
-        todo.extend(children.get(p, []))
-    return total
 
 
 def run(preset: str, size: int, work: Path, terrain: str, seed: int) -> dict:
@@ -96,7 +59,7 @@ def run(preset: str, size: int, work: Path, terrain: str, seed: int) -> dict:
     proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     peak = 0
     while proc.poll() is None:
-        peak = max(peak, _tree_rss(proc.pid))
+        peak = max(peak, tree_rss(proc.pid))
         time.sleep(0.2)
     wall = time.perf_counter() - t0
     _stdout, stderr = proc.communicate()
@@ -141,26 +104,15 @@ def main() -> int:
     finally:
         if args.work is None:
             shutil.rmtree(work, ignore_errors=True)
-    document = {"runs": []}
-    if args.out.exists():
-        document = json.loads(args.out.read_text())
-    keep = {(r["preset"], tuple(r["size"])) for r in results}
-    document["runs"] = [
-        r for r in document.get("runs", []) if (r["preset"], tuple(r["size"])) not in keep
-    ] + results
-    document["runs"].sort(key=lambda r: (r["preset"], r["size"][0]))
-    document["machine"] = {
-        "cpus": os.cpu_count(),
-        "python": platform.python_version(),
-        "platform": platform.platform(),
-    }
-    document["updated"] = datetime.date.today().isoformat()
-    document["method"] = (
-        "benchmarks/simulate_scale.py: carto simulate in a subprocess; peak of the summed RSS of "
-        "the process tree polled every 0.2 s"
+    document = merge_runs(
+        args.out,
+        results,
+        lambda r: (r["preset"], tuple(r["size"])),
+        (
+            "benchmarks/simulate_scale.py: carto simulate in a subprocess; peak of the summed "
+            "RSS of the process tree polled every 0.2 s"
+        ),
     )
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(document, indent=2) + "\n")
     print(json.dumps(document, indent=2))
     return 0 if all(r["returncode"] == 0 for r in results) else 1
 
