@@ -84,3 +84,41 @@ def test_unreachable_scheduler():
         open_engine(scheduler="tcp://127.0.0.1:9"),
     ):
         pass
+
+
+INTERRUPTED = """
+import functools, os, signal, sys, threading, time
+from carto.framework.parallel.engine import open_engine
+
+def slow(x):
+    time.sleep(2.0)
+    return x
+
+if __name__ == "__main__":
+    threading.Timer(float(sys.argv[1]), lambda: os.kill(os.getpid(), signal.SIGINT)).start()
+    try:
+        with open_engine(2) as engine:
+            engine.run([functools.partial(slow, k) for k in range(6)])
+        print("completed")
+    except KeyboardInterrupt:
+        print("interrupted")
+"""
+
+
+@pytest.mark.parametrize("delay_s", [0.3, 1.5])
+def test_ctrl_c_while_the_local_cluster_starts_or_runs_is_an_interruption(tmp_path, delay_s):
+    """distributed fails on its own half-made state when interrupted while a LocalCluster
+    starts (AssertionError: Status.init): the engine holds the signal until it is up."""
+    import subprocess
+    import sys
+
+    script = tmp_path / "interrupted.py"
+    script.write_text(INTERRUPTED)
+    res = subprocess.run(
+        [sys.executable, str(script), str(delay_s)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
+    assert res.stdout.strip() == "interrupted", res.stderr[-2000:]

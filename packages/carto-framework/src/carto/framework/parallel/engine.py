@@ -226,21 +226,46 @@ def _client(address: str) -> Iterator[Any]:
 
 
 @contextlib.contextmanager
+def _signals_deferred() -> Iterator[list[int]]:
+    """Hold SIGINT and SIGTERM for the block (the signals received are listed); in the main
+    thread only (elsewhere Python delivers no signal)."""
+    import signal
+    import threading
+
+    pending: list[int] = []
+    if threading.current_thread() is not threading.main_thread():
+        yield pending
+        return
+    caught = (signal.SIGINT, signal.SIGTERM)
+    previous = {s: signal.signal(s, lambda signum, _frame: pending.append(signum)) for s in caught}
+    try:
+        yield pending
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+
+
+@contextlib.contextmanager
 def _local_cluster(n: int) -> Iterator[Any]:
     from distributed import Client, LocalCluster
 
     for name in ("distributed", "tornado", "bokeh"):
         logging.getLogger(name).setLevel(logging.ERROR)
-    cluster = LocalCluster(
-        n_workers=n,
-        threads_per_worker=1,
-        processes=True,
-        dashboard_address=None,
-        silence_logs=logging.CRITICAL,
-        env=_WORKER_ENV,
-    )
-    client = Client(cluster, set_as_default=False)
+    # an interruption while the cluster starts would leave it half made (distributed then
+    # fails on its own state): it is held until the cluster is up, then raised
+    with _signals_deferred() as pending:
+        cluster = LocalCluster(
+            n_workers=n,
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=None,
+            silence_logs=logging.CRITICAL,
+            env=_WORKER_ENV,
+        )
+        client = Client(cluster, set_as_default=False)
     try:
+        if pending:
+            raise KeyboardInterrupt
         yield client
     finally:
         client.close()
