@@ -139,26 +139,40 @@ class TileEngine:
     def _run_distributed(
         self, tasks: Sequence[Callable[[], Any]], names: list[str], retries: int, bar: Any
     ) -> list[Any]:
-        from distributed import as_completed
+        from distributed import wait
 
-        futures = [
-            self.client.submit(_call, task, pure=False, retries=retries, key=_key(name))
-            for task, name in zip(tasks, names, strict=True)
-        ]
-        index = {f.key: k for k, f in enumerate(futures)}
-        results: list[Any] = [None] * len(futures)
-        try:
-            for future in as_completed(futures, loop=self.client.loop):
-                k = index[future.key]
-                if future.status == "error":
-                    results[k] = TaskFailure(names[k], _cause(future.exception()))
-                else:
-                    results[k] = future.result()
-                future.release()
-                bar.advance()
-        except BaseException:
-            self.client.cancel(futures)
-            raise
+        # Ctrl-C and SIGTERM are held while distributed works (it may swallow an interruption
+        # in its own waits) and raised here, between waits of at most half a second
+        with _signals_deferred() as pending:
+            futures = [
+                self.client.submit(_call, task, pure=False, retries=retries, key=_key(name))
+                for task, name in zip(tasks, names, strict=True)
+            ]
+            index = {f.key: k for k, f in enumerate(futures)}
+            results: list[Any] = [None] * len(futures)
+            remaining = set(futures)
+            try:
+                while remaining:
+                    if pending:
+                        raise KeyboardInterrupt
+                    try:
+                        with self.client.as_current():
+                            done, remaining = wait(
+                                remaining, timeout=0.5, return_when="FIRST_COMPLETED"
+                            )
+                    except TimeoutError:
+                        continue
+                    for future in done:
+                        k = index[future.key]
+                        if future.status == "error":
+                            results[k] = TaskFailure(names[k], _cause(future.exception()))
+                        else:
+                            results[k] = future.result()
+                        future.release()
+                        bar.advance()
+            except BaseException:
+                self.client.cancel(futures)
+                raise
         return results
 
 
