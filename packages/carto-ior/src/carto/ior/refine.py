@@ -54,6 +54,7 @@ from carto.framework.errors import InputError
 from carto.framework.geometry.sensor import Sensor
 from carto.framework.imaging.ortho_grid import OrthoGrid, check_grid_size, footprint_box
 from carto.framework.matching.base import Matcher
+from carto.framework.parallel.engine import TaskFailure
 from carto.framework.raster.dem import DEM, ELLIPSOID
 from carto.framework.raster.focal import focal_nanmedian
 from carto.ior.settings import IORSettings, option_label
@@ -389,7 +390,7 @@ def refine_dem(
         TileFailure: tiles failed (without ``keep_failed_tiles``); the finished ones stay in
             the work folder.
     """
-    from carto.framework.parallel.engine import TaskFailure, TileEngine
+    from carto.framework.parallel.engine import TileEngine
     from carto.framework.raster.image_source import as_image_source
 
     s = settings or IORSettings()
@@ -426,7 +427,6 @@ def refine_dem(
             matcher,
             progress,
             keep_failed_tiles,
-            TaskFailure,
         )
         if not kept:  # the temporary folder goes: read the layers now
             result = attrs.evolve(
@@ -452,7 +452,6 @@ def _iterate(
     matcher: Matcher | None,
     progress: Callable[[str], None] | None,
     keep_failed_tiles: bool,
-    failure_type: type,
 ) -> IORResult:
     """The iterations of :func:`refine_dem` from ``state`` on."""
     from carto.framework.raster.tiled_layer import TiledLayer, TilePiece, piece_path
@@ -497,7 +496,7 @@ def _iterate(
         )
         tasks = [functools.partial(run_tile, job, rows, cols) for rows, cols in plan]
         outcomes = _run_tiles(engine, tasks, f"IOR iteration {iteration}", keys)
-        failed = [str(o) for o in outcomes if isinstance(o, failure_type)]
+        failed = [str(o) for o in outcomes if isinstance(o, TaskFailure)]
         if failed and not keep_failed_tiles:
             raise TileFailure(
                 f"ior: {len(failed)} of {len(plan)} tiles failed in iteration {iteration} "
@@ -508,7 +507,7 @@ def _iterate(
         d_col = np.full(dem_grid.shape, np.nan)
         covered = np.zeros(dem_grid.shape, bool)
         for (rows, cols), outcome in zip(plan, outcomes, strict=True):
-            if isinstance(outcome, failure_type):
+            if isinstance(outcome, TaskFailure):
                 continue
             arrays = tile_arrays(outcome, NODE_LAYERS)
             new[rows, cols] = arrays["new_height"]
@@ -570,7 +569,7 @@ def _iterate(
     for name in ORTHO_LAYERS:
         pieces = []
         for (rows, cols), outcome in zip(plan, outcomes, strict=True):
-            if isinstance(outcome, failure_type):
+            if isinstance(outcome, TaskFailure):
                 continue
             shape = ((rows.stop - rows.start) * k, (cols.stop - cols.start) * k)
             path = piece_path(space.iteration_dir(iteration), rows.start, cols.start)
