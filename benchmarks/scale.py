@@ -39,9 +39,12 @@ CARTO = str(ROOT / ".venv" / "bin" / "carto")
 SIZES = ("6000x6000", "12000x6000", "12000x12000")
 
 
-def _step(name: str, command: list[str], log: Path, skip: bool) -> dict[str, Any]:
+def _step(
+    name: str, command: list[str], log: Path, skip: bool, before: dict[str, Any] | None
+) -> dict[str, Any]:
     if skip:
-        return {"reused": True}
+        # A kept scene or adjustment: its measurement is the one of the run that made it.
+        return before if before and "wall_s" in before else {"reused": True}
     print(f"[scale] {name}: {' '.join(command)}", file=sys.stderr, flush=True)
     result = run_measured(command, log=log)
     result["command"] = " ".join(Path(c).name if c == CARTO else c for c in command)
@@ -52,7 +55,9 @@ def _step(name: str, command: list[str], log: Path, skip: bool) -> dict[str, Any
     return result
 
 
-def run_size(size: str, work: Path, workers: list[str]) -> dict[str, Any]:
+def run_size(
+    size: str, work: Path, workers: list[str], steps: list[str], before: dict[str, Any]
+) -> dict[str, Any]:
     cols, lines = (int(v) for v in size.split("x"))
     folder = work / size
     folder.mkdir(parents=True, exist_ok=True)
@@ -77,17 +82,23 @@ def run_size(size: str, work: Path, workers: list[str]) -> dict[str, Any]:
         ],
         folder / "simulate.log",
         (scene / ".carto-output.json").is_file(),
+        before.get("simulate"),
     )
+    if "adjust" not in steps:
+        return entry
     entry["adjust"] = _step(
         "adjust",
         [CARTO, "adjust", str(scene), "--gcps", "1", "--out", str(adjusted), "--quiet"],
         folder / "adjust.log",
         (adjusted / ".carto-output.json").is_file(),
+        before.get("adjust"),
     )
     if (adjusted / "report.json").is_file():
         report = json.loads((adjusted / "report.json").read_text())
         entry["adjust_checkpoints"] = report.get("checkpoints")
-    entry["dem"] = {}
+    entry["dem"] = dict(before.get("dem", {}))
+    if "dem" not in steps:
+        return entry
     for label in workers:
         out = folder / f"dem-{label}"
         extra = [] if label == "default" else ["--workers", label]
@@ -110,6 +121,7 @@ def run_size(size: str, work: Path, workers: list[str]) -> dict[str, Any]:
             ],
             folder / f"dem-{label}.log",
             False,
+            None,
         )
         if (out / "report.json").is_file() and result.get("returncode") == 0:
             report = json.loads((out / "report.json").read_text())
@@ -166,10 +178,18 @@ def main() -> int:
         metavar="N",
         help="carto dem runs per size: 'default' (every core) and/or worker counts",
     )
+    parser.add_argument(
+        "--steps",
+        nargs="+",
+        default=["simulate", "adjust", "dem"],
+        choices=["simulate", "adjust", "dem"],
+        help="stop after the last step named (kept scenes and adjustments are reused)",
+    )
     args = parser.parse_args()
     doc = json.loads(RESULT.read_text()) if RESULT.is_file() else {"runs": {}}
     for size in args.sizes:
-        doc["runs"][size] = run_size(size, args.work, args.dem_workers)
+        before = doc["runs"].get(size, {})
+        doc["runs"][size] = run_size(size, args.work, args.dem_workers, args.steps, before)
         doc["summary"] = summary(doc["runs"])
         doc["machine"] = {
             "cpus": os.cpu_count(),
