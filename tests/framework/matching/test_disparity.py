@@ -111,3 +111,66 @@ def test_hole_filling_near_and_far() -> None:
     assert filled.max() <= np.nanmax(d) + 1e-5
     constant = np.where(valid, np.float32(2.5), np.nan).astype(np.float32)
     np.testing.assert_allclose(fill_holes(constant), 2.5, rtol=1e-6)
+
+
+def _search_reference(left, right, radius, window):
+    """The integer-shift NCC search written plainly (every shifted right image filtered
+    anew, numpy's argmax over the score cube): what the compiled search must equal."""
+
+    def box(a):
+        return cv2.boxFilter(a, cv2.CV_32F, (window, window), normalize=True)
+
+    def shift(image, dr, dc):
+        out = np.full_like(image, np.nan)
+        rows, cols = image.shape
+        r0, r1 = max(0, -dr), min(rows, rows - dr)
+        c0, c1 = max(0, -dc), min(cols, cols - dc)
+        out[r0:r1, c0:c1] = image[r0 + dr : r1 + dr, c0 + dc : c1 + dc]
+        return out
+
+    half = window // 2
+    bad_l = ~np.isfinite(left)
+    lf = np.where(bad_l, 0.0, left).astype(np.float32)
+    mean_l = box(lf)
+    var_l = np.maximum(box(lf * lf) - mean_l**2, 0.0)
+    hole_l = box(bad_l.astype(np.float32)) > 0
+    hole_l[:half] = hole_l[-half:] = True
+    hole_l[:, :half] = hole_l[:, -half:] = True
+    n = 2 * radius + 1
+    scores = np.full((n * n, *left.shape), -2.0, np.float32)
+    for i, dr in enumerate(range(-radius, radius + 1)):
+        for j, dc in enumerate(range(-radius, radius + 1)):
+            r = shift(right, dr, dc)
+            bad = ~np.isfinite(r)
+            rf = np.where(bad, 0.0, r).astype(np.float32)
+            mean_r = box(rf)
+            var_r = np.maximum(box(rf * rf) - mean_r**2, 0.0)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                ncc = (box(lf * rf) - mean_l * mean_r) / np.sqrt(var_l * var_r)
+            hole = hole_l | (box(bad.astype(np.float32)) > 0)
+            scores[i * n + j] = np.where(hole | ~np.isfinite(ncc), -2.0, ncc)
+    best = scores.argmax(axis=0)
+    return np.divmod(best, n), scores.max(axis=0)
+
+
+def test_compiled_search_equals_the_plain_search(pair):
+    from carto.framework.matching.disparity import _search
+
+    left = pair[0]
+    rr, cc = np.mgrid[0 : left.shape[0], 0 : left.shape[1]].astype(np.float32)
+    # offsets within the search (up to 1.5 px) and a void whose windows have no score
+    right = cv2.remap(
+        left, cc + 1.5 * np.sin(rr / 60.0), rr + 1.2 * np.cos(cc / 45.0), cv2.INTER_CUBIC
+    )
+    right[200:230, 50:90] = np.nan
+    radius, window = 2, 9
+    d_row, d_col, score = _search(left, right, radius, window)
+    (bi, bj), ref_score = _search_reference(left, right, radius, window)
+    found = np.isfinite(d_row)
+    ref_found = (ref_score > -1.5) & (bi > 0) & (bi < 2 * radius) & (bj > 0) & (bj < 2 * radius)
+    assert found.sum() > 0.8 * found.size
+    assert (found != ref_found).mean() < 1e-3  # ties may fall either way after rounding
+    both = found & ref_found
+    assert (np.round(d_row[both]) == bi[both] - radius).mean() > 0.999
+    assert (np.round(d_col[both]) == bj[both] - radius).mean() > 0.999
+    np.testing.assert_allclose(score[both], ref_score[both], atol=1e-4)

@@ -21,6 +21,7 @@ from carto.framework.imaging.ortho_grid import OrthoGrid
 from carto.framework.matching.base import DenseSettings, Matcher
 from carto.framework.raster.dem import DEM, ELLIPSOID
 from carto.framework.raster.tiled_layer import piece_path
+from carto.ior.rays import RayField, intersect_offsets
 from carto.ior.settings import IORSettings
 
 __all__ = ["NODE_LAYERS", "ORTHO_LAYERS", "TileJob", "TileResult", "refine_tile", "run_tile"]
@@ -100,9 +101,11 @@ def refine_tile(
     ortho-images map into are read). ``heights`` is the whole current DEM grid (an array or a
     memory map: the tile reads its window plus ``overlap`` nodes around it); the result
     covers ``rows, cols`` (DEM node slices) only. ``h_range``: the lowest and highest height
-    of the whole grid (the intersection searches 500 m beyond; default: from ``heights``).
+    of the whole grid (an intersection more than 500 m beyond gives no height; default:
+    from ``heights``). The two rays of a node are intersected by the tile's local ray model
+    (:mod:`carto.ior.rays`).
     """
-    from carto.framework.geometry.intersection import intersect_sensors
+    from scipy import ndimage
 
     n_r, n_c = dem_grid.shape
     r0, r1 = max(0, rows.start - overlap), min(n_r, rows.stop + overlap)
@@ -116,7 +119,6 @@ def refine_tile(
     ogrid = OrthoGrid(
         sub.crs, Affine(t.a / k, 0.0, t.c, 0.0, t.e / k, t.f), ((r1 - r0) * k, (c1 - c0) * k)
     )
-    left, right = sensors
     ortho = [orthorectify(img, s, ogrid, dem) for img, s in zip(images, sensors, strict=True)]
     field = (matcher or _default_matcher()).match_dense(
         ortho[0],
@@ -137,28 +139,23 @@ def refine_tile(
     )
     ok = np.isfinite(d_row) & np.isfinite(d_col) & covered
     nr, nc = np.nonzero(ok)
-    # left ray: the node's ground point on the current DEM; right ray: the matched position
-    h_node = window[nr, nc]
-    lon_l, lat_l = sub.lonlat(nr, nc)
-    line_l, sample_l = left.ground_to_image(lon_l, lat_l, h_node)
+    # left ray: through the node's ground point on the current DEM; right ray: through the
+    # matched position on the current DEM; intersected by the tile's local ray model
+    surface = np.asarray(dem.heights, np.float64)
+    h_node = surface[nr, nc]
     rr = (nr + 0.5) * k - 0.5 + d_row[nr, nc]  # ortho pixel index of the match
     cc = (nc + 0.5) * k - 0.5 + d_col[nr, nc]
-    lon_r, lat_r = ogrid.lonlat(rr, cc)
-    h_r = dem.height(lon_r, lat_r)
-    line_r, sample_r = right.ground_to_image(lon_r, lat_r, h_r)
+    x_r, y_r = ogrid.xy(rr, cc)
+    h_r = ndimage.map_coordinates(
+        surface, [(rr + 0.5) / k - 0.5, (cc + 0.5) / k - 0.5], order=1, mode="nearest"
+    )
+    rays = RayField.sample(sensors, sub, surface)
+    x_p, y_p, h_p = intersect_offsets(rays, nr, nc, h_node, x_r, y_r, h_r)
     if h_range is None:
         h_range = (float(np.nanmin(heights)), float(np.nanmax(heights)))
-    h_lo, h_hi = h_range[0] - 500.0, h_range[1] + 500.0
-    inter = intersect_sensors(
-        [left, right],
-        np.stack([line_l, line_r]),
-        np.stack([sample_l, sample_r]),
-        h_range_m=(h_lo, h_hi),
-    )
-    lon_p, lat_p, h_p = inter.lon_deg, inter.lat_deg, inter.h_m
-    # back to the node: the intersection lies on the left ray, a little off the node
-    # (horizontally); remove the height change of that offset along the current surface
-    x_p, y_p = sub.map_xy(lon_p, lat_p)
+    h_p = np.where((h_p >= h_range[0] - 500.0) & (h_p <= h_range[1] + 500.0), h_p, np.nan)
+    # back to the node: the intersection lies a little off the node (horizontally); remove
+    # the height change of that offset along the current surface
     x_n, y_n = sub.xy(nr, nc)
     g_row, g_col = np.gradient(window)
     px, py = sub.resolution

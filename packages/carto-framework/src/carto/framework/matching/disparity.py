@@ -28,6 +28,7 @@ NaN marks no data in the inputs; windows touching it get no match.
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -90,49 +91,87 @@ def _box(image: FloatArray, window: int) -> FloatArray:
     return cv2.boxFilter(image, cv2.CV_32F, (window, window), normalize=True)
 
 
-def _shift(image: FloatArray, dr: int, dc: int) -> FloatArray:
-    """``image[row + dr, col + dc]`` with NaN where that falls outside."""
-    out = np.full_like(image, np.nan)
-    rows, cols = image.shape
-    r0, r1 = max(0, -dr), min(rows, rows - dr)
-    c0, c1 = max(0, -dc), min(cols, cols - dc)
-    if r0 < r1 and c0 < c1:
-        out[r0:r1, c0:c1] = image[r0 + dr : r1 + dr, c0 + dc : c1 + dc]
-    return out
+@numba.njit(parallel=True, cache=True, nogil=True)
+def _score_shift(  # pragma: no cover (compiled)
+    cov: NDArray,
+    mean_l: NDArray,
+    var_l: NDArray,
+    hole_l: NDArray,
+    mean_r: NDArray,
+    var_r: NDArray,
+    hole_r: NDArray,
+    dr: int,
+    dc: int,
+    index: int,
+    scores: NDArray,
+    best: NDArray,
+    best_index: NDArray,
+) -> None:
+    """The NCC of every pixel's window with the right image's window shifted by ``(dr, dc)``
+    (``cov``: the box mean of ``left * right[row + dr, col + dc]``; the right image's window
+    statistics are read at the shifted pixel), -2 where either window has no data or
+    reaches beyond an image; the running best score and its shift index."""
+    n_r, n_c = cov.shape
+    for r in numba.prange(n_r):
+        rr = r + dr
+        for c in range(n_c):
+            cc = c + dc
+            s = -2.0
+            if 0 <= rr < n_r and 0 <= cc < n_c and not hole_l[r, c] and not hole_r[rr, cc]:
+                v = var_l[r, c] * var_r[rr, cc]
+                if v > 0.0:
+                    s = (cov[r, c] - mean_l[r, c] * mean_r[rr, cc]) / np.sqrt(v)
+            scores[r, c] = s
+            if s > best[r, c]:
+                best[r, c] = s
+                best_index[r, c] = index
+
+
+def _window_stats(image: FloatArray, window: int) -> tuple[FloatArray, FloatArray, NDArray]:
+    """``(zero-filled image, box mean, box variance, windows with no data or beyond the
+    image)``."""
+    bad = ~np.isfinite(image)
+    filled = np.where(bad, 0.0, image).astype(np.float32)
+    mean = _box(filled, window)
+    var = np.maximum(_box(filled * filled, window) - mean**2, 0.0)
+    hole = _box(bad.astype(np.float32), window) > 0
+    # windows that reach beyond the image (the box filter reflects the border)
+    half = window // 2
+    hole[:half] = hole[-half:] = True
+    hole[:, :half] = hole[:, -half:] = True
+    return filled, mean, var, hole
 
 
 def _search(
     left: FloatArray, right: FloatArray, radius: int, window: int
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Best integer shift within ``radius`` (sub-pixel by parabolas) of ``right`` against
-    ``left`` at every pixel: ``(d_row, d_col, score)``; NaN where no full window."""
-    bad_l = ~np.isfinite(left)
-    lf = np.where(bad_l, 0.0, left).astype(np.float32)
-    mean_l = _box(lf, window)
-    var_l = np.maximum(_box(lf * lf, window) - mean_l**2, 0.0)
-    hole_l = _box(bad_l.astype(np.float32), window) > 0
-    # windows that reach beyond the image (the box filter reflects the border)
-    half = window // 2
-    hole_l[:half] = hole_l[-half:] = True
-    hole_l[:, :half] = hole_l[:, -half:] = True
+    ``left`` at every pixel: ``(d_row, d_col, score)``; NaN where no full window. One box
+    filter per shift (the right image's window statistics are computed once and read at the
+    shifted pixel) and one compiled pass that scores it and keeps the best."""
+    lf, mean_l, var_l, hole_l = _window_stats(left, window)
+    rf, mean_r, var_r, hole_r = _window_stats(right, window)
     n = 2 * radius + 1
-    scores = np.full((n, n, *left.shape), -2.0, np.float32)
+    scores = np.empty((n * n, *left.shape), np.float32)
+    best = np.full(left.shape, -np.inf, np.float32)
+    best_index = np.zeros(left.shape, np.int64)
+    shifted = np.zeros_like(rf)
+    rows, cols = left.shape
     for i, dr in enumerate(range(-radius, radius + 1)):
         for j, dc in enumerate(range(-radius, radius + 1)):
-            r = _shift(right, dr, dc)
-            bad = ~np.isfinite(r)
-            rf = np.where(bad, 0.0, r).astype(np.float32)
-            mean_r = _box(rf, window)
-            var_r = np.maximum(_box(rf * rf, window) - mean_r**2, 0.0)
-            cov = _box(lf * rf, window) - mean_l * mean_r
-            with np.errstate(invalid="ignore", divide="ignore"):
-                ncc = cov / np.sqrt(var_l * var_r)
-            hole = hole_l | (_box(bad.astype(np.float32), window) > 0)
-            scores[i, j] = np.where(hole | ~np.isfinite(ncc), -2.0, ncc)
-    flat = scores.reshape(n * n, *left.shape)
-    best = flat.argmax(axis=0)
-    score = np.take_along_axis(flat, best[None], axis=0)[0]
-    bi, bj = np.divmod(best, n)
+            # right[row + dr, col + dc], zero beyond the image (those windows are holes)
+            shifted.fill(0.0)
+            r0, r1 = max(0, -dr), min(rows, rows - dr)
+            c0, c1 = max(0, -dc), min(cols, cols - dc)
+            if r0 < r1 and c0 < c1:
+                shifted[r0:r1, c0:c1] = rf[r0 + dr : r1 + dr, c0 + dc : c1 + dc]
+            cov = _box(lf * shifted, window)
+            _score_shift(
+                cov, mean_l, var_l, hole_l, mean_r, var_r, hole_r, dr, dc, i * n + j,
+                scores[i * n + j], best, best_index,
+            )  # fmt: skip
+    score = best
+    bi, bj = np.divmod(best_index, n)
 
     def parabola(lo: FloatArray, mid: FloatArray, hi: FloatArray) -> FloatArray:
         den = lo - 2.0 * mid + hi
@@ -142,7 +181,7 @@ def _search(
 
     def at(ii: NDArray, jj: NDArray) -> FloatArray:
         ii, jj = np.clip(ii, 0, n - 1), np.clip(jj, 0, n - 1)
-        return np.take_along_axis(flat, (ii * n + jj)[None], axis=0)[0]
+        return np.take_along_axis(scores, (ii * n + jj)[None], axis=0)[0]
 
     inner_r = (bi > 0) & (bi < n - 1)
     inner_c = (bj > 0) & (bj < n - 1)
