@@ -128,6 +128,12 @@ def run_size(
             result["workers"] = report.get("workers")
             result["engine"] = report.get("engine")
             result["iterations"] = len(report.get("iterations", []))
+            result["iteration_seconds"] = [
+                round(r.get("seconds", 0.0), 1) for r in report.get("iterations", [])
+            ]
+            # completeness against the truth counts the truth's margin beyond the images;
+            # the matched share of the nodes both images cover says what IOR measured
+            result["matched_fraction"] = report.get("matched_fraction")
             acc = report.get("accuracy", {})
             result["accuracy_vs_truth"] = {
                 k: acc.get(k) for k in ("median_m", "nmad_m", "rmse_m", "le90_m", "completeness")

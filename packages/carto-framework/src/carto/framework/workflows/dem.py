@@ -33,7 +33,6 @@ __all__ = [
     "choose_dem_generator",
     "dem_product",
     "open_pair",
-    "tile_scheduler",
 ]
 
 
@@ -207,22 +206,6 @@ def initial_dem(
     if scene_dem is not None:
         return scene_dem
     raise InputError("dem: give an initial DEM (--init-dem FILE [--geoid GTX]) or --init-height M")
-
-
-def tile_scheduler(workers: int) -> Any:
-    """A scheduler for tile tasks (callables without arguments) that runs them on ``workers``
-    dask threads (OpenCV, numba and NumPy release the GIL in the heavy parts); a distributed
-    dask client could be plugged in the same way."""
-    import dask
-
-    if workers < 1:
-        raise UsageError(f"--workers must be >= 1, got {workers}")
-
-    def run(tasks: Sequence[Any]) -> list[Any]:
-        delayed = [dask.delayed(task)() for task in tasks]
-        return list(dask.compute(*delayed, scheduler="threads", num_workers=workers))
-
-    return run
 
 
 def choose_dem_generator(requested: str | None, types: Sequence[SensorType]) -> str:
