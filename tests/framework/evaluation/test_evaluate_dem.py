@@ -420,3 +420,59 @@ def test_cli_evaluate_help_has_examples(run_carto):
     assert "examples:" in result.stdout
     assert "carto evaluate dem.tif --reference" in result.stdout
     assert "evaluate" in run_carto(["--help"]).stdout
+
+
+# ----------------------------------------------------------------------------- by blocks
+def _same_report(blocks: dict, whole: dict) -> None:
+    assert blocks.keys() == whole.keys()
+    for key, value in whole.items():
+        if key == "by_slope":
+            for a, b in zip(blocks[key], value, strict=True):
+                _same_report(a, b)
+        elif isinstance(value, float):
+            # the differences are kept in float32: sub-millimetre rounding
+            assert blocks[key] == pytest.approx(value, rel=1e-6, abs=1e-5), key
+        else:
+            assert blocks[key] == value, key
+
+
+@pytest.mark.parametrize("case", ["same grid", "shifted", "geographic dem", "geoid"])
+def test_accuracy_by_blocks_equals_the_whole_grid_computation(tmp_path: Path, case: str):
+    """The reference read by bands of 7 rows (seams everywhere) gives the figures and the
+    difference map of the computation on the whole grids."""
+    from carto.framework.evaluation.dem_accuracy import dem_accuracy_by_blocks
+
+    reference, evaluated = _synthetic_pair(UTM_TRANSFORM, SHAPE, _hill_utm)
+    ref_dem = DEM.from_array(reference, UTM_TRANSFORM, UTM, source="ref.tif")
+    dem = DEM.from_array(evaluated, UTM_TRANSFORM, UTM)
+    geoid = None
+    if case == "shifted":
+        dem = DEM.from_array(evaluated, UTM_TRANSFORM @ Affine.translation(0.5, 0.3), UTM)
+    elif case == "geographic dem":
+        to_utm = pyproj.Transformer.from_crs("EPSG:4326", UTM, always_xy=True)
+        geo = Affine(1e-4, 0.0, 2.998, 0.0, -1e-4, 44.255)
+        lon, lat = _centres(geo, (160, 240))
+        e, n = to_utm.transform(lon, lat)
+        dem = DEM.from_array(_hill_utm(np.asarray(e), np.asarray(n)) + 0.3, geo, "EPSG:4326")
+    elif case == "geoid":
+        geoid = Geoid(np.full((3, 5), 48.0), Affine(2.0, 0.0, -1.0, 0.0, -4.0, 50.0))
+        ref_dem = DEM.from_array(reference - 48.0, UTM_TRANSFORM, UTM, vertical="geoid:EGM96")
+    path = ref_dem.write(tmp_path / "ref.tif")
+    whole = dem_accuracy(dem, DEM.open(path), geoid=geoid)
+    blocks = dem_accuracy_by_blocks(dem, path, geoid=geoid, block_rows=7, preview_px=40)
+    _same_report(blocks.report, whole)
+    assert whole["count"] > 1000
+    difference, _, _ = dem_difference(dem, DEM.open(path), geoid=geoid)
+    step = blocks.step
+    assert step == 4  # 150 columns shown in 40
+    np.testing.assert_allclose(blocks.preview, difference[::step, ::step], atol=1e-9)
+
+
+def test_accuracy_by_blocks_refuses_grids_that_do_not_overlap(tmp_path: Path):
+    from carto.framework.evaluation.dem_accuracy import dem_accuracy_by_blocks
+
+    x, y = _centres(UTM_TRANSFORM, SHAPE)
+    path = DEM.from_array(_hill_utm(x, y), UTM_TRANSFORM, UTM).write(tmp_path / "ref.tif")
+    far = DEM.from_array(_hill_utm(x, y), UTM_TRANSFORM @ Affine.translation(20000.0, 0.0), UTM)
+    with pytest.raises(InputError, match="do not overlap"):
+        dem_accuracy_by_blocks(far, path, block_rows=16)

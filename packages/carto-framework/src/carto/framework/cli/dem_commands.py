@@ -8,8 +8,6 @@ import textwrap
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from carto.framework.cli.common import examples, formatter, table
 from carto.framework.errors import InputError
 from carto.framework.parallel.engine import default_workers
@@ -60,7 +58,7 @@ def _accuracy_summary(report: dict[str, Any]) -> str:
 
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
-    from carto.framework.evaluation.dem_accuracy import dem_difference, difference_accuracy
+    from carto.framework.evaluation.dem_accuracy import dem_accuracy_by_blocks
     from carto.framework.files.atomic import atomic_output
     from carto.framework.files.staging import check_output_file
     from carto.framework.raster.dem import DEM, Geoid
@@ -73,16 +71,9 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         if value is not None:
             check_output_file(value, option)
     dem = DEM.open(args.dem)
-    reference = DEM.open(args.reference)
     geoid = None if args.geoid is None else Geoid.open(args.geoid)
-    difference, slope, reference = dem_difference(dem, reference, geoid=geoid)
-    stats = difference_accuracy(difference, slope, np.isfinite(reference.heights))
-    report: dict[str, Any] = {
-        "dem": dem.name,
-        "reference": reference.name,
-        "vertical": reference.vertical,
-    }
-    report.update(stats)
+    comparison = dem_accuracy_by_blocks(dem, args.reference, geoid=geoid)
+    report: dict[str, Any] = comparison.report
     print(_accuracy_summary(report))
     outputs = []
     if args.out:
@@ -96,8 +87,8 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         from carto.framework.raster.quicklook import difference_png, hillshade_png
 
         if args.plot:
-            title = f"{Path(dem.name).name} - {Path(reference.name).name}"
-            difference_png(difference, args.plot, title=title)
+            title = f"{Path(dem.name).name} - {Path(args.reference).name}"
+            difference_png(comparison.preview, args.plot, title=title, figures=report)
             outputs.append(f"difference map {args.plot}")
         if args.hillshade:
             hillshade_png(dem, args.hillshade)

@@ -402,6 +402,7 @@ class DEM:
         vertical: str | None = None,
         band: int = 1,
         require_ellipsoidal: bool = False,
+        rows: tuple[int, int] | None = None,
     ) -> DEM:
         """Read a DEM from a GeoTIFF, an SRTM ``.hgt`` tile or any raster GDAL reads.
 
@@ -419,6 +420,8 @@ class DEM:
             band: the band holding the heights.
             require_ellipsoidal: refuse geoid heights that no ``geoid`` converts, with the
                 advice to give ``--geoid GTX`` (:meth:`check_ellipsoidal`).
+            rows: read only the rows ``start..stop`` (clipped to the file): a band of a
+                large DEM read piece by piece. Such a band may hold no valid height.
 
         Heights outside ``MIN_HEIGHT_M..MAX_HEIGHT_M`` are nodata (undeclared voids such as
         -9999 or -32768, fill values such as 1e30), as is the file's declared nodata.
@@ -464,7 +467,16 @@ class DEM:
                     vref = file_vertical or ELLIPSOID
                 window = None
                 transform = ds.transform
-                if bounds is not None:
+                if rows is not None:
+                    r0, r1 = max(0, int(rows[0])), min(ds.height, int(rows[1]))
+                    if r0 >= r1:
+                        raise InputError(
+                            f"DEM {path}: rows {rows[0]}..{rows[1]} are outside its "
+                            f"{ds.height} rows"
+                        )
+                    window = Window(0, r0, ds.width, r1 - r0)
+                    transform = transform @ Affine.translation(0, r0)
+                elif bounds is not None:
                     full = cls(np.zeros((1, 1)), transform, crs, source=str(path))
                     rows, cols = full._window_for(bounds, ds.height, ds.width)
                     window = Window(cols[0], rows[0], cols[1] - cols[0], rows[1] - rows[0])
@@ -477,7 +489,7 @@ class DEM:
         if scale not in (None, 1.0) or offset not in (None, 0.0):
             grid = grid * (1.0 if scale is None else scale) + (offset or 0.0)
         dem = cls(grid, transform, crs, vertical=vref, source=str(path))
-        if not np.isfinite(dem.heights).any():
+        if rows is None and not np.isfinite(dem.heights).any():
             where = "" if bounds is None else " in the requested bounds"
             raise InputError(
                 f"DEM {path}: no valid height{where} (all {grid.shape[1]} x {grid.shape[0]} "

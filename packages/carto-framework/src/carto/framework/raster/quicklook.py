@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -169,6 +170,7 @@ def difference_png(
     path: str | os.PathLike[str],
     title: str | None = None,
     limit_m: float | None = None,
+    figures: Mapping[str, Any] | None = None,
 ) -> Path:
     """Write a map of height differences (metres, e.g. DEM - reference) to the PNG ``path``.
 
@@ -181,6 +183,10 @@ def difference_png(
         title: figure title (default "DEM - reference").
         limit_m: half range of the colours, metres; default ``3 * NMAD`` of the finite
             differences, at least 0.5 m.
+        figures: the accuracy figures of all the differences (``count``, ``bias_m``,
+            ``rmse_m``, ``nmad_m``, as from
+            :func:`~carto.framework.evaluation.dem_accuracy.dem_accuracy_by_blocks`) when
+            ``difference`` is a decimated preview: the caption and colours use them.
 
     Returns:
         ``path``.
@@ -189,11 +195,14 @@ def difference_png(
     if d.ndim != 2:
         raise InputError(f"difference map: a 2-D grid is needed, got shape {d.shape}")
     finite = d[np.isfinite(d)]
-    if limit_m is None:
-        nmad = 0.0
+    if figures is None:
+        figures = {"count": int(finite.size)}
         if finite.size:
-            nmad = _NMAD_FACTOR * float(np.median(np.abs(finite - np.median(finite))))
-        limit_m = max(3.0 * nmad, _MIN_LIMIT_M)
+            figures["bias_m"] = float(np.mean(finite))
+            figures["rmse_m"] = float(np.sqrt(np.mean(finite**2)))
+            figures["nmad_m"] = _NMAD_FACTOR * float(np.median(np.abs(finite - np.median(finite))))
+    if limit_m is None:
+        limit_m = max(3.0 * float(figures.get("nmad_m") or 0.0), _MIN_LIMIT_M)
     elif not (limit_m > 0.0 and math.isfinite(limit_m)):
         raise InputError(f"difference map: limit_m must be positive, got {limit_m}")
     shown = _decimate(d)
@@ -212,10 +221,10 @@ def difference_png(
     bar = fig.colorbar(image, ax=ax, extend="both", shrink=0.85)
     bar.set_label("height difference (m)")
     ax.set_title(title or "DEM - reference", fontsize=10)
-    if finite.size:
+    if figures.get("count"):
         caption = (
-            f"{finite.size} px compared; mean {np.mean(finite):+.2f} m, "
-            f"RMSE {np.sqrt(np.mean(finite**2)):.2f} m; colours +/-{limit_m:.2f} m; grey: no data"
+            f"{figures['count']} px compared; mean {figures['bias_m']:+.2f} m, "
+            f"RMSE {figures['rmse_m']:.2f} m; colours +/-{limit_m:.2f} m; grey: no data"
         )
     else:
         caption = "no pixel compared"

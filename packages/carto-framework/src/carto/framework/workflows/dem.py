@@ -559,13 +559,17 @@ def _dem_into(
         )
     report.update(product.extras)
     if reference is not None:
-        from carto.framework.evaluation.dem_accuracy import dem_accuracy, dem_difference
+        from carto.framework.evaluation.dem_accuracy import dem_accuracy_by_blocks
 
-        ref = DEM.open(reference, geoid=Geoid.open(geoid) if geoid else None)
-        report["accuracy"] = dem_accuracy(product.dem, ref)
-        diff, _, _ = dem_difference(product.dem, ref)
+        comparison = dem_accuracy_by_blocks(
+            product.dem, reference, geoid=Geoid.open(geoid) if geoid else None
+        )
+        report["accuracy"] = comparison.report
         files["difference"] = difference_png(
-            diff, out / "dem_difference.png", f"DEM - {Path(reference).name}"
+            comparison.preview,
+            out / "dem_difference.png",
+            f"DEM - {Path(reference).name}",
+            figures=comparison.report,
         ).name
     report["seconds"] = time.perf_counter() - t0
     write_report(out / "report.json", report)
