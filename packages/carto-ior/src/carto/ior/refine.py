@@ -261,19 +261,22 @@ def regularise(
     (nodes far from any match keep their height). Returns the new heights and the inliers."""
     from scipy import ndimage
 
-    dh = new_height - heights
+    dh = new_height - heights  # NaN where no match
     valid = np.isfinite(dh)
     if not valid.any():
         return heights.copy(), valid
-    local = focal_nanmedian(np.where(valid, dh, np.nan), 2)
-    resid = dh - local
+    resid = dh - focal_nanmedian(dh, 2)  # NaN where no match or no neighbour
     r = resid[np.isfinite(resid)]
     nmad = 1.4826 * float(np.median(np.abs(r - np.median(r)))) if r.size else 0.0
-    inlier = valid & np.isfinite(local) & (np.abs(resid) <= max(settings.outlier_m, 4.0 * nmad))
-    w = inlier.astype(np.float64)
+    del r
+    with np.errstate(invalid="ignore"):
+        inlier = np.abs(resid) <= max(settings.outlier_m, 4.0 * nmad)  # False at NaN
+    del resid
     sigma = float(settings.smoothing_nodes)
-    num = ndimage.gaussian_filter(np.where(inlier, dh, 0.0), sigma, mode="nearest")
-    den = ndimage.gaussian_filter(w, sigma, mode="nearest")
+    dh[~inlier] = 0.0
+    num = ndimage.gaussian_filter(dh, sigma, mode="nearest")
+    del dh
+    den = ndimage.gaussian_filter(inlier.astype(np.float64), sigma, mode="nearest")
     # holes: grow the fill with wider Gaussians where the narrow one has no support
     for wide in (3 * sigma, 9 * sigma):
         missing = den < 0.05
@@ -502,9 +505,11 @@ def _iterate(
                 f"ior: {len(failed)} of {len(plan)} tiles failed in iteration {iteration} "
                 f"({failed[0]})"
             )
+        # the grids of the coordinator: heights in float64, offsets in float32 (what the
+        # tiles measured to a hundredth of a pixel), the rest as masks
         new = np.full(dem_grid.shape, np.nan)
-        d_row = np.full(dem_grid.shape, np.nan)
-        d_col = np.full(dem_grid.shape, np.nan)
+        d_row = np.full(dem_grid.shape, np.nan, np.float32)
+        d_col = np.full(dem_grid.shape, np.nan, np.float32)
         covered = np.zeros(dem_grid.shape, bool)
         for (rows, cols), outcome in zip(plan, outcomes, strict=True):
             if isinstance(outcome, TaskFailure):
@@ -518,10 +523,13 @@ def _iterate(
         ever_matched |= matched
         # the mismatch a height change removes: along the base; across it, what the
         # relative orientation leaves (reported, and the next search starts from it)
-        along = d_row * base_rc[0] + d_col * base_rc[1]
-        across = -d_row * base_rc[1] + d_col * base_rc[0]
-        med = float(np.median(np.abs(along[matched]))) if matched.any() else float("nan")
-        across_px = float(np.median(across[matched])) if matched.any() else float("nan")
+        m_row, m_col = d_row[matched], d_col[matched]
+        del d_row, d_col
+        along = m_row * base_rc[0] + m_col * base_rc[1]
+        across = -m_row * base_rc[1] + m_col * base_rc[0]
+        med = float(np.median(np.abs(along))) if along.size else float("nan")
+        across_px = float(np.median(across)) if across.size else float("nan")
+        del m_row, m_col, along, across
         if matched.any():  # the across-base offset stays; the along-base one the DEM removes
             guess = (-across_px * float(base_rc[1]), across_px * float(base_rc[0]))
         pct = 100.0 * float(matched.sum()) / max(int(covered.sum()), 1)
