@@ -56,7 +56,7 @@ from carto.framework.imaging.ortho_grid import OrthoGrid, check_grid_size, footp
 from carto.framework.matching.base import Matcher
 from carto.framework.parallel.engine import TaskFailure
 from carto.framework.raster.dem import DEM, ELLIPSOID
-from carto.framework.raster.focal import focal_nanmedian
+from carto.ior.regularise import regularise, support
 from carto.ior.settings import IORSettings, option_label
 from carto.ior.start import StartingSurface, seen_by_both, starting_surface
 from carto.ior.tiles import NODE_LAYERS, ORTHO_LAYERS, TileJob, refine_tile, run_tile, tile_arrays
@@ -250,43 +250,6 @@ def base_direction(
 def b_over_h(left: Sensor, right: Sensor, lon: float, lat: float, h: float) -> float:
     """Base-to-height ratio at a ground point (:func:`base_direction`)."""
     return base_direction(left, right, lon, lat, h)[0]
-
-
-def regularise(
-    heights: FloatArray, new_height: FloatArray, settings: IORSettings
-) -> tuple[FloatArray, NDArray[np.bool_]]:
-    """The DEM update: height changes ``new - heights`` at matched nodes, outliers against
-    the 5 x 5 local median removed, then a normalised Gaussian convolution (sigma
-    ``smoothing_nodes``) that smooths the noise and fills the holes from their neighbours
-    (nodes far from any match keep their height). Returns the new heights and the inliers."""
-    from scipy import ndimage
-
-    dh = new_height - heights  # NaN where no match
-    valid = np.isfinite(dh)
-    if not valid.any():
-        return heights.copy(), valid
-    resid = dh - focal_nanmedian(dh, 2)  # NaN where no match or no neighbour
-    r = resid[np.isfinite(resid)]
-    nmad = 1.4826 * float(np.median(np.abs(r - np.median(r)))) if r.size else 0.0
-    del r
-    with np.errstate(invalid="ignore"):
-        inlier = np.abs(resid) <= max(settings.outlier_m, 4.0 * nmad)  # False at NaN
-    del resid
-    sigma = float(settings.smoothing_nodes)
-    dh[~inlier] = 0.0
-    num = ndimage.gaussian_filter(dh, sigma, mode="nearest")
-    del dh
-    den = ndimage.gaussian_filter(inlier.astype(np.float64), sigma, mode="nearest")
-    # holes: grow the fill with wider Gaussians where the narrow one has no support
-    for wide in (3 * sigma, 9 * sigma):
-        missing = den < 0.05
-        if not missing.any():
-            break
-        num = np.where(missing, ndimage.gaussian_filter(num, wide, mode="nearest"), num)
-        den = np.where(missing, ndimage.gaussian_filter(den, wide, mode="nearest"), den)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        update = np.where(den > 1e-3, num / den, 0.0)
-    return heights + update, inlier
 
 
 class TileFailure(InputError):
@@ -589,7 +552,7 @@ def _iterate(
             bool if is_valid else np.float32,
             False if is_valid else float("nan"),
         )
-    final = np.where(covered & _support(ever_matched, s), heights, np.nan)
+    final = np.where(covered & support(ever_matched, s), heights, np.nan)
     dem = DEM.from_array(final, dem_grid.transform, dem_grid.crs.to_wkt(), vertical=ELLIPSOID)
     return IORResult(
         dem,
@@ -606,16 +569,3 @@ def _iterate(
         init_filled=float(state.facts.get("init_filled", 0.0)),
         failed_tiles=tuple(failed),
     )
-
-
-def _support(matched: NDArray[np.bool_], settings: IORSettings) -> NDArray[np.bool_]:
-    """The nodes :func:`regularise` reaches from matched nodes (its widest Gaussian, 9 sigma):
-    the others were never measured and keep the starting height, so the DEM has no value
-    there."""
-    from scipy import ndimage
-
-    if not matched.any():
-        return matched.copy()
-    wide = 9.0 * float(settings.smoothing_nodes)
-    reach = ndimage.gaussian_filter(matched.astype(np.float64), wide, mode="constant")
-    return (reach > 1e-3) | matched

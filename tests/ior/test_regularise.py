@@ -1,0 +1,67 @@
+"""The regularised DEM update by bands of rows equals the update computed on the whole grid
+at once (written here plainly: scipy filters over the whole arrays), whatever the band size."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import ndimage
+
+from carto.framework.raster.focal import focal_nanmedian
+from carto.ior.regularise import regularise, support
+from carto.ior.settings import IORSettings
+
+
+def _whole_grid(heights, new, settings):
+    dh = new - heights
+    resid = (dh - focal_nanmedian(dh, 2)).astype(np.float32)
+    r = resid[np.isfinite(resid)].astype(np.float64)
+    nmad = 1.4826 * np.median(np.abs(r - np.median(r)))
+    with np.errstate(invalid="ignore"):
+        inlier = np.abs(resid) <= max(settings.outlier_m, 4.0 * nmad)
+    sigma = settings.smoothing_nodes
+    num = ndimage.gaussian_filter(np.where(inlier, dh, 0.0), sigma, mode="nearest")
+    den = ndimage.gaussian_filter(inlier.astype(float), sigma, mode="nearest")
+    for wide in (3 * sigma, 9 * sigma):
+        missing = den < 0.05
+        num = np.where(missing, ndimage.gaussian_filter(num, wide, mode="nearest"), num)
+        den = np.where(missing, ndimage.gaussian_filter(den, wide, mode="nearest"), den)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return heights + np.where(den > 1e-3, num / den, 0.0), inlier
+
+
+@pytest.fixture(scope="module")
+def grids():
+    rng = np.random.default_rng(5)
+    rows, cols = 300, 170
+    heights = 500.0 + 30.0 * np.sin(np.arange(cols) / 17.0)[None, :] + np.zeros((rows, 1))
+    new = heights + 1.5 + rng.normal(0.0, 0.3, heights.shape)
+    new[rng.random(heights.shape) < 0.02] += 40.0  # wild matches
+    new[40:120, 30:90] = np.nan  # a hole wider than every Gaussian
+    new[200:204, :] = np.nan  # a gap across the grid
+    new[250:, 150:] = np.nan  # an unmatched corner
+    return heights, new
+
+
+@pytest.mark.parametrize("band_rows", [1, 7, 64, 10_000])
+def test_bands_give_the_whole_grid_update(grids, band_rows):
+    heights, new = grids
+    settings = IORSettings(smoothing_nodes=1.5)
+    expected, expected_inlier = _whole_grid(heights, new, settings)
+    out, inlier = regularise(heights, new, settings, band_rows=band_rows)
+    np.testing.assert_array_equal(inlier, expected_inlier)
+    np.testing.assert_allclose(out, expected, rtol=0, atol=1e-9)
+    assert (~inlier & np.isfinite(new)).sum() > 100  # the wild matches were found
+    assert np.abs(out[60:100, 50:70] - heights[60:100, 50:70] - 1.5).max() < 0.2  # hole filled
+
+
+@pytest.mark.parametrize("band_rows", [3, 50])
+def test_support_by_bands(grids, band_rows):
+    _, new = grids
+    matched = np.isfinite(new)
+    matched[:, :40] = False
+    settings = IORSettings()
+    reach = ndimage.gaussian_filter(matched.astype(float), 9.0, mode="constant")
+    np.testing.assert_array_equal(
+        support(matched, settings, band_rows=band_rows), (reach > 1e-3) | matched
+    )
