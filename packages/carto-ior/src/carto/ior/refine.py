@@ -459,6 +459,7 @@ def _iterate(
             matcher,
             (float(np.nanmin(current)), float(np.nanmax(current))),
             space.iteration_dir(iteration),
+            (float(base_rc[0]), float(base_rc[1])),
         )
         tasks = [functools.partial(run_tile, job, rows, cols) for rows, cols in plan]
         outcomes = _run_tiles(engine, tasks, f"IOR iteration {iteration}", keys)

@@ -93,6 +93,7 @@ def refine_tile(
     guess: tuple[float, float] = (0.0, 0.0),
     matcher: Matcher | None = None,
     h_range: tuple[float, float] | None = None,
+    base: tuple[float, float] | None = None,
 ) -> TileResult:
     """One tile of one iteration: orthos on the current DEM, dense matching, intersection.
 
@@ -103,7 +104,8 @@ def refine_tile(
     covers ``rows, cols`` (DEM node slices) only. ``h_range``: the lowest and highest height
     of the whole grid (an intersection more than 500 m beyond gives no height; default:
     from ``heights``). The two rays of a node are intersected by the tile's local ray model
-    (:mod:`carto.ior.rays`).
+    (:mod:`carto.ior.rays`). ``base``: the stereo base, ``(d_row, d_col)`` of the ortho
+    grid, for matchers that search along it.
     """
     from scipy import ndimage
 
@@ -128,6 +130,7 @@ def refine_tile(
             guess=guess,
             window=settings.window,
             min_score=settings.min_score,
+            base=base,
         ),
     )
     # node offsets: the mean of the valid offsets of the node's k x k ortho pixels
@@ -199,6 +202,7 @@ class TileJob:
     matcher: Matcher | None
     h_range: tuple[float, float]
     folder: Path
+    base: tuple[float, float] | None = None
 
 
 def run_tile(job: TileJob, rows: slice, cols: slice) -> Path:
@@ -224,6 +228,7 @@ def run_tile(job: TileJob, rows: slice, cols: slice) -> Path:
         job.guess,
         job.matcher,
         h_range=job.h_range,
+        base=job.base,
     )
     arrays = {name: getattr(result, name) for name in NODE_LAYERS + ORTHO_LAYERS}
     with atomic_output(path) as tmp, open(tmp, "wb") as stream:

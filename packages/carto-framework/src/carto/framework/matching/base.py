@@ -96,6 +96,19 @@ def _check_positive(value: object, name: str) -> float:
     return number
 
 
+def _unit_or_none(value: object) -> tuple[float, float] | None:
+    if value is None:
+        return None
+    try:
+        d_row, d_col = (float(v) for v in value)  # type: ignore[union-attr]
+    except (TypeError, ValueError):
+        raise InputError(f"matcher settings: base must be (d_row, d_col), got {value!r}") from None
+    length = float(np.hypot(d_row, d_col))
+    if not (np.isfinite(length) and length > 0.0):
+        raise InputError(f"matcher settings: base must be a non-zero direction, got {value!r}")
+    return d_row / length, d_col / length
+
+
 @attrs.frozen
 class MatchSettings:
     """What a caller of :meth:`Matcher.match_points` asks for.
@@ -144,6 +157,10 @@ class DenseSettings:
             percentile range (flat windows match anything).
         consistency_px: tolerance of the left-right check, pixels.
         guess: a constant first-guess offset ``(d_row, d_col)``, pixels.
+        base: the direction ``(d_row, d_col)`` along which the offsets vary (the stereo
+            base on two ortho-images: across it, the offset is the guess), normalised; None
+            when unknown. Matchers that search along a line (``"sgm"``) need it; 2-D
+            searches (``"ncc"``) ignore it.
     """
 
     levels: int = attrs.field(default=5)
@@ -155,6 +172,7 @@ class DenseSettings:
     guess: tuple[float, float] = attrs.field(
         default=(0.0, 0.0), converter=lambda g: (float(g[0]), float(g[1]))
     )
+    base: tuple[float, float] | None = attrs.field(default=None, converter=_unit_or_none)
 
     def __attrs_post_init__(self) -> None:
         _check_int(self.levels, "levels", 1)

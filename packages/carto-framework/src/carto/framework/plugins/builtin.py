@@ -43,9 +43,10 @@ def carto_adjusters() -> Sequence[Adjuster]:
 
 @hookimpl
 def carto_matchers() -> Sequence[Matcher]:
+    from carto.framework.matching.sgm_matcher import SGMMatcher
     from carto.framework.matching.tiepoints import OrthoTiePointMatcher
 
-    return [NCCMatcher(), OrthoTiePointMatcher()]
+    return [NCCMatcher(), OrthoTiePointMatcher(), SGMMatcher()]
 
 
 @hookimpl
