@@ -56,8 +56,15 @@ def _step(
 
 
 def run_size(
-    size: str, work: Path, workers: list[str], steps: list[str], before: dict[str, Any]
+    size: str,
+    work: Path,
+    workers: list[str],
+    steps: list[str],
+    before: dict[str, Any],
+    save: Any = lambda entry: None,
 ) -> dict[str, Any]:
+    """The runs of one size; ``save(entry)`` after every step (an interrupted run keeps the
+    steps it finished)."""
     cols, lines = (int(v) for v in size.split("x"))
     folder = work / size
     folder.mkdir(parents=True, exist_ok=True)
@@ -84,6 +91,7 @@ def run_size(
         (scene / ".carto-output.json").is_file(),
         before.get("simulate"),
     )
+    save(entry)
     if "adjust" not in steps:
         return entry
     entry["adjust"] = _step(
@@ -142,6 +150,7 @@ def run_size(
             round(result["wall_s"] / entry["megapixels"], 3) if "wall_s" in result else None
         )
         entry["dem"][label] = result
+        save(entry)
     return entry
 
 
@@ -193,22 +202,36 @@ def main() -> int:
     )
     args = parser.parse_args()
     doc = json.loads(RESULT.read_text()) if RESULT.is_file() else {"runs": {}}
-    for size in args.sizes:
-        before = doc["runs"].get(size, {})
-        doc["runs"][size] = run_size(size, args.work, args.dem_workers, args.steps, before)
+
+    def save(size: str, entry: dict[str, Any]) -> None:
+        doc["runs"][size] = entry
         doc["summary"] = summary(doc["runs"])
         doc["machine"] = {
             "cpus": os.cpu_count(),
-            "memory_gb": round(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 2**30, 1),
+            "memory_gb": round(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 1e9, 1),
             "python": platform.python_version(),
         }
         doc["updated"] = datetime.date.today().isoformat()
         doc["method"] = (
             "benchmarks/scale.py: each carto command in a subprocess; peak of the summed RSS "
-            "of the process tree (workers included) polled every 0.2 s; simulated scenes: a "
-            "best case (#18)"
+            "of the process tree (workers included) polled every 0.2 s, GB = 1e9 bytes; "
+            "simulated scenes: a best case (#18)"
         )
         RESULT.write_text(json.dumps(doc, indent=2) + "\n")
+
+    for size in args.sizes:
+        before = doc["runs"].get(size, {})
+        save(
+            size,
+            run_size(
+                size,
+                args.work,
+                args.dem_workers,
+                args.steps,
+                before,
+                lambda entry, size=size: save(size, entry),
+            ),
+        )
     print(json.dumps(doc, indent=2))
     return 0
 
