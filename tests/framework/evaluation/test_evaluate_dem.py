@@ -476,3 +476,19 @@ def test_accuracy_by_blocks_refuses_grids_that_do_not_overlap(tmp_path: Path):
     far = DEM.from_array(_hill_utm(x, y), UTM_TRANSFORM @ Affine.translation(20000.0, 0.0), UTM)
     with pytest.raises(InputError, match="do not overlap"):
         dem_accuracy_by_blocks(far, path, block_rows=16)
+
+
+@pytest.mark.parametrize(
+    ("shape", "band_rows"), [((4100, 300), 7), ((900, 5000), 64), ((50, 40), 1)]
+)
+def test_hillshade_by_bands_equals_the_whole_grid(shape, band_rows):
+    """The PNG's hillshade is computed band by band (flat memory) and decimated: the same
+    pixels as the whole grid's hillshade decimated."""
+    from carto.framework.raster.quicklook import _decimate, _decimated_hillshade, hillshade
+
+    rng = np.random.default_rng(2)
+    heights = np.cumsum(rng.normal(size=shape), axis=0) + np.cumsum(rng.normal(size=shape), 1)
+    heights[10:20, 5:9] = np.nan
+    expected = _decimate(hillshade(heights, (10.0, 12.0)))
+    got = _decimated_hillshade(heights, (10.0, 12.0), band_rows=band_rows)
+    np.testing.assert_array_equal(got, expected)

@@ -489,8 +489,9 @@ def _iterate(
         # relative orientation leaves (reported, and the next search starts from it)
         m_row, m_col = d_row[matched], d_col[matched]
         del d_row, d_col
-        along = m_row * base_rc[0] + m_col * base_rc[1]
-        across = -m_row * base_rc[1] + m_col * base_rc[0]
+        b_row, b_col = float(base_rc[0]), float(base_rc[1])  # float32 products
+        along = m_row * b_row + m_col * b_col
+        across = m_col * b_row - m_row * b_col
         med = float(np.median(np.abs(along))) if along.size else float("nan")
         across_px = float(np.median(across)) if across.size else float("nan")
         del m_row, m_col, along, across

@@ -341,6 +341,47 @@ class BlockComparison:
 PREVIEW_PX = 2000
 """Longest side of the decimated difference grid kept for maps, pixels."""
 
+BLOCK_PX = 2_000_000
+"""Reference pixels per band of :func:`dem_accuracy_by_blocks` (about 100 MB of work)."""
+
+
+def _covering(dem: DEM, part: DEM) -> DEM:
+    """The window of ``dem`` that covers the reference band ``part`` (two pixels more on each
+    side for the bilinear kernel), or ``dem`` when the band's bounds cannot be located in
+    its CRS."""
+    from rasterio.warp import transform_bounds
+
+    t = part.transform
+    rows, cols = part.shape
+    xs = [t.c, t.c + t.a * cols + t.b * rows, t.c + t.b * rows, t.c + t.a * cols]
+    ys = [t.f, t.f + t.d * cols + t.e * rows, t.f + t.e * rows, t.f + t.d * cols]
+    try:
+        left, bottom, right, top = transform_bounds(
+            _rio_crs(part), _rio_crs(dem), min(xs), min(ys), max(xs), max(ys), densify_pts=21
+        )
+    except Exception:  # noqa: BLE001 (a CRS pair PROJ cannot relate: compare with all)
+        return dem
+    inverse = ~dem.transform
+    corners = [inverse @ (x, y) for x in (left, right) for y in (bottom, top)]
+    c = [p[0] for p in corners]
+    r = [p[1] for p in corners]
+    if not all(map(math.isfinite, c + r)):
+        return dem
+    n_rows, n_cols = dem.shape
+    r0 = max(0, math.floor(min(r)) - 2)
+    r1 = min(n_rows, math.ceil(max(r)) + 2)
+    c0 = max(0, math.floor(min(c)) - 2)
+    c1 = min(n_cols, math.ceil(max(c)) + 2)
+    if r0 >= r1 or c0 >= c1:  # no overlap: a 1 x 1 window far from the band says so
+        r0, r1, c0, c1 = 0, 1, 0, 1
+    from affine import Affine
+
+    return attrs.evolve(
+        dem,
+        heights=dem.heights[r0:r1, c0:c1],
+        transform=dem.transform @ Affine.translation(c0, r0),
+    )
+
 
 def dem_accuracy_by_blocks(
     dem: DEMSource,
@@ -348,12 +389,13 @@ def dem_accuracy_by_blocks(
     *,
     geoid: Geoid | str | os.PathLike[str] | None = None,
     slope_classes_deg: Sequence[float] = DEFAULT_SLOPE_CLASSES_DEG,
-    block_rows: int = 1024,
+    block_rows: int | None = None,
     preview_px: int = PREVIEW_PX,
 ) -> BlockComparison:
     """:func:`dem_accuracy` of ``dem`` against the reference DEM file, read by bands of
-    ``block_rows`` rows (with one row more on each side for the slope): the memory holds one
-    band of the reference grid, the compared differences (float32) and a decimated
+    ``block_rows`` rows (default: about :data:`BLOCK_PX` pixels a band; one row more on each
+    side for the slope), each compared with the part of ``dem`` that covers it: the memory
+    holds one band of the reference grid, the compared differences (float32) and a decimated
     difference grid, not the reference grid several times over (a LiDAR reference of a whole
     scene has hundreds of millions of pixels).
 
@@ -380,7 +422,7 @@ def dem_accuracy_by_blocks(
     except RasterioError as exc:  # pragma: no cover (DEM.open read it just before)
         raise InputError(f"DEM {path}: not a readable raster ({exc})") from exc
     step = max(1, math.ceil(max(n_rows, n_cols) / max(int(preview_px), 1)))
-    block = max(int(block_rows), 1)
+    block = max(int(block_rows), 1) if block_rows is not None else max(16, BLOCK_PX // n_cols)
     block += (-block) % step  # bands hold whole preview rows
     values: list[NDArray[np.float32]] = []
     classes: list[NDArray[np.int8]] = []
@@ -394,7 +436,7 @@ def dem_accuracy_by_blocks(
         part = DEM.open(path, rows=(a, b))
         inner = slice(r0 - a, r0 - a + (r1 - r0))
         if np.isfinite(part.heights).any():
-            evaluated, part = _same_vertical(dem, part, geoid)
+            evaluated, part = _same_vertical(_covering(dem, part), part, geoid)
             name, vertical = part.name, part.vertical
             if _same_grid(evaluated, part):
                 resampled = np.array(evaluated.heights, np.float64)

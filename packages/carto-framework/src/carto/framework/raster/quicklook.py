@@ -115,6 +115,24 @@ def _pixel_text(dem: DEM, dx: float, dy: float) -> str:
     return f"pixel {dx:.3g} x {dy:.3g} m"
 
 
+def _decimated_hillshade(
+    heights: FloatArray, pixel_size_m: tuple[float, float], band_rows: int = 512
+) -> FloatArray:
+    """:func:`hillshade` of the whole grid, decimated as :func:`_decimate` does, computed by
+    bands of rows (one row more on each side for the gradient): the memory of one band, not
+    of the grid several times over."""
+    n_rows, n_cols = heights.shape
+    step = max(1, math.ceil(max(n_rows, n_cols) / _MAX_DISPLAY_PX))
+    band = max(step, band_rows - band_rows % step)
+    parts = []
+    for r0 in range(0, n_rows, band):
+        r1 = min(n_rows, r0 + band)
+        a, b = max(0, r0 - 1), min(n_rows, r1 + 1)
+        shade = hillshade(heights[a:b], pixel_size_m)[r0 - a : r1 - a]
+        parts.append(shade[::step, ::step])
+    return np.concatenate(parts, axis=0)
+
+
 def hillshade_png(
     dem: DEM | str | os.PathLike[str],
     path: str | os.PathLike[str],
@@ -138,7 +156,7 @@ def hillshade_png(
         dem = DEM.open(dem)
     dx_grid, dy_grid = dem_pixel_size_m(dem)
     dx, dy = float(np.median(dx_grid)), float(np.median(dy_grid))  # centre latitude
-    shade = _decimate(hillshade(dem.heights, (dx, dy)))
+    shade = _decimated_hillshade(dem.heights, (dx, dy))
     aspect = dy / dx  # ground shape of a pixel: a geographic grid is not drawn squeezed
     fig, ax = _new_figure(shade.shape, aspect=aspect)
     import matplotlib
@@ -154,8 +172,11 @@ def hillshade_png(
     )
     ax.set_axis_off()
     ax.set_title(title or f"hillshade of {Path(dem.name).name}", fontsize=10)
-    valid = dem.heights[np.isfinite(dem.heights)]
-    heights = f"heights {valid.min():.1f} .. {valid.max():.1f} m" if valid.size else "no data"
+    if np.isfinite(dem.heights).any():
+        low, high = np.nanmin(dem.heights), np.nanmax(dem.heights)
+        heights = f"heights {low:.1f} .. {high:.1f} m"
+    else:
+        heights = "no data"
     caption = (
         f"{_pixel_text(dem, dx, dy)}; {dem.shape[1]} x {dem.shape[0]} px; {heights} "
         f"({dem.vertical}); {dem.crs.name}"
