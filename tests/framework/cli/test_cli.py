@@ -89,7 +89,7 @@ def test_unknown_component_of_a_kind(run_carto):
     result = run_carto(["plugins", "nope", "--kind", "matcher"], with_test_plugins=False)
     assert result.returncode == 1
     assert result.stderr.strip() == (
-        "carto: error: unknown matcher 'nope'; available: ncc, ortho-forstner"
+        "carto: error: unknown matcher 'nope'; available: ncc, ortho-forstner, sgm"
     )
 
 
