@@ -157,27 +157,27 @@ def run_size(
 def summary(runs: dict[str, Any]) -> dict[str, Any]:
     """The done-when ratios of #16 from the runs at hand."""
     out: dict[str, Any] = {}
-    quarter, full = runs.get("6000x6000"), runs.get("12000x12000")
+    quarter, full = runs.get("6000x6000") or {}, runs.get("12000x12000") or {}
     for step in ("simulate", "adjust"):
-        if quarter and full and "wall_s" in quarter[step] and "wall_s" in full[step]:
+        if "wall_s" in quarter.get(step, {}) and "wall_s" in full.get(step, {}):
             out[f"{step}_time_full_over_quarter"] = round(
                 full[step]["wall_s"] / quarter[step]["wall_s"], 2
             )
             out[f"{step}_memory_full_over_quarter"] = round(
                 full[step]["peak_rss_gb"] / quarter[step]["peak_rss_gb"], 2
             )
-    if quarter and full and "default" in quarter["dem"] and "default" in full["dem"]:
+    if "default" in quarter.get("dem", {}) and "default" in full.get("dem", {}):
         q, f = quarter["dem"]["default"], full["dem"]["default"]
         if "wall_s" in q and "wall_s" in f:
             out["dem_time_full_over_quarter"] = round(f["wall_s"] / q["wall_s"], 2)
             out["dem_memory_full_over_quarter"] = round(f["peak_rss_gb"] / q["peak_rss_gb"], 2)
-    if full and "1" in full["dem"] and "default" in full["dem"]:
+    if "1" in full.get("dem", {}) and "default" in full.get("dem", {}):
         one, two = full["dem"]["1"], full["dem"]["default"]
         if "wall_s" in one and "wall_s" in two:
             out["dem_full_speedup_default_over_1_worker"] = round(one["wall_s"] / two["wall_s"], 2)
     if full:
-        peaks = [full[s].get("peak_rss_gb", 0) for s in ("simulate", "adjust")]
-        peaks += [d.get("peak_rss_gb", 0) for d in full["dem"].values()]
+        peaks = [full.get(s, {}).get("peak_rss_gb", 0) for s in ("simulate", "adjust")]
+        peaks += [d.get("peak_rss_gb", 0) for d in full.get("dem", {}).values()]
         out["full_scene_peak_rss_gb"] = max(peaks)
     return out
 
