@@ -266,20 +266,30 @@ def difference_accuracy(
         int(np.count_nonzero(valid & ref_valid)) / reference_count if reference_count else None
     )
     report["reference_count"] = reference_count
-    slopes = slope[valid]
-    classes = []
+    report["by_slope"] = _by_slope(values, _slope_class(slope[valid], edges), edges)
+    return report
+
+
+def _slope_class(slopes: FloatArray, edges: list[float]) -> NDArray[np.int8]:
+    """The class index of each slope (``[edge_i, edge_i+1)``, the last class closed; -1 for
+    NaN or outside every class)."""
+    index = np.full(slopes.shape, -1, np.int8)
     for i, (lo, hi) in enumerate(itertools.pairwise(edges)):
         last = i == len(edges) - 2
-        in_class = (slopes >= lo) & ((slopes <= hi) if last else (slopes < hi))
-        stats = difference_statistics(values[in_class])
-        classes.append(
-            {
-                "slope_deg": [lo, hi],
-                **{k: stats[k] for k in ("count", "bias_m", "rmse_m", "nmad_m", "le90_m")},
-            }
-        )
-    report["by_slope"] = classes
-    return report
+        index[(slopes >= lo) & ((slopes <= hi) if last else (slopes < hi))] = i
+    return index
+
+
+def _by_slope(
+    values: FloatArray, classes: NDArray[np.int8], edges: list[float]
+) -> list[dict[str, Any]]:
+    """The figures of each slope class (``by_slope`` of :func:`difference_accuracy`)."""
+    out = []
+    for i, (lo, hi) in enumerate(itertools.pairwise(edges)):
+        stats = difference_statistics(values[classes == i])
+        keys = ("count", "bias_m", "rmse_m", "nmad_m", "le90_m")
+        out.append({"slope_deg": [lo, hi], **{k: stats[k] for k in keys}})
+    return out
 
 
 def dem_accuracy(
@@ -455,12 +465,7 @@ def dem_accuracy_by_blocks(
         reference_count += int(np.count_nonzero(ref_valid))
         valid = np.isfinite(diff)
         values.append(diff[valid].astype(np.float32))
-        index = np.full(int(valid.sum()), -1, np.int8)
-        s = slope[valid]
-        for i, (lo, hi) in enumerate(itertools.pairwise(edges)):
-            last = i == len(edges) - 2
-            index[(s >= lo) & ((s <= hi) if last else (s < hi))] = i
-        classes.append(index)
+        classes.append(_slope_class(slope[valid], edges))
         preview.append(diff[(-r0) % step :: step, ::step])
     if name is None:
         raise InputError(f"reference DEM {path}: no valid height (all nodata)")
@@ -478,15 +483,6 @@ def dem_accuracy_by_blocks(
     report = difference_statistics(d)
     report["completeness"] = int(d.size) / reference_count if reference_count else None
     report["reference_count"] = reference_count
-    cls = np.concatenate(classes)
-    report["by_slope"] = []
-    for i, (lo, hi) in enumerate(itertools.pairwise(edges)):
-        stats = difference_statistics(d[cls == i])
-        report["by_slope"].append(
-            {
-                "slope_deg": [lo, hi],
-                **{k: stats[k] for k in ("count", "bias_m", "rmse_m", "nmad_m", "le90_m")},
-            }
-        )
+    report["by_slope"] = _by_slope(d, np.concatenate(classes), edges)
     report = {"dem": dem.name, "reference": name, "vertical": vertical, **report}
     return BlockComparison(report, np.concatenate(preview, axis=0), step)
