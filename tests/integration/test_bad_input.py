@@ -99,12 +99,13 @@ def test_an_interrupted_adjust_leaves_the_earlier_output_as_it_was(
         stderr=subprocess.PIPE,
         text=True,
     )
-    # wait for the work to start (the progress line of the tie-point matching), then Ctrl-C
+    # Ctrl-C as soon as the work starts (the progress line of the tie-point matching): on a
+    # quiet machine the whole adjustment of this small scene takes about a second more
     assert proc.stderr is not None
     for line in proc.stderr:
         if "matching tie points" in line:
             break
-    time.sleep(1.0)
+    time.sleep(0.1)
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=120)
     assert proc.returncode == 130, err
