@@ -28,23 +28,60 @@ def tree_rss(pid: int) -> int:
     return total
 
 
+def tree_rss_by_process(pid: int) -> dict[int, tuple[str, int]]:
+    """``{pid: (short command line, resident bytes)}`` of ``pid`` and its descendants."""
+    try:
+        proc = psutil.Process(pid)
+        procs = [proc, *proc.children(recursive=True)]
+    except psutil.Error:
+        return {}
+    out = {}
+    for p in procs:
+        with contextlib.suppress(psutil.Error):
+            cmd = " ".join(Path(a).name if "/" in a else a for a in p.cmdline()[:4])
+            out[p.pid] = (cmd[:80], p.memory_info().rss)
+    return out
+
+
 def run_measured(
-    command: Sequence[str], *, log: Path | None = None, poll_s: float = 0.2
+    command: Sequence[str],
+    *,
+    log: Path | None = None,
+    poll_s: float = 0.2,
+    timeline: Path | None = None,
+    timeline_s: float = 2.0,
 ) -> dict[str, Any]:
     """Run ``command``; its ``wall_s``, ``peak_rss_gb`` (process tree) and ``returncode``
-    (stdout and stderr go to ``log`` when given)."""
+    (stdout and stderr go to ``log`` when given). With ``timeline``, every ``timeline_s``
+    seconds one CSV row per process: seconds since the start, pid, command, resident MB
+    (where a run's memory sits, and when)."""
     sink = open(log, "w") if log else subprocess.DEVNULL  # noqa: SIM115
+    rows = open(timeline, "w") if timeline else None  # noqa: SIM115
     try:
+        if rows:
+            rows.write("t_s,pid,command,rss_mb\n")
         t0 = time.perf_counter()
         proc = subprocess.Popen(list(command), stdout=sink, stderr=subprocess.STDOUT)
         peak = 0
+        next_row = 0.0
         while proc.poll() is None:
-            peak = max(peak, tree_rss(proc.pid))
+            now = time.perf_counter() - t0
+            if rows and now >= next_row:
+                by_process = tree_rss_by_process(proc.pid)
+                peak = max(peak, sum(v[1] for v in by_process.values()))
+                for p, (cmd, rss) in by_process.items():
+                    rows.write(f'{now:.1f},{p},"{cmd}",{rss / 1e6:.0f}\n')
+                rows.flush()
+                next_row = now + timeline_s
+            else:
+                peak = max(peak, tree_rss(proc.pid))
             time.sleep(poll_s)
         wall = time.perf_counter() - t0
     finally:
         if log:
             sink.close()
+        if rows:
+            rows.close()
     return {
         "wall_s": round(wall, 1),
         "peak_rss_gb": round(peak / 1e9, 3),

@@ -32,6 +32,12 @@ def interrupted() -> None:
     raise KeyboardInterrupt
 
 
+def worker_facts(_: int) -> tuple[int, str | None]:
+    import os
+
+    return os.getpid(), os.environ.get("GDAL_CACHEMAX")
+
+
 def _check(engine: TileEngine, tmp_path: Path) -> None:
     tasks = [functools.partial(square, k) for k in range(6)]
     keys = [f"tile {k}" for k in range(6)]
@@ -53,11 +59,29 @@ def test_in_this_process(tmp_path):
             engine.run([interrupted])
 
 
-def test_on_a_local_cluster_of_processes(tmp_path):
+def test_on_a_local_cluster_of_processes(tmp_path, monkeypatch):
+    import os
+
+    monkeypatch.delenv("GDAL_CACHEMAX", raising=False)
     with open_engine(2) as engine:
         assert engine.workers == 2
         assert "LocalCluster of 2 processes" in engine.description
         _check(engine, tmp_path)
+        tasks = [functools.partial(worker_facts, k) for k in range(4)]
+        first = engine.run(tasks)
+        # the workers are other processes, with GDAL's block cache bounded
+        assert {pid for pid, _ in first}.isdisjoint({os.getpid()})
+        assert {cache for _, cache in first} == {"256"}
+        # released: the worker processes stop; the next stage starts new ones
+        engine.release()
+        assert engine.client is None
+        for pid, _ in first:
+            with pytest.raises(ProcessLookupError):
+                os.kill(pid, 0)
+        again = engine.run(tasks)
+        assert {pid for pid, _ in again}.isdisjoint({pid for pid, _ in first})
+        (tmp_path / "again").mkdir()
+        _check(engine, tmp_path / "again")
 
 
 def test_on_a_running_cluster(tmp_path):

@@ -27,6 +27,7 @@ from carto.framework.cli.geometry_commands import add_project_locate
 from carto.framework.cli.plugins_command import add_plugins
 from carto.framework.cli.simulate_command import add_simulate
 from carto.framework.errors import CartoError, UsageError
+from carto.framework.parallel.engine import bound_gdal_cache
 from carto.framework.plugins.registry import get_registry
 
 __all__ = ["build_parser", "main"]
@@ -157,6 +158,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if handler is None:
         parser.print_help(sys.stderr)
         return 2
+    bound_gdal_cache()
     with _quiet_libraries(args.debug):
         return _run(handler, args)
 

@@ -41,6 +41,20 @@ __all__ = [
 RETRIES = 1
 """How many times a failed task is run again before it is recorded as failed."""
 
+GDAL_CACHE_MB = 256
+"""GDAL's raster block cache per process, MB, unless ``GDAL_CACHEMAX`` is set: GDAL's default
+(5 % of the RAM) lets each process keep up to 1.2 GB of blocks of a 24 GB machine, so the
+memory of a run would grow with the rasters it reads and writes up to that size; a tile
+reads and writes windows of a few tens of MB."""
+
+
+def bound_gdal_cache() -> None:
+    """Bound GDAL's block cache of this process and of the workers it starts
+    (:data:`GDAL_CACHE_MB`) unless the user set ``GDAL_CACHEMAX``. Takes effect where GDAL
+    has not read a raster yet (the CLI calls it first)."""
+    os.environ.setdefault("GDAL_CACHEMAX", str(GDAL_CACHE_MB))
+
+
 _WORKER_ENV = {  # one thread per worker process: the processes are the parallelism
     "OMP_NUM_THREADS": "1",
     "OPENBLAS_NUM_THREADS": "1",
@@ -104,6 +118,14 @@ class TileEngine:
     description: str = "this process"
     quiet: bool = False
     connect: Callable[[], Any] | None = None
+    disconnect: Callable[[], None] | None = None
+
+    def release(self) -> None:
+        """Stop the local cluster this engine started (its worker processes give their
+        memory back while the command writes its outputs); a later stage starts it again."""
+        if self.client is not None and self.disconnect is not None:
+            self.disconnect()
+            self.client = None
 
     def run(
         self,
@@ -222,6 +244,7 @@ def open_engine(
             f"LocalCluster of {n} processes",
             quiet,
             connect=lambda: stack.enter_context(_local_cluster(n)),
+            disconnect=stack.close,
         )
 
 
@@ -274,7 +297,10 @@ def _local_cluster(n: int) -> Iterator[Any]:
             processes=True,
             dashboard_address=None,
             silence_logs=logging.CRITICAL,
-            env=_WORKER_ENV,
+            env={
+                **_WORKER_ENV,
+                "GDAL_CACHEMAX": os.environ.get("GDAL_CACHEMAX", str(GDAL_CACHE_MB)),
+            },
         )
         client = Client(cluster, set_as_default=False)
     try:

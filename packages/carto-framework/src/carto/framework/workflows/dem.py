@@ -486,6 +486,9 @@ def _dem_into(
         keep_failed_tiles=allow_poor,
         **settings,
     )
+    release = getattr(engine, "release", None)
+    if release is not None:  # the workers' memory back before the outputs are written
+        release()
     if not isinstance(product, DEMProduct):
         raise InputError(
             f"DEM generator {generator!r} returned {type(product).__name__}, not a DEMProduct"
