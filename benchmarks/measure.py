@@ -89,6 +89,28 @@ def run_measured(
     }
 
 
+def timeline_peaks(timeline: Path) -> dict[str, float]:
+    """Peak resident GB of each process of a :func:`run_measured` timeline, by its command
+    (``"carto dem"``, ``"worker 1"``, ``"worker 2"`` ... in the order they appeared)."""
+    import csv
+
+    peaks: dict[str, float] = {}
+    names: dict[str, str] = {}
+    with open(timeline) as f:
+        for row in csv.DictReader(f):
+            pid, command = row["pid"], row["command"]
+            if pid not in names:
+                if "spawn_main" in command:
+                    names[pid] = f"worker {sum(n.startswith('worker') for n in names.values()) + 1}"
+                elif "resource_tracker" in command:
+                    names[pid] = "resource tracker"
+                else:
+                    names[pid] = " ".join(command.split()[1:3]) or command
+            name = names[pid]
+            peaks[name] = max(peaks.get(name, 0.0), float(row["rss_mb"]) / 1e3)
+    return {k: round(v, 3) for k, v in peaks.items()}
+
+
 def merge_runs(
     path: Path, results: list[dict[str, Any]], key: Callable[[dict[str, Any]], Any], method: str
 ) -> dict[str, Any]:

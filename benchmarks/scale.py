@@ -26,12 +26,13 @@ import datetime
 import json
 import os
 import platform
+import shutil
 import sys
 from pathlib import Path
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from measure import run_measured
+from measure import run_measured, timeline_peaks
 
 ROOT = Path(__file__).resolve().parent.parent
 RESULT = ROOT / "benchmarks" / "results" / "scale.json"
@@ -46,7 +47,10 @@ def _step(
         # A kept scene or adjustment: its measurement is the one of the run that made it.
         return before if before and "wall_s" in before else {"reused": True}
     print(f"[scale] {name}: {' '.join(command)}", file=sys.stderr, flush=True)
-    result = run_measured(command, log=log)
+    timeline = log.with_suffix(".memory.csv")
+    result = run_measured(command, log=log, timeline=timeline)
+    # where the memory sits: the peak of each process (the sum's peak is peak_rss_gb)
+    result["peak_rss_gb_by_process"] = timeline_peaks(timeline)
     result["command"] = " ".join(Path(c).name if c == CARTO else c for c in command)
     if result["returncode"] != 0:
         tail = log.read_text().strip().splitlines()[-3:]
@@ -110,9 +114,13 @@ def run_size(
     for label in workers:
         out = folder / f"dem-{label}"
         extra = [] if label == "default" else ["--workers", label]
+        # one worker is one core: `--workers 1` runs the tiles in the carto process, whose
+        # libraries (OpenCV, numba) would otherwise use every core
+        pin = ["taskset", "-c", "0"] if label == "1" and shutil.which("taskset") else []
         result = _step(
             f"dem ({label} workers)",
             [
+                *pin,
                 CARTO,
                 "dem",
                 str(scene),

@@ -1,14 +1,21 @@
 #!/usr/bin/env bash
 # Regenerate requirements.lock: resolve the runtime dependencies of the four packages and the
 # development tools in a throw-away virtual environment and freeze every version.
-# Run it when a package's dependencies change: `make lock`.
+# Run it when a package's dependencies change: `make lock`. The versions already pinned stay
+# (the old lock constrains the resolution; only new packages are resolved); `UPGRADE=1 make lock`
+# resolves everything afresh.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
 python3 -m venv "$tmp/venv"
-"$tmp/venv/bin/python" -m pip install -q --upgrade pip
-"$tmp/venv/bin/python" -m pip install -q -r requirements-dev.in \
+constraints=()
+if [[ -z "${UPGRADE:-}" && -f requirements.lock ]]; then
+  grep -v -i -E '^(setuptools|wheel)==' requirements.lock > "$tmp/constraints.txt"
+  constraints=(-c "$tmp/constraints.txt")
+fi
+"$tmp/venv/bin/python" -m pip install -q "${constraints[@]}" --upgrade pip
+"$tmp/venv/bin/python" -m pip install -q "${constraints[@]}" -r requirements-dev.in \
     ./packages/carto-framework ./packages/carto-cartosat1 ./packages/carto-cartosat2 ./packages/carto-ior
 {
   echo "# Pinned versions of every third-party package Carto installs (runtime and development)."

@@ -114,3 +114,75 @@ def test_killed_then_resumed_gives_the_same_dem(
     assert res.returncode == 0, res.stderr
     np.testing.assert_array_equal(_dem(out), one_process)
     assert not work.exists()
+
+
+def test_vertical_geoid_writes_heights_above_the_geoid_as_a_cog(
+    run_carto, inputs, one_process, tmp_path
+):
+    """``--vertical geoid --geoid G``: dem.tif holds ``H = h - N`` (N of a linear geoid made
+    here, so bilinear interpolation is exact, evaluated with pyproj at the node centres), a
+    compound CRS whose vertical part is EGM96 height, and passes rio-cogeo's validation."""
+    import pyproj
+    import rasterio.warp
+    from rasterio.transform import from_origin
+    from rio_cogeo.cogeo import cog_validate
+
+    with rasterio.open(Path(inputs[1]) / "init_dem.tif") as ds:
+        west, south, east, north = rasterio.warp.transform_bounds(ds.crs, "EPSG:4326", *ds.bounds)
+    lon0, lat0 = west - 0.5, north + 0.5
+    step = 0.05
+    n_cols, n_rows = int((east - lon0) / step) + 12, int((lat0 - south) / step) + 12
+    lon_c = lon0 + (np.arange(n_cols) + 0.5) * step
+    lat_c = lat0 - (np.arange(n_rows) + 0.5) * step
+
+    def undulation(lon, lat):
+        return 20.0 + 3.0 * (lon - lon0) - 2.0 * (lat - lat0)
+
+    grid = undulation(lon_c[None, :], lat_c[:, None]).astype(np.float32)
+    geoid = tmp_path / "egm96_test.tif"
+    with rasterio.open(
+        geoid,
+        "w",
+        driver="GTiff",
+        width=n_cols,
+        height=n_rows,
+        count=1,
+        dtype="float32",
+        crs="EPSG:4326",
+        transform=from_origin(lon0, lat0, step, step),
+    ) as dst:
+        dst.write(grid, 1)
+    out = tmp_path / "dem"
+    res = run_carto(
+        [
+            *inputs,
+            *OPTIONS,
+            "--workers",
+            "1",
+            "--geoid",
+            str(geoid),
+            "--vertical",
+            "geoid",
+            "--out",
+            str(out),
+        ]
+    )
+    assert res.returncode == 0, res.stderr
+    path = out / "dem.tif"
+    valid, errors, _ = cog_validate(str(path), strict=True)
+    assert valid, errors
+    with rasterio.open(path) as ds:
+        crs = pyproj.CRS.from_wkt(ds.crs.to_wkt())
+        heights = ds.read(1).astype(np.float64)
+        rows, cols = np.indices(heights.shape)
+        x, y = rasterio.transform.xy(ds.transform, rows.ravel(), cols.ravel())
+    assert crs.is_compound
+    assert crs.sub_crs_list[1].to_epsg() == 5773
+    to_lonlat = pyproj.Transformer.from_crs(crs.sub_crs_list[0], "EPSG:4326", always_xy=True)
+    lon, lat = to_lonlat.transform(np.asarray(x), np.asarray(y))
+    expected = one_process.astype(np.float64) - undulation(lon, lat).reshape(heights.shape)
+    np.testing.assert_array_equal(np.isnan(heights), np.isnan(one_process))
+    ok = np.isfinite(heights)
+    np.testing.assert_allclose(heights[ok], expected[ok], atol=2e-3)  # float32 heights
+    report = json.loads((out / "report.json").read_text())
+    assert report["vertical_reference"] == "geoid EGM96"

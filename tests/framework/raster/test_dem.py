@@ -344,6 +344,27 @@ def test_geoid_conversion_of_an_array_dem():
 
 
 # ----------------------------------------------------------------------------- writing
+@pytest.mark.parametrize(("vertical", "epsg"), [(EGM96, 5773), ("geoid:EGM2008", 3855)])
+def test_geoid_heights_are_written_with_the_epsg_vertical_crs(tmp_path: Path, vertical, epsg):
+    """Orthometric heights: the compound CRS's vertical part is the geoid model's EPSG CRS;
+    without the tag, the CRS alone tells DEM.open the vertical reference."""
+    transform = Affine(25.0, 0.0, 640_000.0, 0.0, -25.0, 4_910_000.0)
+    dem = DEM.from_array(np.full((8, 9), 120.0), transform, "EPSG:32631", vertical=vertical)
+    path = dem.write(tmp_path / "geoid.tif")
+    plain = tmp_path / "untagged.tif"  # as a tool that drops our tag would copy it
+    with rasterio.open(path) as src:
+        crs = pyproj.CRS.from_wkt(src.crs.to_wkt())
+        assert crs.sub_crs_list[1].to_epsg() == epsg
+        assert src.tags()[VERTICAL_TAG] == vertical.replace(":", " ")
+        with rasterio.open(plain, "w", **{**src.profile, "driver": "GTiff"}) as dst:
+            dst.write(src.read())
+    with rasterio.open(plain) as copy:
+        assert VERTICAL_TAG not in copy.tags()
+    back = DEM.open(plain)
+    assert back.vertical == vertical
+    assert back.crs.to_epsg() == 32631
+
+
 def test_write_read_round_trip_utm(tmp_path: Path):
     transform = Affine(25.0, 0.0, 640_000.0, 0.0, -25.0, 4_910_000.0)
     heights = np.random.default_rng(7).normal(800.0, 100.0, (20, 30))
@@ -354,8 +375,14 @@ def test_write_read_round_trip_utm(tmp_path: Path):
     with rasterio.open(path) as ds:
         assert ds.dtypes == ("float32",)
         assert math.isnan(ds.nodata)
-        assert ds.crs.to_epsg() == 32631
+        # compound: the horizontal CRS and the ellipsoidal heights' vertical CRS (what GDAL,
+        # PROJ and QGIS read without our tag)
+        crs = pyproj.CRS.from_wkt(ds.crs.to_wkt())
+        assert crs.is_compound
+        assert crs.sub_crs_list[0].to_epsg() == 32631
+        assert crs.sub_crs_list[1].name == "WGS 84 ellipsoidal height"
         assert ds.tags()[VERTICAL_TAG] == "ellipsoid WGS84"
+        assert ds.units == ("metre",)
         assert ds.transform.almost_equals(transform)
     back = DEM.open(path)
     assert back.crs.equals(dem.crs)

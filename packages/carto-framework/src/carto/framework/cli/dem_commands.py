@@ -164,6 +164,7 @@ def cmd_dem(args: argparse.Namespace) -> int:
         generator=args.generator,
         matcher=args.matcher,
         reference=args.reference,
+        vertical=args.vertical,
         options=options,
         quiet=args.quiet,
         allow_poor=args.allow_poor,
@@ -175,7 +176,7 @@ def cmd_dem(args: argparse.Namespace) -> int:
     grid = report["dem_grid"]
     print(
         f"DEM: {grid['shape'][1]} x {grid['shape'][0]} nodes at {grid['posting_m']:g} m, "
-        f"{grid['crs']}, ellipsoidal heights"
+        f"{grid['crs']}, heights above {report['vertical_reference']}"
     )
     acc = report.get("accuracy")
     if acc:
@@ -214,8 +215,9 @@ def add_dem(sub: argparse._SubParsersAction) -> None:
             "(--left/--right; the model\nbeside each image: RPC tags, .geom, _RPC.TXT, .RPB, "
             "or --left-model). Starts from\n--init-dem (SRTM .hgt with --geoid for geoid "
             "heights) or a constant --init-height;\na scene's init_dem.tif by default. Writes "
-            "dem.tif (float32, ellipsoidal heights,\nnodata, CRS), ortho_left.tif, "
-            "ortho_right.tif, quality.tif (score, mask),\ndem_hillshade.png and report.json "
+            "cloud-optimised GeoTIFFs dem.tif (float32,\nellipsoidal heights or with "
+            "--vertical geoid above the geoid, nodata, compound CRS),\northo_left.tif, "
+            "ortho_right.tif, quality.tif (score, mask), dem_hillshade.png and\nreport.json "
             "(one entry per iteration); with --reference,\nthe accuracy against it and "
             "dem_difference.png."
         ),
@@ -225,6 +227,7 @@ def add_dem(sub: argparse._SubParsersAction) -> None:
             "--ortho-res 0.5 --out dem",
             "carto dem --left left.tif --right right.tif --init-dem N44E005.hgt --geoid "
             "egm96_15.gtx --out dem",
+            "carto dem scene1 --models adj1 --geoid egm96_15.gtx --vertical geoid --out dem1",
             "carto dem scene1 --models adj1 --scheduler tcp://10.0.0.5:8786 --out dem1",
             "carto dem scene1 --models adj1 --out dem1 --resume   # after an interruption",
         ),
@@ -240,7 +243,19 @@ def add_dem(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--models", metavar="DIR", help="adjusted models (a carto adjust output)")
     p.add_argument("--pair", nargs=2, metavar=("LEFT", "RIGHT"), help="image names of a scene")
     p.add_argument("--init-dem", metavar="FILE", help="starting DEM (GeoTIFF, SRTM .hgt)")
-    p.add_argument("--geoid", metavar="GTX", help="geoid grid for geoid heights (EGM96)")
+    p.add_argument(
+        "--geoid",
+        metavar="GTX",
+        help="geoid grid (e.g. egm96_15.gtx): for an initial DEM of geoid heights, a "
+        "reference above the geoid, and --vertical geoid",
+    )
+    p.add_argument(
+        "--vertical",
+        choices=("ellipsoid", "geoid"),
+        default="ellipsoid",
+        help="heights of dem.tif above the WGS84 ellipsoid (default) or above the geoid of "
+        "--geoid; the file's compound CRS says which",
+    )
     p.add_argument("--init-height", type=float, metavar="M", help="constant starting height")
     p.add_argument("--posting", type=float, metavar="M", help="DEM posting (default 10 m)")
     p.add_argument("--ortho-res", type=float, metavar="M", help="ortho pixel (default: GSD)")

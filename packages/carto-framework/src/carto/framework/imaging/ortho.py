@@ -69,7 +69,6 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from carto.framework.errors import InputError
-from carto.framework.files.atomic import atomic_output
 from carto.framework.geometry.sensor import Sensor
 from carto.framework.imaging.ortho_grid import (
     OrthoGrid,
@@ -560,11 +559,12 @@ def write_ortho(
     tags: Mapping[str, Any] | None = None,
     nodata: float | None = None,
     band_descriptions: Sequence[str] | None = None,
+    overview_resampling: str = "average",
 ) -> Path:
-    """Write an ortho-image (or any raster on ``grid``) as a GeoTIFF, atomically.
-
-    Deflate-compressed, tiled 256 x 256 when large enough, the grid's CRS and transform,
-    ``AREA_OR_POINT=Area``. Float data get NaN as nodata unless ``nodata`` says otherwise.
+    """Write an ortho-image (or any raster on ``grid``) as a cloud-optimised GeoTIFF,
+    atomically (:func:`carto.framework.raster.cog.cog_writer`: 256 x 256 tiles, DEFLATE,
+    overviews), with the grid's CRS and transform and ``AREA_OR_POINT=Area``. Float data get
+    NaN as nodata unless ``nodata`` says otherwise.
 
     Args:
         path: the output file.
@@ -573,12 +573,15 @@ def write_ortho(
             in a list of bands), written window by window.
         grid: the grid the data are on.
         vertical: when the raster holds heights, their vertical reference (``"ellipsoid"``,
-            ``"geoid:EGM96"``...), written in the ``VERTICAL_REFERENCE`` tag as
-            :meth:`carto.framework.raster.dem.DEM.write` does (so ``DEM.open`` reads it back).
+            ``"geoid:EGM96"``...): the CRS is then compound with its vertical CRS
+            (:mod:`carto.framework.raster.vertical_reference`), the ``VERTICAL_REFERENCE``
+            tag names it too and the band unit is metres.
         tags: more metadata tags (values written as strings).
         nodata: nodata value (default NaN for float data, none for integers).
         band_descriptions: one GDAL band description per band (what QGIS and ``gdalinfo``
             show as the band's name).
+        overview_resampling: how the overviews are made: ``"average"`` (images, heights)
+            or ``"nearest"`` (flags, counts).
 
     Returns:
         ``path``.
@@ -586,13 +589,12 @@ def write_ortho(
     Raises:
         InputError: data of the wrong shape or dtype, bad vertical reference, unwritable path.
     """
-    import rasterio
     from rasterio.crs import CRS as RioCRS
-    from rasterio.errors import RasterioError
     from rasterio.windows import Window
 
-    from carto.framework.raster.dem import VERTICAL_TAG, normalise_vertical
+    from carto.framework.raster.cog import cog_writer
     from carto.framework.raster.tiled_layer import layer_window
+    from carto.framework.raster.vertical_reference import VERTICAL_TAG, vertical_tag, with_vertical
 
     if not isinstance(grid, OrthoGrid):
         raise InputError(f"write_ortho: grid must be an OrthoGrid, got {type(grid).__name__}")
@@ -615,43 +617,34 @@ def write_ortho(
     if nodata is None and is_float:
         nodata = float("nan")
     all_tags = {"AREA_OR_POINT": "Area"}
+    crs = grid.crs
     if vertical is not None:
-        vref = normalise_vertical(vertical)
-        all_tags[VERTICAL_TAG] = (
-            "ellipsoid WGS84" if vref == "ellipsoid" else vref.replace(":", " ")
-        )
+        all_tags[VERTICAL_TAG] = vertical_tag(vertical)
+        crs = with_vertical(grid.crs, vertical)
     for key, value in (tags or {}).items():
         all_tags[str(key)] = str(value)
     rows, cols = grid.shape
     profile: dict[str, Any] = {
-        "driver": "GTiff",
         "height": rows,
         "width": cols,
         "count": len(bands),
         "dtype": dtype,
-        "crs": RioCRS.from_wkt(grid.crs.to_wkt()),
+        "crs": RioCRS.from_wkt(crs.to_wkt()),
         "transform": grid.transform,
-        "compress": "deflate",
-        "predictor": 3 if is_float else 2,
-        "BIGTIFF": "IF_SAFER",
     }
     if nodata is not None:
         profile["nodata"] = nodata
-    if rows >= 256 and cols >= 256:
-        profile.update(tiled=True, blockxsize=256, blockysize=256)
     path = Path(path)
-    try:
-        with atomic_output(path) as tmp, rasterio.open(tmp, "w", **profile) as dst:
-            # by blocks of rows: tiled layers are read window by window, never whole
-            for r0 in range(0, rows, _WRITE_ROWS):
-                window = Window(0, r0, cols, min(_WRITE_ROWS, rows - r0))
-                for k, band in enumerate(bands, 1):
-                    block = layer_window(band, slice(r0, r0 + window.height), slice(0, cols))
-                    dst.write(np.asarray(block, dtype), k, window=window)
-            dst.update_tags(**all_tags)
-            for k, description in enumerate(band_descriptions or (), 1):
-                dst.set_band_description(k, str(description))
-    except (RasterioError, OSError) as exc:
-        text = str(exc).strip().splitlines()
-        raise InputError(f"cannot write ortho {path}: {text[0] if text else exc}") from exc
+    with cog_writer(path, profile, overview_resampling=overview_resampling, what="ortho") as dst:
+        # by blocks of rows: tiled layers are read window by window, never whole
+        for r0 in range(0, rows, _WRITE_ROWS):
+            window = Window(0, r0, cols, min(_WRITE_ROWS, rows - r0))
+            for k, band in enumerate(bands, 1):
+                block = layer_window(band, slice(r0, r0 + window.height), slice(0, cols))
+                dst.write(np.asarray(block, dtype), k, window=window)
+        dst.update_tags(**all_tags)
+        for k, description in enumerate(band_descriptions or (), 1):
+            dst.set_band_description(k, str(description))
+        if vertical is not None:
+            dst.units = ("metre",) * len(bands)
     return path

@@ -45,7 +45,14 @@ from numpy.typing import ArrayLike, NDArray
 
 from carto.framework.arrays import as_float_arrays
 from carto.framework.errors import InputError
-from carto.framework.files.atomic import atomic_output
+from carto.framework.raster.vertical_reference import (
+    EGM96,
+    ELLIPSOID,
+    VERTICAL_TAG,
+    normalise_vertical,
+    split_vertical,
+    vertical_tag,
+)
 
 if TYPE_CHECKING:  # rasterio and pyproj are imported when a DEM is used, not at plugin discovery
     import pyproj
@@ -54,13 +61,6 @@ if TYPE_CHECKING:  # rasterio and pyproj are imported when a DEM is used, not at
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
 Bounds = tuple[float, float, float, float]
-
-ELLIPSOID = "ellipsoid"
-"""Vertical reference of ellipsoidal heights (WGS84): the Carto convention."""
-EGM96 = "geoid:EGM96"
-"""Vertical reference of EGM96 orthometric heights (SRTM)."""
-VERTICAL_TAG = "VERTICAL_REFERENCE"
-"""GeoTIFF metadata tag holding the vertical reference of a written DEM."""
 
 _EDGE_TOL_PX = 1e-9  # tolerance on "inside the span of pixel centres", in pixels
 
@@ -78,30 +78,6 @@ GEOID_ADVICE = 'give the geoid grid with --geoid GTX (configuration key "geoid")
 
 
 # ----------------------------------------------------------------------------- helpers
-def normalise_vertical(value: str) -> str:
-    """Canonical vertical reference: ``"ellipsoid"`` or ``"geoid:<NAME>"`` (upper-case name).
-
-    Accepts ``"ellipsoid"``, ``"ellipsoid WGS84"``, ``"WGS84"``, ``"geoid:EGM96"``,
-    ``"geoid EGM96"``, ``"EGM96"``, ``"EGM2008"`` (case-insensitive).
-    """
-    words = str(value).replace(":", " ").split()
-    lowered = [w.lower() for w in words]
-    if lowered in (["ellipsoid"], ["ellipsoid", "wgs84"], ["wgs84"]):
-        return ELLIPSOID
-    if len(words) == 2 and lowered[0] == "geoid":
-        return f"geoid:{words[1].upper()}"
-    if len(words) == 1 and lowered[0].startswith("egm"):
-        return f"geoid:{words[0].upper()}"
-    raise InputError(
-        f"vertical reference {value!r} not understood; use 'ellipsoid' (WGS84) or "
-        "'geoid:<NAME>' such as 'geoid:EGM96'"
-    )
-
-
-def _vertical_tag(vertical: str) -> str:
-    return "ellipsoid WGS84" if vertical == ELLIPSOID else vertical.replace(":", " ")
-
-
 def to_affine(value: Any) -> Affine:
     from rasterio.transform import Affine
 
@@ -128,7 +104,7 @@ def _to_crs(value: Any) -> pyproj.CRS:
 
 
 def _to_horizontal_crs(value: Any) -> pyproj.CRS:
-    return _split_crs(_to_crs(value))[0]
+    return split_vertical(_to_crs(value))[0]
 
 
 def _readonly(array: ArrayLike) -> FloatArray:
@@ -262,6 +238,20 @@ class Geoid:
             padded.flags.writeable = False
         object.__setattr__(self, "_global", is_global)
         object.__setattr__(self, "_padded", padded)
+
+    @property
+    def model(self) -> str:
+        """The geoid model, from the grid's file name (``egm96_15.gtx``: ``"EGM96"``;
+        ``egm08_25.gtx`` or ``us_nga_egm2008_1.tif``: ``"EGM2008"``); otherwise the file's
+        stem in capitals (``"GEOID"`` without a file)."""
+        stem = Path(self.source).stem.upper() if self.source else "GEOID"
+        compact = stem.replace("_", "").replace("-", "")
+        if "EGM2008" in compact or "EGM08" in compact:
+            return "EGM2008"
+        for model in ("EGM96", "EGM84"):
+            if model in compact:
+                return model
+        return "".join(c for c in stem if c.isalnum()) or "GEOID"
 
     @classmethod
     def open(cls, path: str | os.PathLike[str]) -> Geoid:
@@ -452,7 +442,7 @@ class DEM:
                         f"DEM {path}: {ds.width} x {ds.height} pixels; a DEM needs at least "
                         f"{MIN_DEM_POSTS} x {MIN_DEM_POSTS} posts"
                     )
-                crs, file_vertical = _split_crs(_to_crs(ds.crs))
+                crs, file_vertical = split_vertical(_to_crs(ds.crs))
                 tag = ds.tags().get(VERTICAL_TAG)
                 if vertical is not None:
                     vref = normalise_vertical(vertical)
@@ -587,6 +577,28 @@ class DEM:
         """
         if self.is_ellipsoidal:
             return self
+        undulation = self._undulation(geoid)
+        return attrs.evolve(self, heights=self.heights + undulation, vertical=ELLIPSOID)
+
+    def to_geoid(self, geoid: Geoid | str | os.PathLike[str]) -> DEM:
+        """This DEM of ellipsoidal heights as orthometric heights ``H = h - N`` above the
+        geoid of the grid (vertical reference ``"geoid:<model>"``, :attr:`Geoid.model`).
+
+        Raises InputError for heights that are not ellipsoidal, or a geoid grid that does
+        not cover a valid node."""
+        if not self.is_ellipsoidal:
+            raise InputError(
+                f"DEM {self.name}: heights are above {self.vertical}, not the ellipsoid"
+            )
+        if not isinstance(geoid, Geoid):
+            geoid = Geoid.open(geoid)
+        undulation = self._undulation(geoid)
+        return attrs.evolve(
+            self, heights=self.heights - undulation, vertical=f"geoid:{geoid.model}"
+        )
+
+    def _undulation(self, geoid: Geoid | str | os.PathLike[str]) -> FloatArray:
+        """The geoid undulation at every node; InputError where it misses a valid node."""
         if not isinstance(geoid, Geoid):
             geoid = Geoid.open(geoid)
         n_rows, n_cols = self.shape
@@ -602,43 +614,35 @@ class DEM:
                 f"{int(uncovered.sum())} nodes (e.g. lon {lon[uncovered][0]:.6f}, "
                 f"lat {lat[uncovered][0]:.6f})"
             )
-        return attrs.evolve(self, heights=self.heights + undulation, vertical=ELLIPSOID)
+        return undulation
 
     def write(self, path: str | os.PathLike[str]) -> Path:
-        """Write a float32 GeoTIFF (CRS, NaN nodata, ``VERTICAL_REFERENCE`` tag); return path.
-
-        The file is written under a temporary name in the same folder, then renamed, so a
-        reader never sees a partial file.
+        """Write a float32 cloud-optimised GeoTIFF (NaN nodata, the CRS compound with the
+        vertical reference's CRS, which the ``VERTICAL_REFERENCE`` tag names too); return
+        the path. A reader never sees a partial file
+        (:func:`carto.framework.raster.cog.cog_writer`).
         """
-        import rasterio
         from rasterio.crs import CRS as RioCRS
-        from rasterio.errors import RasterioError
+
+        from carto.framework.raster.cog import cog_writer
+        from carto.framework.raster.vertical_reference import with_vertical
 
         path = Path(path)
         n_rows, n_cols = self.shape
+        crs = with_vertical(self.crs, self.vertical)
         profile: dict[str, Any] = {
-            "driver": "GTiff",
             "height": n_rows,
             "width": n_cols,
             "count": 1,
             "dtype": "float32",
-            "crs": RioCRS.from_wkt(self.crs.to_wkt()),
+            "crs": RioCRS.from_wkt(crs.to_wkt()),
             "transform": self.transform,
             "nodata": np.nan,
-            "compress": "deflate",
-            "predictor": 3,
         }
-        if n_rows >= 256 and n_cols >= 256:
-            profile.update(tiled=True, blockxsize=256, blockysize=256)
-        try:
-            with atomic_output(path) as tmp, rasterio.open(tmp, "w", **profile) as dst:
-                dst.write(self.heights.astype(np.float32), 1)
-                dst.update_tags(
-                    **{VERTICAL_TAG: _vertical_tag(self.vertical), "AREA_OR_POINT": "Area"}
-                )
-                dst.units = ("metre",)
-        except (RasterioError, OSError) as exc:
-            raise InputError(f"cannot write DEM to {path}: {_first_line(exc)}") from exc
+        with cog_writer(path, profile, what="DEM to") as dst:
+            dst.write(self.heights.astype(np.float32), 1)
+            dst.update_tags(**{VERTICAL_TAG: vertical_tag(self.vertical), "AREA_OR_POINT": "Area"})
+            dst.units = ("metre",)
         return path
 
     # ------------------------------------------------------------------ internals
@@ -701,19 +705,3 @@ class DEM:
         r1 = min(math.ceil(r_max - tol) + 1, n_rows)
         c1 = min(math.ceil(c_max - tol) + 1, n_cols)
         return (r0, max(r1, r0 + 1)), (c0, max(c1, c0 + 1))
-
-
-def _split_crs(crs: pyproj.CRS) -> tuple[pyproj.CRS, str | None]:
-    """Horizontal part of a CRS and the vertical reference of its vertical part, if any."""
-    vertical = None
-    if crs.is_compound:
-        horizontal = crs.sub_crs_list[0]
-        name = crs.sub_crs_list[1].name.upper().replace(" ", "")
-        for model in ("EGM2008", "EGM96", "EGM84"):
-            if model in name:
-                vertical = f"geoid:{model}"
-                break
-        return horizontal, vertical
-    if crs.is_geographic and len(crs.axis_info) == 3:  # e.g. EPSG:4979: ellipsoidal heights
-        return crs.geodetic_crs.to_2d() if crs.geodetic_crs else crs, ELLIPSOID
-    return crs, vertical

@@ -23,7 +23,8 @@ from carto.framework.errors import InputError, UsageError
 from carto.framework.files.staging import require_complete_output, staged_folder
 from carto.framework.geometry.sensor import Sensor, SensorType
 from carto.framework.plugins.registry import get_registry
-from carto.framework.raster.dem import DEM, ELLIPSOID, Geoid
+from carto.framework.raster.dem import DEM, Geoid
+from carto.framework.raster.vertical_reference import vertical_tag
 from carto.framework.workflows.opening import open_options, open_sensor, sensor_type_for
 from carto.framework.workflows.reporting import jsonable, progress, write_report
 
@@ -298,6 +299,7 @@ def dem_product(
     generator: str | None = None,
     matcher: str = "ncc",
     reference: str | os.PathLike[str] | None = None,
+    vertical: str = "ellipsoid",
     options: Mapping[str, Any] | None = None,
     quiet: bool = False,
     allow_poor: bool = False,
@@ -309,7 +311,9 @@ def dem_product(
 
     See :class:`StereoInputs` for the inputs and :func:`initial_dem` for the starting DEM;
     ``generator`` names the DEM generator (default: :func:`choose_dem_generator`),
-    ``matcher`` the matcher it uses (a registry name); ``options`` go to the generator
+    ``matcher`` the matcher it uses (a registry name); ``vertical`` is what ``dem.tif``'s
+    heights are above: ``"ellipsoid"`` (WGS84) or ``"geoid"`` (the geoid grid ``geoid``,
+    required then); ``options`` go to the generator
     (``posting_m``, ``ortho_res_m``, ``crs``, ``max_iterations`` ...). Tiles run on a
     :func:`~carto.framework.parallel.engine.open_engine` engine: ``workers`` processes of a
     local cluster (default: every core; 1: this process) or the ``dask.distributed``
@@ -326,6 +330,10 @@ def dem_product(
 
     settings = dict(options or {})
     _check_options(settings)
+    if vertical not in ("ellipsoid", "geoid"):
+        raise UsageError(f"--vertical must be 'ellipsoid' or 'geoid', got {vertical!r}")
+    if vertical == "geoid" and geoid is None:
+        raise UsageError("--vertical geoid needs the geoid grid: --geoid GTX")
     if "workers" in settings:  # the earlier form of the argument
         workers = int(settings.pop("workers"))
     sources = [
@@ -347,6 +355,7 @@ def dem_product(
         "sensor_type": inputs.sensor_type,
         "settings": {k: str(v) for k, v in sorted(settings.items())},
         "allow_poor": allow_poor,
+        "vertical": vertical,
     }
     work: Path | None = None
     try:
@@ -362,6 +371,7 @@ def dem_product(
                     generator=generator,
                     matcher=matcher,
                     reference=reference,
+                    vertical=vertical,
                     settings=settings,
                     quiet=quiet,
                     allow_poor=allow_poor,
@@ -423,6 +433,7 @@ def _dem_into(
     generator: str | None,
     matcher: str,
     reference: str | os.PathLike[str] | None,
+    vertical: str,
     settings: dict[str, Any],
     quiet: bool,
     allow_poor: bool,
@@ -508,15 +519,23 @@ def _dem_into(
         raise InputError(f"dem: {'; '.join(warnings)} (--allow-poor writes it anyway)")
     for warning in warnings:
         progress("dem", f"warning: {warning}", quiet)
+    geoid_grid = Geoid.open(geoid) if geoid else None
+    written = (
+        product.dem
+        if geoid_grid is None or vertical == "ellipsoid"
+        else (product.dem.to_geoid(geoid_grid))
+    )
+    vertical_reference = vertical_tag(written.vertical)
     files = {
         "dem": write_ortho(
             out / "dem.tif",
-            product.dem.heights.astype(np.float32),
+            written.heights.astype(np.float32),
             product.dem_grid,
-            vertical=ELLIPSOID,
+            vertical=written.vertical,
             tags={"CARTO_PRODUCT": "dem", "CARTO_GENERATOR": generator},
         ).name
     }
+    del written
     for side, ortho in zip(("left", "right"), product.orthos, strict=True):
         files[f"ortho_{side}"] = write_ortho(
             out / f"ortho_{side}.tif", ortho, product.ortho_grid
@@ -547,7 +566,7 @@ def _dem_into(
             "shape": list(product.dem_grid.shape),
         },
         "ortho_resolution_m": product.ortho_grid.resolution[0],
-        "vertical_reference": "ellipsoid WGS84",
+        "vertical_reference": vertical_reference,
         "quality_bands": [layer.name for layer in product.quality],
         "converged": product.converged,
         "matched_fraction": product.matched_fraction,
@@ -564,9 +583,7 @@ def _dem_into(
     if reference is not None:
         from carto.framework.evaluation.dem_accuracy import dem_accuracy_by_blocks
 
-        comparison = dem_accuracy_by_blocks(
-            product.dem, reference, geoid=Geoid.open(geoid) if geoid else None
-        )
+        comparison = dem_accuracy_by_blocks(product.dem, reference, geoid=geoid_grid)
         report["accuracy"] = comparison.report
         files["difference"] = difference_png(
             comparison.preview,

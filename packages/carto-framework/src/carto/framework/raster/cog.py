@@ -1,0 +1,105 @@
+"""Cloud-optimised GeoTIFF output: what users open in QGIS, serve over HTTP or read by
+windows from object storage.
+
+:func:`cog_writer` hands out an ordinary tiled GeoTIFF to write (window by window, in a
+temporary file beside the destination); when the block ends, GDAL's COG driver copies it
+into the destination: 256 x 256 internal tiles, DEFLATE with the predictor that suits the
+data type, overviews down to one tile (averaged, or nearest for flags), the header and the
+overviews before the full-resolution tiles. Metadata tags, band descriptions and nodata
+are carried over. The destination appears whole or not at all
+(:func:`~carto.framework.files.atomic.atomic_output`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+from collections.abc import Iterator, Mapping
+from pathlib import Path
+from typing import Any
+
+from carto.framework.errors import InputError
+from carto.framework.files.atomic import atomic_output
+
+__all__ = ["COG_BLOCK_PX", "cog_writer"]
+
+COG_BLOCK_PX = 256
+"""Side of the internal tiles (and of the smallest overview), pixels."""
+
+OVERVIEW_RESAMPLING = ("average", "nearest", "bilinear", "mode")
+
+
+@contextlib.contextmanager
+def cog_writer(
+    path: str | os.PathLike[str],
+    profile: Mapping[str, Any],
+    *,
+    overview_resampling: str = "average",
+    what: str = "raster",
+) -> Iterator[Any]:
+    """A rasterio dataset open for writing; ``path`` becomes a COG of it when the block ends
+    without an error (see the module docstring).
+
+    Args:
+        path: the COG to write.
+        profile: rasterio creation profile (``width``, ``height``, ``count``, ``dtype``,
+            ``crs``, ``transform``, ``nodata``); driver, tiling and compression are set
+            here.
+        overview_resampling: ``"average"`` (images, heights), ``"nearest"`` (flags,
+            classes), ``"bilinear"`` or ``"mode"``.
+        what: what the file is, for the error message (``"cannot write DEM to ..."``).
+
+    Raises:
+        InputError: the file cannot be written (full disk, unwritable folder), a bad
+            resampling name.
+    """
+    from rasterio.errors import RasterioError
+
+    if overview_resampling not in OVERVIEW_RESAMPLING:
+        raise InputError(
+            f"overview resampling {overview_resampling!r}: use one of {OVERVIEW_RESAMPLING}"
+        )
+    path = Path(path)
+    try:
+        with _staged_cog(path, profile, overview_resampling) as dst:
+            yield dst
+    except (RasterioError, OSError) as exc:
+        text = str(exc).strip().splitlines()
+        raise InputError(f"cannot write {what} {path}: {text[0] if text else exc}") from exc
+
+
+@contextlib.contextmanager
+def _staged_cog(path: Path, profile: Mapping[str, Any], overview_resampling: str) -> Iterator[Any]:
+    import rasterio
+    import rasterio.shutil
+
+    staging_profile = {
+        **profile,
+        "driver": "GTiff",
+        "tiled": True,
+        "blockxsize": COG_BLOCK_PX,
+        "blockysize": COG_BLOCK_PX,
+        "BIGTIFF": "IF_SAFER",
+    }
+    for key in ("compress", "predictor", "zlevel"):
+        staging_profile.pop(key, None)
+    with atomic_output(path) as final:
+        staging = final.with_name(f"{final.stem}.staging.tif")
+        try:
+            with rasterio.open(staging, "w", **staging_profile) as dst:
+                yield dst
+            rasterio.shutil.copy(
+                staging,
+                final,
+                driver="COG",
+                COMPRESS="DEFLATE",
+                PREDICTOR="YES",
+                BLOCKSIZE=COG_BLOCK_PX,
+                OVERVIEWS="AUTO",
+                RESAMPLING=overview_resampling.upper(),
+                BIGTIFF="IF_SAFER",
+                NUM_THREADS="ALL_CPUS",
+            )
+        finally:
+            staging.unlink(missing_ok=True)
+            Path(f"{staging}.aux.xml").unlink(missing_ok=True)
