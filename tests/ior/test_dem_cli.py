@@ -57,10 +57,22 @@ def test_dem_from_a_scene_writes_every_product(run_carto, scene, tmp_path):
         assert ds.res == pytest.approx((10.0, 10.0))
         assert "ellipsoid" in ds.tags()["VERTICAL_REFERENCE"].lower()
         assert np.isnan(ds.nodata)
-    with rasterio.open(out / "quality.tif") as ds:
-        assert ds.count == 2
-        assert ds.descriptions == ("score", "valid")  # GDAL band descriptions
-    assert report["quality_bands"] == ["score", "valid"]
+    with rasterio.open(out / "quality.tif") as ds:  # per DEM node
+        assert ds.descriptions == ("confidence", "points", "spread_m", "filled")  # GDAL's
+        assert ds.res == pytest.approx((10.0, 10.0))
+        confidence, points, spread, filled = ds.read()
+        heights = DEM.open(out / "dem.tif").heights
+    has = np.isfinite(heights)
+    measured = has & (filled == 0)
+    assert measured.mean() > 0.5
+    assert (points[has & (filled == 1)] == 0).all()  # filled: no point of its own
+    assert (points[measured] >= 1).all()
+    assert np.isfinite(spread[measured & (points >= 3)]).all()
+    assert (confidence[measured] > 0).all()
+    assert report["quality_bands"] == ["confidence", "points", "spread_m", "filled"]
+    with rasterio.open(out / "matching.tif") as ds:  # per ortho pixel
+        assert ds.descriptions == ("score", "valid")
+    assert report["matching_bands"] == ["score", "valid"]
     for name in ("ortho_left.tif", "ortho_right.tif", "dem_hillshade.png", "dem_difference.png"):
         assert (out / name).is_file(), name
     # with the true models, better than the starting DEM (truth from the simulator)

@@ -27,7 +27,9 @@ _SETTINGS = {f.name for f in attrs.fields(IORSettings)}
 
 def ior_product(result: IORResult) -> DEMProduct:
     """The framework's :class:`DEMProduct` of an IOR result: the DEM, both ortho-images, the
-    last matching's score and validity as quality layers, the iterations' figures and the
+    quality layers (per DEM node: the mean correlation score of its points, their number and
+    spread, whether the height was filled; per ortho pixel: the last matching's score and
+    validity), the iterations' figures and the
     base-to-height ratio (``extras["b_over_h"]``), and what the initial DEM gave: the share
     of the images' common footprint it covered and the share whose starting height was
     filled (``extras["init_dem_coverage_percent"]``, ``extras["init_dem_filled_percent"]``).
@@ -48,7 +50,39 @@ def ior_product(result: IORResult) -> DEMProduct:
         )
         for r in result.iterations
     ]
-    quality = [
+    quality = []
+    nodes = result.node_quality
+    if nodes:
+        quality += [
+            QualityLayer(
+                "confidence",
+                "mean correlation score of the node's matched points",
+                nodes["node_score"],
+                grid="dem",
+            ),
+            QualityLayer(
+                "points",
+                "matched ortho pixels whose rays gave the node's height",
+                nodes["count"],
+                grid="dem",
+            ),
+            QualityLayer(
+                "spread_m",
+                "spread of the node's point heights, m (interquartile range / 1.349)",
+                nodes["spread_m"],
+                grid="dem",
+            ),
+        ]
+    if result.filled is not None:
+        quality.append(
+            QualityLayer(
+                "filled",
+                "1: height not measured in the last iteration (filled), 0: measured",
+                np.asarray(result.filled, np.float32),
+                grid="dem",
+            )
+        )
+    quality += [
         QualityLayer("score", "correlation score", result.score),
         QualityLayer("valid", "valid match (1) or not (0)", _as_float(result.valid)),
     ]

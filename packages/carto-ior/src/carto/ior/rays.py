@@ -133,12 +133,15 @@ def intersect_offsets(
     match_x: FloatArray,
     match_y: FloatArray,
     h_match_m: FloatArray,
+    directions: FloatArray | None = None,
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Intersect the left ray through each node (its map position at ``h_node_m``) with the
     right ray through its match (map ``match_x, match_y`` at ``h_match_m``), see the module
-    docstring. Returns ``(x, y, h)`` of the ground points (map units, metres); NaN where a
-    ray direction is unknown or the two rays are parallel."""
-    t = rays.at(node_row, node_col)
+    docstring. ``directions``: the rays' directions at the points, ``(n_sensors, 2, n)``
+    (default: :meth:`RayField.at` the points). Returns ``(x, y, h)`` of the ground points
+    (map units, metres); NaN where a ray direction is unknown or the two rays are
+    parallel."""
+    t = rays.at(node_row, node_col) if directions is None else directions
     t_l, t_r = t[0], t[1]
     x_n, y_n = rays.grid.xy(node_row, node_col)
     base = t_l - t_r

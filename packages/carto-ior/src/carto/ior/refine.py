@@ -10,8 +10,10 @@ the stereo base. The loop:
    matcher extension point, ``carto dem --matcher``; the default ``"ncc"`` is
    :func:`carto.framework.matching.disparity.dense_offsets`: pyramid, left-right check,
    sub-pixel, score and validity);
-3. turn each mismatch into a height by intersecting the two image rays at the matched points
-   (:func:`carto.framework.geometry.intersection.intersect_sensors`), carried back to the DEM node;
+3. turn each mismatch into a height by intersecting the two image rays at every matched
+   ortho pixel (the tile's local ray model, :mod:`carto.ior.rays`), carried to the centre of
+   its DEM node; a node takes the median of its points (:mod:`carto.ior.node_heights`), whose
+   number and spread are kept as quality layers;
 4. update the DEM with regularisation: outliers against the local median removed, holes and
    noise handled by a normalised Gaussian convolution of the height changes;
 5. repeat until the median mismatch is below a threshold or a number of iterations is reached.
@@ -59,7 +61,15 @@ from carto.framework.raster.dem import DEM, ELLIPSOID
 from carto.ior.regularise import regularise, support
 from carto.ior.settings import IORSettings, option_label
 from carto.ior.start import StartingSurface, seen_by_both, starting_surface
-from carto.ior.tiles import NODE_LAYERS, ORTHO_LAYERS, TileJob, refine_tile, run_tile, tile_arrays
+from carto.ior.tiles import (
+    NODE_LAYERS,
+    NODE_QUALITY,
+    ORTHO_LAYERS,
+    TileJob,
+    refine_tile,
+    run_tile,
+    tile_arrays,
+)
 from carto.ior.workspace import RunState, Workspace
 
 __all__ = [
@@ -132,6 +142,11 @@ class IORResult:
             the initial DEM, :func:`starting_surface`).
         failed_tiles: the tiles that failed (``"tile R,C: cause"``; their nodes have no
             height).
+        node_quality: the last iteration's matched points per DEM node (tiled layers on
+            ``dem_grid``, :data:`NODE_QUALITY`): ``count`` (points), ``spread_m``
+            (their interquartile range / 1.349), ``node_score`` (mean correlation score).
+        filled: per DEM node, a height the last iteration did not measure (it comes from
+            the regularised update's filling).
     """
 
     dem: DEM
@@ -147,6 +162,8 @@ class IORResult:
     init_coverage: float = 1.0
     init_filled: float = 0.0
     failed_tiles: tuple[str, ...] = ()
+    node_quality: dict[str, Any] = attrs.field(factory=dict)
+    filled: Any = None
 
 
 def _grids(
@@ -401,6 +418,7 @@ def refine_dem(
                 ortho_right=np.asarray(result.ortho_right),
                 score=np.asarray(result.score),
                 valid=np.asarray(result.valid),
+                node_quality={k: np.asarray(v) for k, v in result.node_quality.items()},
             )
         return result
 
@@ -554,7 +572,24 @@ def _iterate(
             bool if is_valid else np.float32,
             False if is_valid else float("nan"),
         )
+    # the last iteration's points per node, on the DEM grid
+    node_quality = {}
+    for name in NODE_QUALITY:
+        pieces = [
+            TilePiece(
+                piece_path(space.iteration_dir(iteration), rows.start, cols.start),
+                name,
+                rows.start,
+                cols.start,
+                (rows.stop - rows.start, cols.stop - cols.start),
+            )
+            for (rows, cols), outcome in zip(plan, outcomes, strict=True)
+            if not isinstance(outcome, TaskFailure)
+        ]
+        fill = 0.0 if name == "count" else float("nan")
+        node_quality[name] = TiledLayer.of(dem_grid.shape, pieces, np.float32, fill)
     final = np.where(covered & support(ever_matched, s), heights, np.nan)
+    filled = np.isfinite(final) & ~matched
     dem = DEM.from_array(final, dem_grid.transform, dem_grid.crs.to_wkt(), vertical=ELLIPSOID)
     return IORResult(
         dem,
@@ -570,4 +605,6 @@ def _iterate(
         init_coverage=float(state.facts.get("init_coverage", 1.0)),
         init_filled=float(state.facts.get("init_filled", 0.0)),
         failed_tiles=tuple(failed),
+        node_quality=node_quality,
+        filled=filled,
     )

@@ -21,15 +21,26 @@ from carto.framework.imaging.ortho_grid import OrthoGrid
 from carto.framework.matching.base import DenseSettings, Matcher
 from carto.framework.raster.dem import DEM, ELLIPSOID
 from carto.framework.raster.tiled_layer import piece_path
-from carto.ior.rays import RayField, intersect_offsets
+from carto.ior.node_heights import node_heights
+from carto.ior.rays import RayField
 from carto.ior.settings import IORSettings
 
-__all__ = ["NODE_LAYERS", "ORTHO_LAYERS", "TileJob", "TileResult", "refine_tile", "run_tile"]
+__all__ = [
+    "NODE_LAYERS",
+    "NODE_QUALITY",
+    "ORTHO_LAYERS",
+    "TileJob",
+    "TileResult",
+    "refine_tile",
+    "run_tile",
+]
 
 FloatArray = NDArray[np.float64]
 
-NODE_LAYERS = ("new_height", "d_row_px", "d_col_px", "covered")
+NODE_LAYERS = ("new_height", "d_row_px", "d_col_px", "covered", "count", "spread_m", "node_score")
 """The arrays of a tile file on the DEM grid (the tile's interior nodes)."""
+NODE_QUALITY = ("count", "spread_m", "node_score")
+"""The node layers of a tile file that describe its matched points (quality layers)."""
 ORTHO_LAYERS = ("ortho_left", "ortho_right", "score", "valid")
 """The arrays of a tile file on the ortho grid (the tile's interior pixels)."""
 
@@ -57,9 +68,11 @@ def _block_mean(values: NDArray, k: int, shape: tuple[int, int]) -> FloatArray:
 @attrs.frozen(eq=False)
 class TileResult:
     """What :func:`refine_tile` returns for its interior nodes: the height each matched node
-    should have (NaN: no valid match), the node offsets right minus left (ortho pixels, rows
-    and columns), whether both images cover the node, and the ortho-images and matching
-    layers of the tile interior."""
+    should have (the median of its matched points, :mod:`carto.ior.node_heights`; NaN: no
+    valid match), the node offsets right minus left (mean of its pixels', ortho pixels, rows
+    and columns), whether both images cover the node, the node's points (count), their
+    spread (m) and mean correlation score, and the ortho-images and matching layers of the
+    tile interior."""
 
     rows: slice
     cols: slice
@@ -67,6 +80,9 @@ class TileResult:
     d_row_px: FloatArray
     d_col_px: FloatArray
     covered: NDArray[np.bool_]
+    count: NDArray[np.int32]
+    spread_m: NDArray[np.float32]
+    node_score: NDArray[np.float32]
     ortho_left: NDArray[np.float32]
     ortho_right: NDArray[np.float32]
     score: NDArray[np.float32]
@@ -107,7 +123,6 @@ def refine_tile(
     (:mod:`carto.ior.rays`). ``base``: the stereo base, ``(d_row, d_col)`` of the ortho
     grid, for matchers that search along it.
     """
-    from scipy import ndimage
 
     n_r, n_c = dem_grid.shape
     r0, r1 = max(0, rows.start - overlap), min(n_r, rows.stop + overlap)
@@ -140,32 +155,15 @@ def refine_tile(
     covered = np.isfinite(_block_mean(ortho[0], k, shape)) & np.isfinite(
         _block_mean(ortho[1], k, shape)
     )
-    ok = np.isfinite(d_row) & np.isfinite(d_col) & covered
-    nr, nc = np.nonzero(ok)
-    # left ray: through the node's ground point on the current DEM; right ray: through the
-    # matched position on the current DEM; intersected by the tile's local ray model
+    # heights: every valid match intersected, carried to its node, the median per node
     surface = np.asarray(dem.heights, np.float64)
-    h_node = surface[nr, nc]
-    rr = (nr + 0.5) * k - 0.5 + d_row[nr, nc]  # ortho pixel index of the match
-    cc = (nc + 0.5) * k - 0.5 + d_col[nr, nc]
-    x_r, y_r = ogrid.xy(rr, cc)
-    h_r = ndimage.map_coordinates(
-        surface, [(rr + 0.5) / k - 0.5, (cc + 0.5) / k - 0.5], order=1, mode="nearest"
-    )
     rays = RayField.sample(sensors, sub, surface)
-    x_p, y_p, h_p = intersect_offsets(rays, nr, nc, h_node, x_r, y_r, h_r)
     if h_range is None:
         h_range = (float(np.nanmin(heights)), float(np.nanmax(heights)))
-    h_p = np.where((h_p >= h_range[0] - 500.0) & (h_p <= h_range[1] + 500.0), h_p, np.nan)
-    # back to the node: the intersection lies a little off the node (horizontally); remove
-    # the height change of that offset along the current surface
-    x_n, y_n = sub.xy(nr, nc)
-    g_row, g_col = np.gradient(window)
-    px, py = sub.resolution
-    slope_x = g_col[nr, nc] / px
-    slope_y = -g_row[nr, nc] / py
-    new = np.full(shape, np.nan)
-    new[nr, nc] = h_p - slope_x * (x_p - x_n) - slope_y * (y_p - y_n)
+    nodes = node_heights(
+        field.d_row, field.d_col, field.valid, field.score, surface, sub, k, rays, h_range
+    )
+    new = np.where(covered, nodes.height_m, np.nan)
     ir = slice(rows.start - r0, rows.stop - r0)
     ic = slice(cols.start - c0, cols.stop - c0)
     orr = slice(ir.start * k, ir.stop * k)
@@ -177,6 +175,9 @@ def refine_tile(
         d_row[ir, ic],
         d_col[ir, ic],
         covered[ir, ic],
+        nodes.count[ir, ic],
+        nodes.spread_m[ir, ic],
+        nodes.score[ir, ic],
         ortho[0][orr, occ],
         ortho[1][orr, occ],
         field.score[orr, occ],

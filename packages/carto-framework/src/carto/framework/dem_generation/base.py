@@ -5,9 +5,9 @@ A :class:`DEMGenerator` takes the prepared raw images of a stereo pair (staggere
 merged, see :meth:`carto.framework.geometry.sensor.Sensor.prepare_raw`; arrays or, for whole
 scenes, :class:`~carto.framework.raster.image_source.ImageSource` s read by windows), their
 models and a starting DEM, and returns a :class:`DEMProduct`. ``carto dem`` writes every
-output (``dem.tif``, the ortho-images, ``quality.tif``, ``report.json``) from the product
-alone, so any generator's outputs look the same to users; a generator only writes its
-intermediate files (tiles) in its work folder.
+output (``dem.tif``, the ortho-images, ``quality.tif``, ``matching.tif``, ``report.json``)
+from the product alone, so any generator's outputs look the same to users; a generator
+only writes its intermediate files (tiles) in its work folder.
 
 Options every generator receives (``generate(..., **options)``):
 
@@ -67,20 +67,24 @@ def _layer_values(value: Any) -> Any:
 
 @attrs.frozen(eq=False)
 class QualityLayer:
-    """One band of ``quality.tif``: a per-pixel measure on the product's ortho grid.
+    """One quality band of a DEM product: a measure per DEM node (``grid="dem"``, a band of
+    ``quality.tif``) or per ortho pixel (``grid="ortho"``, a band of ``matching.tif``).
 
     Attributes:
-        name: short identifier (``"score"``, ``"valid"``), written as the band's GDAL
+        name: short identifier (``"points"``, ``"score"``), written as the band's GDAL
             description.
-        description: one line for people (the ``BAND_<k>`` tag of ``quality.tif``).
-        values: float32 array of the ortho grid's shape (NaN = no value), or a
+        description: one line for people (the ``BAND_<k>`` tag of the file).
+        values: float32 array of the grid's shape (NaN = no value), or a
             :class:`~carto.framework.raster.tiled_layer.TiledLayer` (tiles in files, for
             whole scenes).
+        grid: ``"dem"`` (the product's DEM grid) or ``"ortho"`` (its ortho grid; the
+            default, for generators written before DEM-grid layers existed).
     """
 
     name: str
     description: str
     values: Any = attrs.field(converter=_layer_values)
+    grid: str = attrs.field(default="ortho", validator=attrs.validators.in_(("dem", "ortho")))
 
     def __attrs_post_init__(self) -> None:
         if self.values.ndim != 2:
@@ -126,8 +130,10 @@ class DEMProduct:
             ``ortho_grid`` (NaN = no data): arrays, or
             :class:`~carto.framework.raster.tiled_layer.TiledLayer` s (tiles in the run's work
             folder, written out window by window).
-        ortho_grid: the ortho-images' map grid (also the grid of the quality layers).
-        quality: the bands of ``quality.tif``.
+        ortho_grid: the ortho-images' map grid (also the grid of the per-pixel quality
+            layers).
+        quality: the quality layers: those on the DEM grid are the bands of ``quality.tif``,
+            those on the ortho grid the bands of ``matching.tif``.
         iterations: one record per iteration (possibly one for a single-pass generator).
         converged: whether the generator's own stopping test was met (``None`` for a
             generator without one).
@@ -167,10 +173,11 @@ class DEMProduct:
                     f"grid {shape}"
                 )
         for layer in self.quality:
-            if layer.values.shape != shape:
+            want = shape if layer.grid == "ortho" else tuple(self.dem_grid.shape)
+            if layer.values.shape != want:
                 raise InputError(
                     f"DEM product: quality layer {layer.name!r} has shape "
-                    f"{layer.values.shape}, the ortho grid {shape}"
+                    f"{layer.values.shape}, the {layer.grid} grid {want}"
                 )
         names = [layer.name for layer in self.quality]
         if len(set(names)) != len(names):

@@ -540,14 +540,20 @@ def _dem_into(
         files[f"ortho_{side}"] = write_ortho(
             out / f"ortho_{side}.tif", ortho, product.ortho_grid
         ).name
-    if product.quality:
-        files["quality"] = write_ortho(
-            out / "quality.tif",
-            [layer.values for layer in product.quality],
-            product.ortho_grid,
-            tags={f"BAND_{k}": layer.description for k, layer in enumerate(product.quality, 1)},
-            band_descriptions=[layer.name for layer in product.quality],
-        ).name
+    for key, on, grid in (
+        ("quality", "dem", product.dem_grid),
+        ("matching", "ortho", product.ortho_grid),
+    ):
+        layers = [layer for layer in product.quality if layer.grid == on]
+        if layers:
+            files[key] = write_ortho(
+                out / f"{key}.tif",
+                [layer.values for layer in layers],
+                grid,
+                tags={f"BAND_{k}": layer.description for k, layer in enumerate(layers, 1)},
+                band_descriptions=[layer.name for layer in layers],
+                overview_resampling="nearest",
+            ).name
     from carto.framework.raster.quicklook import difference_png, hillshade_png
 
     files["hillshade"] = hillshade_png(out / "dem.tif", out / "dem_hillshade.png", "DEM").name
@@ -567,7 +573,8 @@ def _dem_into(
         },
         "ortho_resolution_m": product.ortho_grid.resolution[0],
         "vertical_reference": vertical_reference,
-        "quality_bands": [layer.name for layer in product.quality],
+        "quality_bands": [layer.name for layer in product.quality if layer.grid == "dem"],
+        "matching_bands": [layer.name for layer in product.quality if layer.grid == "ortho"],
         "converged": product.converged,
         "matched_fraction": product.matched_fraction,
         "warnings": warnings,
