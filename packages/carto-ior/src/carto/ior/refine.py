@@ -555,39 +555,37 @@ def _iterate(
                 state.facts,
             )
         )
-    # the last iteration's tiles hold the orthos made on the final DEM and its matching
-    layers = {}
-    for name in ORTHO_LAYERS:
-        pieces = []
-        for (rows, cols), outcome in zip(plan, outcomes, strict=True):
-            if isinstance(outcome, TaskFailure):
-                continue
-            shape = ((rows.stop - rows.start) * k, (cols.stop - cols.start) * k)
-            path = piece_path(space.iteration_dir(iteration), rows.start, cols.start)
-            pieces.append(TilePiece(path, name, rows.start * k, cols.start * k, shape))
-        is_valid = name == "valid"
-        layers[name] = TiledLayer.of(
-            ortho_grid.shape,
-            pieces,
-            bool if is_valid else np.float32,
-            False if is_valid else float("nan"),
-        )
-    # the last iteration's points per node, on the DEM grid
-    node_quality = {}
-    for name in NODE_QUALITY:
+    # the last iteration's tiles hold the orthos made on the final DEM, its matching (ortho
+    # grid: k pixels per node) and the points per node (DEM grid)
+    finished = [
+        (rows, cols)
+        for (rows, cols), outcome in zip(plan, outcomes, strict=True)
+        if not isinstance(outcome, TaskFailure)
+    ]
+
+    def tiled(name: str, scale: int, shape: tuple[int, int], dtype: Any, fill: Any) -> Any:
         pieces = [
             TilePiece(
                 piece_path(space.iteration_dir(iteration), rows.start, cols.start),
                 name,
-                rows.start,
-                cols.start,
-                (rows.stop - rows.start, cols.stop - cols.start),
+                rows.start * scale,
+                cols.start * scale,
+                ((rows.stop - rows.start) * scale, (cols.stop - cols.start) * scale),
             )
-            for (rows, cols), outcome in zip(plan, outcomes, strict=True)
-            if not isinstance(outcome, TaskFailure)
+            for rows, cols in finished
         ]
-        fill = 0.0 if name == "count" else float("nan")
-        node_quality[name] = TiledLayer.of(dem_grid.shape, pieces, np.float32, fill)
+        return TiledLayer.of(shape, pieces, dtype, fill)
+
+    layers = {
+        name: tiled(name, k, ortho_grid.shape, np.float32, float("nan"))
+        for name in ORTHO_LAYERS
+        if name != "valid"
+    }
+    layers["valid"] = tiled("valid", k, ortho_grid.shape, bool, False)
+    node_quality = {
+        name: tiled(name, 1, dem_grid.shape, np.float32, 0.0 if name == "count" else np.nan)
+        for name in NODE_QUALITY
+    }
     final = np.where(covered & support(ever_matched, s), heights, np.nan)
     filled = np.isfinite(final) & ~matched
     dem = DEM.from_array(final, dem_grid.transform, dem_grid.crs.to_wkt(), vertical=ELLIPSOID)

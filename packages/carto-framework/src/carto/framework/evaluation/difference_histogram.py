@@ -28,7 +28,7 @@ from numpy.typing import ArrayLike, NDArray
 __all__ = ["BIN_M", "NMAD_FACTOR", "RANGE_M", "DifferenceHistogram"]
 
 BIN_M = 1e-3
-"""Width of a histogram bin, metres: the median, NMAD and LE90 are within half of it."""
+"""Width of a histogram bin, metres: the median, NMAD and LE90 are within about one."""
 
 RANGE_M = 500.0
 """The histogram covers ``[-RANGE_M, RANGE_M)``; differences beyond are kept exactly."""

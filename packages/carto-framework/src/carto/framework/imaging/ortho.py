@@ -594,7 +594,6 @@ def write_ortho(
 
     from carto.framework.raster.cog import cog_writer
     from carto.framework.raster.tiled_layer import layer_window
-    from carto.framework.raster.vertical_reference import VERTICAL_TAG, vertical_tag, with_vertical
 
     if not isinstance(grid, OrthoGrid):
         raise InputError(f"write_ortho: grid must be an OrthoGrid, got {type(grid).__name__}")
@@ -617,10 +616,6 @@ def write_ortho(
     if nodata is None and is_float:
         nodata = float("nan")
     all_tags = {"AREA_OR_POINT": "Area"}
-    crs = grid.crs
-    if vertical is not None:
-        all_tags[VERTICAL_TAG] = vertical_tag(vertical)
-        crs = with_vertical(grid.crs, vertical)
     for key, value in (tags or {}).items():
         all_tags[str(key)] = str(value)
     rows, cols = grid.shape
@@ -629,13 +624,15 @@ def write_ortho(
         "width": cols,
         "count": len(bands),
         "dtype": dtype,
-        "crs": RioCRS.from_wkt(crs.to_wkt()),
+        "crs": RioCRS.from_wkt(grid.crs.to_wkt()),
         "transform": grid.transform,
     }
     if nodata is not None:
         profile["nodata"] = nodata
     path = Path(path)
-    with cog_writer(path, profile, overview_resampling=overview_resampling, what="ortho") as dst:
+    with cog_writer(
+        path, profile, overview_resampling=overview_resampling, what="ortho", vertical=vertical
+    ) as dst:
         # by blocks of rows: tiled layers are read window by window, never whole
         for r0 in range(0, rows, _WRITE_ROWS):
             window = Window(0, r0, cols, min(_WRITE_ROWS, rows - r0))
@@ -645,6 +642,4 @@ def write_ortho(
         dst.update_tags(**all_tags)
         for k, description in enumerate(band_descriptions or (), 1):
             dst.set_band_description(k, str(description))
-        if vertical is not None:
-            dst.units = ("metre",) * len(bands)
     return path

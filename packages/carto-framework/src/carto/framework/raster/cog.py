@@ -36,6 +36,7 @@ def cog_writer(
     *,
     overview_resampling: str = "average",
     what: str = "raster",
+    vertical: str | None = None,
 ) -> Iterator[Any]:
     """A rasterio dataset open for writing; ``path`` becomes a COG of it when the block ends
     without an error (see the module docstring).
@@ -48,6 +49,10 @@ def cog_writer(
         overview_resampling: ``"average"`` (images, heights), ``"nearest"`` (flags,
             classes), ``"bilinear"`` or ``"mode"``.
         what: what the file is, for the error message (``"cannot write DEM to ..."``).
+        vertical: for heights, their vertical reference (``"ellipsoid"``,
+            ``"geoid:EGM96"``...): the CRS is made compound with its vertical CRS
+            (:func:`~carto.framework.raster.vertical_reference.with_vertical`), the
+            ``VERTICAL_REFERENCE`` tag names it and the bands' unit is metres.
 
     Raises:
         InputError: the file cannot be written (full disk, unwritable folder), a bad
@@ -60,9 +65,23 @@ def cog_writer(
             f"overview resampling {overview_resampling!r}: use one of {OVERVIEW_RESAMPLING}"
         )
     path = Path(path)
+    profile = dict(profile)
+    if vertical is not None:
+        from rasterio.crs import CRS as RioCRS
+
+        from carto.framework.raster.vertical_reference import (
+            VERTICAL_TAG,
+            vertical_tag,
+            with_vertical,
+        )
+
+        profile["crs"] = RioCRS.from_wkt(with_vertical(profile["crs"].to_wkt(), vertical).to_wkt())
     try:
         with _staged_cog(path, profile, overview_resampling) as dst:
             yield dst
+            if vertical is not None:
+                dst.update_tags(**{VERTICAL_TAG: vertical_tag(vertical)})
+                dst.units = ("metre",) * dst.count
     except (RasterioError, OSError) as exc:
         text = str(exc).strip().splitlines()
         raise InputError(f"cannot write {what} {path}: {text[0] if text else exc}") from exc

@@ -51,7 +51,6 @@ from carto.framework.raster.vertical_reference import (
     VERTICAL_TAG,
     normalise_vertical,
     split_vertical,
-    vertical_tag,
 )
 
 if TYPE_CHECKING:  # rasterio and pyproj are imported when a DEM is used, not at plugin discovery
@@ -625,24 +624,21 @@ class DEM:
         from rasterio.crs import CRS as RioCRS
 
         from carto.framework.raster.cog import cog_writer
-        from carto.framework.raster.vertical_reference import with_vertical
 
         path = Path(path)
         n_rows, n_cols = self.shape
-        crs = with_vertical(self.crs, self.vertical)
         profile: dict[str, Any] = {
             "height": n_rows,
             "width": n_cols,
             "count": 1,
             "dtype": "float32",
-            "crs": RioCRS.from_wkt(crs.to_wkt()),
+            "crs": RioCRS.from_wkt(self.crs.to_wkt()),
             "transform": self.transform,
             "nodata": np.nan,
         }
-        with cog_writer(path, profile, what="DEM to") as dst:
+        with cog_writer(path, profile, what="DEM to", vertical=self.vertical) as dst:
             dst.write(self.heights.astype(np.float32), 1)
-            dst.update_tags(**{VERTICAL_TAG: vertical_tag(self.vertical), "AREA_OR_POINT": "Area"})
-            dst.units = ("metre",)
+            dst.update_tags(AREA_OR_POINT="Area")
         return path
 
     # ------------------------------------------------------------------ internals

@@ -520,11 +520,7 @@ def _dem_into(
     for warning in warnings:
         progress("dem", f"warning: {warning}", quiet)
     geoid_grid = Geoid.open(geoid) if geoid else None
-    written = (
-        product.dem
-        if geoid_grid is None or vertical == "ellipsoid"
-        else (product.dem.to_geoid(geoid_grid))
-    )
+    written = product.dem.to_geoid(geoid_grid) if vertical == "geoid" else product.dem
     vertical_reference = vertical_tag(written.vertical)
     files = {
         "dem": write_ortho(
