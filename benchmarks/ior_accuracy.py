@@ -54,8 +54,9 @@ def _ortho_error_px(out: Path, truth_ortho: Path) -> dict:
 
     from carto.framework.matching.disparity import dense_offsets
 
-    with rasterio.open(out / "ortho_left.tif") as ds:
-        ours, transform, crs = ds.read(1), ds.transform, ds.crs
+    with rasterio.open(out / "ortho_left.tif") as ds:  # nodata as NaN (uint16: 0)
+        ours = ds.read(1, masked=True).astype(np.float32).filled(np.nan)
+        transform, crs = ds.transform, ds.crs
     with rasterio.open(truth_ortho) as ds:
         true = np.full(ours.shape, np.nan, np.float32)
         reproject(

@@ -58,9 +58,15 @@ def test_dem_from_a_scene_writes_every_product(run_carto, scene, tmp_path):
         assert "ellipsoid" in ds.tags()["VERTICAL_REFERENCE"].lower()
         assert np.isnan(ds.nodata)
     with rasterio.open(out / "quality.tif") as ds:  # per DEM node
-        assert ds.descriptions == ("confidence", "points", "spread_m", "filled")  # GDAL's
+        assert ds.descriptions == (
+            "confidence",
+            "points",
+            "spread_m",
+            "sigma_m",
+            "filled",
+        )  # GDAL's
         assert ds.res == pytest.approx((10.0, 10.0))
-        confidence, points, spread, filled = ds.read()
+        confidence, points, spread, sigma, filled = ds.read()
         heights = DEM.open(out / "dem.tif").heights
     has = np.isfinite(heights)
     measured = has & (filled == 0)
@@ -69,10 +75,21 @@ def test_dem_from_a_scene_writes_every_product(run_carto, scene, tmp_path):
     assert (points[measured] >= 1).all()
     assert np.isfinite(spread[measured & (points >= 3)]).all()
     assert (confidence[measured] > 0).all()
-    assert report["quality_bands"] == ["confidence", "points", "spread_m", "filled"]
+    assert report["quality_bands"] == ["confidence", "points", "spread_m", "sigma_m", "filled"]
+    assert np.isfinite(sigma[measured]).mean() > 0.9
+    assert (sigma[measured & np.isfinite(sigma)] > 0).all()
+    assert not np.isfinite(sigma[~measured]).any()  # no prediction without a measurement
+    counts = report["completeness"]  # measured nodes only; the filled ones apart
+    assert counts["measured_nodes"] == int(measured.sum())
+    assert counts["filled_nodes"] == int((has & (filled == 1)).sum())
+    assert counts["measured_fraction"] == pytest.approx(report["matched_fraction"], abs=1e-6)
     with rasterio.open(out / "matching.tif") as ds:  # per ortho pixel
         assert ds.descriptions == ("score", "valid")
     assert report["matching_bands"] == ["score", "valid"]
+    for name in ("ortho_left.tif", "ortho_right.tif"):  # in the images' radiometry
+        with rasterio.open(out / name) as ds, rasterio.open(scene / "fore.tif") as raw:
+            assert ds.dtypes == raw.dtypes == ("uint16",)
+            assert ds.nodata == 0
     for name in ("ortho_left.tif", "ortho_right.tif", "dem_hillshade.png", "dem_difference.png"):
         assert (out / name).is_file(), name
     # with the true models, better than the starting DEM (truth from the simulator)
@@ -80,6 +97,10 @@ def test_dem_from_a_scene_writes_every_product(run_carto, scene, tmp_path):
     start = dem_accuracy(DEM.open(scene / "init_dem.tif"), DEM.open(truth / "dem.tif"))
     assert ours["rmse_m"] < start["rmse_m"]
     assert report["accuracy"]["nmad_m"] == pytest.approx(ours["nmad_m"], rel=0.05)
+    # the predicted sigma has the size of the error against the truth (within 2x here; the
+    # benchmark dem_simulated.py measures the ratio)
+    ratio = ours["nmad_m"] / float(np.nanmedian(sigma[measured]))
+    assert 0.5 < ratio < 2.0, ratio
 
 
 @pytest.mark.parametrize(

@@ -8,7 +8,7 @@ import pytest
 from scipy import ndimage
 
 from carto.framework.raster.focal import focal_nanmedian
-from carto.ior.regularise import regularise, support
+from carto.ior.regularise import regularise
 from carto.ior.settings import IORSettings
 
 
@@ -53,15 +53,3 @@ def test_bands_give_the_whole_grid_update(grids, band_rows):
     np.testing.assert_allclose(out, expected, rtol=0, atol=1e-9)
     assert (~inlier & np.isfinite(new)).sum() > 100  # the wild matches were found
     assert np.abs(out[60:100, 50:70] - heights[60:100, 50:70] - 1.5).max() < 0.2  # hole filled
-
-
-@pytest.mark.parametrize("band_rows", [3, 50])
-def test_support_by_bands(grids, band_rows):
-    _, new = grids
-    matched = np.isfinite(new)
-    matched[:, :40] = False
-    settings = IORSettings()
-    reach = ndimage.gaussian_filter(matched.astype(float), 9.0, mode="constant")
-    np.testing.assert_array_equal(
-        support(matched, settings, band_rows=band_rows), (reach > 1e-3) | matched
-    )

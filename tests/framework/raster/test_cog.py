@@ -49,6 +49,29 @@ def test_an_ortho_image_is_a_cog_with_overviews(tmp_path: Path):
     assert sorted(os.listdir(tmp_path)) == ["ortho.tif"]  # nothing left beside it
 
 
+def test_float_orthos_in_the_inputs_uint16_radiometry(tmp_path: Path):
+    """Resampled float values (cubic overshoots included) written as the input's uint16:
+    rounded, clipped, NaN as nodata 0, a valid 0 kept apart from nodata."""
+    rng = np.random.default_rng(2)
+    image = rng.uniform(-50.0, 70_000.0, (300, 280)).astype(np.float32)
+    image[10:20, 30:40] = np.nan
+    image[0, 0], image[0, 1], image[0, 2] = 0.2, 1.6, 65_534.6
+    path = write_ortho(tmp_path / "o.tif", image, _grid(300, 280), out_dtype="uint16")
+    _valid(path)
+    with rasterio.open(path) as ds:
+        assert ds.dtypes == ("uint16",)
+        assert ds.nodata == 0
+        got = ds.read(1)
+    expected = np.clip(np.rint(np.nan_to_num(image, nan=0.0)), 0, 65535).astype(np.uint16)
+    expected[expected == 0] = 1  # a valid value of 0 is not nodata
+    expected[np.isnan(image)] = 0
+    np.testing.assert_array_equal(got, expected)
+    assert (got[10:20, 30:40] == 0).all()
+    assert got[0, 0] == 1
+    assert got[0, 1] == 2
+    assert got[0, 2] == 65535
+
+
 def test_bands_keep_their_descriptions_tags_and_values(tmp_path: Path):
     rng = np.random.default_rng(1)
     bands = [rng.normal(size=(300, 260)).astype(np.float32) for _ in range(3)]

@@ -28,11 +28,13 @@ _SETTINGS = {f.name for f in attrs.fields(IORSettings)}
 def ior_product(result: IORResult) -> DEMProduct:
     """The framework's :class:`DEMProduct` of an IOR result: the DEM, both ortho-images, the
     quality layers (per DEM node: the mean correlation score of its points, their number and
-    spread, whether the height was filled; per ortho pixel: the last matching's score and
-    validity), the iterations' figures and the
+    spread, the predicted height standard deviation, whether the height was filled; per ortho
+    pixel: the last matching's score and validity), the iterations' figures and the
     base-to-height ratio (``extras["b_over_h"]``), and what the initial DEM gave: the share
     of the images' common footprint it covered and the share whose starting height was
-    filled (``extras["init_dem_coverage_percent"]``, ``extras["init_dem_filled_percent"]``).
+    filled (``extras["init_dem_coverage_percent"]``, ``extras["init_dem_filled_percent"]``),
+    and the DEM's completeness (``extras["completeness"]``: the nodes of the common footprint
+    measured, filled (holes inside the measured area) and left empty).
 
     Each iteration's measures: ``median_abs_mismatch_px``, ``matched_percent`` (nodes with a
     valid match among the nodes both ortho-images cover), ``median_abs_dem_change_m``,
@@ -72,6 +74,13 @@ def ior_product(result: IORResult) -> DEMProduct:
                 nodes["spread_m"],
                 grid="dem",
             ),
+            QualityLayer(
+                "sigma_m",
+                "predicted height standard deviation, m (matching precision, local B/H, "
+                "regularisation)",
+                nodes["sigma_m"],
+                grid="dem",
+            ),
         ]
     if result.filled is not None:
         quality.append(
@@ -102,6 +111,7 @@ def ior_product(result: IORResult) -> DEMProduct:
             "b_over_h": result.b_over_h,
             "init_dem_coverage_percent": round(100.0 * result.init_coverage, 2),
             "init_dem_filled_percent": round(100.0 * result.init_filled, 2),
+            "completeness": dict(result.nodes),
         },
     )
 

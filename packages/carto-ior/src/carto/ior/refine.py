@@ -9,7 +9,8 @@ the stereo base. The loop:
 2. match the two ortho-images densely with the chosen matcher's ``match_dense`` (the
    matcher extension point, ``carto dem --matcher``; the default ``"ncc"`` is
    :func:`carto.framework.matching.disparity.dense_offsets`: pyramid, left-right check,
-   sub-pixel, score and validity);
+   sub-pixel, score and validity), its offsets then refined by least squares along the base
+   (:func:`carto.framework.matching.precision.refine_along_base`, ``subpixel_steps``);
 3. turn each mismatch into a height by intersecting the two image rays at every matched
    ortho pixel (the tile's local ray model, :mod:`carto.ior.rays`), carried to the centre of
    its DEM node; a node takes the median of its points (:mod:`carto.ior.node_heights`), whose
@@ -17,6 +18,10 @@ the stereo base. The loop:
 4. update the DEM with regularisation: outliers against the local median removed, holes and
    noise handled by a normalised Gaussian convolution of the height changes;
 5. repeat until the median mismatch is below a threshold or a number of iterations is reached.
+
+The delivered DEM holds the nodes the last iteration measured and the holes they enclose
+(filled, flagged); nothing beyond the measured area (:mod:`carto.ior.filling`). Each node
+gets a predicted height standard deviation (:mod:`carto.ior.height_precision`).
 
 **Height from mismatch, to first order.** The left ortho pixel at ``(x, y)`` shows the terrain
 where the left line of sight through ``(x, y, h_dem)`` meets it: for a height error ``e =
@@ -58,7 +63,9 @@ from carto.framework.imaging.ortho_grid import OrthoGrid, check_grid_size, footp
 from carto.framework.matching.base import Matcher
 from carto.framework.parallel.engine import TaskFailure
 from carto.framework.raster.dem import DEM, ELLIPSOID
-from carto.ior.regularise import regularise, support
+from carto.ior.filling import node_footprint
+from carto.ior.height_precision import smoothing_variance_factor
+from carto.ior.regularise import regularise
 from carto.ior.settings import IORSettings, option_label
 from carto.ior.start import StartingSurface, seen_by_both, starting_surface
 from carto.ior.tiles import (
@@ -144,9 +151,14 @@ class IORResult:
             height).
         node_quality: the last iteration's matched points per DEM node (tiled layers on
             ``dem_grid``, :data:`NODE_QUALITY`): ``count`` (points), ``spread_m``
-            (their interquartile range / 1.349), ``node_score`` (mean correlation score).
-        filled: per DEM node, a height the last iteration did not measure (it comes from
-            the regularised update's filling).
+            (their interquartile range / 1.349), ``node_score`` (mean correlation score),
+            ``sigma_m`` (the predicted standard deviation of the DEM's height,
+            :mod:`carto.ior.height_precision`).
+        filled: per DEM node, a height the last iteration did not measure: a hole inside
+            the measured area, filled by the regularised update (:mod:`carto.ior.filling`;
+            beyond the measured area, nodes have no height).
+        nodes: the node counts of the footprint (:meth:`~carto.ior.filling.NodeFootprint.
+            counts`): measured, filled, left empty.
     """
 
     dem: DEM
@@ -164,6 +176,7 @@ class IORResult:
     failed_tiles: tuple[str, ...] = ()
     node_quality: dict[str, Any] = attrs.field(factory=dict)
     filled: Any = None
+    nodes: dict[str, Any] = attrs.field(factory=dict)
 
 
 def _grids(
@@ -391,9 +404,7 @@ def refine_dem(
                     "footprint filled (voids)"
                 )
             facts = {"init_coverage": start.coverage, "init_filled": start.filled}
-            state = RunState(
-                1, start.heights, np.zeros(dem_grid.shape, bool), (0.0, 0.0), (), facts
-            )
+            state = RunState(1, start.heights, (0.0, 0.0), (), facts)
             space.begin(state)
         elif progress:
             progress(f"resuming at iteration {state.iteration} from {folder}")
@@ -455,7 +466,6 @@ def _iterate(
     reports = [IterationReport(**r) for r in state.reports]
     converged = False
     guess = state.guess
-    ever_matched = state.ever_matched.copy()
     failed: list[str] = []
     iteration = state.iteration
     while True:
@@ -478,6 +488,7 @@ def _iterate(
             (float(np.nanmin(current)), float(np.nanmax(current))),
             space.iteration_dir(iteration),
             (float(base_rc[0]), float(base_rc[1])),
+            smoothing_variance_factor(s.smoothing_nodes, iteration - 1, s.window, k),
         )
         tasks = [functools.partial(run_tile, job, rows, cols) for rows, cols in plan]
         outcomes = _run_tiles(engine, tasks, f"IOR iteration {iteration}", keys)
@@ -502,7 +513,6 @@ def _iterate(
             d_col[rows, cols] = arrays["d_col_px"]
             covered[rows, cols] = arrays["covered"]
         matched = np.isfinite(d_row) & covered
-        ever_matched |= matched
         # the mismatch a height change removes: along the base; across it, what the
         # relative orientation leaves (reported, and the next search starts from it)
         m_row, m_col = d_row[matched], d_col[matched]
@@ -549,7 +559,6 @@ def _iterate(
             RunState(
                 iteration,
                 heights,
-                ever_matched,
                 guess,
                 tuple(attrs.asdict(r) for r in reports),
                 state.facts,
@@ -586,8 +595,13 @@ def _iterate(
         name: tiled(name, 1, dem_grid.shape, np.float32, 0.0 if name == "count" else np.nan)
         for name in NODE_QUALITY
     }
-    final = np.where(covered & support(ever_matched, s), heights, np.nan)
-    filled = np.isfinite(final) & ~matched
+    # heights where the last iteration measured and in the holes it encloses; none beyond
+    failed_nodes = np.zeros(dem_grid.shape, bool)
+    for (rows, cols), outcome in zip(plan, outcomes, strict=True):
+        if isinstance(outcome, TaskFailure):
+            failed_nodes[rows, cols] = True
+    footprint = node_footprint(matched, covered, failed_nodes)
+    final = np.where(footprint.has_height, heights, np.nan)
     dem = DEM.from_array(final, dem_grid.transform, dem_grid.crs.to_wkt(), vertical=ELLIPSOID)
     return IORResult(
         dem,
@@ -604,5 +618,6 @@ def _iterate(
         init_filled=float(state.facts.get("init_filled", 0.0)),
         failed_tiles=tuple(failed),
         node_quality=node_quality,
-        filled=filled,
+        filled=footprint.filled,
+        nodes=footprint.counts(),
     )

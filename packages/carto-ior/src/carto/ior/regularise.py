@@ -1,7 +1,7 @@
-"""The regularised DEM update of an IOR iteration (:func:`regularise`) and the nodes it reaches
-from measured ones (:func:`support`), computed by bands of DEM rows with the halo every
-filter needs, so that the coordinator of a whole scene holds the DEM grids and one band of
-temporaries, not a dozen grid-sized arrays. Any band size gives the same result (tested)."""
+"""The regularised DEM update of an IOR iteration (:func:`regularise`), computed by bands of
+DEM rows with the halo every filter needs, so that the coordinator of a whole scene holds the
+DEM grids and one band of temporaries, not a dozen grid-sized arrays. Any band size gives the
+same result (tested). Which nodes keep a height in the end: :mod:`carto.ior.filling`."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ from numpy.typing import NDArray
 from carto.framework.raster.focal import focal_nanmedian
 from carto.ior.settings import IORSettings
 
-__all__ = ["BAND_ROWS", "regularise", "support"]
+__all__ = ["BAND_ROWS", "regularise"]
 
 FloatArray = NDArray[np.float64]
 
@@ -89,22 +89,3 @@ def regularise(
         out[rows] = heights[rows] + update[inner]
         inliers[rows] = inlier[inner]
     return out, inliers
-
-
-def support(
-    matched: NDArray[np.bool_], settings: IORSettings, band_rows: int = BAND_ROWS
-) -> NDArray[np.bool_]:
-    """The nodes :func:`regularise` reaches from matched nodes (its widest Gaussian, 9 sigma):
-    the others were never measured and keep the starting height, so the DEM has no value
-    there."""
-    from scipy import ndimage
-
-    if not matched.any():
-        return matched.copy()
-    wide_sigma = _FILL_FACTORS[-1] * float(settings.smoothing_nodes)
-    out = np.empty(matched.shape, bool)
-    for rows, wide, inner in _bands(matched.shape[0], band_rows, _reach(wide_sigma)):
-        band = matched[wide].astype(np.float64)
-        reach = ndimage.gaussian_filter(band, wide_sigma, mode="constant")
-        out[rows] = (reach[inner] > 1e-3) | matched[rows]
-    return out

@@ -117,6 +117,9 @@ class IORSettings:
             iteration's offset across the base (what the relative orientation leaves; what
             is left along the base is then a few pixels, and coarse levels of low-contrast
             images would only add wrong guesses).
+        subpixel_steps: least-squares steps that refine the matcher's offsets along the base
+            (:func:`carto.framework.matching.precision.refine_along_base`; 0: the matcher's
+            own sub-pixel offsets).
         smoothing_nodes: sigma of the Gaussian that regularises the height changes, nodes.
         outlier_m: a height change more than ``max(outlier_m, 4 NMAD)`` from the median of its
             5 x 5 neighbourhood is an outlier.
@@ -147,6 +150,7 @@ class IORSettings:
     levels: int = attrs.field(default=5, converter=_integer("levels", 1, 12))
     refine_levels: int = attrs.field(default=3, converter=_integer("refine_levels", 1, 12))
     min_score: float = attrs.field(default=0.5, converter=_number("min_score", -1.0, 1.0))
+    subpixel_steps: int = attrs.field(default=2, converter=_integer("subpixel_steps", 0, 10))
     smoothing_nodes: float = attrs.field(
         default=1.0, converter=_number("smoothing_nodes", 0.0, low_open=True)
     )

@@ -19,8 +19,10 @@ from carto.framework.geometry.sensor import Sensor
 from carto.framework.imaging.ortho import orthorectify
 from carto.framework.imaging.ortho_grid import OrthoGrid
 from carto.framework.matching.base import DenseSettings, Matcher
+from carto.framework.matching.precision import refine_along_base
 from carto.framework.raster.dem import DEM, ELLIPSOID
 from carto.framework.raster.tiled_layer import piece_path
+from carto.ior.height_precision import node_sigma_m
 from carto.ior.node_heights import node_heights
 from carto.ior.rays import RayField
 from carto.ior.settings import IORSettings
@@ -37,9 +39,18 @@ __all__ = [
 
 FloatArray = NDArray[np.float64]
 
-NODE_LAYERS = ("new_height", "d_row_px", "d_col_px", "covered", "count", "spread_m", "node_score")
+NODE_LAYERS = (
+    "new_height",
+    "d_row_px",
+    "d_col_px",
+    "covered",
+    "count",
+    "spread_m",
+    "node_score",
+    "sigma_m",
+)
 """The arrays of a tile file on the DEM grid (the tile's interior nodes)."""
-NODE_QUALITY = ("count", "spread_m", "node_score")
+NODE_QUALITY = ("count", "spread_m", "node_score", "sigma_m")
 """The node layers of a tile file that describe its matched points (quality layers)."""
 ORTHO_LAYERS = ("ortho_left", "ortho_right", "score", "valid")
 """The arrays of a tile file on the ortho grid (the tile's interior pixels)."""
@@ -71,8 +82,9 @@ class TileResult:
     should have (the median of its matched points, :mod:`carto.ior.node_heights`; NaN: no
     valid match), the node offsets right minus left (mean of its pixels', ortho pixels, rows
     and columns), whether both images cover the node, the node's points (count), their
-    spread (m) and mean correlation score, and the ortho-images and matching layers of the
-    tile interior."""
+    spread (m) and mean correlation score, the predicted standard deviation of the height
+    of the DEM the tile started from (m, :mod:`carto.ior.height_precision`), and the
+    ortho-images and matching layers of the tile interior."""
 
     rows: slice
     cols: slice
@@ -83,6 +95,7 @@ class TileResult:
     count: NDArray[np.int32]
     spread_m: NDArray[np.float32]
     node_score: NDArray[np.float32]
+    sigma_m: NDArray[np.float32]
     ortho_left: NDArray[np.float32]
     ortho_right: NDArray[np.float32]
     score: NDArray[np.float32]
@@ -110,6 +123,7 @@ def refine_tile(
     matcher: Matcher | None = None,
     h_range: tuple[float, float] | None = None,
     base: tuple[float, float] | None = None,
+    variance_factor: float = 1.0,
 ) -> TileResult:
     """One tile of one iteration: orthos on the current DEM, dense matching, intersection.
 
@@ -121,7 +135,9 @@ def refine_tile(
     of the whole grid (an intersection more than 500 m beyond gives no height; default:
     from ``heights``). The two rays of a node are intersected by the tile's local ray model
     (:mod:`carto.ior.rays`). ``base``: the stereo base, ``(d_row, d_col)`` of the ortho
-    grid, for matchers that search along it.
+    grid, for matchers that search along it. ``variance_factor``: the share of a node's
+    measurement variance the regularised updates left in the current DEM
+    (:func:`carto.ior.height_precision.smoothing_variance_factor`).
     """
 
     n_r, n_c = dem_grid.shape
@@ -148,6 +164,11 @@ def refine_tile(
             base=base,
         ),
     )
+    direction = base if base is not None else (0.0, 1.0)
+    if settings.subpixel_steps:  # least-squares sub-pixel offsets along the base
+        field = refine_along_base(
+            ortho[0], ortho[1], field, settings.window, direction, settings.subpixel_steps
+        )
     # node offsets: the mean of the valid offsets of the node's k x k ortho pixels
     shape = (r1 - r0, c1 - c0)
     d_row = _block_mean(field.d_row, k, shape)
@@ -164,6 +185,21 @@ def refine_tile(
         field.d_row, field.d_col, field.valid, field.score, surface, sub, k, rays, h_range
     )
     new = np.where(covered, nodes.height_m, np.nan)
+    # the predicted precision: the matching's bound, checked across the base; local B/H
+    node_r, node_c = np.meshgrid(np.arange(shape[0]), np.arange(shape[1]), indexing="ij")
+    t = rays.at(node_r, node_c)
+    bh = np.hypot(t[0, 0] - t[1, 0], t[0, 1] - t[1, 1])
+    sigma, _ = node_sigma_m(
+        ortho[0],
+        ortho[1],
+        field,
+        settings.window,
+        direction,
+        k,
+        ogrid.resolution[0],
+        bh,
+        variance_factor,
+    )
     ir = slice(rows.start - r0, rows.stop - r0)
     ic = slice(cols.start - c0, cols.stop - c0)
     orr = slice(ir.start * k, ir.stop * k)
@@ -178,6 +214,7 @@ def refine_tile(
         nodes.count[ir, ic],
         nodes.spread_m[ir, ic],
         nodes.score[ir, ic],
+        sigma[ir, ic],
         ortho[0][orr, occ],
         ortho[1][orr, occ],
         field.score[orr, occ],
@@ -204,6 +241,7 @@ class TileJob:
     h_range: tuple[float, float]
     folder: Path
     base: tuple[float, float] | None = None
+    variance_factor: float = 1.0
 
 
 def run_tile(job: TileJob, rows: slice, cols: slice) -> Path:
@@ -230,6 +268,7 @@ def run_tile(job: TileJob, rows: slice, cols: slice) -> Path:
         job.matcher,
         h_range=job.h_range,
         base=job.base,
+        variance_factor=job.variance_factor,
     )
     arrays = {name: getattr(result, name) for name in NODE_LAYERS + ORTHO_LAYERS}
     with atomic_output(path) as tmp, open(tmp, "wb") as stream:

@@ -5,7 +5,6 @@ Layout::
 
     state.json                  the current iteration, the search guess, the reports so far
     iteration_NN/heights.npy    the DEM grid the iteration starts from (float64)
-    iteration_NN/ever_matched.npy   nodes matched by an earlier iteration
     iteration_NN/tile_RRRRRR_CCCCCC.npz   one file per finished tile (complete when present)
 
 Every file is written under a temporary name and renamed; ``state.json`` is written after the
@@ -31,7 +30,7 @@ from carto.framework.files.documents import write_json_atomic
 
 __all__ = ["RunState", "Workspace"]
 
-STATE_VERSION = 1
+STATE_VERSION = 2
 
 
 @attrs.frozen(eq=False)
@@ -40,7 +39,6 @@ class RunState:
 
     iteration: int
     heights: NDArray[np.float64]
-    ever_matched: NDArray[np.bool_]
     guess: tuple[float, float]
     reports: tuple[dict[str, Any], ...]
     facts: dict[str, Any]
@@ -68,12 +66,8 @@ class Workspace:
         folder = self.iteration_dir(state.iteration)
         shutil.rmtree(folder, ignore_errors=True)  # a half-begun earlier attempt
         folder.mkdir(parents=True)
-        for name, array in (
-            ("heights.npy", np.asarray(state.heights, np.float64)),
-            ("ever_matched.npy", np.asarray(state.ever_matched, bool)),
-        ):
-            with atomic_output(folder / name) as tmp, open(tmp, "wb") as stream:
-                np.save(stream, array)
+        with atomic_output(folder / "heights.npy") as tmp, open(tmp, "wb") as stream:
+            np.save(stream, np.asarray(state.heights, np.float64))
         write_json_atomic(
             self.state_path,
             {
@@ -99,7 +93,6 @@ class Workspace:
             doc = json.loads(self.state_path.read_text())
             iteration = int(doc["iteration"])
             heights = np.load(self.heights_path(iteration))
-            ever = np.load(self.iteration_dir(iteration) / "ever_matched.npy")
             guess = tuple(float(v) for v in doc["guess"])
             reports = tuple(dict(r) for r in doc["reports"])
             facts = dict(doc.get("facts", {}))
@@ -113,4 +106,4 @@ class Workspace:
                 f"{self.folder}: the work folder is of another run (DEM grid "
                 f"{heights.shape}, this run {tuple(grid_shape)}); run without --resume"
             )
-        return RunState(iteration, heights, ever.astype(bool), guess, reports, facts)  # type: ignore[arg-type]
+        return RunState(iteration, heights, guess, reports, facts)  # type: ignore[arg-type]

@@ -217,8 +217,10 @@ def add_dem(sub: argparse._SubParsersAction) -> None:
             "heights) or a constant --init-height;\na scene's init_dem.tif by default. Writes "
             "cloud-optimised GeoTIFFs dem.tif (float32,\nellipsoidal heights or with "
             "--vertical geoid above the geoid, nodata, compound CRS),\northo_left.tif, "
-            "ortho_right.tif, quality.tif (score, mask), dem_hillshade.png and\nreport.json "
-            "(one entry per iteration); with --reference,\nthe accuracy against it and "
+            "ortho_right.tif (in the images' radiometry, e.g. uint16 with nodata 0),\n"
+            "quality.tif (per DEM node: confidence, points, spread_m, sigma_m, filled), "
+            "matching.tif,\ndem_hillshade.png and report.json (one entry per iteration, "
+            "completeness); with\n--reference, the accuracy against it and "
             "dem_difference.png."
         ),
         epilog=examples(

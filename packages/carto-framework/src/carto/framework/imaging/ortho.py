@@ -550,6 +550,27 @@ def _bands(data: Any) -> list[Any]:
     return bands
 
 
+def _converter(target: np.dtype, nodata: float | None) -> Any:
+    """A block of float data in ``target``: integers rounded and clipped to the dtype's
+    range, NaN as ``nodata``, a valid value equal to ``nodata`` moved to the next one."""
+
+    def convert(block: Any) -> NDArray:
+        values = np.asarray(block, np.float64)
+        if not np.issubdtype(target, np.integer):
+            return values.astype(target)
+        info = np.iinfo(target)
+        finite = np.isfinite(values)
+        out = np.clip(np.rint(np.where(finite, values, 0.0)), info.min, info.max)
+        if nodata is not None:
+            fill = int(nodata)
+            bump = fill + 1 if fill < info.max else fill - 1
+            out = np.where(finite & (out == fill), bump, out)
+            out = np.where(finite, out, fill)
+        return out.astype(target)
+
+    return convert
+
+
 def write_ortho(
     path: str | os.PathLike[str],
     data: ArrayLike,
@@ -560,6 +581,7 @@ def write_ortho(
     nodata: float | None = None,
     band_descriptions: Sequence[str] | None = None,
     overview_resampling: str = "average",
+    out_dtype: Any = None,
 ) -> Path:
     """Write an ortho-image (or any raster on ``grid``) as a cloud-optimised GeoTIFF,
     atomically (:func:`carto.framework.raster.cog.cog_writer`: 256 x 256 tiles, DEFLATE,
@@ -582,6 +604,10 @@ def write_ortho(
             show as the band's name).
         overview_resampling: how the overviews are made: ``"average"`` (images, heights)
             or ``"nearest"`` (flags, counts).
+        out_dtype: write float data in this dtype (the input images' radiometry, e.g.
+            ``uint16``): an integer dtype rounds, clips to its range and writes NaN as
+            ``nodata`` (default 0 for an integer dtype; a valid value equal to it becomes
+            the next one, so no pixel with data reads as nodata).
 
     Returns:
         ``path``.
@@ -604,6 +630,14 @@ def write_ortho(
             f"{grid.shape}"
         )
     dtype = np.result_type(*[b.dtype for b in bands])
+    convert = None
+    if out_dtype is not None and np.dtype(out_dtype) != dtype:
+        target = np.dtype(out_dtype)
+        if not np.issubdtype(target, np.integer) and not np.issubdtype(target, np.floating):
+            raise InputError(f"write_ortho: out_dtype {target} cannot be written")
+        if np.issubdtype(target, np.integer) and nodata is None:
+            nodata = 0
+        convert, dtype = _converter(target, nodata), target
     if band_descriptions is not None and len(band_descriptions) != len(bands):
         raise InputError(
             f"write_ortho: {len(band_descriptions)} band descriptions for {len(bands)} bands"
@@ -638,7 +672,8 @@ def write_ortho(
             window = Window(0, r0, cols, min(_WRITE_ROWS, rows - r0))
             for k, band in enumerate(bands, 1):
                 block = layer_window(band, slice(r0, r0 + window.height), slice(0, cols))
-                dst.write(np.asarray(block, dtype), k, window=window)
+                block = convert(block) if convert is not None else np.asarray(block, dtype)
+                dst.write(block, k, window=window)
         dst.update_tags(**all_tags)
         for k, description in enumerate(band_descriptions or (), 1):
             dst.set_band_description(k, str(description))

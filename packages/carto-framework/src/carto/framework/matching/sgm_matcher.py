@@ -41,6 +41,7 @@ from carto.framework.matching.base import (
     MatchSettings,
     OffsetField,
 )
+from carto.framework.matching.precision import window_ncc
 
 __all__ = ["SGMMatcher"]
 
@@ -84,24 +85,6 @@ def _to_8bit(image: FloatArray, valid: NDArray[np.bool_]) -> FloatArray:
     return np.clip((np.where(valid, image, lo) - lo) * scale, 0.0, 255.0).astype(np.float32)
 
 
-def _ncc_at(
-    left: FloatArray, right_warped: FloatArray, window: int
-) -> tuple[FloatArray, FloatArray]:
-    """The NCC of each pixel's window in ``left`` and ``right_warped`` (the right image already
-    resampled at the matches), and the left window's standard deviation."""
-    import cv2
-
-    def box(a: NDArray) -> NDArray:
-        return cv2.boxFilter(a, cv2.CV_32F, (window, window), normalize=True)
-
-    mean_l, mean_r = box(left), box(right_warped)
-    var_l = np.maximum(box(left * left) - mean_l * mean_l, 0.0)
-    var_r = np.maximum(box(right_warped * right_warped) - mean_r * mean_r, 0.0)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        ncc = (box(left * right_warped) - mean_l * mean_r) / np.sqrt(var_l * var_r)
-    return ncc.astype(np.float32), np.sqrt(var_l).astype(np.float32)
-
-
 def _refine_along_rows(
     left: FloatArray, right: FloatArray, disparity: FloatArray, found: NDArray, window: int
 ) -> FloatArray:
@@ -115,7 +98,7 @@ def _refine_along_rows(
     scores = []
     for step in (-1.0, 0.0, 1.0):
         shifted = cv2.remap(right, xx - d0 - step, yy, cv2.INTER_NEAREST, borderValue=0.0)
-        scores.append(_ncc_at(left, shifted, window)[0])
+        scores.append(window_ncc(left, shifted, window)[0])
     lo, mid, hi = scores
     with np.errstate(invalid="ignore", divide="ignore"):
         den = lo - 2.0 * mid + hi
@@ -288,7 +271,7 @@ class SGMMatcher(Matcher):
             borderValue=0.0,
         )
         a_filled = np.where(valid_a, a, float(np.mean(a[valid_a])) if valid_a.any() else 0.0)
-        score, std = _ncc_at(a_filled.astype(np.float32), warped, s.window)
+        score, std = window_ncc(a_filled.astype(np.float32), warped, s.window)
         lo, hi = np.percentile(a[valid_a], [2, 98]) if valid_a.any() else (0.0, 1.0)
         valid = (
             np.isfinite(t)

@@ -167,6 +167,15 @@ def _off_nadir_deg(sensor: Sensor) -> float:
     return float(np.degrees(np.arccos(np.clip(np.dot(np.ravel(d), up) / np.linalg.norm(d), -1, 1))))
 
 
+def _radiometry(path: str | os.PathLike[str]) -> Any:
+    """The dtype of an input image's first band: the ortho-image is written in it (an
+    integer image: rounded, nodata 0)."""
+    import rasterio
+
+    with rasterio.open(path) as ds:
+        return np.dtype(ds.dtypes[0])
+
+
 def _poor_dem(product: Any) -> list[str]:
     """Why a DEM is too poor to deliver (empty when it is not)."""
     matched = product.matched_fraction
@@ -532,9 +541,12 @@ def _dem_into(
         ).name
     }
     del written
-    for side, ortho in zip(("left", "right"), product.orthos, strict=True):
+    for side, name, ortho in zip(("left", "right"), names, product.orthos, strict=True):
         files[f"ortho_{side}"] = write_ortho(
-            out / f"ortho_{side}.tif", ortho, product.ortho_grid
+            out / f"ortho_{side}.tif",
+            ortho,
+            product.ortho_grid,
+            out_dtype=_radiometry(rasters[name]),
         ).name
     for key, on, grid in (
         ("quality", "dem", product.dem_grid),
