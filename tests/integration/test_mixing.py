@@ -68,9 +68,13 @@ def test_adjust_uses_the_matcher_it_is_given(run_carto, scene, tmp_path):
 
 
 def test_dem_uses_the_matcher_it_is_given(run_carto, scene, tmp_path):
+    """With the matcher's own sub-pixel offsets (``--subpixel-steps 0``) its bias goes into
+    the DEM; IOR's least-squares steps (the default) measure the images again and take most
+    of it out."""
     dems, reports = {}, {}
-    for matcher in ("ncc", "example-biased"):
-        out = tmp_path / matcher
+    runs = [(m, s) for m in ("ncc", "example-biased") for s in ("0", "2")]
+    for matcher, steps in runs:
+        out = tmp_path / f"{matcher}-{steps}"
         proc = run_carto(
             [
                 "dem",
@@ -81,23 +85,29 @@ def test_dem_uses_the_matcher_it_is_given(run_carto, scene, tmp_path):
                 "10",
                 "--matcher",
                 matcher,
+                "--subpixel-steps",
+                steps,
                 "--out",
                 str(out),
             ]
         )
         assert proc.returncode == 0, proc.stderr
-        reports[matcher] = json.loads((out / "report.json").read_text())
-        assert reports[matcher]["matcher"] == matcher
-        assert reports[matcher]["generator"] == "ior"  # the sensor type's default
+        key = f"{matcher}-{steps}"
+        reports[key] = json.loads((out / "report.json").read_text())
+        assert reports[key]["matcher"] == matcher
+        assert reports[key]["generator"] == "ior"  # the sensor type's default
+        assert reports[key]["settings"]["subpixel_steps"] == int(steps)
         with rasterio.open(out / "dem.tif") as ds:
-            dems[matcher] = ds.read(1)
-    report = reports["example-biased"]
+            dems[key] = ds.read(1)
+    report = reports["example-biased-0"]
     # the parallax BIAS_PX ortho pixels along the (north-south) base means this height
     expected_m = BIAS_PX * report["ortho_resolution_m"] / report["b_over_h"]
-    shift = dems["example-biased"] - dems["ncc"]
+    shift = dems["example-biased-0"] - dems["ncc-0"]
     assert np.isfinite(shift).mean() > 0.5
     assert abs(np.nanmedian(shift)) == pytest.approx(expected_m, rel=0.25)
     assert np.nanstd(shift) < 0.25 * expected_m  # a shift of the whole DEM, not noise
+    corrected = dems["example-biased-2"] - dems["ncc-2"]
+    assert abs(np.nanmedian(corrected)) < 0.2 * expected_m  # two steps from 0.75 px
 
 
 def test_a_sparse_only_matcher_is_refused_by_the_dense_generator(run_carto, scene, tmp_path):

@@ -19,6 +19,7 @@ _FLAGS = {
     "crs": "--crs",
     "max_iterations": "--max-iterations",
     "tile_px": "--tile-size",
+    "subpixel_steps": "--subpixel-steps",
 }
 """The ``carto dem`` option of each setting that has one (named in the messages)."""
 

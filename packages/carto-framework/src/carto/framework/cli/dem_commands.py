@@ -143,6 +143,7 @@ def cmd_dem(args: argparse.Namespace) -> int:
         ("crs", args.crs),
         ("max_iterations", args.max_iterations),
         ("tile_px", args.tile_size),
+        ("subpixel_steps", args.subpixel_steps),
     ):
         if value is not None:
             options[key] = value
@@ -269,6 +270,13 @@ def add_dem(sub: argparse._SubParsersAction) -> None:
         metavar="PX",
         help="side of a tile task, ortho pixels (default 2048; memory per worker grows with "
         "its square)",
+    )
+    p.add_argument(
+        "--subpixel-steps",
+        type=int,
+        metavar="N",
+        help="least-squares steps that refine the matcher's offsets along the stereo base "
+        "(default 2; 0: the matcher's own sub-pixel offsets)",
     )
     p.add_argument(
         "--workers",
