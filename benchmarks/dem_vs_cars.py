@@ -135,34 +135,41 @@ def run_carto(
     return result
 
 
-def accuracy(dsm: str | None, reference: Path) -> dict[str, Any] | None:
+def accuracy(dsm: str | None, reference: Path, geoid: Path) -> dict[str, Any] | None:
+    """Against the reference on its grid; CARS writes heights above EGM96 (its compound
+    CRS says so), carto and the reference above the ellipsoid: the geoid reconciles them."""
     from carto.framework.evaluation.dem_accuracy import dem_accuracy_by_blocks
     from carto.framework.raster.dem import DEM
 
     if dsm is None:
         return None
-    report = dem_accuracy_by_blocks(DEM.open(dsm), reference).report
+    report = dem_accuracy_by_blocks(DEM.open(dsm), reference, geoid=geoid).report
     keys = ("count", "median_m", "nmad_m", "rmse_m", "le90_m", "completeness")
     return {k: (round(report[k], 3) if isinstance(report[k], float) else report[k]) for k in keys}
 
 
-def figure(dsms: dict[str, str], reference: Path, path: Path) -> None:
+def figure(dsms: dict[str, str], reference: Path, geoid: Path, path: Path) -> None:
     """Hillshades (top) and differences to the reference (bottom), side by side."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
     from carto.framework.evaluation.dem_accuracy import dem_difference
-    from carto.framework.raster.dem import DEM
+    from carto.framework.raster.dem import DEM, Geoid
     from carto.framework.raster.quicklook import hillshade
 
     ref = DEM.open(reference)
+    geoid_grid = Geoid.open(geoid)
     size = (abs(ref.transform.a), abs(ref.transform.e))  # metres: the reference is UTM
     names = [*dsms, "reference"]
     fig = Figure(figsize=(4.2 * len(names), 8.6), dpi=100)
     FigureCanvasAgg(fig)
     for i, name in enumerate(names):
         dem = ref if name == "reference" else DEM.open(dsms[name])
-        on_ref = ref.heights if name == "reference" else ref.heights + dem_difference(dem, ref)[0]
+        on_ref = (
+            ref.heights
+            if name == "reference"
+            else ref.heights + dem_difference(dem, ref, geoid=geoid_grid)[0]
+        )
         ax = fig.add_subplot(2, len(names), i + 1)
         shade = hillshade(np.nan_to_num(on_ref, nan=float(np.nanmedian(on_ref))), size)
         ax.imshow(np.where(np.isfinite(on_ref), shade, np.nan), cmap="gray", interpolation="none")
@@ -199,14 +206,15 @@ def main() -> int:
     for matcher in args.matchers:
         out = args.work / f"carto-{matcher}"
         runs[f"carto {matcher}"] = run_carto(images, start, geoid, out, matcher, args.workers)
+    (args.work / "runs.json").write_text(json.dumps(runs, indent=2) + "\n")
     for run in runs.values():
-        run["accuracy"] = accuracy(run.get("dsm"), reference)
+        run["accuracy"] = accuracy(run.get("dsm"), reference, geoid)
     cars_wall = runs["cars"].get("wall_s")
     for name, run in runs.items():
         if name != "cars" and cars_wall and run.get("wall_s"):
             run["speedup_over_cars"] = round(cars_wall / run["wall_s"], 2)
     dsms = {n: r["dsm"] for n, r in runs.items() if r.get("dsm")}
-    figure(dsms, reference, RESULTS / "dem_vs_cars.png")
+    figure(dsms, reference, geoid, RESULTS / "dem_vs_cars.png")
     doc = {
         "runs": runs,
         "workers": args.workers,

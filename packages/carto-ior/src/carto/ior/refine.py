@@ -392,6 +392,7 @@ def refine_dem(
     s = settings or IORSettings()
     images = (as_image_source(left_image), as_image_source(right_image))
     dem_grid, ortho_grid, k = _grids(left, right, init_dem, s)
+    s = attrs.evolve(s, smoothing_nodes=s.smoothing_for(k))  # for this grid's k
     engine = scheduler if scheduler is not None else TileEngine(quiet=True)
     with _work_folder(work_dir) as (folder, kept):
         space = Workspace(folder)

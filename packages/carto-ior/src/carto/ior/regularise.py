@@ -66,7 +66,7 @@ def regularise(
     nmad = 1.4826 * float(np.median(np.abs(r - np.median(r)))) if r.size else 0.0
     del r
     limit = max(settings.outlier_m, 4.0 * nmad)
-    sigma = float(settings.smoothing_nodes)
+    sigma = settings.smoothing_for(1)  # refine_dem resolves it for its posting
     halo = _reach(sigma) + sum(_reach(f * sigma) for f in _FILL_FACTORS)
     out = np.empty(heights.shape, np.float64)
     inliers = np.empty(heights.shape, bool)

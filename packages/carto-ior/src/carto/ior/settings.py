@@ -121,7 +121,10 @@ class IORSettings:
         subpixel_steps: least-squares steps that refine the matcher's offsets along the base
             (:func:`carto.framework.matching.precision.refine_along_base`; 0: the matcher's
             own sub-pixel offsets).
-        smoothing_nodes: sigma of the Gaussian that regularises the height changes, nodes.
+        smoothing_nodes: sigma of the Gaussian that regularises the height changes, nodes
+            (default: a third of the matching window, at least one node,
+            :meth:`smoothing_for`: the window sets how far a measurement's error reaches,
+            whatever the posting).
         outlier_m: a height change more than ``max(outlier_m, 4 NMAD)`` from the median of its
             5 x 5 neighbourhood is an outlier.
         tile_px, overlap_px: tile side and overlap on each side, ortho pixels (rounded to
@@ -152,8 +155,8 @@ class IORSettings:
     refine_levels: int = attrs.field(default=3, converter=_integer("refine_levels", 1, 12))
     min_score: float = attrs.field(default=0.5, converter=_number("min_score", -1.0, 1.0))
     subpixel_steps: int = attrs.field(default=2, converter=_integer("subpixel_steps", 0, 10))
-    smoothing_nodes: float = attrs.field(
-        default=1.0, converter=_number("smoothing_nodes", 0.0, low_open=True)
+    smoothing_nodes: float | None = attrs.field(
+        default=None, converter=_optional_number("smoothing_nodes", 0.0)
     )
     outlier_m: float = attrs.field(default=3.0, converter=_number("outlier_m", 0.0, low_open=True))
     tile_px: int = attrs.field(default=2048, converter=_integer("tile_px", 64, 1 << 20))
@@ -163,6 +166,13 @@ class IORSettings:
         default=0.75, converter=_number("min_init_coverage", 0.0, 1.0)
     )
     max_cells: float = attrs.field(default=MAX_GRID_CELLS, converter=_number("max_cells", 1.0))
+
+    def smoothing_for(self, k: int) -> float:
+        """The regularisation's sigma, nodes, for ``k`` ortho pixels per node: the setting,
+        or a third of the matching window in ortho pixels (at least one node)."""
+        if self.smoothing_nodes is not None:
+            return float(self.smoothing_nodes)
+        return max(1.0, self.window / (3.0 * max(int(k), 1)))
 
     def __attrs_post_init__(self) -> None:
         if self.ortho_res_m is not None and self.ortho_res_m > self.posting_m:
