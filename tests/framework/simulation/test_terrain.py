@@ -478,3 +478,29 @@ def test_bad_presets_and_texture_arguments(dems):
     utm = DEM.from_array(np.zeros((10, 10)), Affine(30, 0, 500000, 0, -30, 2200000), 32644)
     with pytest.raises(InputError, match="EPSG:4326"):
         make_texture(utm, 1.0, 0)
+
+
+def test_urban_has_flat_roofs_vertical_walls_and_the_share_of_buildings():
+    """Truth from the heights alone: a building is where the ground stands at least the
+    lowest building height above the 7 x 7 minimum (the street next to it)."""
+    from scipy import ndimage
+
+    preset = TERRAINS["urban"]
+    dem = make_terrain("urban", BOX_2KM, 2.5, seed=4)  # 800 x 800 nodes, 25 blocks a side
+    h = dem.heights
+    ground = ndimage.minimum_filter(h, size=int(preset.block_m / 2.5))
+    building = h - ground >= preset.building_heights_m[0] - 0.5
+    assert 0.2 < building.mean() < 0.45  # 0.35 expected, the draws vary
+    # walls: height steps between neighbours of at least the lowest building
+    steps = np.abs(np.diff(h, axis=1))
+    assert (steps > preset.building_heights_m[0]).mean() > 0.01
+    # roofs are flat: inside a building the relief of the plains only (cm per node)
+    inner = (
+        ndimage.binary_erosion(building, iterations=2)[:, :-1]
+        & ndimage.binary_erosion(building, iterations=2)[:, 1:]
+    )
+    assert np.percentile(steps[inner], 99) < 0.2
+    assert h.max() <= preset.h_max_m
+    assert h.min() >= preset.h_min_m
+    heights_of_buildings = (h - ground)[building]
+    assert heights_of_buildings.max() > 0.8 * preset.building_heights_m[1]

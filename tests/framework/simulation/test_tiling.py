@@ -76,7 +76,7 @@ def test_lattice_field_windows_equal_an_independent_interpolation(shape):
 
 
 def test_terrain_tiles_equal_one_piece_and_the_whole_dem():
-    for name in ("hilly", "flat-coastal", "mountains"):
+    for name in ("hilly", "flat-coastal", "mountains", "urban"):
         terrain = ProceduralTerrain(name, BOUNDS, 5.0, seed=7)
         n_rows, n_cols = terrain.shape
         whole = terrain.window(0, n_rows, 0, n_cols)

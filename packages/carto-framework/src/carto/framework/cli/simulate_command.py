@@ -91,7 +91,7 @@ def add_simulate(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--terrain",
         metavar="NAME",
-        help="terrain preset: flat-coastal, plains, mixed, hilly, mountains",
+        help="terrain preset: flat-coastal, plains, mixed, hilly, urban, mountains",
     )
     p.add_argument("--dem", metavar="FILE", help="use this DEM (ellipsoidal heights) as terrain")
     p.add_argument(

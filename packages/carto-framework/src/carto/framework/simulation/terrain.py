@@ -60,6 +60,11 @@ Terrain synthesis (:func:`make_terrain`)
         hilly          200.0 ..  752  10.2 / 22.4 / 27.8 / 42.6           0.02
         mountains     4198   .. 5828  21.3 / 41.7 / 49.1 / 63.3           0
 
+    ``urban`` is the plains' relief (200-240 m) with flat-roofed buildings 6-60 m tall on
+    80 m blocks (:mod:`carto.framework.simulation.buildings`): vertical breaks, where a
+    correlation window straddles two surfaces and a wall hides the ground behind it in one
+    view.
+
     A 2 km x 2 km area only holds part of the relief (wavelengths reach 5-10 km): over 10
     seeds it spans 0.35-0.57 of the height range on average, and its slope percentiles vary
     with the seed (at 5 m, p95 29-47 deg for mountains, 1.3-2.7 deg for plains). Slopes grow
@@ -88,6 +93,7 @@ from carto.framework.errors import InputError
 from carto.framework.geometry.frames import WGS84_A_M, WGS84_E2
 from carto.framework.raster.dem import DEM, ELLIPSOID
 from carto.framework.simulation.fields import LatticeField, linear_matrix, resample
+from carto.framework.simulation.grid_windows import bilinear_heights, centre_bounds
 
 if TYPE_CHECKING:
     from affine import Affine
@@ -143,6 +149,13 @@ class TerrainPreset:
         uniform_fraction: expected fraction of flat uniform ground (water, sand) at
             ``h_min_m``; realised fractions vary with the area and seed.
         spread_sigma: standard deviations of the field mapped onto the half range.
+        building_fraction: expected share of the ground under flat-roofed buildings (0: none;
+            the ``urban`` preset): blocks on a lattice of ``block_m`` cells, each cell a
+            building or not, its footprint and height drawn per cell; walls are vertical
+            between two nodes. The relief below them takes the range up to ``h_max_m`` less
+            the tallest building.
+        building_heights_m: the range of building heights, metres.
+        block_m: side of a city block (a lattice cell), metres.
     """
 
     name: str
@@ -157,6 +170,18 @@ class TerrainPreset:
     ridge_wavelength_m: float = attrs.field(default=2000.0, converter=float, validator=_positive)
     uniform_fraction: float = attrs.field(default=0.0, converter=float, validator=_unit_interval)
     spread_sigma: float = attrs.field(default=3.0, converter=float, validator=_positive)
+    building_fraction: float = attrs.field(default=0.0, converter=float, validator=_unit_interval)
+    building_heights_m: tuple[float, float] = attrs.field(
+        default=(6.0, 60.0), converter=lambda v: (float(v[0]), float(v[1]))
+    )
+    block_m: float = attrs.field(default=80.0, converter=float, validator=_positive)
+
+    @property
+    def relief_max_m(self) -> float:
+        """The top of the relief below the buildings."""
+        if self.building_fraction > 0.0:
+            return self.h_max_m - self.building_heights_m[1]
+        return self.h_max_m
 
     def __attrs_post_init__(self) -> None:
         if not (math.isfinite(self.h_min_m) and self.h_min_m < self.h_max_m < math.inf):
@@ -173,6 +198,14 @@ class TerrainPreset:
             raise InputError(
                 f"terrain preset {self.name!r}: detail_weight must be in [0, 10], "
                 f"got {self.detail_weight}"
+            )
+        low, high = self.building_heights_m
+        if self.building_fraction > 0.0 and not (
+            0.0 < low <= high and self.h_min_m < self.relief_max_m
+        ):
+            raise InputError(
+                f"terrain preset {self.name!r}: building heights must be 0 < low <= high with "
+                f"room below h_max_m, got {self.building_heights_m}"
             )
         if self.uniform_fraction >= 0.9:
             raise InputError(
@@ -224,6 +257,17 @@ TERRAINS: Mapping[str, TerrainPreset] = types.MappingProxyType(
                 ridge_weight=0.35,
                 ridge_wavelength_m=6000.0,
                 uniform_fraction=0.02,
+            ),
+            TerrainPreset(
+                "urban",
+                "a city on plains: flat-roofed blocks 6-60 m tall, vertical walls, streets",
+                200.0,
+                300.0,
+                correlation_length_m=8000.0,
+                spectral_exponent=5.0,
+                building_fraction=0.35,
+                building_heights_m=(6.0, 60.0),
+                block_m=80.0,
             ),
             TerrainPreset(
                 "mountains",
@@ -424,7 +468,7 @@ def _heights_from_field(preset: TerrainPreset, z: FloatArray) -> FloatArray:
         frac[z <= q] = 0.0  # exactly flat
     else:
         frac = _softclip(0.5 + 0.5 * z / s)
-    return preset.h_min_m + (preset.h_max_m - preset.h_min_m) * frac
+    return preset.h_min_m + (preset.relief_max_m - preset.h_min_m) * frac
 
 
 class ProceduralTerrain:
@@ -462,6 +506,7 @@ class ProceduralTerrain:
             for k in range(_RIDGE_OCTAVES if preset.ridge_weight > 0.0 else 0)
         ]
         self.source = f"terrain {preset.name!r} seed {int(seed)}"
+        self._seed, self._posting = int(seed), posting
 
     @property
     def height_range(self) -> tuple[float, float]:
@@ -481,7 +526,14 @@ class ProceduralTerrain:
             norm = math.hypot(w, 1.0 - w)
             ridged = _ridged_multifractal([f.window(r0, r1, c0, c1) for f in self._ridges])
             z = z * ((1.0 - w) / norm) + ridged * (w / norm)
-        return _heights_from_field(self.preset, z)
+        heights = _heights_from_field(self.preset, z)
+        if self.preset.building_fraction > 0.0:
+            from carto.framework.simulation.buildings import building_heights
+
+            heights = heights + building_heights(
+                self.preset, self._seed, (r0, r1, c0, c1), self._posting
+            )
+        return heights
 
     def height(self, lon_deg: Any, lat_deg: Any) -> FloatArray:
         """Bilinear height at WGS84 lon/lat (NaN outside the node centres), as
@@ -523,55 +575,6 @@ class GridTerrain:
         return bilinear_heights(self, lon_deg, lat_deg)
 
 
-def centre_bounds(transform: Affine, shape: tuple[int, int]) -> Bounds:
-    n_rows, n_cols = shape
-    t = transform
-    west, north = t.c + 0.5 * t.a, t.f + 0.5 * t.e
-    return (west, north + (n_rows - 1) * t.e, west + (n_cols - 1) * t.a, north)
-
-
-def bilinear_heights(terrain: Any, lon_deg: Any, lat_deg: Any) -> FloatArray:
-    """Bilinear heights of a windowed terrain at WGS84 lon/lat (NaN outside the node
-    centres): the points are taken in groups of nearby rows, each from one window."""
-    lon, lat = np.broadcast_arrays(np.asarray(lon_deg, np.float64), np.asarray(lat_deg, np.float64))
-    shape_out = lon.shape
-    lon, lat = lon.ravel(), lat.ravel()
-    t = terrain.transform
-    n_rows, n_cols = terrain.shape
-    row = (lat - t.f) / t.e - 0.5
-    col = (lon - t.c) / t.a - 0.5
-    out = np.full(lon.size, np.nan)
-    ok = np.flatnonzero(
-        np.isfinite(row)
-        & np.isfinite(col)
-        & (row >= 0)
-        & (row <= n_rows - 1)
-        & (col >= 0)
-        & (col <= n_cols - 1)
-    )
-    if ok.size == 0:
-        return out.reshape(shape_out)
-    i = np.clip(np.floor(row[ok]).astype(np.intp), 0, max(n_rows - 2, 0))
-    j = np.clip(np.floor(col[ok]).astype(np.intp), 0, max(n_cols - 2, 0))
-    order = np.argsort(i, kind="stable")
-    start = 0
-    while start < order.size:
-        first = i[order[start]]
-        stop = int(np.searchsorted(i[order], first + 62, side="left"))
-        sel = order[start:stop]
-        r0, r1 = int(first), min(int(i[sel].max()) + 2, n_rows)
-        c0, c1 = int(j[sel].min()), min(int(j[sel].max()) + 2, n_cols)
-        h = terrain.window(r0, r1, c0, c1)
-        ii, jj = i[sel] - r0, j[sel] - c0
-        fr, fc = row[ok][sel] - i[sel], col[ok][sel] - j[sel]
-        i1, j1 = np.minimum(ii + 1, h.shape[0] - 1), np.minimum(jj + 1, h.shape[1] - 1)
-        out[ok[sel]] = (1.0 - fr) * ((1.0 - fc) * h[ii, jj] + fc * h[ii, j1]) + fr * (
-            (1.0 - fc) * h[i1, jj] + fc * h[i1, j1]
-        )
-        start = stop
-    return out.reshape(shape_out)
-
-
 def _preset(name: str | TerrainPreset) -> TerrainPreset:
     if isinstance(name, TerrainPreset):
         return name
@@ -588,7 +591,7 @@ def make_terrain(
 
     Args:
         name: a key of :data:`TERRAINS` (``"flat-coastal"``, ``"plains"``, ``"mixed"``,
-            ``"hilly"``, ``"mountains"``) or a :class:`TerrainPreset`.
+            ``"hilly"``, ``"urban"``, ``"mountains"``) or a :class:`TerrainPreset`.
         bounds_lonlat: ``(west, south, east, north)`` WGS84 degrees.
         posting_m: ground spacing of the grid at the centre latitude, metres.
         seed: random seed (integer >= 0); same seed and arguments give identical heights.
@@ -678,7 +681,6 @@ __all__ = [
     "GridTerrain",
     "ProceduralTerrain",
     "TerrainPreset",
-    "bilinear_heights",
     "geographic_grid",
     "grid_spacing_deg",
     "make_terrain",

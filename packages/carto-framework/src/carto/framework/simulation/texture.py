@@ -71,13 +71,13 @@ from carto.framework.errors import InputError
 from carto.framework.raster.dem import DEM, bilinear_sample, to_affine
 from carto.framework.simulation.cover import Parcels, make_roads, paint_roads
 from carto.framework.simulation.fields import LatticeField, pyramid_noise
+from carto.framework.simulation.grid_windows import centre_bounds
 from carto.framework.simulation.terrain import (
     MAX_GRID_PX,
     MAX_TILED_GRID_PX,
     MAX_TILED_GRID_SIDE_PX,
     Bounds,
     GridTerrain,
-    centre_bounds,
     check_posting,
     check_seed,
     geographic_grid,
