@@ -2,10 +2,10 @@
 simulator's true DEM, completeness, and the predicted height sigma against the measured error.
 Prints one JSON document (kept in ``benchmarks/results/dem_simulated.json``).
 
-Per terrain (``hilly``, ``mountains``), seed, posting (10 m, 5 m) and matcher (``ncc``,
-``sgm``): ``carto dem`` from the scene's SRTM-like ``init_dem.tif`` with the true models
-(``truth/``), so the figures measure the DEM generator, not an orientation. Against the true
-DEM sampled (bilinear) at the DEM nodes:
+Per terrain (``hilly``, ``mountains``, ``urban``: vertical breaks), seed, posting (10 m,
+5 m) and matcher (``ncc``, ``sgm``): ``carto dem`` from the scene's SRTM-like
+``init_dem.tif`` with the true models (``truth/``), so the figures measure the DEM
+generator, not an orientation. Against the true DEM sampled (bilinear) at the DEM nodes:
 
 * median, NMAD, RMSE and LE90 of the measured nodes, and of all nodes with a height (filled
   holes included); the nodes measured, filled and left empty (``report.json``'s completeness);
@@ -174,7 +174,7 @@ def summary(runs: list[dict[str, Any]]) -> dict[str, Any]:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4])
-    parser.add_argument("--terrains", nargs="+", default=["hilly", "mountains"])
+    parser.add_argument("--terrains", nargs="+", default=["hilly", "mountains", "urban"])
     parser.add_argument("--postings", type=float, nargs="+", default=[10.0, 5.0])
     parser.add_argument("--matchers", nargs="+", default=["ncc", "sgm"])
     parser.add_argument("--size", type=int, nargs=2, default=[1000, 2000], metavar=("W", "H"))
