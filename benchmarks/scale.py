@@ -109,6 +109,7 @@ def run_size(
         report = json.loads((adjusted / "report.json").read_text())
         entry["adjust_checkpoints"] = report.get("checkpoints")
     entry["dem"] = dict(before.get("dem", {}))
+    save(entry)  # an interrupted dem step keeps the adjust measurement
     if "dem" not in steps:
         return entry
     for label in workers:
