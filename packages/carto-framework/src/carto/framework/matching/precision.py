@@ -167,15 +167,12 @@ def refine_along_base(
     f0 = np.where(f_hole, 0.0, f).astype(np.float32)
     mean_f = _box(f0, window)
     std_f = np.sqrt(np.maximum(_box(f0 * f0, window) - mean_f * mean_f, 0.0))
-    okf = ok.astype(np.float32)
-    support = _box(okf, window)
     for _ in range(max(0, int(iterations))):
-        # each window is resampled at one offset: the mean along-base offset of its valid
-        # pixels (warping by every pixel's own offset would mix the neighbours' noise in)
-        along = np.where(ok, out_r * u_r + out_c * u_c, 0.0).astype(np.float32)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            smooth = np.where(support > 0, _box(along, window) / support, along)
-        shift = np.where(ok, smooth - along, 0.0).astype(np.float32)
+        # each window is resampled at one offset along the base: its valid pixels' mean
+        # (warping by every pixel's own offset would mix the neighbours' noise in)
+        mean_r, mean_c = window_offsets(out_r, out_c, ok, window)
+        shift = np.where(ok, (mean_r - out_r) * u_r + (mean_c - out_c) * u_c, 0.0)
+        shift = shift.astype(np.float32)
         at_r, at_c = out_r + shift * u_r, out_c + shift * u_c
         g = resample_at_offsets(right, at_r, at_c)
         hole = f_hole | ~np.isfinite(g)
