@@ -63,22 +63,12 @@ def _figures(d: np.ndarray) -> dict[str, float]:
     }
 
 
-def _truth_on_nodes(dem: DEM, truth: DEM) -> np.ndarray:
-    import pyproj
-
-    rows, cols = np.mgrid[0 : dem.shape[0], 0 : dem.shape[1]]
-    t = dem.transform
-    x, y = t.c + t.a * (cols + 0.5), t.f + t.e * (rows + 0.5)
-    lon, lat = pyproj.Transformer.from_crs(dem.crs, "EPSG:4326", always_xy=True).transform(x, y)
-    return truth.height(lon, lat)
-
-
 def evaluate(out: Path, truth_path: Path) -> dict[str, Any]:
     """The figures of one ``carto dem`` output folder against the true DEM."""
     import rasterio
 
     dem = DEM.open(out / "dem.tif")
-    error = dem.heights - _truth_on_nodes(dem, DEM.open(truth_path))
+    error = dem.heights - DEM.open(truth_path).height(*dem.node_lonlat())
     with rasterio.open(out / "quality.tif") as ds:
         bands = dict(zip(ds.descriptions, ds.read(), strict=True))
     filled = bands["filled"] == 1

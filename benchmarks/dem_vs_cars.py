@@ -39,6 +39,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from measure import run_measured
+from panels import hillshade_panel
 
 ROOT = Path(__file__).resolve().parent.parent
 CARTO = str(ROOT / ".venv" / "bin" / "carto")
@@ -155,7 +156,6 @@ def figure(dsms: dict[str, str], reference: Path, geoid: Path, path: Path) -> No
 
     from carto.framework.evaluation.dem_accuracy import dem_difference
     from carto.framework.raster.dem import DEM, Geoid
-    from carto.framework.raster.quicklook import hillshade
 
     ref = DEM.open(reference)
     geoid_grid = Geoid.open(geoid)
@@ -170,11 +170,7 @@ def figure(dsms: dict[str, str], reference: Path, geoid: Path, path: Path) -> No
             if name == "reference"
             else ref.heights + dem_difference(dem, ref, geoid=geoid_grid)[0]
         )
-        ax = fig.add_subplot(2, len(names), i + 1)
-        shade = hillshade(np.nan_to_num(on_ref, nan=float(np.nanmedian(on_ref))), size)
-        ax.imshow(np.where(np.isfinite(on_ref), shade, np.nan), cmap="gray", interpolation="none")
-        ax.set_title(name, fontsize=10)
-        ax.set_axis_off()
+        hillshade_panel(fig.add_subplot(2, len(names), i + 1), on_ref, size, name)
         ax = fig.add_subplot(2, len(names), len(names) + i + 1)
         if name != "reference":
             image = ax.imshow(on_ref - ref.heights, cmap="RdBu", vmin=-2, vmax=2)

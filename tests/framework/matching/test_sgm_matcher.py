@@ -90,3 +90,20 @@ def test_bad_options(kwargs, message):
 def test_bad_base():
     with pytest.raises(InputError, match="non-zero"):
         DenseSettings(base=(0.0, 0.0))
+
+
+def test_no_block_reaches_beyond_the_data(pair):
+    """A match whose block (7 x 7) in the right image touches its void would match the edge
+    of the data: none is kept."""
+    left, right, _ = pair
+    right = right.copy()
+    right[100:140, 100:160] = np.nan
+    field = SGMMatcher(block=7).match_dense(
+        left, right, settings=DenseSettings(levels=3, radius=2, guess=GUESS, base=BASE)
+    )
+    rows, cols = np.nonzero(field.valid)
+    r = rows + field.d_row[rows, cols]
+    c = cols + field.d_col[rows, cols]
+    # Chebyshev distance of the match to the void's pixels (centres 100..139, 100..159)
+    dist = np.maximum(np.maximum(100 - r, r - 139), np.maximum(100 - c, c - 159))
+    assert dist.min() > 3.0 - 0.6  # half a block, less the rounding of the disparity

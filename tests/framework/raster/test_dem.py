@@ -546,3 +546,29 @@ def test_locate_requires_ellipsoidal_heights_and_handles_shapes():
     np.testing.assert_allclose(lon, expected[0], rtol=0, atol=1e-12)
     lon, lat, h = dem_surface_locate(sensor, np.nan, 1.0, flat)
     assert np.isnan(h)
+
+
+def test_cubic_sample_reproduces_quadratics_and_keeps_voids():
+    """Keys' cubic convolution is exact on quadratics (the analytic truth) away from the
+    edges, passes through the nodes, and is NaN where a node of its 4 x 4 is void."""
+    from carto.framework.raster.dem import bilinear_sample, cubic_sample
+
+    rows, cols = np.mgrid[0:20, 0:30].astype(float)
+
+    def quadratic(r, c):
+        return 3.0 + 0.5 * r - 0.2 * c + 0.07 * r * r - 0.03 * r * c + 0.05 * c * c
+
+    grid = quadratic(rows, cols)
+    rng = np.random.default_rng(0)
+    r = rng.uniform(1.0, 17.9, 500)
+    c = rng.uniform(1.0, 27.9, 500)
+    assert np.abs(cubic_sample(grid, r, c) - quadratic(r, c)).max() < 1e-9
+    # bilinear is not exact on curvature (what the cubic is for)
+    assert np.abs(bilinear_sample(grid, r, c) - quadratic(r, c)).max() > 0.01
+    assert np.allclose(cubic_sample(grid, rows, cols), grid)  # through the nodes, edges too
+    holed = grid.copy()
+    holed[10, 10] = np.nan
+    out = cubic_sample(holed, np.array([9.5, 11.5, 8.2, 5.0]), np.array([9.5, 10.5, 11.9, 5.0]))
+    assert np.isnan(out[:3]).all()
+    assert np.isfinite(out[3])
+    assert np.isnan(cubic_sample(grid, np.array([-0.5, 19.5]), np.array([3.0, 3.0]))).all()

@@ -13,7 +13,7 @@ from numpy.typing import NDArray
 from carto.framework.errors import InputError
 from carto.framework.geometry.sensor import Sensor
 from carto.framework.imaging.ortho_grid import OrthoGrid
-from carto.framework.raster.dem import DEM
+from carto.framework.raster.dem import DEM, cubic_sample
 from carto.framework.raster.dem_measures import fill_voids
 
 __all__ = ["StartingSurface", "seen_by_both", "starting_surface"]
@@ -68,14 +68,37 @@ _FOOTPRINT_SAMPLES = 250_000  # nodes at most on which the footprint and coverag
 _BLOCK_ROWS = 256  # grid rows located at once
 
 
+def _posting_m(dem: DEM) -> float:
+    """The larger node spacing of ``dem``, metres on the ground (degrees at its centre)."""
+    t = dem.transform
+    dx, dy = math.hypot(t.a, t.d), math.hypot(t.b, t.e)
+    if dem.crs.is_geographic:
+        lat = math.radians(t.f + 0.5 * dem.shape[0] * t.e)
+        return max(dx * 111_320.0 * math.cos(lat), dy * 110_574.0)
+    return max(dx, dy)
+
+
 def _on_grid(dem: DEM, grid: OrthoGrid) -> FloatArray:
-    """The DEM's heights at every node of ``grid`` (bilinear; NaN off the DEM), block by block
-    of rows (memory of the result only)."""
+    """The DEM's heights at every node of ``grid`` (NaN off the DEM), block by block of rows
+    (memory of the result only): bilinear, or from a DEM more than twice as coarse as the
+    grid, cubic convolution (:func:`~carto.framework.raster.dem.cubic_sample`: continuous
+    slope). A kink of bilinear heights at a coarse DEM's cell edges (SRTM's 90 m cells on a
+    1 m grid) would outlive the iterations as a seam in the refined DEM. Where the cubic
+    height is missing (a void among its 4 x 4 nodes) or wild (a node of 1e30), the bilinear
+    one stays."""
     n_r, n_c = grid.shape
+    cubic = _posting_m(dem) > 2.0 * abs(grid.transform.a)
     out = np.empty((n_r, n_c))
     for r0 in range(0, n_r, _BLOCK_ROWS):
         rows, cols = np.mgrid[r0 : min(n_r, r0 + _BLOCK_ROWS), 0:n_c]
-        out[r0 : r0 + rows.shape[0]] = dem.height(*grid.lonlat(rows, cols))
+        lon, lat = grid.lonlat(rows, cols)
+        block = dem.height(lon, lat)
+        if cubic:
+            smooth = cubic_sample(dem.heights, *dem.lonlat_to_pixel(lon, lat))
+            with np.errstate(invalid="ignore", over="ignore"):
+                keep = np.isfinite(smooth) & (np.abs(smooth - block) < 1e4)
+            block = np.where(keep, smooth, block)
+        out[r0 : r0 + rows.shape[0]] = block
     return out
 
 

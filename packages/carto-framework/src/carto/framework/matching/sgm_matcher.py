@@ -230,6 +230,10 @@ class SGMMatcher(Matcher):
         ]
         pairs = zip(turned, masks, strict=True)
         eight = [_to_8bit(img, mask).astype(np.uint8) for img, mask in pairs]
+        # a block that reaches beyond either image's data (zeros there) matches the edge of
+        # the data, not the ground: only blocks wholly inside count
+        kernel = np.ones((self.block, self.block), np.uint8)
+        masks = [cv2.erode(mask.astype(np.uint8), kernel).astype(bool) for mask in masks]
         sgbm = cv2.StereoSGBM_create(
             minDisparity=-n_disp // 2,
             numDisparities=n_disp,
