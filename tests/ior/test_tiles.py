@@ -4,6 +4,7 @@ nodes without heights; tiles beyond the common footprint get no task."""
 
 from __future__ import annotations
 
+import attrs
 import numpy as np
 import pytest
 
@@ -13,7 +14,9 @@ from carto.framework.raster.image_source import ArrayImage
 from carto.framework.raster.images import read_raster
 from carto.ior.refine import IORSettings, TileFailure, refine_dem
 
-SETTINGS = IORSettings(posting_m=10.0, max_iterations=2, tile_px=256, overlap_px=96)
+SETTINGS = IORSettings(
+    posting_m=10.0, max_iterations=2, tile_px=256, overlap_px=96, coarse_stages=0
+)  # every iteration at one resolution: the tiles of each are known
 
 
 @pytest.fixture(scope="module")
@@ -67,6 +70,26 @@ def test_resume_from_finished_tiles_gives_the_same_dem(pair, uninterrupted, tmp_
     ]
 
 
+def test_resume_inside_a_coarse_stage_gives_the_same_dem(pair, tmp_path):
+    """Interrupted in the coarse stage (half resolution), resumed: the same DEM and the same
+    iterations as a run never interrupted."""
+    settings = attrs.evolve(SETTINGS, coarse_stages=1, coarse_iterations=2)
+    reference = refine_dem(*pair, settings, work_dir=tmp_path / "reference")
+    factors = [r.factor for r in reference.iterations]
+    assert factors[0] == 2
+    assert factors[-1] == 1
+    assert (tmp_path / "reference" / "stage_1_2" / "state.json").is_file()
+    work = tmp_path / "work"
+    with pytest.raises(KeyboardInterrupt):
+        refine_dem(*pair, settings, scheduler=StopAfter(1), work_dir=work)
+    assert not (work / "state.json").exists()  # stopped inside the stage
+    resumed = refine_dem(*pair, settings, work_dir=work)
+    np.testing.assert_array_equal(resumed.dem.heights, reference.dem.heights)
+    assert [(r.iteration, r.factor) for r in resumed.iterations] == [
+        (r.iteration, r.factor) for r in reference.iterations
+    ]
+
+
 class FailOne(TileEngine):
     """Runs every task but reports the second as failed."""
 
@@ -103,7 +126,8 @@ def test_a_kept_failed_tile_has_no_heights(pair, uninterrupted, tmp_path):
 
 
 def test_tiles_beyond_the_footprint_get_no_task(pair):
-    from carto.ior.refine import _grids, _tile_plan
+    from carto.ior.iteration import _tile_plan
+    from carto.ior.refine import _grids
 
     left, right, init = pair[2], pair[3], pair[4]
     grid, _, _ = _grids(left, right, init, SETTINGS)

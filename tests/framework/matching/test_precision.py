@@ -11,6 +11,8 @@ from scipy import ndimage
 
 from carto.framework.matching.base import OffsetField
 from carto.framework.matching.precision import (
+    levels_for_reach,
+    limit_along_base,
     offset_sigma_px,
     refine_along_base,
     resample_at_offsets,
@@ -142,3 +144,29 @@ def test_least_squares_refinement_beats_the_parabola_and_stays_on_the_base():
     again = refine_along_base(f, g, attrs.evolve(field, valid=invalid), WINDOW, base, 1)
     assert again.d_row[50, 50] == field.d_row[50, 50]
     np.testing.assert_array_equal(again.score, field.score)  # only the offsets change
+
+
+def test_matches_beyond_their_pixel_bound_along_the_base_are_refused():
+    """Offsets along a slanted base from a guess, against per-pixel bounds; across the base
+    nothing counts."""
+    base = np.array([0.6, 0.8])
+    across = np.array([-0.8, 0.6])
+    guess = (0.3, -0.2)
+    along = np.array([[0.5, -1.9, 2.5], [3.0, -3.2, 0.0]])
+    off = along[..., None] * base + 5.0 * across + np.array(guess)  # 5 px across: ignored
+    field = _field(off[..., 0], off[..., 1], np.ones(along.shape, bool))
+    bound = np.array([[1.0, 2.0, 2.0], [np.inf, 3.0, 0.1]], np.float32)
+    out = limit_along_base(field, bound, guess, tuple(base))
+    expected = np.abs(along) <= bound
+    np.testing.assert_array_equal(out.valid, expected)
+    assert np.isnan(out.d_row[~expected]).all()
+    np.testing.assert_array_equal(out.d_col[expected], field.d_col[expected])
+
+
+@pytest.mark.parametrize(
+    ("reach", "levels"), [(0.5, 1), (2.0, 1), (2.1, 2), (6.0, 2), (6.5, 3), (30.0, 4), (np.inf, 12)]
+)
+def test_levels_for_reach_is_the_fewest_that_reach(reach, levels):
+    assert levels_for_reach(reach, 2) == levels
+    if np.isfinite(reach) and levels > 1:
+        assert 2 * (2 ** (levels - 1) - 1) < reach <= 2 * (2**levels - 1)

@@ -38,7 +38,10 @@ def ior_product(result: IORResult) -> DEMProduct:
 
     Each iteration's measures: ``median_abs_mismatch_px``, ``matched_percent`` (nodes with a
     valid match among the nodes both ortho-images cover), ``median_abs_dem_change_m``,
-    ``median_across_base_px``."""
+    ``median_across_base_px``, ``resolution_factor`` (a coarse-to-fine stage's images and
+    ortho-images are that many times coarser; its pixels are coarse pixels),
+    ``median_search_px`` (the median per-node bound of the search along the base; NaN: the
+    pyramid's reach)."""
     iterations = [
         IterationRecord(
             r.iteration,
@@ -48,6 +51,8 @@ def ior_product(result: IORResult) -> DEMProduct:
                 "matched_percent": r.matched_percent,
                 "median_abs_dem_change_m": r.median_abs_dem_change_m,
                 "median_across_base_px": r.median_across_base_px,
+                "resolution_factor": r.factor,
+                "median_search_px": r.median_search_px,
             },
         )
         for r in result.iterations

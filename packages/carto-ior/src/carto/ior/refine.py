@@ -45,10 +45,8 @@ the regularisation then runs on the assembled DEM grid.
 from __future__ import annotations
 
 import contextlib
-import functools
 import os
 import tempfile
-import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
@@ -59,23 +57,23 @@ from numpy.typing import NDArray
 
 from carto.framework.errors import InputError
 from carto.framework.geometry.sensor import Sensor
-from carto.framework.imaging.ortho_grid import OrthoGrid, check_grid_size, footprint_box
 from carto.framework.matching.base import Matcher
-from carto.framework.parallel.engine import TaskFailure
-from carto.framework.raster.dem import DEM, ELLIPSOID
-from carto.ior.filling import node_footprint
-from carto.ior.height_precision import smoothing_variance_factor
+from carto.framework.raster.dem import DEM
+from carto.ior.coarse_to_fine import coarse_stages, say_filled, search_on
+from carto.ior.grids import ior_grids as _grids
+from carto.ior.iteration import (
+    IORResult,
+    IterationReport,
+    TileFailure,
+    b_over_h,
+    base_direction,
+    iterate,
+)
 from carto.ior.regularise import regularise
-from carto.ior.settings import IORSettings, option_label
-from carto.ior.start import StartingSurface, seen_by_both, starting_surface
+from carto.ior.settings import IORSettings
+from carto.ior.start import StartingSurface, starting_surface
 from carto.ior.tiles import (
-    NODE_LAYERS,
-    NODE_QUALITY,
-    ORTHO_LAYERS,
-    TileJob,
     refine_tile,
-    run_tile,
-    tile_arrays,
 )
 from carto.ior.workspace import RunState, Workspace
 
@@ -93,7 +91,6 @@ __all__ = [
     "regularise",
     "starting_surface",
 ]
-
 FloatArray = NDArray[np.float64]
 
 
@@ -109,221 +106,6 @@ def first_order_height_change(mismatch_m: Any, b_over_h: float) -> FloatArray:
     if not b_over_h > 0:
         raise InputError(f"b_over_h must be > 0, got {b_over_h}")
     return -np.asarray(mismatch_m, np.float64) / float(b_over_h)
-
-
-@attrs.frozen
-class IterationReport:
-    """One iteration: the mismatch of the ortho-images on the DEM it started from, and the
-    update. ``median_abs_mismatch_px``: median |offset along the base| of the valid matches
-    (what a height change removes), ortho pixels; ``matched_percent``: nodes with a valid
-    match among the nodes both images cover; ``median_abs_dem_change_m``: median |height
-    change| applied (0 when converged); ``median_across_base_px``: median offset across the
-    base (a relative orientation error: no height change removes it)."""
-
-    iteration: int
-    median_abs_mismatch_px: float
-    matched_percent: float
-    median_abs_dem_change_m: float
-    median_across_base_px: float
-    seconds: float
-
-
-@attrs.frozen(eq=False)
-class IORResult:
-    """The outcome of :func:`refine_dem`.
-
-    Attributes:
-        dem: the refined DEM (ellipsoidal heights, NaN outside the common area).
-        dem_grid, ortho_grid: the grids of the DEM and of the ortho-images.
-        ortho_left, ortho_right: float32 ortho-images on the final DEM (NaN = no data):
-            arrays, or tiles in the run's work folder
-            (:class:`~carto.framework.raster.tiled_layer.TiledLayer`).
-        score, valid: the last matching's correlation score and validity, per ortho pixel
-            (arrays or tiled layers).
-        iterations: one report per iteration.
-        converged: the mismatch fell below the threshold.
-        b_over_h: base-to-height ratio at the scene centre.
-        init_coverage: share of the images' common footprint where the initial DEM had a
-            height.
-        init_filled: share of that footprint whose starting height was filled (voids of
-            the initial DEM, :func:`starting_surface`).
-        failed_tiles: the tiles that failed (``"tile R,C: cause"``; their nodes have no
-            height).
-        node_quality: the last iteration's matched points per DEM node (tiled layers on
-            ``dem_grid``, :data:`NODE_QUALITY`): ``count`` (points), ``spread_m``
-            (their interquartile range / 1.349), ``node_score`` (mean correlation score),
-            ``sigma_m`` (the predicted standard deviation of the DEM's height,
-            :mod:`carto.ior.height_precision`).
-        filled: per DEM node, a height the last iteration did not measure: a hole inside
-            the measured area, filled by the regularised update (:mod:`carto.ior.filling`;
-            beyond the measured area, nodes have no height).
-        nodes: the node counts of the footprint (:meth:`~carto.ior.filling.NodeFootprint.
-            counts`): measured, filled, left empty.
-    """
-
-    dem: DEM
-    dem_grid: OrthoGrid
-    ortho_grid: OrthoGrid
-    ortho_left: Any
-    ortho_right: Any
-    score: Any
-    valid: Any
-    iterations: tuple[IterationReport, ...]
-    converged: bool
-    b_over_h: float
-    init_coverage: float = 1.0
-    init_filled: float = 0.0
-    failed_tiles: tuple[str, ...] = ()
-    node_quality: dict[str, Any] = attrs.field(factory=dict)
-    filled: Any = None
-    nodes: dict[str, Any] = attrs.field(factory=dict)
-
-
-def _grids(
-    left: Sensor, right: Sensor, init_dem: DEM, settings: IORSettings
-) -> tuple[OrthoGrid, OrthoGrid, int]:
-    """DEM grid (posting) and ortho grid (``k`` ortho pixels per node), aligned, covering the
-    area both images see. Refuses (before allocating anything) grids too large or too small
-    for the common footprint."""
-    from affine import Affine
-
-    from carto.framework.imaging.preparation import ground_sampling_m
-    from carto.framework.raster.images import MIN_IMAGE_PX
-
-    h_mid = float(np.nanmedian(init_dem.heights))
-    posting = float(settings.posting_m)
-    res = settings.ortho_res_m
-    if res is None:
-        sampling = {
-            side: ground_sampling_m(s, h_mid) for side, s in (("left", left), ("right", right))
-        }
-        for side, value in sampling.items():
-            if not (np.isfinite(value) and value > 0.0):
-                raise InputError(
-                    f"dem: the centre of the {side} image does not locate on the ground at "
-                    f"{h_mid:.0f} m (its model gives no ground sampling there: a model outside "
-                    "its validity domain, or not this image's?)"
-                )
-        res = max(sampling.values())
-    k = max(1, round(posting / res))
-    crs = settings.crs
-    if crs is None:  # the UTM zone of the two footprints' centre
-        crs = footprint_box([left, right], init_dem)[0]
-    _, (la, ba, ra, ta) = footprint_box([left], init_dem, crs)
-    _, (lb, bb, rb, tb) = footprint_box([right], init_dem, crs)
-    box = (max(la, lb), max(ba, bb), min(ra, rb), min(ta, tb))
-    if not (box[0] < box[2] and box[1] < box[3]):
-        raise InputError("dem: the two images do not overlap on the ground")
-    width, height = box[2] - box[0], box[3] - box[1]
-    size = f"{width:.0f} x {height:.0f} m"
-    if 2.0 * posting > min(width, height):
-        raise InputError(
-            f"{option_label('posting_m')} {posting:g} m is larger than the images' common "
-            f"footprint ({size}) allows: a DEM needs at least 2 x 2 nodes"
-        )
-    check_grid_size(
-        width,
-        height,
-        posting,
-        what="ior",
-        option="posting_m (--posting)",
-        max_cells=settings.max_cells,
-    )
-    o_rows, o_cols = check_grid_size(
-        width,
-        height,
-        posting / k,
-        what="ior",
-        option="ortho_res_m (--ortho-res)",
-        max_cells=settings.max_cells,
-    )
-    if min(o_rows, o_cols) < MIN_IMAGE_PX:
-        raise InputError(
-            f"{option_label('ortho_res_m')} {posting / k:g} m gives {o_cols} x {o_rows} "
-            f"ortho pixels "
-            f"over the images' common footprint ({size}); matching needs at least "
-            f"{MIN_IMAGE_PX} x {MIN_IMAGE_PX}"
-        )
-    dem_grid = OrthoGrid.covering(
-        [], init_dem, posting, crs=crs, bounds=box, max_cells=settings.max_cells
-    )
-    t = dem_grid.transform
-    ortho_grid = OrthoGrid(
-        dem_grid.crs,
-        Affine(t.a / k, 0.0, t.c, 0.0, t.e / k, t.f),
-        (dem_grid.shape[0] * k, dem_grid.shape[1] * k),
-    )
-    return dem_grid, ortho_grid, k
-
-
-def base_direction(
-    left: Sensor, right: Sensor, lon: float, lat: float, h: float
-) -> tuple[float, FloatArray]:
-    """``(B/H, unit (east, north))`` at a ground point: ``t_R - t_L``, the horizontal
-    displacement between the two lines of sight per metre of height (``t``: of length
-    ``tan theta``), its length and direction. A DEM too high shifts a detail in the right
-    ortho-image against the left one along this direction."""
-    from carto.framework.geometry import frames
-
-    e_n_u = frames.enu_basis(lon, lat)
-    t = []
-    for s in (left, right):
-        line, sample = s.ground_to_image(lon, lat, h)
-        lo, la = s.image_to_ground(line, sample, h + 100.0)
-        d = frames.geodetic_to_ecef(lo, la, h + 100.0) - frames.geodetic_to_ecef(lon, lat, h)
-        t.append((e_n_u @ np.ravel(d))[:2] / 100.0)
-    base = t[1] - t[0]
-    length = float(np.linalg.norm(base))
-    return length, base / length
-
-
-def b_over_h(left: Sensor, right: Sensor, lon: float, lat: float, h: float) -> float:
-    """Base-to-height ratio at a ground point (:func:`base_direction`)."""
-    return base_direction(left, right, lon, lat, h)[0]
-
-
-class TileFailure(InputError):
-    """Tiles of an iteration failed after their retries (the cause of the first, and how
-    many)."""
-
-
-def _tile_plan(
-    sensors: tuple[Sensor, Sensor], grid: OrthoGrid, heights: FloatArray, tile_n: int
-) -> list[tuple[slice, slice]]:
-    """The tiles (node slices) that both images see: each tile's nodes sampled on an 9 x 9
-    lattice (edges included) at the starting heights; tiles beyond the common footprint get
-    no task."""
-    n_r, n_c = grid.shape
-    tiles = [
-        (slice(r, min(n_r, r + tile_n)), slice(c, min(n_c, c + tile_n)))
-        for r in range(0, n_r, tile_n)
-        for c in range(0, n_c, tile_n)
-    ]
-    rr, cc, owner = [], [], []
-    for k, (rows, cols) in enumerate(tiles):
-        r = np.unique(np.linspace(rows.start, rows.stop - 1, 9).round().astype(int))
-        c = np.unique(np.linspace(cols.start, cols.stop - 1, 9).round().astype(int))
-        gr, gc = np.meshgrid(r, c, indexing="ij")
-        rr.append(gr.ravel())
-        cc.append(gc.ravel())
-        owner.append(np.full(gr.size, k))
-    rows_all, cols_all, who = np.concatenate(rr), np.concatenate(cc), np.concatenate(owner)
-    lon, lat = grid.lonlat(rows_all, cols_all)
-    seen = seen_by_both(sensors, lon, lat, heights[rows_all, cols_all])
-    keep = np.zeros(len(tiles), bool)
-    keep[np.unique(who[seen])] = True
-    if not keep.any():  # let matching say what is wrong
-        keep[:] = True
-    return [t for t, k in zip(tiles, keep, strict=True) if k]
-
-
-def _run_tiles(scheduler: Any, tasks: list[Any], desc: str, keys: list[str]) -> list[Any]:
-    """Run tile tasks on a :class:`~carto.framework.parallel.engine.TileEngine` (with its
-    progress bar) or on any callable scheduler (results in order)."""
-    run = getattr(scheduler, "run", None)
-    if run is not None:
-        return list(run(tasks, desc=desc, keys=keys))
-    return list(scheduler(tasks))
 
 
 @contextlib.contextmanager
@@ -398,18 +180,27 @@ def refine_dem(
         space = Workspace(folder)
         state = space.load(dem_grid.shape)
         if state is None:
+            # the initial DEM on the final grid: its coverage checked, its voids counted
             start = starting_surface(init_dem, dem_grid, (left, right), s.min_init_coverage)
-            if progress and start.filled > 0.0:
-                progress(
-                    f"initial DEM {init_dem.name}: {100.0 * start.filled:.1f} % of the "
-                    "footprint filled (voids)"
-                )
+            say_filled(progress, init_dem, start)
             facts = {"init_coverage": start.coverage, "init_filled": start.filled}
-            state = RunState(1, start.heights, (0.0, 0.0), (), facts)
+            stages = coarse_stages(
+                images, (left, right), init_dem, s, dem_grid.crs, k, folder, engine, matcher,
+                progress, keep_failed_tiles,
+            )  # fmt: skip
+            if stages is None:  # no coarse stage: from the initial DEM
+                state = RunState(1, start.heights, (0.0, 0.0), (), facts)
+            else:
+                start_dem, guess, reports, search = stages
+                start = starting_surface(start_dem, dem_grid, (left, right), 0.0)
+                bound = None if search is None else search_on(search, dem_grid, 1)
+                facts["coarse_reports"] = [attrs.asdict(r) for r in reports]
+                facts["start_refined"] = True
+                state = RunState(1, start.heights, guess, (), facts, bound)
             space.begin(state)
         elif progress:
             progress(f"resuming at iteration {state.iteration} from {folder}")
-        result = _iterate(
+        result = iterate(
             images,
             (left, right),
             dem_grid,
@@ -423,6 +214,11 @@ def refine_dem(
             progress,
             keep_failed_tiles,
         )
+        coarse = [IterationReport(**r) for r in state.facts.get("coarse_reports", ())]
+        every = [
+            attrs.evolve(r, iteration=i + 1) for i, r in enumerate(coarse + list(result.iterations))
+        ]
+        result = attrs.evolve(result, iterations=tuple(every))
         if not kept:  # the temporary folder goes: read the layers now
             result = attrs.evolve(
                 result,
@@ -433,192 +229,3 @@ def refine_dem(
                 node_quality={k: np.asarray(v) for k, v in result.node_quality.items()},
             )
         return result
-
-
-def _iterate(
-    images: tuple[Any, Any],
-    sensors: tuple[Sensor, Sensor],
-    dem_grid: OrthoGrid,
-    ortho_grid: OrthoGrid,
-    k: int,
-    s: IORSettings,
-    state: RunState,
-    space: Workspace,
-    engine: Any,
-    matcher: Matcher | None,
-    progress: Callable[[str], None] | None,
-    keep_failed_tiles: bool,
-) -> IORResult:
-    """The iterations of :func:`refine_dem` from ``state`` on."""
-    from carto.framework.raster.tiled_layer import TiledLayer, TilePiece, piece_path
-
-    left, right = sensors
-    heights = state.heights
-    n_r, n_c = dem_grid.shape
-    c_lon, c_lat = dem_grid.lonlat(n_r / 2, n_c / 2)
-    bh, base_en = base_direction(
-        left, right, float(c_lon), float(c_lat), float(np.nanmedian(heights))
-    )
-    base_rc = np.array([-base_en[1], base_en[0]])  # (row, col) of the north-up grid
-    tile_n = max(16, s.tile_px // k)
-    overlap_n = max(2, -(-s.overlap_px // k))
-    plan = _tile_plan((left, right), dem_grid, heights, tile_n)
-    keys = [f"tile {rows.start // tile_n},{cols.start // tile_n}" for rows, cols in plan]
-    reports = [IterationReport(**r) for r in state.reports]
-    converged = False
-    guess = state.guess
-    failed: list[str] = []
-    iteration = state.iteration
-    while True:
-        t0 = time.perf_counter()
-        current = heights
-        levels = (
-            s.refine_levels if reports and reports[-1].median_abs_mismatch_px < 2.0 else s.levels
-        )
-        job = TileJob(
-            images,
-            (left, right),
-            space.heights_path(iteration),
-            dem_grid,
-            k,
-            overlap_n,
-            s,
-            levels,
-            guess,
-            matcher,
-            (float(np.nanmin(current)), float(np.nanmax(current))),
-            space.iteration_dir(iteration),
-            (float(base_rc[0]), float(base_rc[1])),
-            smoothing_variance_factor(s.smoothing_nodes, iteration - 1, s.window, k),
-        )
-        tasks = [functools.partial(run_tile, job, rows, cols) for rows, cols in plan]
-        outcomes = _run_tiles(engine, tasks, f"IOR iteration {iteration}", keys)
-        failed = [str(o) for o in outcomes if isinstance(o, TaskFailure)]
-        if failed and not keep_failed_tiles:
-            raise TileFailure(
-                f"ior: {len(failed)} of {len(plan)} tiles failed in iteration {iteration} "
-                f"({failed[0]})"
-            )
-        # the grids of the coordinator: heights in float64, offsets in float32 (what the
-        # tiles measured to a hundredth of a pixel), the rest as masks
-        new = np.full(dem_grid.shape, np.nan)
-        d_row = np.full(dem_grid.shape, np.nan, np.float32)
-        d_col = np.full(dem_grid.shape, np.nan, np.float32)
-        covered = np.zeros(dem_grid.shape, bool)
-        for (rows, cols), outcome in zip(plan, outcomes, strict=True):
-            if isinstance(outcome, TaskFailure):
-                continue
-            arrays = tile_arrays(outcome, NODE_LAYERS)
-            new[rows, cols] = arrays["new_height"]
-            d_row[rows, cols] = arrays["d_row_px"]
-            d_col[rows, cols] = arrays["d_col_px"]
-            covered[rows, cols] = arrays["covered"]
-        matched = np.isfinite(d_row) & covered
-        # the mismatch a height change removes: along the base; across it, what the
-        # relative orientation leaves (reported, and the next search starts from it)
-        m_row, m_col = d_row[matched], d_col[matched]
-        del d_row, d_col
-        b_row, b_col = float(base_rc[0]), float(base_rc[1])  # float32 products
-        along = m_row * b_row + m_col * b_col
-        across = m_col * b_row - m_row * b_col
-        med = float(np.median(np.abs(along))) if along.size else float("nan")
-        across_px = float(np.median(across)) if across.size else float("nan")
-        del m_row, m_col, along, across
-        if matched.any():  # the across-base offset stays; the along-base one the DEM removes
-            guess = (-across_px * float(base_rc[1]), across_px * float(base_rc[0]))
-        pct = 100.0 * float(matched.sum()) / max(int(covered.sum()), 1)
-        # converged: the mismatch is below the threshold, or it no longer improves (what
-        # is left is the matching noise, which no height change removes)
-        stalled = (
-            bool(reports) and med > (1.0 - s.min_improvement) * reports[-1].median_abs_mismatch_px
-        )
-        done = bool(matched.any() and (med < s.threshold_px or stalled))
-        if done or iteration > s.max_iterations:
-            converged = done
-            reports.append(
-                IterationReport(iteration, med, pct, 0.0, across_px, time.perf_counter() - t0)
-            )
-            if progress:
-                progress(
-                    f"iteration {iteration}: median mismatch {med:.3f} px along the base, "
-                    f"{pct:.1f} % matched" + (" (converged)" if done else " (last)")
-                )
-            break
-        heights, _ = regularise(current, new, s)
-        change = np.abs(heights - current)[covered]
-        med_change = float(np.median(change)) if change.size else 0.0
-        reports.append(
-            IterationReport(iteration, med, pct, med_change, across_px, time.perf_counter() - t0)
-        )
-        if progress:
-            progress(
-                f"iteration {iteration}: median mismatch {med:.3f} px along the base, "
-                f"{pct:.1f} % matched, median DEM change {med_change:.2f} m"
-            )
-        iteration += 1
-        space.begin(
-            RunState(
-                iteration,
-                heights,
-                guess,
-                tuple(attrs.asdict(r) for r in reports),
-                state.facts,
-            )
-        )
-    # the last iteration's tiles hold the orthos made on the final DEM, its matching (ortho
-    # grid: k pixels per node) and the points per node (DEM grid)
-    finished = [
-        (rows, cols)
-        for (rows, cols), outcome in zip(plan, outcomes, strict=True)
-        if not isinstance(outcome, TaskFailure)
-    ]
-
-    def tiled(name: str, scale: int, shape: tuple[int, int], dtype: Any, fill: Any) -> Any:
-        pieces = [
-            TilePiece(
-                piece_path(space.iteration_dir(iteration), rows.start, cols.start),
-                name,
-                rows.start * scale,
-                cols.start * scale,
-                ((rows.stop - rows.start) * scale, (cols.stop - cols.start) * scale),
-            )
-            for rows, cols in finished
-        ]
-        return TiledLayer.of(shape, pieces, dtype, fill)
-
-    layers = {
-        name: tiled(name, k, ortho_grid.shape, np.float32, float("nan"))
-        for name in ORTHO_LAYERS
-        if name != "valid"
-    }
-    layers["valid"] = tiled("valid", k, ortho_grid.shape, bool, False)
-    node_quality = {
-        name: tiled(name, 1, dem_grid.shape, np.float32, 0.0 if name == "count" else np.nan)
-        for name in NODE_QUALITY
-    }
-    # heights where the last iteration measured and in the holes it encloses; none beyond
-    failed_nodes = np.zeros(dem_grid.shape, bool)
-    for (rows, cols), outcome in zip(plan, outcomes, strict=True):
-        if isinstance(outcome, TaskFailure):
-            failed_nodes[rows, cols] = True
-    footprint = node_footprint(matched, covered, failed_nodes)
-    final = np.where(footprint.has_height, heights, np.nan)
-    dem = DEM.from_array(final, dem_grid.transform, dem_grid.crs.to_wkt(), vertical=ELLIPSOID)
-    return IORResult(
-        dem,
-        dem_grid,
-        ortho_grid,
-        layers["ortho_left"],
-        layers["ortho_right"],
-        layers["score"],
-        layers["valid"],
-        tuple(reports),
-        converged,
-        bh,
-        init_coverage=float(state.facts.get("init_coverage", 1.0)),
-        init_filled=float(state.facts.get("init_filled", 0.0)),
-        failed_tiles=tuple(failed),
-        node_quality=node_quality,
-        filled=footprint.filled,
-        nodes=footprint.counts(),
-    )

@@ -20,6 +20,7 @@ _FLAGS = {
     "max_iterations": "--max-iterations",
     "tile_px": "--tile-size",
     "subpixel_steps": "--subpixel-steps",
+    "coarse_stages": "--coarse-stages",
 }
 """The ``carto dem`` option of each setting that has one (named in the messages)."""
 
@@ -121,6 +122,11 @@ class IORSettings:
         subpixel_steps: least-squares steps that refine the matcher's offsets along the base
             (:func:`carto.framework.matching.precision.refine_along_base`; 0: the matcher's
             own sub-pixel offsets).
+        coarse_stages, coarse_iterations: coarse-to-fine: before the final grid, stages on
+            the images reduced ``2**c`` times (``c = coarse_stages .. 1``; block means) with
+            grid and ortho-images as many times coarser, at most ``coarse_iterations`` each,
+            each starting from the one before (0: every iteration at the final resolution).
+            The final stage then starts close (its first search is ``refine_levels``).
         smoothing_nodes: sigma of the Gaussian that regularises the height changes, nodes
             (default: a third of the matching window, at least one node,
             :meth:`smoothing_for`: the window sets how far a measurement's error reaches,
@@ -155,6 +161,8 @@ class IORSettings:
     refine_levels: int = attrs.field(default=3, converter=_integer("refine_levels", 1, 12))
     min_score: float = attrs.field(default=0.5, converter=_number("min_score", -1.0, 1.0))
     subpixel_steps: int = attrs.field(default=2, converter=_integer("subpixel_steps", 0, 10))
+    coarse_stages: int = attrs.field(default=2, converter=_integer("coarse_stages", 0, 4))
+    coarse_iterations: int = attrs.field(default=3, converter=_integer("coarse_iterations", 1, 20))
     smoothing_nodes: float | None = attrs.field(
         default=None, converter=_optional_number("smoothing_nodes", 0.0)
     )

@@ -16,7 +16,7 @@ from carto.framework.imaging.ortho_grid import OrthoGrid
 from carto.framework.raster.dem import DEM, cubic_sample
 from carto.framework.raster.dem_measures import fill_voids
 
-__all__ = ["StartingSurface", "seen_by_both", "starting_surface"]
+__all__ = ["StartingSurface", "seen_by_both", "starting_surface", "values_on_grid"]
 
 FloatArray = NDArray[np.float64]
 
@@ -78,16 +78,16 @@ def _posting_m(dem: DEM) -> float:
     return max(dx, dy)
 
 
-def _on_grid(dem: DEM, grid: OrthoGrid) -> FloatArray:
+def values_on_grid(dem: DEM, grid: OrthoGrid, *, smooth: bool = True) -> FloatArray:
     """The DEM's heights at every node of ``grid`` (NaN off the DEM), block by block of rows
     (memory of the result only): bilinear, or from a DEM more than twice as coarse as the
     grid, cubic convolution (:func:`~carto.framework.raster.dem.cubic_sample`: continuous
-    slope). A kink of bilinear heights at a coarse DEM's cell edges (SRTM's 90 m cells on a
-    1 m grid) would outlive the iterations as a seam in the refined DEM. Where the cubic
-    height is missing (a void among its 4 x 4 nodes) or wild (a node of 1e30), the bilinear
-    one stays."""
+    slope; bilinear everywhere without ``smooth``). A kink of bilinear heights at a coarse
+    DEM's cell edges (SRTM's 90 m cells on a 1 m grid) would outlive the iterations as a
+    seam in the refined DEM. Where the cubic height is missing (a void among its 4 x 4
+    nodes) or wild (a node of 1e30), the bilinear one stays."""
     n_r, n_c = grid.shape
-    cubic = _posting_m(dem) > 2.0 * abs(grid.transform.a)
+    cubic = smooth and _posting_m(dem) > 2.0 * abs(grid.transform.a)
     out = np.empty((n_r, n_c))
     for r0 in range(0, n_r, _BLOCK_ROWS):
         rows, cols = np.mgrid[r0 : min(n_r, r0 + _BLOCK_ROWS), 0:n_c]
@@ -117,7 +117,7 @@ def starting_surface(
         InputError: the initial DEM gives a height at less than ``min_coverage`` of the
             images' common footprint (mostly void, or a tile of another place).
     """
-    raw = _on_grid(init_dem, grid)
+    raw = values_on_grid(init_dem, grid)
     covered = np.isfinite(raw)
     step = max(1, math.ceil(math.sqrt(raw.size / _FOOTPRINT_SAMPLES)))
     pick = (slice(None, None, step), slice(None, None, step))
@@ -145,7 +145,7 @@ def starting_surface(
         lon_e, lat_e = grid.lonlat(edge_r, edge_c)
         bounds = (float(lon_e.min()), float(lat_e.min()), float(lon_e.max()), float(lat_e.max()))
         filled_dem, _ = fill_voids(init_dem, bounds)
-        heights = np.where(covered, raw, _on_grid(filled_dem, grid))
+        heights = np.where(covered, raw, values_on_grid(filled_dem, grid))
         still = ~np.isfinite(heights)
         if still.any():  # beyond the initial DEM: fill on the grid itself
             from rasterio.fill import fillnodata

@@ -19,7 +19,11 @@ from carto.framework.geometry.sensor import Sensor
 from carto.framework.imaging.ortho import orthorectify
 from carto.framework.imaging.ortho_grid import OrthoGrid
 from carto.framework.matching.base import DenseSettings, Matcher
-from carto.framework.matching.precision import refine_along_base
+from carto.framework.matching.precision import (
+    levels_for_reach,
+    limit_along_base,
+    refine_along_base,
+)
 from carto.framework.raster.dem import DEM, ELLIPSOID
 from carto.framework.raster.tiled_layer import piece_path
 from carto.ior.height_precision import node_sigma_m
@@ -124,6 +128,7 @@ def refine_tile(
     h_range: tuple[float, float] | None = None,
     base: tuple[float, float] | None = None,
     variance_factor: float = 1.0,
+    search_px: FloatArray | None = None,
 ) -> TileResult:
     """One tile of one iteration: orthos on the current DEM, dense matching, intersection.
 
@@ -137,7 +142,10 @@ def refine_tile(
     (:mod:`carto.ior.rays`). ``base``: the stereo base, ``(d_row, d_col)`` of the ortho
     grid, for matchers that search along it. ``variance_factor``: the share of a node's
     measurement variance the regularised updates left in the current DEM
-    (:func:`carto.ior.height_precision.smoothing_variance_factor`).
+    (:func:`carto.ior.height_precision.smoothing_variance_factor`). ``search_px``: the whole
+    grid's per-node bound on the offset along the base from the guess, ortho pixels (NaN:
+    none; None: none anywhere): the matcher's pyramid is no deeper than the tile's bounds
+    need, and matches beyond their node's bound are refused.
     """
 
     n_r, n_c = dem_grid.shape
@@ -153,15 +161,22 @@ def refine_tile(
         sub.crs, Affine(t.a / k, 0.0, t.c, 0.0, t.e / k, t.f), ((r1 - r0) * k, (c1 - c0) * k)
     )
     ortho = [orthorectify(img, s, ogrid, dem) for img, s in zip(images, sensors, strict=True)]
+    depth = settings.levels if levels is None else levels
+    bound = None
+    if search_px is not None:  # per pixel: its node's bound
+        nodes = np.asarray(search_px[r0:r1, c0:c1], np.float32)
+        bound = np.repeat(np.repeat(np.where(np.isnan(nodes), np.inf, nodes), k, 0), k, 1)
+        depth = min(depth, levels_for_reach(float(bound.max())))
     field = (matcher or _default_matcher()).match_dense(
         ortho[0],
         ortho[1],
         settings=DenseSettings(
-            levels=settings.levels if levels is None else levels,
+            levels=depth,
             guess=guess,
             window=settings.window,
             min_score=settings.min_score,
             base=base,
+            search_px=bound,
         ),
     )
     direction = base if base is not None else (0.0, 1.0)
@@ -169,6 +184,8 @@ def refine_tile(
         field = refine_along_base(
             ortho[0], ortho[1], field, settings.window, direction, settings.subpixel_steps
         )
+    if bound is not None:
+        field = limit_along_base(field, bound, guess, direction)
     # node offsets: the mean of the valid offsets of the node's k x k ortho pixels
     shape = (r1 - r0, c1 - c0)
     d_row = _block_mean(field.d_row, k, shape)
@@ -242,6 +259,7 @@ class TileJob:
     folder: Path
     base: tuple[float, float] | None = None
     variance_factor: float = 1.0
+    search_path: Path | None = None
 
 
 def run_tile(job: TileJob, rows: slice, cols: slice) -> Path:
@@ -269,6 +287,7 @@ def run_tile(job: TileJob, rows: slice, cols: slice) -> Path:
         h_range=job.h_range,
         base=job.base,
         variance_factor=job.variance_factor,
+        search_px=None if job.search_path is None else np.load(job.search_path, mmap_mode="r"),
     )
     arrays = {name: getattr(result, name) for name in NODE_LAYERS + ORTHO_LAYERS}
     with atomic_output(path) as tmp, open(tmp, "wb") as stream:

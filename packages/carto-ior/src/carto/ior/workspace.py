@@ -5,6 +5,8 @@ Layout::
 
     state.json                  the current iteration, the search guess, the reports so far
     iteration_NN/heights.npy    the DEM grid the iteration starts from (float64)
+    iteration_NN/search_px.npy  its per-node search bound along the base, ortho pixels
+                                (float32, NaN: none; absent: none anywhere)
     iteration_NN/tile_RRRRRR_CCCCCC.npz   one file per finished tile (complete when present)
 
 Every file is written under a temporary name and renamed; ``state.json`` is written after the
@@ -30,7 +32,7 @@ from carto.framework.files.documents import write_json_atomic
 
 __all__ = ["RunState", "Workspace"]
 
-STATE_VERSION = 2
+STATE_VERSION = 3
 
 
 @attrs.frozen(eq=False)
@@ -42,6 +44,7 @@ class RunState:
     guess: tuple[float, float]
     reports: tuple[dict[str, Any], ...]
     facts: dict[str, Any]
+    search_px: NDArray[np.float32] | None = None
 
 
 @attrs.frozen
@@ -56,6 +59,9 @@ class Workspace:
     def heights_path(self, iteration: int) -> Path:
         return self.iteration_dir(iteration) / "heights.npy"
 
+    def search_path(self, iteration: int) -> Path:
+        return self.iteration_dir(iteration) / "search_px.npy"
+
     @property
     def state_path(self) -> Path:
         return self.folder / "state.json"
@@ -68,6 +74,9 @@ class Workspace:
         folder.mkdir(parents=True)
         with atomic_output(folder / "heights.npy") as tmp, open(tmp, "wb") as stream:
             np.save(stream, np.asarray(state.heights, np.float64))
+        if state.search_px is not None:
+            with atomic_output(folder / "search_px.npy") as tmp, open(tmp, "wb") as stream:
+                np.save(stream, np.asarray(state.search_px, np.float32))
         write_json_atomic(
             self.state_path,
             {
@@ -93,6 +102,8 @@ class Workspace:
             doc = json.loads(self.state_path.read_text())
             iteration = int(doc["iteration"])
             heights = np.load(self.heights_path(iteration))
+            found = self.search_path(iteration)
+            search = np.load(found) if found.is_file() else None
             guess = tuple(float(v) for v in doc["guess"])
             reports = tuple(dict(r) for r in doc["reports"])
             facts = dict(doc.get("facts", {}))
@@ -106,4 +117,4 @@ class Workspace:
                 f"{self.folder}: the work folder is of another run (DEM grid "
                 f"{heights.shape}, this run {tuple(grid_shape)}); run without --resume"
             )
-        return RunState(iteration, heights, guess, reports, facts)  # type: ignore[arg-type]
+        return RunState(iteration, heights, guess, reports, facts, search)  # type: ignore[arg-type]

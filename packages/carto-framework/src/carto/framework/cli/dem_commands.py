@@ -144,6 +144,7 @@ def cmd_dem(args: argparse.Namespace) -> int:
         ("max_iterations", args.max_iterations),
         ("tile_px", args.tile_size),
         ("subpixel_steps", args.subpixel_steps),
+        ("coarse_stages", args.coarse_stages),
     ):
         if value is not None:
             options[key] = value
@@ -277,6 +278,13 @@ def add_dem(sub: argparse._SubParsersAction) -> None:
         metavar="N",
         help="least-squares steps that refine the matcher's offsets along the stereo base "
         "(default 2; 0: the matcher's own sub-pixel offsets)",
+    )
+    p.add_argument(
+        "--coarse-stages",
+        type=int,
+        metavar="N",
+        help="coarse-to-fine: first iterations on images and ortho-images reduced 2**N, ..., "
+        "4, 2 times, then the final resolution (default 2; 0: all at the final resolution)",
     )
     p.add_argument(
         "--workers",

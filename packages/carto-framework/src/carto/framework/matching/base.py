@@ -161,6 +161,11 @@ class DenseSettings:
             base on two ortho-images: across it, the offset is the guess), normalised; None
             when unknown. Matchers that search along a line (``"sgm"``) need it; 2-D
             searches (``"ncc"``) ignore it.
+        search_px: per pixel of the left image, the largest offset along ``base`` from the
+            guess that can be right, pixels (inf: no bound); None: the levels' reach
+            everywhere. A matcher may narrow its search with it (``"sgm"`` sizes its
+            disparity range by its largest finite value); the caller refuses matches beyond
+            it (:func:`~carto.framework.matching.precision.limit_along_base`).
     """
 
     levels: int = attrs.field(default=5)
@@ -173,6 +178,7 @@ class DenseSettings:
         default=(0.0, 0.0), converter=lambda g: (float(g[0]), float(g[1]))
     )
     base: tuple[float, float] | None = attrs.field(default=None, converter=_unit_or_none)
+    search_px: NDArray[np.float32] | None = attrs.field(default=None, eq=False)
 
     def __attrs_post_init__(self) -> None:
         _check_int(self.levels, "levels", 1)

@@ -32,6 +32,8 @@ from numpy.typing import NDArray
 from carto.framework.matching.base import OffsetField
 
 __all__ = [
+    "levels_for_reach",
+    "limit_along_base",
     "offset_sigma_px",
     "refine_along_base",
     "resample_at_offsets",
@@ -201,3 +203,35 @@ def refine_along_base(
 
 def _usable(field: OffsetField) -> NDArray[np.bool_]:
     return np.asarray(field.valid, bool) & np.isfinite(field.d_row) & np.isfinite(field.d_col)
+
+
+def levels_for_reach(reach_px: float, radius: int = 2) -> int:
+    """The fewest pyramid levels whose reach ``radius * (2**levels - 1)`` is at least
+    ``reach_px`` (at least 1)."""
+    if not np.isfinite(reach_px) or reach_px <= radius:
+        return 1 if np.isfinite(reach_px) else 12
+    return int(np.ceil(np.log2(reach_px / radius + 1.0)))
+
+
+def limit_along_base(
+    field: OffsetField,
+    search_px: NDArray,
+    guess: tuple[float, float],
+    direction: tuple[float, float],
+) -> OffsetField:
+    """``field`` without the matches whose offset along ``direction`` (unit ``(d_row,
+    d_col)``) from ``guess`` exceeds the pixel's bound ``search_px`` (inf: no bound): a
+    per-pixel search range enforced for any matcher, whatever its own search."""
+    along = (field.d_row - np.float32(guess[0])) * np.float32(direction[0])
+    along = along + (field.d_col - np.float32(guess[1])) * np.float32(direction[1])
+    with np.errstate(invalid="ignore"):
+        beyond = np.abs(along) > np.asarray(search_px, np.float32)
+    if not beyond.any():
+        return field
+    nan = np.float32(np.nan)
+    return attrs.evolve(
+        field,
+        d_row=np.where(beyond, nan, field.d_row),
+        d_col=np.where(beyond, nan, field.d_col),
+        valid=field.valid & ~beyond,
+    )

@@ -21,8 +21,9 @@ An offset across the base that the caller's guess lacks is measured first, as th
 sparse NCC matches (least-squares sub-pixel) on a grid of the image.
 
 The search range is the caller's reach, ``radius * (2**levels - 1)`` pixels each way along the
-base (:class:`~carto.framework.matching.base.DenseSettings`), rounded up to OpenCV's multiples
-of 16 disparities. Sparse points (:meth:`SGMMatcher.match_points`) are read from the dense field
+base (:class:`~carto.framework.matching.base.DenseSettings`), or the largest of the caller's
+per-pixel bounds (``search_px``) when smaller, rounded up to OpenCV's multiples of 16
+disparities. Sparse points (:meth:`SGMMatcher.match_points`) are read from the dense field
 of the two images, so they suit nearly co-registered images only (ortho-images of one grid).
 """
 
@@ -209,6 +210,10 @@ class SGMMatcher(Matcher):
         base = s.base if s.base is not None else (0.0, 1.0)
         rows, cols = a.shape
         reach = s.radius * (2**s.levels - 1)
+        if s.search_px is not None:  # the caller's per-pixel bound: no wider than needed
+            bound = np.asarray(s.search_px, np.float32)[np.isfinite(a)]
+            if bound.size and np.isfinite(bound).all():
+                reach = min(reach, max(2, math.ceil(float(bound.max()))))
         n_disp = 16 * max(1, math.ceil(2 * reach / 16))
         m, width, height = _rotation(a.shape, base)
         g_row, g_col = _guess_across(a, b, s, base)

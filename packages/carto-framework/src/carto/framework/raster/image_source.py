@@ -28,6 +28,7 @@ from carto.framework.raster.images import MIN_IMAGE_PX, check_image
 __all__ = [
     "ArrayImage",
     "BandedImage",
+    "DecimatedImage",
     "ImageSource",
     "RasterImage",
     "as_image_source",
@@ -200,6 +201,48 @@ class BandedImage(ImageSource):
                 out[a0 - rows.start : a1 - rows.start] = band[a0 - b0 : a1 - b0, cols]
             except (OSError, ValueError) as exc:
                 raise InputError(f"{self.band_path(b0)}: cannot read band: {exc}") from None
+        return out
+
+
+@attrs.frozen
+class DecimatedImage(ImageSource):
+    """``source`` reduced ``factor`` times: pixel ``(i, j)`` is the mean of the source's
+    ``factor x factor`` block at ``(i factor, j factor)`` (NaN if any of them is NaN; a
+    partial block at the right or bottom edge has no pixel). A window reads only the source
+    window under it, a strip of rows at a time: memory of the window and one strip. With
+    :class:`~carto.framework.geometry.decimated.DecimatedSensor` it is the reduced image of
+    a coarse-to-fine stage."""
+
+    source: ImageSource
+    factor: int = attrs.field()
+
+    @factor.validator
+    def _check_factor(self, _attribute: attrs.Attribute, value: int) -> None:
+        if isinstance(value, bool) or int(value) != value or value < 1:
+            raise InputError(f"image decimation factor must be a whole number >= 1, got {value!r}")
+
+    _STRIP_ROWS = 128  # output rows per read of the source
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        n_r, n_c = self.source.shape
+        return (n_r // self.factor, n_c // self.factor)
+
+    @property
+    def name(self) -> str:
+        return f"{self.source.name} (1/{self.factor})"
+
+    def read(self, rows: slice, cols: slice) -> NDArray[np.float32]:
+        rows, cols = _slices((rows, cols), self.shape)
+        f = self.factor
+        h, w = rows.stop - rows.start, cols.stop - cols.start
+        out = np.empty((h, w), np.float32)
+        for r0 in range(0, h, self._STRIP_ROWS):
+            r1 = min(h, r0 + self._STRIP_ROWS)
+            block = self.source[
+                (rows.start + r0) * f : (rows.start + r1) * f, cols.start * f : cols.stop * f
+            ]
+            out[r0:r1] = block.reshape(r1 - r0, f, w, f).mean(axis=(1, 3), dtype=np.float64)
         return out
 
 

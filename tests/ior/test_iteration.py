@@ -1,0 +1,42 @@
+"""The per-node search bound an update leaves, and the bound at work in a run."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from carto.ior.iteration import SEARCH_MARGIN_PX, next_search_px
+from carto.ior.refine import IORSettings, refine_dem
+
+
+def test_the_bound_is_twice_the_change_in_pixels_where_matched():
+    change = np.array([[1.0, -2.0], [0.5, 3.0]])
+    matched = np.array([[True, True], [False, True]])
+    first = next_search_px(None, change, matched, px_per_m=0.25)
+    np.testing.assert_allclose(
+        first[matched], 2 * np.abs(change[matched]) * 0.25 + SEARCH_MARGIN_PX
+    )
+    assert np.isnan(first[1, 0])  # never matched: no bound
+    second = next_search_px(first, np.zeros_like(change), ~matched, px_per_m=0.25)
+    assert second[1, 0] == SEARCH_MARGIN_PX  # matched now, and nothing moved
+    np.testing.assert_array_equal(second[matched], first[matched])  # kept where unmatched
+
+
+def test_a_run_searches_within_its_bounds_after_the_first_update(hilly):
+    """From the SRTM-like start at one resolution: the first iteration searches the pyramid's
+    whole reach, the later ones within a few pixels of each node, and they match as much."""
+    from carto.framework.raster.dem import DEM
+    from carto.framework.raster.images import read_raster
+
+    truth = hilly.truth_sensors()
+    init = DEM.open(hilly.path("init_dem.tif"))
+    images = [truth[n].prepare_raw(read_raster(hilly.raster(n)), init) for n in ("aft", "fore")]
+    result = refine_dem(
+        *images, truth["aft"], truth["fore"], init,
+        IORSettings(posting_m=10.0, max_iterations=3, coarse_stages=0, threshold_px=1e-3),
+    )  # fmt: skip
+    reports = result.iterations
+    assert np.isnan(reports[0].median_search_px)
+    assert len(reports) >= 3
+    for r in reports[1:]:
+        assert SEARCH_MARGIN_PX <= r.median_search_px < 6.0
+        assert r.matched_percent > 0.9 * reports[0].matched_percent
