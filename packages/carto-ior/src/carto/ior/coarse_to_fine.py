@@ -93,7 +93,7 @@ def coarse_stages(
             space.begin(state)
         stage = iterate(
             coarse_images, coarse_sensors, grid, o_grid, k_f, cs, state, space, engine,
-            matcher, progress, keep_failed_tiles, factor=f,
+            matcher, progress, keep_failed_tiles, factor=f, apply_last=True,
         )  # fmt: skip
         ran = True
         start_dem = DEM.from_array(

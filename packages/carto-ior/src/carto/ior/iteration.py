@@ -227,9 +227,12 @@ def iterate(
     progress: Callable[[str], None] | None,
     keep_failed_tiles: bool,
     factor: int = 1,
+    apply_last: bool = False,
 ) -> IORResult:
     """The iterations of :func:`refine_dem` from ``state`` on (``factor``: the stage's
-    ortho-images are that many times coarser than the final ones)."""
+    ortho-images are that many times coarser than the final ones; ``apply_last``: the last
+    iteration's measurement updates the surface too, for a stage whose result is a start,
+    not a product: ``surface`` is then one update ahead of ``dem``)."""
     from carto.framework.raster.tiled_layer import TiledLayer, TilePiece, piece_path
 
     left, right = sensors
@@ -329,7 +332,7 @@ def iterate(
         )
         last = done or iteration > s.max_iterations
         med_change = 0.0
-        if not last:
+        if not last or (apply_last and matched.any()):
             heights, _ = regularise(current, new, s)
             search = next_search_px(search, heights - current, matched, px_per_m)
             change = np.abs(heights - current)[covered]

@@ -124,8 +124,9 @@ class IORSettings:
             own sub-pixel offsets).
         coarse_stages, coarse_iterations: coarse-to-fine: before the final grid, stages on
             the images reduced ``2**c`` times (``c = coarse_stages .. 1``; block means) with
-            grid and ortho-images as many times coarser, at most ``coarse_iterations`` each,
-            each starting from the one before (0: every iteration at the final resolution).
+            grid and ortho-images as many times coarser, ``coarse_iterations`` updates each
+            plus one from the stage's last measurement, each starting from the one before
+            (0: every iteration at the final resolution).
             The final stage then starts close (its first search is ``refine_levels``).
         smoothing_nodes: sigma of the Gaussian that regularises the height changes, nodes
             (default: a third of the matching window, at least one node,
@@ -162,7 +163,7 @@ class IORSettings:
     min_score: float = attrs.field(default=0.5, converter=_number("min_score", -1.0, 1.0))
     subpixel_steps: int = attrs.field(default=2, converter=_integer("subpixel_steps", 0, 10))
     coarse_stages: int = attrs.field(default=2, converter=_integer("coarse_stages", 0, 4))
-    coarse_iterations: int = attrs.field(default=3, converter=_integer("coarse_iterations", 1, 20))
+    coarse_iterations: int = attrs.field(default=1, converter=_integer("coarse_iterations", 1, 20))
     smoothing_nodes: float | None = attrs.field(
         default=None, converter=_optional_number("smoothing_nodes", 0.0)
     )
