@@ -40,3 +40,25 @@ def test_a_run_searches_within_its_bounds_after_the_first_update(hilly):
     for r in reports[1:]:
         assert SEARCH_MARGIN_PX <= r.median_search_px < 6.0
         assert r.matched_percent > 0.9 * reports[0].matched_percent
+
+
+def test_the_final_resolution_updates_at_least_once_after_a_coarse_stage(hilly):
+    """Even when the first mismatch at the final resolution is under the threshold (here a
+    threshold no mismatch misses), the final grid gets one update of its own: a DEM left at
+    the coarse stage's surface would lack the fine relief (and have no predicted sigma)."""
+    from carto.framework.raster.dem import DEM
+    from carto.framework.raster.images import read_raster
+
+    truth = hilly.truth_sensors()
+    init = DEM.open(hilly.path("init_dem.tif"))
+    images = [truth[n].prepare_raw(read_raster(hilly.raster(n)), init) for n in ("aft", "fore")]
+    result = refine_dem(
+        *images, truth["aft"], truth["fore"], init,
+        IORSettings(posting_m=10.0, coarse_stages=1, threshold_px=10.0),
+    )  # fmt: skip
+    final = [r for r in result.iterations if r.factor == 1]
+    assert len(final) == 2
+    assert final[0].median_abs_dem_change_m > 0.0
+    assert result.converged
+    sigma = np.asarray(result.node_quality["sigma_m"])
+    assert np.nanmedian(sigma) > 0.0

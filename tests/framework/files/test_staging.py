@@ -15,6 +15,7 @@ from carto.framework.errors import InputError, UsageError
 from carto.framework.files.staging import (
     MARKER,
     check_output_file,
+    note_interrupt,
     require_complete_output,
     staged_folder,
 )
@@ -78,6 +79,25 @@ def test_a_failed_or_interrupted_run_leaves_the_earlier_output_as_it_was(
     assert snapshot(out) == before
     assert siblings(out) == []
     assert any("left as it was" in note for note in info.value.__notes__)
+
+
+def test_an_interrupt_lost_on_its_way_still_keeps_the_earlier_output(tmp_path: Path) -> None:
+    """A signal handler recorded Ctrl-C, but its KeyboardInterrupt was swallowed (Python ignores
+    exceptions in ctypes callbacks, e.g. llvmlite's while numba compiles) and the run went
+    on to the end: the output is not put in place."""
+    out = tmp_path / "out"
+    write_run(out, {"a.txt": "old"})
+    before = snapshot(out)
+    note_interrupt("SIGINT")
+    try:
+        with pytest.raises(KeyboardInterrupt, match="SIGINT"):
+            write_run(out, {"a.txt": "new"})
+    finally:
+        note_interrupt(None)
+    assert snapshot(out) == before
+    assert siblings(out) == []
+    write_run(out, {"a.txt": "new"})  # forgotten: the next run goes through
+    assert (out / "a.txt").read_text() == "new"
 
 
 def test_a_failed_first_run_creates_nothing(tmp_path: Path) -> None:

@@ -141,7 +141,7 @@ class IORGenerator(DEMGenerator):
     ) -> DEMProduct:
         """``images``: the left and right prepared raw images (2-D arrays);
         ``sensors``: their models. Options: ``init_dem`` (a :class:`DEM`, required),
-        ``matcher`` (a matcher with dense matching, default ``"ncc"``), ``progress``
+        ``matcher`` (a matcher with dense matching, default ``"sgm"``), ``progress``
         (callable taking a line), ``scheduler``, ``work_dir``, ``keep_failed_tiles`` (see
         :func:`refine_dem`) and the fields of
         :class:`IORSettings` (``posting_m``, ``ortho_res_m``, ``crs``, ``max_iterations``

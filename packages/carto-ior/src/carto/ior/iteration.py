@@ -323,7 +323,10 @@ def iterate(
         stalled = (
             bool(reports) and med > (1.0 - s.min_improvement) * reports[-1].median_abs_mismatch_px
         )
-        done = bool(matched.any() and (med < s.threshold_px or stalled))
+        # a stage that starts from a coarser one updates at least once at its own resolution:
+        # a small median mismatch there says the coarse relief is right, not the fine one
+        first_here = not reports and bool(state.facts.get("start_refined"))
+        done = bool(matched.any() and (med < s.threshold_px or stalled)) and not first_here
         bounded = None if search is None else search[covered]
         med_search = (
             float(np.nanmedian(bounded))

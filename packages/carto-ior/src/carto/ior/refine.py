@@ -7,9 +7,12 @@ the stereo base. The loop:
 
 1. orthorectify both images on the current DEM (:func:`carto.framework.imaging.ortho.orthorectify`);
 2. match the two ortho-images densely with the chosen matcher's ``match_dense`` (the
-   matcher extension point, ``carto dem --matcher``; the default ``"ncc"`` is
-   :func:`carto.framework.matching.disparity.dense_offsets`: pyramid, left-right check,
-   sub-pixel, score and validity), its offsets then refined by least squares along the base
+   matcher extension point, ``carto dem --matcher``; the default ``"sgm"`` is
+   :class:`carto.framework.matching.sgm_matcher.SGMMatcher`: OpenCV's semi-global matching
+   along the base, left-right check, NCC confidence; ``"ncc"`` the NCC pyramid of
+   :func:`carto.framework.matching.disparity.dense_offsets`), searching each node within a
+   bound its last height change sets (:func:`carto.ior.iteration.next_search_px`), its
+   offsets then refined by least squares along the base
    (:func:`carto.framework.matching.precision.refine_along_base`, ``subpixel_steps``);
 3. turn each mismatch into a height by intersecting the two image rays at every matched
    ortho pixel (the tile's local ray model, :mod:`carto.ior.rays`), carried to the centre of
@@ -149,8 +152,8 @@ def refine_dem(
             dask cluster, with retries and progress bars; default: this process) or any
             callable. Tasks are pure functions of files, windows and settings
             (:func:`carto.ior.tiles.run_tile`).
-        matcher: the dense matcher of the ortho-images (default: the framework's ``"ncc"``,
-            hierarchical NCC with a left-right check); any matcher with ``match_dense``.
+        matcher: the dense matcher of the ortho-images (default: the framework's ``"sgm"``,
+            semi-global matching along the base); any matcher with ``match_dense``.
         work_dir: the run's work folder (:mod:`carto.ior.workspace`): an iteration's DEM grid
             and tile files; a folder that holds the state of an interrupted run is continued
             from its finished tiles. With a work folder, the ortho-images and matching layers

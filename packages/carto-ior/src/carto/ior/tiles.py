@@ -107,9 +107,9 @@ class TileResult:
 
 
 def _default_matcher() -> Matcher:
-    from carto.framework.matching.ncc_matcher import NCCMatcher
+    from carto.framework.matching.sgm_matcher import SGMMatcher
 
-    return NCCMatcher()
+    return SGMMatcher()
 
 
 def refine_tile(

@@ -86,7 +86,11 @@ def _interrupt_in(exc: BaseException) -> KeyboardInterrupt | None:
 
 
 def _terminate(signum: int, frame: object) -> None:
-    raise KeyboardInterrupt(f"signal {signum}")
+    from carto.framework.files.staging import note_interrupt
+
+    name = signal.Signals(signum).name
+    note_interrupt(name)
+    raise KeyboardInterrupt(name)
 
 
 def _silence_libtiff() -> None:
@@ -116,8 +120,10 @@ def _quiet_libraries(debug: bool) -> Iterator[None]:
     """Library chatter stays off stderr while a command runs: NumPy's RuntimeWarnings (NaN
     arithmetic on voids), GDAL messages that rasterio logs (``_tiffWriteProc`` ...); Carto's
     own warnings are printed as one ``carto: warning:`` line. ``--debug`` shows everything.
-    SIGTERM ends the command as Ctrl-C does (its outputs are cleaned up). Everything is
-    restored afterwards (``main`` may be called in-process)."""
+    SIGTERM ends the command as Ctrl-C does (its outputs are cleaned up); both are also
+    recorded, so that no output is put in place after one even if the interrupt was lost on
+    its way (:func:`~carto.framework.files.staging.note_interrupt`). Everything is restored
+    afterwards (``main`` may be called in-process)."""
     if debug:
         yield
         return
@@ -139,8 +145,13 @@ def _quiet_libraries(debug: bool) -> Iterator[None]:
         warnings.showwarning = show
         for logger in loggers:
             logger.setLevel(logging.CRITICAL)
-        with contextlib.suppress(ValueError):  # not in the main thread: leave SIGTERM alone
+        previous_int = None
+        from carto.framework.files.staging import note_interrupt
+
+        note_interrupt(None)  # this command's interrupts only
+        with contextlib.suppress(ValueError):  # not in the main thread: leave signals alone
             previous = signal.signal(signal.SIGTERM, _terminate)
+            previous_int = signal.signal(signal.SIGINT, _terminate)
         try:
             yield
         finally:
@@ -148,6 +159,8 @@ def _quiet_libraries(debug: bool) -> Iterator[None]:
                 logger.setLevel(level)
             if previous is not None:
                 signal.signal(signal.SIGTERM, previous)
+            if previous_int is not None:
+                signal.signal(signal.SIGINT, previous_int)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

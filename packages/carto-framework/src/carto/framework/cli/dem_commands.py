@@ -313,9 +313,10 @@ def add_dem(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--matcher",
-        default="ncc",
+        default="sgm",
         metavar="NAME",
-        help="dense matcher the generator uses (default ncc; carto plugins --kind matcher)",
+        help="dense matcher the generator uses (default sgm, semi-global along the stereo base; "
+        "ncc, the NCC pyramid; carto plugins --kind matcher)",
     )
     p.add_argument("--reference", metavar="DEM", help="reference DEM to evaluate against")
     p.add_argument(

@@ -37,12 +37,28 @@ from carto.framework.files.atomic import current_umask
 __all__ = [
     "MARKER",
     "check_output_file",
+    "note_interrupt",
     "require_complete_output",
     "staged_folder",
 ]
 
 MARKER = ".carto-output.json"
 """The file a complete output folder holds: the command that wrote it, when, and its files."""
+
+_INTERRUPTS: list[str] = []
+"""Interrupts this process received (:func:`note_interrupt`): an output is never put in place
+after one, even when the KeyboardInterrupt it raised was swallowed on the way (Python ignores
+exceptions raised inside a ctypes callback, such as llvmlite's while numba compiles)."""
+
+
+def note_interrupt(what: str | None) -> None:
+    """Record that the process was interrupted (a signal handler calls it before raising);
+    ``None`` forgets every interrupt (a command run in-process starts afresh)."""
+    if what is None:
+        _INTERRUPTS.clear()
+    else:
+        _INTERRUPTS.append(what)
+
 
 _STAGING = ".carto-staging-"
 _OLD = ".carto-old-"
@@ -212,6 +228,8 @@ def staged_folder(
     stage = _make_stage(destination)
     try:
         yield stage
+        if _INTERRUPTS:  # interrupted, but the KeyboardInterrupt got lost on its way
+            raise KeyboardInterrupt(_INTERRUPTS[-1])
         marker = {
             "command": command,
             "completed_utc": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),

@@ -17,7 +17,8 @@ interface serves the two uses Carto has:
 The settings are the caller's statement of what it needs (window size, search reach, score
 threshold, a left-right check); a matcher uses those that apply to its method and says in its
 description which it ignores. ``carto adjust --matcher NAME`` and ``carto dem --matcher NAME``
-choose the matcher from the registry (default ``"ncc"``).
+choose the matcher from the registry (default ``"ncc"`` for tie points, ``"sgm"`` for dense
+DEM matching).
 
 Conventions
     * Image coordinates are continuous ``(line, sample)``, the centre of the first pixel at

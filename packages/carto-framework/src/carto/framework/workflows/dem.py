@@ -1,6 +1,6 @@
 """The DEM workflow behind ``carto dem``: a stereo pair (two images with models, or a scene
 folder with its adjusted models) -> a DEM generator (chosen by name, or the default the images'
-sensor types name) with a matcher (default ``ncc``) -> ``dem.tif``,
+sensor types name) with a matcher (default ``sgm``) -> ``dem.tif``,
 ``ortho_left.tif``, ``ortho_right.tif``, ``quality.tif``, ``report.json`` and a hillshade
 (and, against a reference DEM, the accuracy and a difference map).
 
@@ -306,7 +306,7 @@ def dem_product(
     geoid: str | os.PathLike[str] | None = None,
     init_height_m: float | None = None,
     generator: str | None = None,
-    matcher: str = "ncc",
+    matcher: str = "sgm",
     reference: str | os.PathLike[str] | None = None,
     vertical: str = "ellipsoid",
     options: Mapping[str, Any] | None = None,
