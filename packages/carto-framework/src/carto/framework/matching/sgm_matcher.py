@@ -154,11 +154,10 @@ class SGMMatcher(Matcher):
         p1, p2: SGM's penalties for a disparity change of one pixel and of more, per pixel
             of the block (multiplied by ``block**2``, as OpenCV's documentation advises).
         uniqueness: OpenCV's uniqueness ratio, percent.
-        subpixel: ``"ncc"`` (default) or ``"sgbm"`` (see the module docstring). Measured
-            with IOR (session notes of #17): on simulated Cartosat-1 pairs (true models,
-            10 m posting) NMAD 0.38 / 0.33 m with ``"ncc"`` against 0.68 / 0.71 m with
-            ``"sgbm"``; on the Reunion Pleiades pair at 0.5 m against s2p's DSM (itself
-            made by SGM), 0.55 m against 0.53 m.
+        subpixel: ``"ncc"`` (default) or ``"sgbm"`` (see the module docstring). In one-off
+            IOR runs of session 9 without the least-squares steps (#17 notes), ``"ncc"``
+            halved the DEM's NMAD on simulated pairs and matched ``"sgbm"`` on Reunion;
+            ``carto dem`` refines either by least squares along the base afterwards.
     """
 
     name = "sgm"
