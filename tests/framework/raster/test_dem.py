@@ -551,7 +551,7 @@ def test_locate_requires_ellipsoidal_heights_and_handles_shapes():
 def test_cubic_sample_reproduces_quadratics_and_keeps_voids():
     """Keys' cubic convolution is exact on quadratics (the analytic truth) away from the
     edges, passes through the nodes, and is NaN where a node of its 4 x 4 is void."""
-    from carto.framework.raster.dem import bilinear_sample, cubic_sample
+    from carto.framework.raster.grid_sampling import bilinear_sample, cubic_sample
 
     rows, cols = np.mgrid[0:20, 0:30].astype(float)
 

@@ -13,8 +13,9 @@ from numpy.typing import NDArray
 from carto.framework.errors import InputError
 from carto.framework.geometry.sensor import Sensor
 from carto.framework.imaging.ortho_grid import OrthoGrid
-from carto.framework.raster.dem import DEM, cubic_sample
+from carto.framework.raster.dem import DEM
 from carto.framework.raster.dem_measures import fill_voids
+from carto.framework.raster.grid_sampling import cubic_sample
 
 __all__ = ["StartingSurface", "seen_by_both", "starting_surface", "values_on_grid"]
 
@@ -81,7 +82,7 @@ def _posting_m(dem: DEM) -> float:
 def values_on_grid(dem: DEM, grid: OrthoGrid, *, smooth: bool = True) -> FloatArray:
     """The DEM's heights at every node of ``grid`` (NaN off the DEM), block by block of rows
     (memory of the result only): bilinear, or from a DEM more than twice as coarse as the
-    grid, cubic convolution (:func:`~carto.framework.raster.dem.cubic_sample`: continuous
+    grid, cubic convolution (:func:`~carto.framework.raster.grid_sampling.cubic_sample`: continuous
     slope; bilinear everywhere without ``smooth``). A kink of bilinear heights at a coarse
     DEM's cell edges (SRTM's 90 m cells on a 1 m grid) would outlive the iterations as a
     seam in the refined DEM. Where the cubic height is missing (a void among its 4 x 4

@@ -161,6 +161,7 @@ def _quiet_libraries(debug: bool) -> Iterator[None]:
                 signal.signal(signal.SIGTERM, previous)
             if previous_int is not None:
                 signal.signal(signal.SIGINT, previous_int)
+            note_interrupt(None)  # nothing carries over to later work in this process
 
 
 def main(argv: Sequence[str] | None = None) -> int:

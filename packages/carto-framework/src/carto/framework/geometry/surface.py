@@ -14,7 +14,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from carto.framework.arrays import as_float_arrays
-from carto.framework.raster.dem import DEM, bilinear_sample
+from carto.framework.raster.dem import DEM
+from carto.framework.raster.grid_sampling import bilinear_sample
 
 if TYPE_CHECKING:  # any sensor: used through its methods only
     from carto.framework.geometry.sensor import Sensor

@@ -192,6 +192,8 @@ class TileEngine:
                             results[k] = future.result()
                         future.release()
                         bar.advance()
+                if pending:  # held during the last wait: an interruption all the same
+                    raise KeyboardInterrupt
             except BaseException:
                 self.client.cancel(futures)
                 raise

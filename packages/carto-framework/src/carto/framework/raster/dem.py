@@ -45,6 +45,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from carto.framework.arrays import as_float_arrays
 from carto.framework.errors import InputError
+from carto.framework.raster.grid_sampling import EDGE_TOL_PX, bilinear_sample
 from carto.framework.raster.vertical_reference import (
     EGM96,
     ELLIPSOID,
@@ -61,7 +62,6 @@ FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
 Bounds = tuple[float, float, float, float]
 
-_EDGE_TOL_PX = 1e-9  # tolerance on "inside the span of pixel centres", in pixels
 
 MIN_HEIGHT_M = -1000.0
 MAX_HEIGHT_M = 10000.0
@@ -145,75 +145,6 @@ def _wrap_lon(lon: FloatArray, start: float) -> FloatArray:
     """Longitudes shifted by multiples of 360 into ``[start, start + 360)`` (start - 1e-12)."""
     start = start - 1e-12
     return start + np.mod(lon - start, 360.0)
-
-
-def _cells(
-    shape: tuple[int, int], row: FloatArray, col: FloatArray
-) -> tuple[BoolArray, NDArray[np.intp], NDArray[np.intp], FloatArray, FloatArray]:
-    """For fractional centre indices: inside the span of the centres (1e-9 px tolerance),
-    the cell's first row and column (clipped to the grid) and the fractions within it."""
-    n_rows, n_cols = shape
-    inside = (
-        (row >= -_EDGE_TOL_PX)
-        & (row <= n_rows - 1 + _EDGE_TOL_PX)
-        & (col >= -_EDGE_TOL_PX)
-        & (col <= n_cols - 1 + _EDGE_TOL_PX)
-    )
-    row = np.where(inside, row, 0.0)
-    col = np.where(inside, col, 0.0)
-    r0 = np.clip(np.floor(row), 0, max(n_rows - 2, 0)).astype(np.intp)
-    c0 = np.clip(np.floor(col), 0, max(n_cols - 2, 0)).astype(np.intp)
-    return inside, r0, c0, np.clip(row - r0, 0.0, 1.0), np.clip(col - c0, 0.0, 1.0)
-
-
-def _keys_weights(t: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-    """Keys' (1981) cubic convolution weights (a = -1/2) of the nodes -1, 0, 1, 2 for a
-    fraction ``t`` in [0, 1]: they sum to 1 and reproduce quadratics exactly."""
-    t2, t3 = t * t, t * t * t
-    return (
-        0.5 * (-t3 + 2.0 * t2 - t),
-        0.5 * (3.0 * t3 - 5.0 * t2 + 2.0),
-        0.5 * (-3.0 * t3 + 4.0 * t2 + t),
-        0.5 * (t3 - t2),
-    )
-
-
-def cubic_sample(grid: FloatArray, row: FloatArray, col: FloatArray) -> FloatArray:
-    """Cubic convolution (Keys 1981, a = -1/2: interpolating, continuous slope) of ``grid``
-    at fractional centre indices (0 = first centre); the nodes beyond the edge repeat the
-    edge's. NaN where :func:`bilinear_sample` is NaN or a node of the 4 x 4 is NaN."""
-    n_rows, n_cols = grid.shape
-    inside, r0, c0, fr, fc = _cells(grid.shape, row, col)
-    w_r, w_c = _keys_weights(fr), _keys_weights(fc)
-    out = np.zeros(np.shape(row))
-    for i, wr in zip(range(-1, 3), w_r, strict=True):
-        r = np.clip(r0 + i, 0, n_rows - 1)
-        across = np.zeros(np.shape(row))
-        for j, wc in zip(range(-1, 3), w_c, strict=True):
-            across += wc * grid[r, np.clip(c0 + j, 0, n_cols - 1)]
-        out += wr * across
-    return np.where(inside, out, np.nan)
-
-
-def bilinear_sample(grid: FloatArray, row: FloatArray, col: FloatArray) -> FloatArray:
-    """Bilinear interpolation of ``grid`` at fractional centre indices (0 = first centre).
-
-    NaN outside ``[0, n-1]`` (with a 1e-9 px tolerance) and where a neighbour is NaN.
-    """
-    n_rows, n_cols = grid.shape
-    inside, r0, c0, fr, fc = _cells(grid.shape, row, col)
-    dr = 1 if n_rows > 1 else 0
-    dc = 1 if n_cols > 1 else 0
-    flat = grid.ravel()
-    index = r0 * n_cols + c0
-    v00 = flat[index]
-    v01 = flat[index + dc]
-    v10 = flat[index + dr * n_cols]
-    v11 = flat[index + dr * n_cols + dc]
-    top = v00 * (1.0 - fc) + v01 * fc
-    bottom = v10 * (1.0 - fc) + v11 * fc
-    out = top * (1.0 - fr) + bottom * fr
-    return np.where(inside, out, np.nan)
 
 
 def _fmt_bounds(bounds: Sequence[float]) -> str:
@@ -728,7 +659,7 @@ class DEM:
         lat = np.concatenate([lat, np.full_like(t, north), south + t * (north - south)])
         row, col = self.lonlat_to_pixel(lon, lat)
         r_min, r_max, c_min, c_max = row.min(), row.max(), col.min(), col.max()
-        tol = _EDGE_TOL_PX
+        tol = EDGE_TOL_PX
         if not (r_min >= -tol and c_min >= -tol and r_max <= n_rows - 1 + tol) or not (
             c_max <= n_cols - 1 + tol
         ):

@@ -68,7 +68,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from carto.framework.arrays import as_float_arrays
 from carto.framework.errors import InputError
-from carto.framework.raster.dem import DEM, bilinear_sample, to_affine
+from carto.framework.raster.dem import DEM, to_affine
+from carto.framework.raster.grid_sampling import bilinear_sample
 from carto.framework.simulation.cover import Parcels, make_roads, paint_roads
 from carto.framework.simulation.fields import LatticeField, pyramid_noise
 from carto.framework.simulation.grid_windows import centre_bounds
