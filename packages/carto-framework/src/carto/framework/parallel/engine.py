@@ -295,26 +295,29 @@ when a task ends its large arrays."""
 
 @contextlib.contextmanager
 def _local_cluster(n: int) -> Iterator[Any]:
-    import dask
-    from distributed import Client, LocalCluster
-
-    for name in ("distributed", "tornado", "bokeh"):
-        logging.getLogger(name).setLevel(logging.ERROR)
     # an interruption while the cluster starts would leave it half made (distributed then
-    # fails on its own state): it is held until the cluster is up, then raised
-    with _signals_deferred() as pending, dask.config.set(_NANNY_ENVIRON):
-        cluster = LocalCluster(
-            n_workers=n,
-            threads_per_worker=1,
-            processes=True,
-            dashboard_address=None,
-            silence_logs=logging.CRITICAL,
-            env={
-                **_WORKER_ENV,
-                "GDAL_CACHEMAX": os.environ.get("GDAL_CACHEMAX", str(GDAL_CACHE_MB)),
-            },
-        )
-        client = Client(cluster, set_as_default=False)
+    # fails on its own state), and one that lands while distributed is imported can be lost
+    # (a finaliser running then swallows it): both are held until the cluster is up, then
+    # raised
+    with _signals_deferred() as pending:
+        import dask
+        from distributed import Client, LocalCluster
+
+        for name in ("distributed", "tornado", "bokeh"):
+            logging.getLogger(name).setLevel(logging.ERROR)
+        with dask.config.set(_NANNY_ENVIRON):
+            cluster = LocalCluster(
+                n_workers=n,
+                threads_per_worker=1,
+                processes=True,
+                dashboard_address=None,
+                silence_logs=logging.CRITICAL,
+                env={
+                    **_WORKER_ENV,
+                    "GDAL_CACHEMAX": os.environ.get("GDAL_CACHEMAX", str(GDAL_CACHE_MB)),
+                },
+            )
+            client = Client(cluster, set_as_default=False)
     try:
         if pending:
             raise KeyboardInterrupt
