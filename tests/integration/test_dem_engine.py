@@ -94,8 +94,18 @@ def test_killed_then_resumed_gives_the_same_dem(
         env=env,
     )
     deadline = time.monotonic() + 300
+
+    def at_second_final_iteration() -> bool:
+        # the state is written after the iteration's grid: wait for the state itself (the
+        # grid alone, killed before the state, would still say iteration 1)
+        try:
+            state = json.loads((work / "generator" / "state.json").read_text())
+        except (OSError, ValueError):
+            return False
+        return state["iteration"] >= 2
+
     try:
-        while not list(work.glob("generator/iteration_02/heights.npy")):
+        while not at_second_final_iteration():
             assert proc.poll() is None, "the run ended before it could be killed"
             assert time.monotonic() < deadline
             time.sleep(0.02)
