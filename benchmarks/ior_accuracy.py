@@ -12,10 +12,9 @@
 * ``reunion``: the Pleiades pair (RPC), from a constant height (2320 m), 1 m posting, 0.5 m
   orthos, against ``reference_dsm.tif`` (s2p's DSM) over its valid pixels: median, NMAD,
   completeness (DEM valid) and the fraction of nodes actually measured in the last iteration.
-* ``ventoux``: the Pleiades crops (full-scene RPCs in ``*.geom``), from SRTM ``N44E005.hgt``
-  with the EGM96 geoid, 1 m posting: median difference to SRTM and the roughness of each
-  (RMS of the Laplacian, m per node^2, on the same grid: a sharper DEM has more relief
-  detail), with both hillshades as PNG.
+
+Ventoux against SRTM is ``benchmarks/dem_ventoux.py`` (#17; the ``ventoux`` entry of the
+session-4 JSON came from an earlier version of this script).
 
 Usage: ``python benchmarks/ior_accuracy.py [--seeds 0 1 2 3 4] [--size 1000 4000] [--data
 ../shared/data] [--work DIR] [--error-size NAME=VALUE ...] [--no-true-models]
@@ -35,7 +34,7 @@ import numpy as np
 
 from carto.framework import get_registry
 from carto.framework.evaluation.dem_accuracy import dem_accuracy
-from carto.framework.raster.dem import DEM, Geoid
+from carto.framework.raster.dem import DEM
 from carto.framework.simulation.plan import SimulationOptions
 from carto.framework.workflows.adjust import adjust_product
 from carto.framework.workflows.dem import StereoInputs, dem_product
@@ -185,50 +184,6 @@ def reunion(data: Path, work: Path) -> dict:
     }
 
 
-def _roughness(heights: np.ndarray) -> float:
-    lap = heights[1:-1, 1:-1] * 4 - heights[:-2, 1:-1] - heights[2:, 1:-1]
-    lap = lap - heights[1:-1, :-2] - heights[1:-1, 2:]
-    return float(np.sqrt(np.nanmean(lap**2)))
-
-
-def ventoux(data: Path, work: Path) -> dict:
-    from carto.framework.raster.quicklook import hillshade_png
-
-    d = data / "pleiades-ventoux-pair"
-    out = work / "ventoux-dem"
-    geoid = data / "geoid" / "egm96_15.gtx"
-    rep = dem_product(
-        out,
-        StereoInputs(left=d / "left_image.tif", right=d / "right_image.tif", sensor_type="rpc"),
-        init_dem=d / "N44E005.hgt",
-        geoid=geoid,
-        options={"posting_m": 1.0},
-        quiet=True,
-    )
-    ours = DEM.open(out / "dem.tif")
-    srtm = DEM.open(d / "N44E005.hgt", geoid=Geoid.open(geoid))
-    rows, cols = np.mgrid[0 : ours.shape[0], 0 : ours.shape[1]]
-    import pyproj
-
-    t = ours.transform
-    x, y = t.c + t.a * (cols + 0.5), t.f + t.e * (rows + 0.5)
-    lon, lat = pyproj.Transformer.from_crs(ours.crs, "EPSG:4326", always_xy=True).transform(x, y)
-    srtm_on_grid = srtm.height(lon, lat)
-    diff = ours.heights - srtm_on_grid
-    srtm_dem = DEM.from_array(srtm_on_grid, ours.transform, ours.crs)
-    srtm_png = srtm_dem.write(work / "ventoux-srtm-on-grid.tif")
-    hillshade_png(srtm_png, out / "srtm_hillshade.png", "SRTM (EGM96 -> ellipsoid), same grid")
-    return {
-        "median_difference_to_srtm_m": float(np.nanmedian(diff)),
-        "within_5_m": bool(abs(np.nanmedian(diff)) <= 5.0),
-        "roughness_ours": _roughness(ours.heights),
-        "roughness_srtm": _roughness(srtm_on_grid),
-        "measured_percent_last_iteration": rep["iterations"][-1]["matched_percent"],
-        "iterations": len(rep["iterations"]),
-        "hillshades": [str(out / "dem_hillshade.png"), str(out / "srtm_hillshade.png")],
-    }
-
-
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4])
@@ -248,7 +203,7 @@ def main() -> int:
     parser.add_argument(
         "--no-true-models", action="store_true", help="skip the runs with the true models"
     )
-    parser.add_argument("--simulated-only", action="store_true", help="skip Reunion and Ventoux")
+    parser.add_argument("--simulated-only", action="store_true", help="skip Reunion")
     args = parser.parse_args()
     work = args.work or Path(tempfile.mkdtemp(prefix="carto-ior-bench-"))
     work.mkdir(parents=True, exist_ok=True)
@@ -262,7 +217,6 @@ def main() -> int:
     result["simulated_summary"] = summary(result["simulated"])
     if args.data.is_dir() and not args.simulated_only:
         result["reunion"] = reunion(args.data, work)
-        result["ventoux"] = ventoux(args.data, work)
     result["work"] = str(work)
     json.dump(
         result,

@@ -20,17 +20,10 @@ from carto.framework.raster.dem import DEM, ELLIPSOID
 from carto.ior.grids import ior_grids
 from carto.ior.iteration import IterationReport, iterate
 from carto.ior.settings import IORSettings
-from carto.ior.start import StartingSurface, starting_surface, values_on_grid
+from carto.ior.start import starting_surface, values_on_grid
 from carto.ior.workspace import RunState, Workspace
 
 FloatArray = NDArray[np.float64]
-
-
-def say_filled(progress: Callable[[str], None] | None, dem: DEM, start: StartingSurface) -> None:
-    if progress and start.filled > 0.0:
-        progress(
-            f"initial DEM {dem.name}: {100.0 * start.filled:.1f} % of the footprint filled (voids)"
-        )
 
 
 def coarse_stages(
@@ -51,7 +44,8 @@ def coarse_stages(
     DecimatedImage`, block means: no aliasing) with their models
     (:class:`~carto.framework.geometry.decimated.DecimatedSensor`), on a grid ``f`` times
     coarser with ortho-images ``f`` times coarser, from ``c = s.coarse_stages`` down to 1,
-    each for at most ``s.coarse_iterations`` and starting from the one before; a stage the
+    each with ``s.coarse_iterations`` updates plus one from its last measurement, starting
+    from the one before; a stage the
     footprint is too small for is skipped. Each stage keeps its work in ``folder /
     "stage_1_F"`` (resumable). Returns the last stage's surface (a DEM for the final grid to
     start from), its offset across the base in final ortho pixels, the stages' reports and

@@ -62,7 +62,7 @@ from carto.framework.errors import InputError
 from carto.framework.geometry.sensor import Sensor
 from carto.framework.matching.base import Matcher
 from carto.framework.raster.dem import DEM
-from carto.ior.coarse_to_fine import coarse_stages, say_filled, search_on
+from carto.ior.coarse_to_fine import coarse_stages, search_on
 from carto.ior.grids import ior_grids as _grids
 from carto.ior.iteration import (
     IORResult,
@@ -74,7 +74,7 @@ from carto.ior.iteration import (
 )
 from carto.ior.regularise import regularise
 from carto.ior.settings import IORSettings
-from carto.ior.start import StartingSurface, starting_surface
+from carto.ior.start import StartingSurface, initial_coverage, starting_surface
 from carto.ior.tiles import (
     refine_tile,
 )
@@ -184,14 +184,19 @@ def refine_dem(
         state = space.load(dem_grid.shape)
         if state is None:
             # the initial DEM on the final grid: its coverage checked, its voids counted
-            start = starting_surface(init_dem, dem_grid, (left, right), s.min_init_coverage)
-            say_filled(progress, init_dem, start)
-            facts = {"init_coverage": start.coverage, "init_filled": start.filled}
+            cover = initial_coverage(init_dem, dem_grid, (left, right), s.min_init_coverage)
+            if progress and cover.filled > 0.0:
+                progress(
+                    f"initial DEM {init_dem.name}: {100.0 * cover.filled:.1f} % of the "
+                    "footprint filled (voids)"
+                )
+            facts = {"init_coverage": cover.coverage, "init_filled": cover.filled}
             stages = coarse_stages(
                 images, (left, right), init_dem, s, dem_grid.crs, k, folder, engine, matcher,
                 progress, keep_failed_tiles,
             )  # fmt: skip
             if stages is None:  # no coarse stage: from the initial DEM
+                start = starting_surface(init_dem, dem_grid, (left, right), 0.0)
                 state = RunState(1, start.heights, (0.0, 0.0), (), facts)
             else:
                 start_dem, guess, reports, search = stages

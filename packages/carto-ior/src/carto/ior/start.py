@@ -14,10 +14,17 @@ from carto.framework.errors import InputError
 from carto.framework.geometry.sensor import Sensor
 from carto.framework.imaging.ortho_grid import OrthoGrid
 from carto.framework.raster.dem import DEM
-from carto.framework.raster.dem_measures import fill_voids
+from carto.framework.raster.dem_measures import dem_pixel_size_m, fill_voids
 from carto.framework.raster.grid_sampling import cubic_sample
 
-__all__ = ["StartingSurface", "seen_by_both", "starting_surface", "values_on_grid"]
+__all__ = [
+    "InitialCoverage",
+    "StartingSurface",
+    "initial_coverage",
+    "seen_by_both",
+    "starting_surface",
+    "values_on_grid",
+]
 
 FloatArray = NDArray[np.float64]
 
@@ -69,16 +76,6 @@ _FOOTPRINT_SAMPLES = 250_000  # nodes at most on which the footprint and coverag
 _BLOCK_ROWS = 256  # grid rows located at once
 
 
-def _posting_m(dem: DEM) -> float:
-    """The larger node spacing of ``dem``, metres on the ground (degrees at its centre)."""
-    t = dem.transform
-    dx, dy = math.hypot(t.a, t.d), math.hypot(t.b, t.e)
-    if dem.crs.is_geographic:
-        lat = math.radians(t.f + 0.5 * dem.shape[0] * t.e)
-        return max(dx * 111_320.0 * math.cos(lat), dy * 110_574.0)
-    return max(dx, dy)
-
-
 def values_on_grid(dem: DEM, grid: OrthoGrid, *, smooth: bool = True) -> FloatArray:
     """The DEM's heights at every node of ``grid`` (NaN off the DEM), block by block of rows
     (memory of the result only): bilinear, or from a DEM more than twice as coarse as the
@@ -88,7 +85,9 @@ def values_on_grid(dem: DEM, grid: OrthoGrid, *, smooth: bool = True) -> FloatAr
     seam in the refined DEM. Where the cubic height is missing (a void among its 4 x 4
     nodes) or wild (a node of 1e30), the bilinear one stays."""
     n_r, n_c = grid.shape
-    cubic = smooth and _posting_m(dem) > 2.0 * abs(grid.transform.a)
+    dx, dy = dem_pixel_size_m(dem)
+    coarse = max(float(np.max(dx)), float(np.max(dy))) > 2.0 * abs(grid.transform.a)
+    cubic = smooth and coarse
     out = np.empty((n_r, n_c))
     for r0 in range(0, n_r, _BLOCK_ROWS):
         rows, cols = np.mgrid[r0 : min(n_r, r0 + _BLOCK_ROWS), 0:n_c]
@@ -101,6 +100,56 @@ def values_on_grid(dem: DEM, grid: OrthoGrid, *, smooth: bool = True) -> FloatAr
             block = np.where(keep, smooth, block)
         out[r0 : r0 + rows.shape[0]] = block
     return out
+
+
+@attrs.frozen
+class InitialCoverage:
+    """What the initial DEM gives over the images' common footprint (measured on a lattice
+    of at most ``_FOOTPRINT_SAMPLES`` nodes): the share where it has a height
+    (``coverage``), the share that must be filled (``filled``), and the share of the grid's
+    nodes both images see (``footprint``)."""
+
+    coverage: float
+    filled: float
+    footprint: float
+
+
+def initial_coverage(
+    init_dem: DEM,
+    grid: OrthoGrid,
+    sensors: tuple[Sensor, Sensor],
+    min_coverage: float = 0.75,
+) -> InitialCoverage:
+    """How much of the images' common footprint on ``grid`` the initial DEM covers, from a
+    lattice of nodes (the cost does not grow with the grid).
+
+    Raises:
+        InputError: less than ``min_coverage`` (mostly void, or a tile of another place).
+    """
+    n_r, n_c = grid.shape
+    step = max(1, math.ceil(math.sqrt(n_r * n_c / _FOOTPRINT_SAMPLES)))
+    lon_p, lat_p = grid.lonlat(*np.mgrid[0:n_r:step, 0:n_c:step])
+    h_p = init_dem.height(lon_p, lat_p)
+    h_mid = (
+        float(np.nanmedian(h_p))
+        if np.isfinite(h_p).any()
+        else float(np.nanmedian(init_dem.heights))
+    )
+    seen = seen_by_both(sensors, lon_p, lat_p, np.where(np.isfinite(h_p), h_p, h_mid))
+    if not seen.any():  # a sliver: measure over the whole grid
+        seen = np.ones_like(seen)
+    # coverage: the nearest post has a height (bilinear sampling would also lose the ring of
+    # cells around each void, which overstates a void of a coarse DEM)
+    post = _nearest_post_valid(init_dem, lon_p, lat_p)
+    coverage = float(post[seen].mean())
+    if coverage < min_coverage:
+        raise InputError(
+            f"dem: initial DEM {init_dem.name} covers {100.0 * coverage:.0f} % of the images' "
+            f"footprint (at least {100.0 * min_coverage:.0f} % needed: a DEM mostly void, or "
+            "a tile of another place; check the file, or start from --init-height M)"
+        )
+    filled = float((~post & seen).sum()) / max(int(seen.sum()), 1)
+    return InitialCoverage(coverage, filled, float(seen.mean()))
 
 
 def starting_surface(
@@ -118,26 +167,10 @@ def starting_surface(
         InputError: the initial DEM gives a height at less than ``min_coverage`` of the
             images' common footprint (mostly void, or a tile of another place).
     """
+    cover = initial_coverage(init_dem, grid, sensors, min_coverage)
     raw = values_on_grid(init_dem, grid)
     covered = np.isfinite(raw)
-    step = max(1, math.ceil(math.sqrt(raw.size / _FOOTPRINT_SAMPLES)))
-    pick = (slice(None, None, step), slice(None, None, step))
-    lon_p, lat_p = grid.lonlat(*np.mgrid[0 : raw.shape[0] : step, 0 : raw.shape[1] : step])
     h_mid = float(np.nanmedian(raw)) if covered.any() else float(np.nanmedian(init_dem.heights))
-    h_fp = np.where(covered[pick], raw[pick], h_mid)
-    seen = seen_by_both(sensors, lon_p, lat_p, h_fp)
-    if not seen.any():  # a sliver: measure over the whole grid
-        seen = np.ones_like(seen)
-    # coverage: the nearest post has a height (bilinear sampling would also lose the ring of
-    # cells around each void, which overstates a void of a coarse DEM)
-    post = _nearest_post_valid(init_dem, lon_p, lat_p)
-    coverage = float(post[seen].mean())
-    if coverage < min_coverage:
-        raise InputError(
-            f"dem: initial DEM {init_dem.name} covers {100.0 * coverage:.0f} % of the images' "
-            f"footprint (at least {100.0 * min_coverage:.0f} % needed: a DEM mostly void, or "
-            "a tile of another place; check the file, or start from --init-height M)"
-        )
     heights = raw
     if not covered.all():
         n_r, n_c = grid.shape
@@ -158,5 +191,6 @@ def starting_surface(
                 smoothing_iterations=0,
             )
         heights = np.where(np.isfinite(heights), heights, h_mid)
-    filled = float((~post & seen).sum()) / max(int(seen.sum()), 1)
-    return StartingSurface(np.asarray(heights, np.float64), coverage, filled, float(seen.mean()))
+    return StartingSurface(
+        np.asarray(heights, np.float64), cover.coverage, cover.filled, cover.footprint
+    )
