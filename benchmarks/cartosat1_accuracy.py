@@ -51,7 +51,9 @@ def _short(acc: dict) -> dict:
     return {k: round(float(acc[k]), 3) for k in acc if k in KEYS or k.startswith("predicted")}
 
 
-def run_scene(work: Path, seed: int, terrain: str, size: tuple[int, int]) -> dict:
+def run_scene(
+    work: Path, seed: int, terrain: str, size: tuple[int, int], errors: str = "realistic"
+) -> dict:
     scene_dir = work / f"{terrain}-{seed}"
     preset = get_registry().get("scene-preset", "cartosat1-pair")
     t0 = time.perf_counter()
@@ -64,6 +66,7 @@ def run_scene(work: Path, seed: int, terrain: str, size: tuple[int, int]) -> dic
                 size=(int(size[0]), int(size[1])),
                 n_gcps=3,
                 n_checkpoints=50,
+                errors=errors,
             ),
             quiet=True,
         )
@@ -246,6 +249,12 @@ def main() -> int:
     )
     parser.add_argument("--jobs", type=int, default=2, help="scenes run in parallel")
     parser.add_argument(
+        "--errors",
+        choices=("realistic", "full"),
+        default="realistic",
+        help="the scenes' error profile (full: errors no adjuster models, issue 18)",
+    )
+    parser.add_argument(
         "--data", type=Path, default=Path(__file__).resolve().parents[1].parent / "shared" / "data"
     )
     parser.add_argument("--work", type=Path, default=None)
@@ -254,7 +263,9 @@ def main() -> int:
     work.mkdir(parents=True, exist_ok=True)
     cases = [(seed, terrain) for terrain in args.terrains for seed in range(args.seeds)]
     with ProcessPoolExecutor(max_workers=max(1, args.jobs)) as pool:
-        futures = [pool.submit(run_scene, work, s, t, tuple(args.size)) for s, t in cases]
+        futures = [
+            pool.submit(run_scene, work, s, t, tuple(args.size), args.errors) for s, t in cases
+        ]
         runs = []
         for future in futures:
             runs.append(future.result())
@@ -328,6 +339,7 @@ def main() -> int:
         "runs": runs,
         "median": summary,
         "n_runs": len(runs),
+        "errors": args.errors,
         "size_px": args.size,
         "work": str(work),
     }

@@ -37,13 +37,21 @@ from carto.framework.raster.dem import DEM
 from carto.framework.simulation.plan import SimulationOptions
 from carto.framework.workflows.adjust import adjust_product
 
+ERRORS = {"profile": "realistic"}
+"""The scenes' error profile (``--errors``)."""
+
 
 def _simulate(preset: str, folder: Path, seed: int, terrain: str, size: int) -> Path:
     if not (folder / "scene.json").is_file():
         get_registry().get("scene-preset", preset).simulate(
             folder,
             SimulationOptions(
-                seed=seed, terrain=terrain, size=(size, size), n_gcps=2, n_checkpoints=50
+                seed=seed,
+                terrain=terrain,
+                size=(size, size),
+                n_gcps=2,
+                n_checkpoints=50,
+                errors=ERRORS["profile"],
             ),
             quiet=True,
         )
@@ -154,7 +162,14 @@ def main() -> int:
         "--data", type=Path, default=Path(__file__).resolve().parents[1].parent / "shared" / "data"
     )
     parser.add_argument("--work", type=Path, default=None)
+    parser.add_argument(
+        "--errors",
+        choices=("realistic", "full"),
+        default="realistic",
+        help="the scenes' error profile (full: errors no adjuster models, issue 18)",
+    )
     args = parser.parse_args()
+    ERRORS["profile"] = args.errors
     work = args.work or Path(tempfile.mkdtemp(prefix="carto-c2-bench-"))
     work.mkdir(parents=True, exist_ok=True)
     runs = []
@@ -166,6 +181,7 @@ def main() -> int:
     checked = sum(r["tie_points"]["checked_observations"] for r in runs)
     ratios = [r["predicted_sigma_planimetric_m"] / r["rmse_planimetric_m"] for r in runs]
     result: dict = {
+        "errors": args.errors,
         "triplets": runs,
         "median": {
             "rmse_planimetric_m": float(np.median([r["rmse_planimetric_m"] for r in runs])),

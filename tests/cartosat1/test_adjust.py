@@ -61,7 +61,13 @@ def test_combined_shares_one_set_of_body_corrections(setup, adjuster):
     assert priors["camera.aft.align.pitch"] == pytest.approx(math.radians(0.002) * math.sqrt(2))
     assert priors["trajectory.position.along.c0"] == 15.0
     acc = checkpoint_accuracy(result.sensors, check)
-    assert acc["rmse_planimetric_m"] < 3.0
+    # measured (seed 11, 400 x 400 px, one GCP with its realistic error, which sets these
+    # figures): planimetric 0.561 m, height 2.040 m; bounds about 1.4x. The benchmark's median
+    # over 15 full-swath pairs is 1.22 / 0.71 m; the old bound (3 m planimetric, no height)
+    # passed adjusted models without their position bias (2.84 / 3.59 m) or without their
+    # pitch drift (0.56 / 6.06 m)
+    assert acc["rmse_planimetric_m"] < 0.8
+    assert acc["rmse_height_m"] < 3.0
     # one realisation of the GCP error: the prediction is an expectation (the benchmark checks
     # the factor 1.5 over seeds); here it must be of the right size
     pred = predicted_checkpoint_sigma(result, check)
@@ -144,6 +150,10 @@ def test_the_pair_shares_one_position_bias(tmp_path, adjuster):
     without = checkpoint_accuracy(
         adjuster.adjust(scene.sensors(), obs, estimate_position=False).sensors, check
     )
-    assert with_bias["rmse_planimetric_m"] < 0.5
-    assert with_bias["rmse_height_m"] < 0.8
-    assert without["rmse_height_m"] > 3 * with_bias["rmse_height_m"]
+    # measured: planimetric 0.117 m, height 0.356 m with the bias; height 8.44 m (23.7 times)
+    # without. Bounds about 1.4x: the old ones (0.5 / 0.8 m, 3 times) passed the residual
+    # alignment weighted 10 times too tightly (0.499 / 0.778 m), and an engine stopping after
+    # one Gauss-Newton step (without the bias: 3.95 m, 11 times)
+    assert with_bias["rmse_planimetric_m"] < 0.17
+    assert with_bias["rmse_height_m"] < 0.5
+    assert without["rmse_height_m"] > 15 * with_bias["rmse_height_m"]

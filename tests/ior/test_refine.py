@@ -84,8 +84,14 @@ def test_ior_refines_the_coarse_dem(hilly):
     d0 = (init.height(lon, lat) - ref)[np.isfinite(result.dem.heights)]
     rmse, rmse0 = np.sqrt(np.mean(d**2)), np.sqrt(np.mean(d0**2))
     nmad = 1.4826 * np.median(np.abs(d - np.median(d)))
-    assert rmse < rmse0 / 2.0
-    assert nmad < 1.5
+    # measured (true models, hilly, seed 2): RMSE 0.31-0.32 m, 11.0 times below the initial
+    # DEM's 3.49 m, NMAD 0.198 m; seeds 1-5 of this setup: RMSE 0.22-0.34 m, 11-24 times
+    # below, NMAD 0.15-0.20 m. Bounds about 1.3x the worst: the old ones (the benchmark's
+    # targets, NMAD < 1.5 m, RMSE 2x better) passed with the least-squares sub-pixel
+    # refinement switched off (NMAD 0.28 m, RMSE 0.42 m)
+    assert rmse < 0.45
+    assert rmse < rmse0 / 7.0
+    assert nmad < 0.26
     assert result.converged
     assert len(result.iterations) <= 7
     first, last = result.iterations[0], result.iterations[-1]

@@ -55,8 +55,10 @@ def test_earth_fixed_point_has_inertial_velocity_omega_cross_r():
     t = 1e8
     p_ecef = frames.geodetic_to_ecef(10.0, 40.0, 0.0)
     p_eci, v_eci = frames.ecef_to_eci(t, p_ecef, np.zeros(3))
+    omega = frames.EarthOrientation.at(t).rotation_vector_ecef  # about the celestial pole
+    assert np.linalg.norm(omega) == pytest.approx(frames.OMEGA_EARTH_RAD_S, rel=1e-9)
     np.testing.assert_allclose(
-        np.linalg.norm(v_eci), frames.OMEGA_EARTH_RAD_S * np.hypot(p_ecef[0], p_ecef[1]), rtol=1e-12
+        np.linalg.norm(v_eci), np.linalg.norm(np.cross(omega, p_ecef)), rtol=1e-12
     )
     p2, v2 = frames.eci_to_ecef(t, p_eci, v_eci)
     np.testing.assert_allclose(p2, p_ecef, atol=1e-6)
@@ -99,3 +101,29 @@ def test_rotation_vectors():
     # a rotation vector along Z is rot_z
     np.testing.assert_allclose(frames.small_rotation(0, 0, 0.3), frames.rot_z(0.3), atol=1e-15)
     np.testing.assert_allclose(frames.small_rotation(0, 0, 0), np.eye(3), atol=0)
+
+
+def test_inertial_to_earth_fixed_is_astropys_gcrs_to_itrs():
+    """The GCRS -> ITRS rotation against astropy's coordinate transformation (IAU 2006/2000A,
+    UT1 and polar motion from the IERS tables), and the linear-ERA form a trajectory uses
+    against the full chain over two minutes."""
+    from astropy import units as u
+    from astropy.coordinates import GCRS, ITRS, CartesianRepresentation
+    from astropy.time import Time
+    from astropy.utils import iers
+
+    epoch = "2026-03-01T05:18:12Z"
+    t0 = frames.utc_to_j2000_s(epoch)
+    dt = np.array([-60.0, -1.5, 0.0, 37.25, 60.0])
+    v = np.array([1.2e6, -6.1e6, 2.9e6])
+    with iers.conf.set_temp("auto_download", False):
+        t = Time("2026-03-01T05:18:12", scale="utc") + dt * u.s
+        gcrs = GCRS(CartesianRepresentation(*(np.broadcast_to(v, (5, 3)).T * u.m)), obstime=t)
+        itrs = gcrs.transform_to(ITRS(obstime=t)).cartesian.xyz.to_value(u.m).T
+    full = np.einsum("nij,j->ni", frames.eci_to_ecef_matrix(t0 + dt), v)
+    linear = np.einsum("nij,j->ni", frames.EarthOrientation.at(t0).eci_to_ecef_matrix(dt), v)
+    assert np.abs(full - itrs).max() < 1e-4  # metres at 7000 km: 1.4e-11 rad (float J2000 s)
+    assert np.abs(linear - itrs).max() < 2e-3  # precession over 60 s: 5e-10 rad
+    # not the sidereal-angle-only frame: precession since J2000 alone is ~0.36 deg
+    gmst_only = np.einsum("nij,j->ni", frames.rot_z(-frames.gmst_rad(t0 + dt)), v)
+    assert np.abs(gmst_only - itrs).max() > 1e4

@@ -395,3 +395,23 @@ def test_dimap_with_an_unknown_encoding_is_an_input_error(dimap_xml, tmp_path, e
     message = str(err.value)
     assert message.startswith(f"{path}: XML")
     assert "\n" not in message
+
+
+def test_a_misspelt_field_is_refused_and_extensions_are_kept_apart(tmp_path, ancillary_doc):
+    """A misspelt optional field would silently take its default (here: no light-path
+    corrections, 24 lines of Cartosat-2 geometry): refused; ``x_...`` fields are extensions."""
+
+    def misspelt(doc):
+        doc["light_paths"] = doc.pop("light_path")
+
+    assert "light_paths: unknown field" in _refused(tmp_path, ancillary_doc, misspelt)
+    doc = copy.deepcopy(ancillary_doc)
+    doc["x_vendor_note"] = {"anything": 1}
+    assert read_ancillary(_write(tmp_path, doc)).light_path.aberration
+
+
+def test_an_epoch_outside_the_earth_orientation_span_is_refused(tmp_path, ancillary_doc):
+    def year_12(doc):
+        doc["epoch_utc"] = "12"
+
+    assert "epoch_utc: '12' is outside 1960-2100" in _refused(tmp_path, ancillary_doc, year_12)

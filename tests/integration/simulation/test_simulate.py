@@ -64,6 +64,8 @@ def test_scene_folder_has_every_product(cartosat1_scene):
 
 
 def test_checkpoints_lie_on_the_true_dem_and_project_with_the_true_models(cartosat1_scene):
+    """Checkpoint image coordinates come from the reference geometry; the true models (what
+    the images are rendered through, another implementation) must agree to 0.01 px."""
     cp = _checkpoints(cartosat1_scene)
     dem = DEM.open(cartosat1_scene / "truth/dem.tif")
     np.testing.assert_allclose(dem.height(cp["lon_deg"], cp["lat_deg"]), cp["h_m"], atol=0.01)
@@ -71,8 +73,9 @@ def test_checkpoints_lie_on_the_true_dem_and_project_with_the_true_models(cartos
         truth = LineScanner.load(cartosat1_scene / f"truth/{name}.model.json")
         m = cp["image"] == name
         line, sample = truth.ground_to_image(cp["lon_deg"][m], cp["lat_deg"][m], cp["h_m"][m])
-        np.testing.assert_allclose(line, cp["line"][m], atol=1e-6)
-        np.testing.assert_allclose(sample, cp["sample"][m], atol=1e-6)
+        np.testing.assert_allclose(line, cp["line"][m], atol=0.01)
+        np.testing.assert_allclose(sample, cp["sample"][m], atol=0.01)
+        assert np.abs(line - cp["line"][m]).max() > 0.0  # two implementations, not one call
 
 
 def _target_centroids(

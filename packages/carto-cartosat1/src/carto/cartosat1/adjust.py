@@ -26,6 +26,11 @@ the tied adjustment then weights the residual alignment by that calibration's si
 The position bias is estimated too (``estimate_position``, default true): Fore and Aft see the
 ground from different distances, so a position error is not one rotation for both.
 
+Option ``self_calibration`` (a list of ``scale``, ``line_offset``, ``centre_offset``, or a
+mapping of them to a-priori sigmas; off by default: one scene with one GCP cannot separate a
+camera's detector-line offset from its pitch alignment) adds interior corrections per camera
+(:func:`carto.framework.adjustment.priors.with_self_calibration`).
+
 The corrections are weighted by the ancillary data's accuracy
 (:mod:`carto.cartosat1.constants`: attitude bias 0.02 deg, drift 2e-5 deg/s, position 15 m per
 axis); options ``bias_sigma_deg``, ``drift_sigma_deg_s``, ``ephemeris_sigma_m`` and
@@ -45,7 +50,11 @@ from carto.cartosat1.calibration import AlignmentCalibration, load_calibration
 from carto.framework.adjustment.base import Adjuster, AdjustmentResult
 from carto.framework.adjustment.bundle import adjust_bundle
 from carto.framework.adjustment.observations import Observations
-from carto.framework.adjustment.priors import AncillaryPrior, line_scanner_corrections
+from carto.framework.adjustment.priors import (
+    AncillaryPrior,
+    line_scanner_corrections,
+    with_self_calibration,
+)
 from carto.framework.errors import InputError
 from carto.framework.geometry.linescan import LineScanner
 from carto.framework.geometry.sensor import Sensor
@@ -143,6 +152,7 @@ class Cartosat1Adjuster(Adjuster):
     ) -> AdjustmentResult:
         mode = options.pop("mode", "combined")
         calibration = options.pop("calibration", None)
+        self_calibration = options.pop("self_calibration", None)
         prepared = prepare_sensors(
             sensors,
             mode,
@@ -154,6 +164,7 @@ class Cartosat1Adjuster(Adjuster):
             float(options.pop("ephemeris_sigma_m", constants.EPHEMERIS_BIAS_SIGMA_M)),
             None if calibration is None else load_calibration(calibration),
         )
+        prepared = with_self_calibration(prepared, self_calibration, self.name)
         result = adjust_bundle(prepared, observations, **options)
         if mode == "calibration":
             calibrated = {

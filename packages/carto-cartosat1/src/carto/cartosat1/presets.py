@@ -12,6 +12,7 @@ from carto.framework.products.ancillary import CameraSpec
 from carto.framework.simulation import acquisition
 from carto.framework.simulation.plan import ScenePlan, SegmentPlan, SimulationOptions, ViewPlan
 from carto.framework.simulation.preset import DemoAdjustment, DemoChain, ScenePreset
+from carto.framework.simulation.reference.attitude import YawSteering
 
 DEFAULT_TARGET = (77.95, 30.30)
 """Near Dehradun, India: hilly terrain as in the paper's test sites."""
@@ -38,14 +39,14 @@ def cartosat1_pair_plan(
 ) -> ScenePlan:
     """The acquisition plan of a Cartosat-1 stereo pair over ``target`` (lon, lat)."""
     lon, lat = target
-    epoch_utc, epoch, elements = acquisition.sun_synchronous_overpass(
+    epoch_utc, _epoch, elements = acquisition.sun_synchronous_overpass(
         lon, lat, date, c.ORBIT_ALTITUDE_M
     )
     cams = camera_specs()
     views = tuple(
         ViewPlan(name, cams[name], c.N_DETECTORS, c.LINE_PERIOD_S) for name in ("fore", "aft")
     )
-    segment = SegmentPlan("body", (-45.0, 45.0), acquisition.yaw_steering_law(epoch), views)
+    segment = SegmentPlan("body", (-45.0, 45.0), YawSteering(), views)
     gsd = c.ORBIT_ALTITUDE_M * c.DETECTOR_PITCH_M / c.FOCAL_LENGTH_M
     return ScenePlan(
         preset="cartosat1-pair",

@@ -18,6 +18,7 @@ from carto.framework.products.ancillary import CameraSpec
 from carto.framework.simulation import acquisition
 from carto.framework.simulation.plan import ScenePlan, SegmentPlan, SimulationOptions, ViewPlan
 from carto.framework.simulation.preset import ScenePreset
+from carto.framework.simulation.reference.attitude import Pointing
 
 DEFAULT_TARGET = (77.95, 30.30)
 DEFAULT_DATE = "2026-03-01"
@@ -58,17 +59,17 @@ def _segment(
     target: tuple[float, float] | None = None,
 ) -> SegmentPlan:
     v_scan = GSD_M / LINE_PERIOD_S
-
-    def aim(dt: np.ndarray) -> np.ndarray:
-        return aim0[None, :] + (dt - t_c)[:, None] * v_scan * along[None, :]
-
+    law = Pointing(
+        tuple(float(a) for a in aim0),
+        tuple(float(a) for a in v_scan * along),
+        float(t_c),
+        tuple(float(a) for a in along),
+    )
     half = 0.5 * c.N_DETECTORS * LINE_PERIOD_S + 2.0
     view = ViewPlan(
         name, camera_spec(), c.N_DETECTORS, LINE_PERIOD_S, centre_dt_s=t_c, target=target
     )
-    return SegmentPlan(
-        name, (t_c - half, t_c + half), acquisition.pointing_law(epoch, aim, along), (view,)
-    )
+    return SegmentPlan(name, (t_c - half, t_c + half), law, (view,))
 
 
 def triplet_plan(

@@ -1,13 +1,17 @@
 """A-priori weights of line-scanner corrections from the ancillary data's accuracy
-(:class:`AncillaryPrior`, :func:`line_scanner_corrections`)."""
+(:class:`AncillaryPrior`, :func:`line_scanner_corrections`) and the optional self-calibration
+of their cameras (:func:`with_self_calibration`)."""
 
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
+from typing import Any
 
 import attrs
 
 from carto.framework.errors import InputError
+from carto.framework.geometry.linescan import LineScanner
 from carto.framework.geometry.sensor import Sensor
 
 
@@ -105,3 +109,38 @@ def line_scanner_corrections(
         sigma = alignment_sigma_rad if alignment_sigma_rad is not None else prior.alignment_rad
         cam = cam.with_parameters(sigmas={p.name: sigma for p in cam.parameters})
     return attrs.evolve(sensor, trajectory=traj, camera=cam)
+
+
+SELF_CALIBRATION_SIGMAS = {"scale": 1e-4, "line_offset": 1e-5, "centre_offset": 1e-5}
+"""Default a-priori sigmas of the interior (self-calibration) corrections of a line scanner's
+camera: 100 ppm of focal length, 1e-5 rad (about 3 Cartosat-1 pixels) of detector-line and
+principal-point offset
+(:meth:`~carto.framework.geometry.camera.Camera.with_interior_parameters`)."""
+
+
+def with_self_calibration(
+    sensors: Mapping[str, LineScanner], kinds: Any, adjuster: str
+) -> dict[str, LineScanner]:
+    """The sensors with free interior corrections of their cameras: ``kinds`` is a list of
+    names of :data:`SELF_CALIBRATION_SIGMAS` (their default sigmas) or a mapping name ->
+    sigma; None or empty: the sensors unchanged. Cameras shared by several images share the
+    corrections (their parameter names are the camera's)."""
+    if not kinds:
+        return dict(sensors)
+    if isinstance(kinds, str):
+        kinds = [k.strip() for k in kinds.split(",") if k.strip()]
+    if isinstance(kinds, Mapping):
+        sigmas = {str(k): float(v) for k, v in kinds.items()}
+    else:
+        sigmas = {}
+        for k in kinds:
+            if k not in SELF_CALIBRATION_SIGMAS:
+                raise InputError(
+                    f"{adjuster}: unknown self-calibration {k!r}; known: "
+                    f"{', '.join(SELF_CALIBRATION_SIGMAS)}"
+                )
+            sigmas[k] = SELF_CALIBRATION_SIGMAS[k]
+    return {
+        name: attrs.evolve(s, camera=s.camera.with_interior_parameters(sigmas))
+        for name, s in sensors.items()
+    }

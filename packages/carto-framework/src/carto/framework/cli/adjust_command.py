@@ -29,6 +29,8 @@ def cmd_adjust(args: argparse.Namespace) -> int:
         options["height_offset_sigma_m"] = args.dem_offset_sigma
     if args.calibration:
         options["calibration"] = list(args.calibration)
+    if args.self_calibration:
+        options["self_calibration"] = [k.strip() for k in args.self_calibration.split(",")]
     for option, value in (
         ("--dem-heights", args.dem_heights),
         ("--dem-offset-sigma", args.dem_offset_sigma),
@@ -120,6 +122,13 @@ def add_adjust(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--mode",
         help="adjuster mode (rpc-bias: shift, affine; other adjusters: carto plugins NAME)",
+    )
+    p.add_argument(
+        "--self-calibration",
+        metavar="KINDS",
+        help="also estimate camera interior corrections, comma-separated: scale (focal "
+        "length), line_offset (detector line along track), centre_offset (principal point); "
+        "line scanners only, off by default",
     )
     p.add_argument(
         "--attitude-order",

@@ -103,9 +103,12 @@ def add_simulate(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--errors",
-        choices=("realistic", "none"),
+        choices=("realistic", "full", "none"),
         default="realistic",
-        help="error sources of the product (default realistic)",
+        help="error sources of the product: realistic (the adjusters' own form: attitude "
+        "bias and drift, ephemeris bias, misalignment, GCP noise; the default), full "
+        "(realistic plus jitter, attitude wander, interior orientation, line timing, "
+        "ephemeris noise and checkpoint noise: errors no adjuster models) or none",
     )
     p.add_argument(
         "--error-size",

@@ -19,6 +19,13 @@ Staggered arrays
     :class:`Camera` models one of them (``array``) or a single array (``array="single"``);
     ``tan psi_x = along_offset_m / f`` for the odd array and ``(along_offset_m + stagger_m) / f``
     for the even one.
+Interior (self-calibration) corrections
+    Optional parameters (:meth:`Camera.with_interior_parameters`, off unless an adjuster asks
+    for them): ``camera.<name>.interior.scale`` (a focal-length error, relative: every tangent
+    becomes ``tan / (1 + scale)``), ``camera.<name>.interior.line_offset`` (the detector
+    line's along-track position, added to ``tan psi_x``) and
+    ``camera.<name>.interior.centre_offset`` (the principal point's across-track position,
+    added to ``tan psi_y``), radians. :meth:`Camera.effective_coeffs` applies them.
 Mounting and alignment
     ``R_camera_to_body = R_payload_to_body @ R_camera_to_payload``. ``R_camera_to_payload`` is
     the nominal mounting (``rpy_to_matrix(*mounting_rpy_rad)``; Cartosat-1 Fore: pitch +26 deg
@@ -44,6 +51,8 @@ from carto.framework.geometry.sensor import Parameter, replace_parameters
 FloatArray = NDArray[np.float64]
 ArrayName = Literal["single", "odd", "even"]
 _AXES = ("roll", "pitch", "yaw")
+INTERIOR = ("scale", "line_offset", "centre_offset")
+"""The interior (self-calibration) corrections a camera may carry (module docstring)."""
 
 
 def _tuple_of_floats(value: Any) -> tuple[float, ...]:
@@ -243,14 +252,72 @@ class Camera:
             self, parameters=replace_parameters(self.parameters, values, free, sigmas)
         )
 
+    def with_interior_parameters(self, sigmas: Mapping[str, float]) -> Camera:
+        """The camera with free interior corrections (``scale``, ``line_offset``,
+        ``centre_offset``: keys of ``sigmas``, their a-priori sigmas), starting at 0; kinds it
+        already has keep their values and get the new sigma."""
+        unknown = sorted(set(sigmas) - set(INTERIOR))
+        if unknown:
+            raise InputError(
+                f"camera {self.name}: unknown interior correction(s) {', '.join(unknown)}; "
+                f"known: {', '.join(INTERIOR)}"
+            )
+        have = {p.name: p for p in self.parameters}
+        params = list(self.parameters)
+        for kind, sigma in sigmas.items():
+            if not (float(sigma) > 0 and np.isfinite(float(sigma))):
+                raise InputError(f"camera {self.name}: interior {kind} sigma must be > 0")
+            name = f"camera.{self.name}.interior.{kind}"
+            unit = "" if kind == "scale" else "rad"
+            if name in have:
+                params[params.index(have[name])] = attrs.evolve(
+                    have[name], sigma=float(sigma), free=True
+                )
+            else:
+                params.append(
+                    Parameter(
+                        name,
+                        0.0,
+                        float(sigma),
+                        unit,
+                        free=True,
+                        description=f"interior {kind} correction of camera {self.name}",
+                    )
+                )
+        return attrs.evolve(self, parameters=tuple(params))
+
+    def _interior(self) -> dict[str, float]:
+        prefix = f"camera.{self.name}.interior."
+        return {
+            p.name[len(prefix) :]: p.value for p in self.parameters if p.name.startswith(prefix)
+        }
+
+    def effective_coeffs(self) -> tuple[FloatArray, FloatArray, float]:
+        """``(tan_psi_x coefficients, tan_psi_y coefficients, stagger_tan)`` with the interior
+        corrections applied (the nominal ones when there are none)."""
+        cx = np.asarray(self.tan_psi_x_coeffs, np.float64).copy()
+        cy = np.asarray(self.tan_psi_y_coeffs, np.float64).copy()
+        corr = self._interior()
+        if not corr:
+            return cx, cy, float(self.stagger_tan)
+        cx[0] += corr.get("line_offset", 0.0)
+        cy[0] += corr.get("centre_offset", 0.0)
+        k = 1.0 / (1.0 + corr.get("scale", 0.0))
+        return cx * k, cy * k, float(self.stagger_tan) * k
+
     def with_calibrated_alignment(self) -> Camera:
         """The camera with its estimated alignment corrections folded into the calibrated
         ``alignment_rpy_rad`` (in-flight calibration result) and the corrections reset to 0."""
-        corr = {p.name.rsplit(".", 1)[1]: p.value for p in self.parameters}
+        prefix = f"camera.{self.name}.align."
+        corr = {
+            p.name[len(prefix) :]: p.value for p in self.parameters if p.name.startswith(prefix)
+        }
         align = tuple(
             a + corr.get(axis, 0.0) for a, axis in zip(self.alignment_rpy_rad, _AXES, strict=True)
         )
-        params = tuple(attrs.evolve(p, value=0.0) for p in self.parameters)
+        params = tuple(
+            attrs.evolve(p, value=0.0) if p.name.startswith(prefix) else p for p in self.parameters
+        )
         return attrs.evolve(self, alignment_rpy_rad=align, parameters=params)
 
     # ------------------------------------------------------------------ geometry
@@ -262,10 +329,9 @@ class Camera:
         """``(tan psi_x, tan psi_y)`` of the look direction at continuous ``sample``."""
         s = np.asarray(sample, dtype=np.float64)
         u = self._u(s)
-        tx = npoly.polyval(u, self.tan_psi_x_coeffs) + (
-            self.stagger_tan if self.array == "even" else 0.0
-        )
-        return tx * np.ones_like(u), npoly.polyval(u, self.tan_psi_y_coeffs)
+        cx, cy, stagger = self.effective_coeffs()
+        tx = npoly.polyval(u, cx) + (stagger if self.array == "even" else 0.0)
+        return tx * np.ones_like(u), npoly.polyval(u, cy)
 
     def look_camera(self, sample: ArrayLike) -> FloatArray:
         """Unit look vectors in the camera frame, shape ``(..., 3)``."""
@@ -276,7 +342,7 @@ class Camera:
     def sample_from_tan_psi_y(self, tan_psi_y: ArrayLike, iterations: int = 6) -> FloatArray:
         """Invert ``tan psi_y(s)``: the continuous sample seen at a given across-track angle."""
         t = np.asarray(tan_psi_y, dtype=np.float64)
-        c = np.asarray(self.tan_psi_y_coeffs)
+        c = self.effective_coeffs()[1]
         half = self.n_samples / 2.0
         u = (t - c[0]) / c[1]
         if len(c) > 2:
@@ -292,7 +358,10 @@ class Camera:
 
     def camera_to_body(self) -> FloatArray:
         """``R_camera_to_body = R_payload_to_body @ R_camera_to_payload``, ``(3, 3)``."""
-        corr = {p.name.rsplit(".", 1)[1]: p.value for p in self.parameters}
+        prefix = f"camera.{self.name}.align."
+        corr = {
+            p.name[len(prefix) :]: p.value for p in self.parameters if p.name.startswith(prefix)
+        }
         align = [
             a + corr.get(axis, 0.0) for a, axis in zip(self.alignment_rpy_rad, _AXES, strict=True)
         ]

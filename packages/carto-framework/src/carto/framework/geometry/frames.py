@@ -4,19 +4,25 @@ Conventions (tested in ``tests/framework/test_frames.py``, summarised in ``docs/
 
 Time
     ``t_s``: UTC seconds since the J2000 epoch 2000-01-01T12:00:00 UTC, leap seconds ignored
-    (a product's times are differences within minutes, so this does not matter for geometry).
-    UT1 is taken equal to UTC (|UT1-UTC| < 0.9 s rotates the Earth by < 0.4 arcsec ~ 1.2 m at
-    the equator; the simulator and the models use the same convention, so it cancels).
+    (a product's times are differences within minutes, so this does not matter for geometry):
+    ``t_s / 86400`` is the UTC quasi-Julian date less 2451545, as ERFA takes it. TT (for
+    precession-nutation) and UT1 (for the Earth's rotation) follow from it through ERFA's
+    leap-second table and the IERS UT1 - UTC.
 
 Earth-fixed frame (ECEF)
     WGS84 geocentric Cartesian, metres (EPSG:4978). Geodetic coordinates are WGS84 longitude,
     latitude in degrees and height above the ellipsoid in metres (EPSG:4979), converted by pyproj.
 
 Inertial frame (ECI)
-    The ECEF frame rotated back about Z by the Greenwich mean sidereal angle (GMST, IAU 1982
-    model, :func:`gmst_rad`): ``X_ecef = R3(GMST) X_eci``. Precession, nutation and polar motion
-    are left out: over the minutes of an acquisition they are constant rotations far below the
-    attitude uncertainty, and every model and the simulator use the same definition.
+    The GCRS (geocentric, ICRS axes: the frame star trackers and ephemerides refer to). The
+    rotation to the ITRS (realised by WGS84 ECEF) is the IAU 2006/2000A chain of ERFA
+    (:class:`EarthOrientation`): ``X_ecef = W R3(-ERA) C X_eci`` with ``C`` the GCRS -> CIRS
+    precession-nutation (``c2i06a``), ``ERA`` the Earth rotation angle of UT1 and ``W`` the
+    polar motion, UT1 - UTC and the pole from the IERS tables that astropy-iers-data installs
+    (no downloads). About an epoch ``C`` and ``W`` are held constant and ``ERA`` linear: the
+    precession then leaves 8e-12 rad per second of distance from the epoch (5e-10 rad a minute
+    away, 0.3 mm on the ground from 700 km). Outside the tables (before 1973, or beyond the
+    predictions about a year ahead) UT1 = UTC and the pole is the ITRS Z axis.
 
 Orbit frame (local orbital, for roll/pitch/yaw)
     From the inertial position ``P`` and velocity ``V``: ``Z_o = -P/|P|`` (towards the Earth's
@@ -37,7 +43,9 @@ Quaternions
 from __future__ import annotations
 
 import functools
+import math
 
+import attrs
 import numpy as np
 import pyproj
 from numpy.typing import ArrayLike, NDArray
@@ -194,34 +202,145 @@ def rot_x(angle_rad: ArrayLike) -> FloatArray:
     )
 
 
+ERA_RATE_RAD_S = 2.0 * math.pi * 1.00273781191135448 / SECONDS_PER_DAY
+"""Rate of the Earth rotation angle, rad per UT1 second (IAU 2000)."""
+
+
+@functools.cache
+def _iers_table():  # pragma: no cover - exercised through earth_orientation_parameters
+    from astropy.utils import iers
+
+    with iers.conf.set_temp("auto_download", False), iers.conf.set_temp("auto_max_age", None):
+        return iers.IERS_Auto.open()
+
+
+def earth_orientation_parameters(t_s: ArrayLike) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """``(UT1 - UTC seconds, x_pole rad, y_pole rad)`` at ``t_s`` from the IERS tables; zero
+    outside them (see the module docstring)."""
+    from astropy.utils import iers
+
+    t = np.asarray(t_s, dtype=np.float64)
+    jd1 = np.full(t.shape, J2000_JD)
+    jd2 = t / SECONDS_PER_DAY
+    table = _iers_table()
+    with iers.conf.set_temp("auto_download", False), iers.conf.set_temp("auto_max_age", None):
+        dut1, s1 = table.ut1_utc(jd1, jd2, return_status=True)
+        xp, yp, s2 = table.pm_xy(jd1, jd2, return_status=True)
+    inside = (np.asarray(s1) >= 0) & (np.asarray(s2) >= 0)
+    arcsec = math.pi / (180.0 * 3600.0)
+    return (
+        np.where(inside, np.asarray(dut1.to_value("s"), float), 0.0),
+        np.where(inside, np.asarray(xp.to_value("arcsec"), float) * arcsec, 0.0),
+        np.where(inside, np.asarray(yp.to_value("arcsec"), float) * arcsec, 0.0),
+    )
+
+
+def _time_scales(t_s: FloatArray) -> tuple[tuple[FloatArray, FloatArray], tuple, FloatArray]:
+    """``((tt1, tt2), (ut11, ut12), (xp, yp))`` of UTC ``t_s`` (ERFA two-part dates)."""
+    import erfa
+
+    utc1 = np.full(t_s.shape, J2000_JD)
+    utc2 = t_s / SECONDS_PER_DAY
+    dut1, xp, yp = earth_orientation_parameters(t_s)
+    tt = erfa.taitt(*erfa.utctai(utc1, utc2))
+    ut1 = erfa.utcut1(utc1, utc2, dut1)
+    return tt, ut1, np.stack([xp, yp])
+
+
+@attrs.frozen(eq=False)
+class EarthOrientation:
+    """GCRS -> ITRS about an epoch: ``R(dt) = W @ rot_z(-(era0 + ERA_RATE dt)) @ C``.
+
+    Attributes:
+        c2i: GCRS -> CIRS (bias, precession, nutation; ERFA ``c2i06a``) at the epoch.
+        era0_rad: the Earth rotation angle at the epoch.
+        pom: TIRS -> ITRS polar motion (ERFA ``pom00``) at the epoch.
+    """
+
+    c2i: FloatArray
+    era0_rad: float
+    pom: FloatArray
+
+    @classmethod
+    def at(cls, epoch_j2000_s: float) -> EarthOrientation:
+        """The orientation about ``epoch_j2000_s`` (cached: models on one epoch share it)."""
+        return _orientation_at(float(epoch_j2000_s))
+
+    def eci_to_ecef_matrix(self, dt_s: ArrayLike) -> FloatArray:
+        """``R_eci_to_ecef`` at ``dt_s`` seconds after the epoch, ``(..., 3, 3)``."""
+        era = self.era0_rad + ERA_RATE_RAD_S * np.asarray(dt_s, np.float64)
+        return self.pom @ rot_z(-era) @ self.c2i
+
+    @property
+    def rotation_vector_ecef(self) -> FloatArray:
+        """The Earth's angular velocity in the ITRS, rad/s (about the celestial pole)."""
+        return ERA_RATE_RAD_S * self.pom[:, 2]
+
+    def to_ecef(
+        self, dt_s: ArrayLike, p_eci: ArrayLike, v_eci: ArrayLike
+    ) -> tuple[FloatArray, FloatArray]:
+        """Inertial position and velocity -> Earth-fixed (velocity relative to the Earth)."""
+        r = self.eci_to_ecef_matrix(dt_s)
+        p = np.einsum("...ij,...j->...i", r, np.asarray(p_eci, float))
+        v = np.einsum("...ij,...j->...i", r, np.asarray(v_eci, float))
+        return p, v - np.cross(self.rotation_vector_ecef, p)
+
+    def to_eci(
+        self, dt_s: ArrayLike, p_ecef: ArrayLike, v_ecef: ArrayLike
+    ) -> tuple[FloatArray, FloatArray]:
+        """Earth-fixed position and Earth-relative velocity -> inertial."""
+        r_t = np.swapaxes(self.eci_to_ecef_matrix(dt_s), -1, -2)
+        p_e = np.asarray(p_ecef, float)
+        v_abs = np.asarray(v_ecef, float) + np.cross(self.rotation_vector_ecef, p_e)
+        return np.einsum("...ij,...j->...i", r_t, p_e), np.einsum("...ij,...j->...i", r_t, v_abs)
+
+
+@functools.lru_cache(maxsize=64)
+def _orientation_at(epoch_j2000_s: float) -> EarthOrientation:
+    import erfa
+
+    (tt1, tt2), (ut11, ut12), (xp, yp) = _time_scales(np.asarray(epoch_j2000_s, np.float64))
+    c2i = np.asarray(erfa.c2i06a(tt1, tt2), np.float64)
+    era0 = float(erfa.era00(ut11, ut12))
+    pom = np.asarray(erfa.pom00(xp, yp, erfa.sp00(tt1, tt2)), np.float64)
+    return EarthOrientation(c2i, era0, pom)
+
+
 def eci_to_ecef_matrix(t_s: ArrayLike) -> FloatArray:
-    """``R_eci_to_ecef(t) = R3(-GMST)`` as matrices ``(..., 3, 3)``: ``X_ecef = R @ X_eci``."""
-    return rot_z(-gmst_rad(t_s))
+    """``R_eci_to_ecef`` (GCRS -> ITRS, ERFA ``c2t06a``) at absolute ``t_s``, ``(..., 3, 3)``."""
+    import erfa
+
+    t = np.asarray(t_s, dtype=np.float64)
+    (tt1, tt2), (ut11, ut12), (xp, yp) = _time_scales(t)
+    return np.asarray(erfa.c2t06a(tt1, tt2, ut11, ut12, xp, yp), np.float64)
 
 
 def eci_to_ecef(
     t_s: ArrayLike, position_eci_m: ArrayLike, velocity_eci_m_s: ArrayLike | None = None
 ) -> tuple[FloatArray, FloatArray | None]:
     """Inertial position (and velocity) -> Earth-fixed, including the Earth-rotation term."""
-    r = eci_to_ecef_matrix(t_s)
+    t = np.asarray(t_s, dtype=np.float64)
+    r = eci_to_ecef_matrix(t)
     p = np.einsum("...ij,...j->...i", r, np.asarray(position_eci_m, float))
     if velocity_eci_m_s is None:
         return p, None
+    omega = EarthOrientation.at(float(np.mean(t))).rotation_vector_ecef
     v = np.einsum("...ij,...j->...i", r, np.asarray(velocity_eci_m_s, float))
-    v = v - np.cross([0.0, 0.0, OMEGA_EARTH_RAD_S], p)
-    return p, v
+    return p, v - np.cross(omega, p)
 
 
 def ecef_to_eci(
     t_s: ArrayLike, position_ecef_m: ArrayLike, velocity_ecef_m_s: ArrayLike | None = None
 ) -> tuple[FloatArray, FloatArray | None]:
     """Earth-fixed position (and velocity) -> inertial, including the Earth-rotation term."""
-    r_t = np.swapaxes(eci_to_ecef_matrix(t_s), -1, -2)
+    t = np.asarray(t_s, dtype=np.float64)
+    r_t = np.swapaxes(eci_to_ecef_matrix(t), -1, -2)
     p_ecef = np.asarray(position_ecef_m, float)
     p = np.einsum("...ij,...j->...i", r_t, p_ecef)
     if velocity_ecef_m_s is None:
         return p, None
-    v_ecef = np.asarray(velocity_ecef_m_s, float) + np.cross([0.0, 0.0, OMEGA_EARTH_RAD_S], p_ecef)
+    omega = EarthOrientation.at(float(np.mean(t))).rotation_vector_ecef
+    v_ecef = np.asarray(velocity_ecef_m_s, float) + np.cross(omega, p_ecef)
     return p, np.einsum("...ij,...j->...i", r_t, v_ecef)
 
 

@@ -51,6 +51,14 @@ from carto.framework.files.documents import (
 )
 from carto.framework.geometry import frames
 from carto.framework.geometry.camera import Camera
+from carto.framework.geometry.light_path import (
+    SPEED_OF_LIGHT_M_S,
+    LightPath,
+    apparent_direction,
+    emission_position,
+    received_ground_point,
+    source_direction,
+)
 from carto.framework.geometry.linescan_solver import (
     TABLE_MARGIN_LINES,
     FirstGuess,
@@ -103,6 +111,8 @@ class LineScanner(Sensor):
         width: number of image columns (default: the detectors from ``first_sample`` on).
         first_line: line of the full acquisition that is this image's first line (for
             reference only: ``timing`` already gives the times of this image's lines).
+        light_path: the light-time and aberration corrections the model applies
+            (:mod:`~carto.framework.geometry.light_path`; both off by default).
 
     Adjustable parameters are the trajectory's corrections followed by the camera's alignment
     corrections, with their own names (two sensors sharing a trajectory share the names of its
@@ -117,6 +127,7 @@ class LineScanner(Sensor):
     first_sample: int = 0
     width: int | None = None
     first_line: int = 0
+    light_path: LightPath = attrs.field(factory=LightPath)
     _guess: FirstGuess = attrs.field(factory=FirstGuess, alias="guess", repr=False)
     _table: LineTable = attrs.field(factory=LineTable, init=False, repr=False)
 
@@ -193,7 +204,7 @@ class LineScanner(Sensor):
         camera-frame vector ``v (N, 3)`` and ``R_camera_to_ecef (N, 3, 3)``. ``pose``: the
         ``(P, R_camera_to_ecef)`` at ``line`` when already known."""
         p, r_c2e = self.camera_to_ecef(line) if pose is None else pose
-        v = np.einsum("nji,nj->ni", r_c2e, x_ecef - p)
+        v = np.einsum("nji,nj->ni", r_c2e, self._apparent_vector(line, x_ecef, p))
         tx, ty = self.camera.tan_psi(sample + self.first_sample)
         f = np.stack([v[:, 0] / v[:, 2] - tx, v[:, 1] / v[:, 2] - ty], -1)
         # v = R^T (X - P): dv/dX = R^T, rows of R^T are the columns of R
@@ -252,6 +263,8 @@ class LineScanner(Sensor):
             table.spacing,
             table.position,
             table.rotation,
+            table.beta,
+            table.omega_c,
         )
         jac[:, 0, 0] = (v_step[:, 0] / v_step[:, 2] - v[:, 0] / v[:, 2]) / step
         jac[:, 1, 0] = (v_step[:, 1] / v_step[:, 2] - v[:, 1] / v[:, 2]) / step
@@ -333,18 +346,47 @@ class LineScanner(Sensor):
         return attrs.evolve(self, camera=camera, guess=FirstGuess())
 
     # ------------------------------------------------------------------ geometry
+    def light_terms(self, t_s: ArrayLike) -> tuple[FloatArray, FloatArray]:
+        """``(beta (..., 3), omega / c (3,))`` of the light path at times ``t_s``: the
+        platform's inertial velocity over ``c`` and the Earth's angular velocity over ``c``
+        (rad per metre), each zero where :attr:`light_path` switches its correction off."""
+        t = np.asarray(t_s, dtype=np.float64)
+        if self.light_path.aberration:
+            beta = self.trajectory.inertial_velocity_ecef(t) / SPEED_OF_LIGHT_M_S
+        else:
+            beta = np.zeros((*t.shape, 3))
+        if self.light_path.light_time:
+            omega_c = self.trajectory.earth_rotation_ecef / SPEED_OF_LIGHT_M_S
+        else:
+            omega_c = np.zeros(3)
+        return beta, omega_c
+
+    def _apparent_vector(self, line: FloatArray, x_ecef: FloatArray, p: FloatArray) -> FloatArray:
+        """``X - P`` turned into the direction the camera sees the point in (light time and
+        aberration, when on), with the length of ``X - P``."""
+        d = x_ecef - p
+        if not (self.light_path.light_time or self.light_path.aberration):
+            return d
+        beta, omega_c = self.light_terms(self.timing.time(line))
+        d = emission_position(x_ecef, p, omega_c) - p
+        dist = np.linalg.norm(d, axis=-1, keepdims=True)
+        return apparent_direction(d / dist, beta) * dist
+
     def camera_to_ecef(self, line: ArrayLike) -> tuple[FloatArray, FloatArray]:
         """``(P_ecef_m (..., 3), R_camera_to_ecef (..., 3, 3))`` at the time of ``line``."""
         p, r_b2e = self.trajectory.evaluate(self.timing.time(line))
         return p, r_b2e @ self.camera.camera_to_body()
 
     def ray(self, line: ArrayLike, sample: ArrayLike) -> tuple[FloatArray, FloatArray]:
-        """Perspective centre ``(..., 3)`` and unit look direction ``(..., 3)``, ECEF."""
+        """Perspective centre ``(..., 3)`` and the unit direction the received light came
+        from ``(..., 3)`` (the look direction corrected for aberration when on), ECEF."""
         line, sample = as_float_arrays(line, sample)
         p, r_c2e = self.camera_to_ecef(line)
         u = np.einsum(
             "...ij,...j->...i", r_c2e, self.camera.look_camera(sample + self.first_sample)
         )
+        if self.light_path.aberration:
+            u = source_direction(u, self.light_terms(self.timing.time(line))[0])
         return p, u
 
     def image_to_ground(
@@ -352,7 +394,11 @@ class LineScanner(Sensor):
     ) -> tuple[FloatArray, FloatArray]:
         line, sample, h = as_float_arrays(line, sample, h_m)
         p, u = self.ray(line, sample)
-        lon, lat, _ = intersect_ellipsoid_height(p, u, h)
+        lon, lat, h_out = intersect_ellipsoid_height(p, u, h)
+        if self.light_path.light_time:
+            x0 = frames.geodetic_to_ecef(lon, lat, h_out)
+            _, omega_c = self.light_terms(np.zeros(0))
+            lon, lat, _ = frames.ecef_to_geodetic(received_ground_point(x0, p, omega_c))
         return lon, lat
 
     def project(
@@ -375,6 +421,7 @@ class LineScanner(Sensor):
         if self._table.position is None:
             self._table.build(self)
         cam = self.camera
+        cx, cy, stagger = cam.effective_coeffs()
         result_t, sample = solve_lines(
             np.ascontiguousarray(x),
             np.ascontiguousarray(self.timing.time(guess)),
@@ -382,9 +429,11 @@ class LineScanner(Sensor):
             self._table.spacing,
             self._table.position,
             self._table.rotation,
-            np.asarray(cam.tan_psi_x_coeffs, float),
-            np.asarray(cam.tan_psi_y_coeffs, float),
-            cam.stagger_tan if cam.array == "even" else 0.0,
+            self._table.beta,
+            self._table.omega_c,
+            cx,
+            cy,
+            stagger if cam.array == "even" else 0.0,
             cam.n_samples / 2.0,
             self._table.tolerance_s,
             MAX_ITERATIONS,
@@ -427,6 +476,7 @@ class LineScanner(Sensor):
             },
             "camera": self.camera.to_dict(),
             "trajectory": self.trajectory.to_dict(),
+            "light_path": self.light_path.to_dict(),
         }
 
     @classmethod
@@ -450,6 +500,7 @@ class LineScanner(Sensor):
                 first_sample=int(window.get("first_sample", 0)),
                 width=None if window.get("width") is None else int(window["width"]),
                 first_line=int(window.get("first_line", 0)),
+                light_path=LightPath.from_dict(d.get("light_path")),
             )
         except KeyError as exc:
             raise InputError(f"{source}: missing field {exc.args[0]!r}") from None

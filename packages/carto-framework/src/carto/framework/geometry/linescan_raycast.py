@@ -27,6 +27,7 @@ from numpy.typing import NDArray
 
 from carto.framework.errors import InputError
 from carto.framework.geometry import frames
+from carto.framework.geometry.light_path import SOURCE_DIRECTION_STEPS
 
 if TYPE_CHECKING:  # the model whose table the kernels read
     from carto.framework.geometry.linescan import LineScanner
@@ -94,6 +95,30 @@ def start_distance(
 
 
 @numba.njit(cache=True, nogil=True)
+def ray_point(
+    px: float,
+    py: float,
+    pz: float,
+    ux: float,
+    uy: float,
+    uz: float,
+    omega_c: NDArray,
+    d: float,
+) -> tuple[float, float, float]:  # pragma: no cover - compiled
+    """The Earth-fixed point whose light travelled ``d`` metres along the ray: ``X0 = P + d u``
+    turned forward by the light time, ``X0 + (omega/c x X0) d`` (``omega_c`` zero: no light
+    time)."""
+    x = px + d * ux
+    y = py + d * uy
+    z = pz + d * uz
+    return (
+        x + (omega_c[1] * z - omega_c[2] * y) * d,
+        y + (omega_c[2] * x - omega_c[0] * z) * d,
+        z + (omega_c[0] * y - omega_c[1] * x) * d,
+    )
+
+
+@numba.njit(cache=True, nogil=True)
 def ray_dem(
     px: float,
     py: float,
@@ -109,8 +134,10 @@ def ray_dem(
     h_top: float,
     h_bottom: float,
     max_slope: float,
+    omega_c: NDArray,
 ) -> tuple[float, float, float]:  # pragma: no cover - compiled
-    """First intersection of a ray with the DEM surface, seen from the ray's origin.
+    """First intersection of a ray with the DEM surface, seen from the ray's origin (points
+    along it turned by the light time, :func:`ray_point`).
 
     Between the heights ``h_top`` and ``h_bottom`` the ray's geodetic coordinates are
     quadratic functions of the distance along it (fitted on three exact points; error below a
@@ -122,9 +149,9 @@ def ray_dem(
     if not (np.isfinite(d0) and np.isfinite(d2)) or d2 <= d0:
         return np.nan, np.nan, np.nan
     d1 = 0.5 * (d0 + d2)
-    lo0, la0, h0 = geodetic(px + d0 * ux, py + d0 * uy, pz + d0 * uz)
-    lo1, la1, h1 = geodetic(px + d1 * ux, py + d1 * uy, pz + d1 * uz)
-    lo2, la2, h2 = geodetic(px + d2 * ux, py + d2 * uy, pz + d2 * uz)
+    lo0, la0, h0 = geodetic(*ray_point(px, py, pz, ux, uy, uz, omega_c, d0))
+    lo1, la1, h1 = geodetic(*ray_point(px, py, pz, ux, uy, uz, omega_c, d1))
+    lo2, la2, h2 = geodetic(*ray_point(px, py, pz, ux, uy, uz, omega_c, d2))
     span = d2 - d0
     # quadratic in tau = (d - d0) / span through tau = 0, 0.5, 1
     alo, blo = 4.0 * lo1 - 3.0 * lo0 - lo2, 2.0 * (lo0 + lo2) - 4.0 * lo1
@@ -151,7 +178,7 @@ def ray_dem(
         return np.nan, np.nan, np.nan
     # exact refinement: Newton steps with the closure rate of the quadratic model
     for _ in range(6):
-        lon, lat, h = geodetic(px + d * ux, py + d * uy, pz + d * uz)
+        lon, lat, h = geodetic(*ray_point(px, py, pz, ux, uy, uz, omega_c, d))
         ground = grid_bilinear(dem, x0, dx, y0, dy, lon, lat)
         if not np.isfinite(ground):
             return np.nan, np.nan, np.nan
@@ -195,12 +222,16 @@ def camera_ray(
     spacing: float,
     pos: NDArray,
     rot: NDArray,
+    beta: NDArray,
     tan_x: NDArray,
     tan_y: NDArray,
     half: float,
     out: NDArray,
 ) -> bool:  # pragma: no cover - compiled
-    """Fill out[0:3] with the perspective centre and out[3:6] with the unit look vector."""
+    """Fill out[0:3] with the perspective centre and out[3:6] with the unit direction the
+    received light came from (the look vector corrected for aberration by ``beta``, the
+    table's velocity over c: ``u - beta + (u . beta) u`` refined as
+    :func:`~carto.framework.geometry.light_path.source_direction` does)."""
     nk = pos.shape[0]
     q = (t - node0) / spacing
     k = math.floor(q)
@@ -244,9 +275,36 @@ def camera_ray(
         )
         out[3 + i] = r0 * v0 + r1 * v1 + r2 * v2
     n = math.sqrt(out[3] ** 2 + out[4] ** 2 + out[5] ** 2)
-    out[3] /= n
-    out[4] /= n
-    out[5] /= n
+    ub = 0.0
+    b = np.empty(3)
+    for i in range(3):
+        out[3 + i] /= n
+        b[i] = w0 * beta[k - 1, i] + w1 * beta[k, i] + w2 * beta[k + 1, i] + w3 * beta[k + 2, i]
+        ub += out[3 + i] * b[i]
+    u = out[3:6].copy()
+    n = 0.0
+    for i in range(3):
+        out[3 + i] = out[3 + i] - b[i] + ub * out[3 + i]
+        n += out[3 + i] ** 2
+    n = math.sqrt(n)
+    for i in range(3):
+        out[3 + i] /= n
+    # refined to the exact inverse of the aberration (light_path.source_direction)
+    a = np.empty(3)
+    for _ in range(SOURCE_DIRECTION_STEPS):
+        nb = out[3] * b[0] + out[4] * b[1] + out[5] * b[2]
+        na = 0.0
+        for i in range(3):
+            a[i] = out[3 + i] + b[i] - nb * out[3 + i]
+            na += a[i] ** 2
+        na = math.sqrt(na)
+        n = 0.0
+        for i in range(3):
+            out[3 + i] += u[i] - a[i] / na
+            n += out[3 + i] ** 2
+        n = math.sqrt(n)
+        for i in range(3):
+            out[3 + i] /= n
     return True
 
 
@@ -261,6 +319,8 @@ def _locate_kernel(
     spacing: float,
     pos: NDArray,
     rot: NDArray,
+    beta: NDArray,
+    omega_c: NDArray,
     tan_x: NDArray,
     tan_y: NDArray,
     half: float,
@@ -279,7 +339,7 @@ def _locate_kernel(
         ray = np.empty(6)
         t = interp_time(lines[i], line_nodes, t_nodes)
         if camera_ray(
-            t, det_samples[i], staggers[i], node0, spacing, pos, rot, tan_x, tan_y, half, ray
+            t, det_samples[i], staggers[i], node0, spacing, pos, rot, beta, tan_x, tan_y, half, ray
         ):
             lon, lat, h = ray_dem(
                 ray[0],
@@ -296,6 +356,7 @@ def _locate_kernel(
                 h_top,
                 h_bottom,
                 max_slope,
+                omega_c,
             )
             out[i, 0] = lon
             out[i, 1] = lat
@@ -341,6 +402,7 @@ def sensor_arrays(sensor: LineScanner) -> dict[str, object]:
     if table.position is None:
         table.build(sensor)
     cam = sensor.camera
+    cx, cy, stagger = cam.effective_coeffs()
     return {
         "line_nodes": np.asarray(sensor.timing.line_nodes, float),
         "t_nodes": np.asarray(sensor.timing.dt_nodes_s, float),
@@ -348,12 +410,10 @@ def sensor_arrays(sensor: LineScanner) -> dict[str, object]:
         "spacing": table.spacing,
         "pos": table.position,
         "rot": table.rotation,
-        "tan_x": np.asarray(cam.tan_psi_x_coeffs, float)
-        + np.array(
-            [cam.stagger_tan if cam.array == "even" else 0.0]
-            + [0.0] * (len(cam.tan_psi_x_coeffs) - 1)
-        ),
-        "tan_y": np.asarray(cam.tan_psi_y_coeffs, float),
+        "beta": table.beta,
+        "omega_c": table.omega_c,
+        "tan_x": cx + np.array([stagger if cam.array == "even" else 0.0] + [0.0] * (len(cx) - 1)),
+        "tan_y": cy,
         "half": cam.n_samples / 2.0,
     }
 
@@ -381,6 +441,8 @@ def locate_pixels(
         arr["spacing"],
         arr["pos"],
         arr["rot"],
+        arr["beta"],
+        arr["omega_c"],
         arr["tan_x"],
         arr["tan_y"],
         arr["half"],

@@ -12,6 +12,7 @@ gives camera-frame vectors from the same table (for the partials of
 
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING, Any
 
 import numba
@@ -144,6 +145,8 @@ class LineTable:
         self.spacing: float = 1.0
         self.position: FloatArray | None = None  # (K, 3)
         self.rotation: FloatArray | None = None  # (K, 3, 3) ecef -> camera
+        self.beta: FloatArray | None = None  # (K, 3) inertial velocity / c, ECEF axes
+        self.omega_c: FloatArray = np.zeros(3)  # Earth's angular velocity / c, rad/m
         self.tolerance_s: float = 1e-12
 
     def build(self, sensor: LineScanner) -> None:
@@ -160,8 +163,11 @@ class LineTable:
         times = self.node0 + self.spacing * np.arange(k)
         p, r_b2e = sensor.trajectory.evaluate(times)
         r_c2e = r_b2e @ sensor.camera.camera_to_body()
+        beta, omega_c = sensor.light_terms(times)
         self.position = np.ascontiguousarray(p)
         self.rotation = np.ascontiguousarray(np.swapaxes(r_c2e, -1, -2))
+        self.beta = np.ascontiguousarray(beta)
+        self.omega_c = np.ascontiguousarray(omega_c, dtype=np.float64)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -194,13 +200,17 @@ def _focal_offset(
     spacing: float,
     pos: FloatArray,
     rot: FloatArray,
+    beta: FloatArray,
+    omega_c: FloatArray,
     tan_x: FloatArray,
     tan_y: FloatArray,
     stagger: float,
     half: float,
     v: FloatArray,
 ) -> float:  # pragma: no cover - compiled
-    """Interpolate the camera state at time ``t_s``; fill ``v`` (camera frame); return f."""
+    """Interpolate the camera state at time ``t_s``; fill ``v`` (camera frame: the direction
+    the camera sees ``x`` in, after light time and aberration, scaled by the distance);
+    return f."""
     nk = pos.shape[0]
     q = (t_s - node0) / spacing
     k = int(np.floor(q))
@@ -215,6 +225,18 @@ def _focal_offset(
     d0 = x[0] - (w0 * pos[k - 1, 0] + w1 * pos[k, 0] + w2 * pos[k + 1, 0] + w3 * pos[k + 2, 0])
     d1 = x[1] - (w0 * pos[k - 1, 1] + w1 * pos[k, 1] + w2 * pos[k + 1, 1] + w3 * pos[k + 2, 1])
     d2 = x[2] - (w0 * pos[k - 1, 2] + w1 * pos[k, 2] + w2 * pos[k + 1, 2] + w3 * pos[k + 2, 2])
+    # light time: the point where it was when the light left, X - (omega/c x X) |X - P|
+    dist = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+    d0 -= (omega_c[1] * x[2] - omega_c[2] * x[1]) * dist
+    d1 -= (omega_c[2] * x[0] - omega_c[0] * x[2]) * dist
+    d2 -= (omega_c[0] * x[1] - omega_c[1] * x[0]) * dist
+    # aberration: seen at n + beta - (n . beta) n (n = d / |d|), kept at length |d|
+    b0 = w0 * beta[k - 1, 0] + w1 * beta[k, 0] + w2 * beta[k + 1, 0] + w3 * beta[k + 2, 0]
+    b1 = w0 * beta[k - 1, 1] + w1 * beta[k, 1] + w2 * beta[k + 1, 1] + w3 * beta[k + 2, 1]
+    b2 = w0 * beta[k - 1, 2] + w1 * beta[k, 2] + w2 * beta[k + 1, 2] + w3 * beta[k + 2, 2]
+    dist = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+    nb = (d0 * b0 + d1 * b1 + d2 * b2) / dist
+    d0, d1, d2 = d0 + dist * b0 - nb * d0, d1 + dist * b1 - nb * d1, d2 + dist * b2 - nb * d2
     for i in range(3):
         r0 = (
             w0 * rot[k - 1, i, 0]
@@ -253,13 +275,17 @@ def camera_vectors(
     spacing: float,
     pos: FloatArray,
     rot: FloatArray,
+    beta: FloatArray,
+    omega_c: FloatArray,
 ) -> FloatArray:  # pragma: no cover - compiled
-    """Camera-frame vectors ``R_ecef_to_camera (X - P)`` at times ``t_s`` from the table,
-    ``(N, 3)``; NaN outside the table."""
+    """Camera-frame vectors ``R_ecef_to_camera (X - P)`` (light time and aberration applied
+    as the table says) at times ``t_s`` from the table, ``(N, 3)``; NaN outside the table."""
     out = np.full((x.shape[0], 3), np.nan)
     one = np.zeros(1)
     for i in range(x.shape[0]):
-        _focal_offset(x[i], t_s[i], node0, spacing, pos, rot, one, one, 0.0, 1.0, out[i])
+        _focal_offset(
+            x[i], t_s[i], node0, spacing, pos, rot, beta, omega_c, one, one, 0.0, 1.0, out[i]
+        )
     return out
 
 
@@ -270,6 +296,8 @@ def _solve_lines_py(
     spacing: float,
     pos: FloatArray,
     rot: FloatArray,
+    beta: FloatArray,
+    omega_c: FloatArray,
     tan_x: FloatArray,
     tan_y: FloatArray,
     stagger: float,
@@ -287,13 +315,17 @@ def _solve_lines_py(
         v = np.empty(3)
         xi = x[i]
         l0 = guess[i]
-        f0 = _focal_offset(xi, l0, node0, spacing, pos, rot, tan_x, tan_y, stagger, half, v)
+        f0 = _focal_offset(
+            xi, l0, node0, spacing, pos, rot, beta, omega_c, tan_x, tan_y, stagger, half, v
+        )
         if not np.isfinite(f0):
             continue
         l1 = l0 + 0.5 * spacing
         converged = False
         for _ in range(max_iter):
-            f1 = _focal_offset(xi, l1, node0, spacing, pos, rot, tan_x, tan_y, stagger, half, v)
+            f1 = _focal_offset(
+                xi, l1, node0, spacing, pos, rot, beta, omega_c, tan_x, tan_y, stagger, half, v
+            )
             if not np.isfinite(f1):
                 break
             if f1 == f0:  # stagnation at the rounding floor of f (~1e-15)
@@ -306,7 +338,9 @@ def _solve_lines_py(
                 converged = True
                 break
         if converged:
-            f1 = _focal_offset(xi, l1, node0, spacing, pos, rot, tan_x, tan_y, stagger, half, v)
+            f1 = _focal_offset(
+                xi, l1, node0, spacing, pos, rot, beta, omega_c, tan_x, tan_y, stagger, half, v
+            )
             if np.isfinite(f1):
                 out_line[i] = l1
                 out_sample[i] = _sample_from_tan_y(tan_y, v[1] / v[2], half)

@@ -154,10 +154,12 @@ def circular_orbit_over(
 
     The satellite is at the epoch on the geocentric radius through the point (so the point is
     at nadir up to the small angle between the geocentric radius and the ellipsoid normal,
-    <= 0.19 deg). The argument of latitude follows from the latitude and the pass direction;
-    the right ascension of the node from the longitude and the sidereal angle at the epoch.
+    <= 0.19 deg). The argument of latitude follows from the point's inertial declination and
+    the pass direction; the right ascension of the node from its inertial right ascension.
     """
-    lat = math.atan((1.0 - frames.WGS84_E2) * math.tan(math.radians(lat_deg)))  # geocentric
+    # the point's inertial direction: declination and right ascension
+    x_eci, _ = frames.ecef_to_eci(epoch_j2000_s, frames.geodetic_to_ecef(lon_deg, lat_deg, 0.0))
+    lat = math.asin(float(x_eci[2]) / float(np.linalg.norm(x_eci)))
     inc = inclination_rad
     if abs(math.sin(lat)) > abs(math.sin(inc)) + 1e-12:
         raise InputError(
@@ -168,6 +170,6 @@ def circular_orbit_over(
     if descending:
         u = math.pi - u
     # right ascension of the point: alpha = raan + atan2(cos i sin u, cos u)
-    alpha = math.radians(lon_deg) + float(frames.gmst_rad(epoch_j2000_s))
+    alpha = math.atan2(float(x_eci[1]), float(x_eci[0]))
     raan = alpha - math.atan2(math.cos(inc) * math.sin(u), math.cos(u))
     return OrbitElements(frames.WGS84_A_M + altitude_m, 0.0, inc, raan % (2 * math.pi), 0.0, u)

@@ -108,12 +108,10 @@ class Trajectory:
     attitude_correction_order: int
     position_correction_order: int
     fit_report: FitReport | None = None
-    _gmst0_rad: float = attrs.field(init=False)
-    _gmst_rate: float = attrs.field(init=False)
+    _earth: frames.EarthOrientation = attrs.field(init=False)
 
     def __attrs_post_init__(self) -> None:
-        object.__setattr__(self, "_gmst0_rad", float(frames.gmst_rad(self.epoch_j2000_s)))
-        object.__setattr__(self, "_gmst_rate", float(frames.gmst_rate_rad_s(self.epoch_j2000_s)))
+        object.__setattr__(self, "_earth", frames.EarthOrientation.at(self.epoch_j2000_s))
 
     @property
     def model(self) -> str:
@@ -158,11 +156,9 @@ class Trajectory:
 
         # ephemeris in the inertial frame
         if ephemeris.frame == "ecef":
-            gmst = (
-                frames.gmst_rad(epoch_j2000_s)
-                + frames.gmst_rate_rad_s(epoch_j2000_s) * ephemeris.dt_s
+            p_eci, v_eci = frames.EarthOrientation.at(epoch_j2000_s).to_eci(
+                ephemeris.dt_s, ephemeris.position_m, ephemeris.velocity_m_s
             )
-            p_eci, v_eci = _ecef_to_eci_by_angle(gmst, ephemeris.position_m, ephemeris.velocity_m_s)
         else:
             p_eci, v_eci = ephemeris.position_m, ephemeris.velocity_m_s
         orbit_values = np.concatenate([p_eci, v_eci], axis=1)
@@ -268,9 +264,22 @@ class Trajectory:
         return out
 
     # ---------------------------------------------------------------- evaluation
-    def gmst_rad(self, dt_s: ArrayLike) -> FloatArray:
-        """Sidereal angle at ``dt_s`` (linear from the epoch: exact to 1e-14 rad over hours)."""
-        return self._gmst0_rad + self._gmst_rate * np.asarray(dt_s, float)
+    def eci_to_ecef_matrix(self, dt_s: ArrayLike) -> FloatArray:
+        """``R_eci_to_ecef`` (GCRS -> ITRS, :class:`~carto.framework.geometry.frames.
+        EarthOrientation`) at ``dt_s``, ``(..., 3, 3)``."""
+        return self._earth.eci_to_ecef_matrix(dt_s)
+
+    def inertial_velocity_ecef(self, dt_s: ArrayLike) -> FloatArray:
+        """The platform's inertial velocity in the Earth-fixed axes of ``dt_s``, m/s
+        ``(..., 3)`` (what aberration depends on, :mod:`~carto.framework.geometry.light_path`)."""
+        t = np.asarray(dt_s, dtype=np.float64)
+        _, v_eci = self.state_eci(t)
+        return np.einsum("...ij,...j->...i", self._earth.eci_to_ecef_matrix(t), v_eci)
+
+    @property
+    def earth_rotation_ecef(self) -> FloatArray:
+        """The Earth's angular velocity in the Earth-fixed frame, rad/s ``(3,)``."""
+        return self._earth.rotation_vector_ecef
 
     def state_eci(self, dt_s: ArrayLike) -> tuple[FloatArray, FloatArray]:
         """Uncorrected inertial position (m) and velocity (m/s), each ``(..., 3)``."""
@@ -310,7 +319,7 @@ class Trajectory:
                 p_eci = p_eci + np.einsum("...ij,...j->...i", r_o2i, d_orbit)
                 # the orbit frame follows the corrected position (it is defined by it)
                 r_o2i = frames.orbit_to_eci_matrix(p_eci, v_eci)
-        r_i2e = frames.rot_z(-self.gmst_rad(t))
+        r_i2e = self._earth.eci_to_ecef_matrix(t)
         r_o2e = r_i2e @ r_o2i
         a = self._angles(t)
         if self.attitude_frame == "orbit":
@@ -348,11 +357,7 @@ class Trajectory:
         """Uncorrected Earth-fixed position (m) and velocity (m/s, relative to the Earth)."""
         t = np.asarray(dt_s, dtype=np.float64)
         p_eci, v_eci = self.state_eci(t)
-        gmst = self.gmst_rad(t)
-        r_i2e = frames.rot_z(-gmst)
-        p = np.einsum("...ij,...j->...i", r_i2e, p_eci)
-        v = np.einsum("...ij,...j->...i", r_i2e, v_eci) - np.cross([0.0, 0.0, self._gmst_rate], p)
-        return p, v
+        return self._earth.to_ecef(t, p_eci, v_eci)
 
     # ---------------------------------------------------------------- serialisation
     def to_dict(self) -> dict[str, Any]:
@@ -457,15 +462,6 @@ def _correction_parameters(
                 )
             )
     return tuple(params)
-
-
-def _ecef_to_eci_by_angle(
-    gmst_rad: FloatArray, p_ecef: FloatArray, v_ecef: FloatArray
-) -> tuple[FloatArray, FloatArray]:
-    r_e2i = frames.rot_z(gmst_rad)
-    p = np.einsum("...ij,...j->...i", r_e2i, p_ecef)
-    v_abs = v_ecef + np.cross([0.0, 0.0, frames.OMEGA_EARTH_RAD_S], p_ecef)
-    return p, np.einsum("...ij,...j->...i", r_e2i, v_abs)
 
 
 def _residuals(orbit_res: FloatArray, angle_res: FloatArray) -> tuple[tuple[float, ...], ...]:

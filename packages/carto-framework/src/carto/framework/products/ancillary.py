@@ -28,6 +28,7 @@ from carto.framework.files.documents import (
 )
 from carto.framework.geometry import frames
 from carto.framework.geometry.camera import Camera
+from carto.framework.geometry.light_path import LightPath
 from carto.framework.geometry.linescan import LineScanner
 from carto.framework.geometry.linescan_timing import LineTiming
 from carto.framework.geometry.time_series import BUILTIN_KINDS, Interpolation
@@ -36,6 +37,18 @@ from carto.framework.geometry.trajectory_models import TrajectoryModel
 
 FORMAT = "carto-ancillary"
 VERSION = 1
+
+
+TOP_LEVEL_FIELDS = frozenset(
+    {"format", "version", "platform", "epoch_utc", "trajectory_model", "light_path"}
+    | {"ephemeris", "attitude", "cameras", "images"}
+)
+"""The document's fields: any other is refused (a misspelt optional field would silently take
+its default), except extensions named ``x_...``."""
+
+EPOCH_RANGE_J2000_S = (-1262304000.0, 3155760000.0)
+"""Epochs the reader accepts (1960-01-01T12:00 to 2100-01-01T12:00 UTC): satellite imagery
+within the span of the IAU 2006/2000A Earth-orientation model."""
 
 
 @attrs.frozen
@@ -119,6 +132,9 @@ class Ancillary:
     cameras: Mapping[str, CameraSpec]
     images: Mapping[str, ImageSpec]
     trajectory_model: str = "polynomial"
+    light_path: LightPath = attrs.field(factory=LightPath)
+    """The light-time and aberration corrections the images' geometry needs (absent in the
+    file: none; :mod:`~carto.framework.geometry.light_path`)."""
     source: str = "ancillary"
     """Where the document came from (the file), for the errors of :meth:`sensors`."""
 
@@ -133,6 +149,7 @@ class Ancillary:
             "platform": self.platform,
             "epoch_utc": self.epoch_utc,
             "trajectory_model": self.trajectory_model,
+            "light_path": self.light_path.to_dict(),
             "ephemeris": {
                 "frame": self.ephemeris.frame,
                 "dt_s": self.ephemeris.dt_s.tolist(),
@@ -216,6 +233,7 @@ class Ancillary:
                     first_sample=image.first_sample,
                     width=image.width,
                     first_line=image.first_line,
+                    light_path=self.light_path,
                 )
             except InputError as exc:
                 raise InputError(f"{self.source}: images.{name}: {exc}") from None
@@ -443,6 +461,9 @@ def parse_ancillary(doc: Mapping[str, Any], source: str = "ancillary") -> Ancill
     time span of the ephemeris and of the attitude.
     """
     check_document(doc, FORMAT, VERSION, "ancillary file", source)
+    unknown = sorted(k for k in doc if k not in TOP_LEVEL_FIELDS and not str(k).startswith("x_"))
+    if unknown:
+        raise _fail(source, str(unknown[0]), "unknown field (extensions start with 'x_')")
     try:
         eph = _mapping(_get(doc, "ephemeris", source), source, "ephemeris")
         ephemeris = EphemerisSamples(
@@ -474,11 +495,17 @@ def parse_ancillary(doc: Mapping[str, Any], source: str = "ancillary") -> Ancill
             _check_time_span(image, "attitude", attitude.dt_s, source)
         epoch = _string(_get(doc, "epoch_utc", source), source, "epoch_utc")
         try:
-            frames.utc_to_j2000_s(epoch)
+            epoch_s = frames.utc_to_j2000_s(epoch)
         except (InputError, ValueError, OverflowError):
             raise _fail(
                 source, "epoch_utc", f"{_short(epoch)} is not an ISO-8601 UTC time"
             ) from None
+        if not EPOCH_RANGE_J2000_S[0] <= epoch_s < EPOCH_RANGE_J2000_S[1]:
+            raise _fail(
+                source,
+                "epoch_utc",
+                f"{_short(epoch)} is outside 1960-2100 (the Earth-orientation model's span)",
+            )
         platform = doc.get("platform", "")
         if not isinstance(platform, str):
             raise _fail(source, "platform", f"expected a string, got {_short(platform)}")
@@ -490,6 +517,7 @@ def parse_ancillary(doc: Mapping[str, Any], source: str = "ancillary") -> Ancill
             cameras,
             images,
             _trajectory_model(doc.get("trajectory_model", "polynomial"), source),
+            light_path=_light_path(doc.get("light_path"), source),
             source=source,
         )
     except InputError as exc:
@@ -499,6 +527,20 @@ def parse_ancillary(doc: Mapping[str, Any], source: str = "ancillary") -> Ancill
         ) from None
     except (TypeError, ValueError, OverflowError) as exc:
         raise InputError(f"{source}: invalid value: {exc}") from None
+
+
+def _light_path(value: Any, source: str) -> LightPath:
+    """``light_path``: absent or ``{"light_time": bool, "aberration": bool}``."""
+    if value is None:
+        return LightPath()
+    d = _mapping(value, source, "light_path")
+    unknown = sorted(set(d) - {"light_time", "aberration"})
+    if unknown:
+        raise _fail(source, f"light_path.{unknown[0]}", "unknown field")
+    for key, flag in d.items():
+        if not isinstance(flag, bool):
+            raise _fail(source, f"light_path.{key}", f"expected true or false, got {_short(flag)}")
+    return LightPath.from_dict(d)
 
 
 def read_ancillary(path: str | os.PathLike[str]) -> Ancillary:

@@ -16,7 +16,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from carto.framework.errors import InputError
-from carto.framework.geometry.linescan import LineScanner
 from carto.framework.simulation.plan import ErrorModel
 
 FloatArray = NDArray[np.float64]
@@ -61,15 +60,23 @@ def _select_points(
 
 
 def control_points(
-    sensors: dict[str, LineScanner],
+    sensors: dict[str, Any],
     dem: Any,
     n_gcps: int,
     n_check: int,
     errors: ErrorModel,
     rng: np.random.Generator,
     min_views: int | None = None,
+    exact: dict[str, Any] | None = None,
 ) -> tuple[dict[str, list], dict[str, list], tuple[FloatArray, FloatArray]]:
     """GCP and checkpoint observation rows (long format) and their ground positions.
+
+    ``sensors``: the true image geometry (``ground_to_image``, ``image_shape``) that decides
+    which pool points the images see; ``exact`` (same keys; default ``sensors``): the geometry
+    the chosen points' image coordinates come from (the simulator passes the reference
+    geometry's imagers, slower than the models it checks). GCPs carry ground and image
+    measurement noise, checkpoints true ground coordinates and, under ``--errors full``,
+    image measurement noise.
 
     Points are chosen where at least ``min_views`` images (None: all) see them; each gets a
     row for every image that sees it."""
@@ -98,6 +105,12 @@ def control_points(
     taken = ~inside
     taken[gcp_idx] = True
     check_idx = _select_points(lon, lat, n_check, rng, exclude=taken)
+    if exact is not None:
+        chosen = np.concatenate([gcp_idx, check_idx])
+        for name, geometry in exact.items():
+            line, sample = geometry.ground_to_image(lon[chosen], lat[chosen], h[chosen])
+            proj[name][0][chosen] = line
+            proj[name][1][chosen] = sample
     # exact projections of the chosen points (refined ground -> image, true models)
     cols = (
         "id",
@@ -112,7 +125,9 @@ def control_points(
         "sigma_px",
     )
 
-    def rows(indices: NDArray[np.intp], prefix: str, noisy: bool) -> dict[str, list]:
+    def rows(
+        indices: NDArray[np.intp], prefix: str, noisy: bool, image_px: float
+    ) -> dict[str, list]:
         table: dict[str, list] = {c: [] for c in cols}
         plan_sigma = errors.gcp_planimetric_m / math.sqrt(2.0)
         for k, i in enumerate(indices):
@@ -129,9 +144,9 @@ def control_points(
                 if not seen_by[name][i]:
                     continue
                 line, sample = proj[name][0][i], proj[name][1][i]
-                if noisy and errors.gcp_image_px:
-                    line += rng.normal(0.0, errors.gcp_image_px)
-                    sample += rng.normal(0.0, errors.gcp_image_px)
+                if image_px:
+                    line += rng.normal(0.0, image_px)
+                    sample += rng.normal(0.0, image_px)
                 for c, value in zip(
                     cols,
                     (
@@ -144,7 +159,7 @@ def control_points(
                         sample,
                         errors.gcp_planimetric_m if noisy else 0.0,
                         errors.gcp_height_m if noisy else 0.0,
-                        errors.gcp_image_px if noisy else 0.0,
+                        image_px,
                     ),
                     strict=True,
                 ):
@@ -152,4 +167,6 @@ def control_points(
         return table
 
     all_idx = np.concatenate([gcp_idx, check_idx])
-    return (rows(gcp_idx, "G", True), rows(check_idx, "C", False), (lon[all_idx], lat[all_idx]))
+    gcps = rows(gcp_idx, "G", True, errors.gcp_image_px)
+    checks = rows(check_idx, "C", False, errors.checkpoint_image_px)
+    return gcps, checks, (lon[all_idx], lat[all_idx])

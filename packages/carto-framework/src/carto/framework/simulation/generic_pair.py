@@ -14,6 +14,7 @@ from carto.framework.products.ancillary import CameraSpec
 from carto.framework.simulation import acquisition
 from carto.framework.simulation.plan import ScenePlan, SegmentPlan, SimulationOptions, ViewPlan
 from carto.framework.simulation.preset import ScenePreset
+from carto.framework.simulation.reference.attitude import YawSteering
 
 ALTITUDE_M = 700e3
 N_DETECTORS = 6000
@@ -33,7 +34,7 @@ def generic_pair_plan(
 ) -> ScenePlan:
     """The acquisition plan of the generic stereo pair over ``target`` (lon, lat)."""
     lon, lat = target
-    epoch_utc, epoch, elements = acquisition.sun_synchronous_overpass(lon, lat, date, ALTITUDE_M)
+    epoch_utc, _epoch, elements = acquisition.sun_synchronous_overpass(lon, lat, date, ALTITUDE_M)
     views = tuple(
         ViewPlan(
             name,
@@ -49,7 +50,7 @@ def generic_pair_plan(
         )
         for name, tilt in TILTS_DEG.items()
     )
-    segment = SegmentPlan("body", (-60.0, 60.0), acquisition.yaw_steering_law(epoch), views)
+    segment = SegmentPlan("body", (-60.0, 60.0), YawSteering(), views)
     return ScenePlan(
         preset="linescan-pair",
         platform=PLATFORM,

@@ -17,7 +17,7 @@ import attrs
 
 from carto.framework.geometry import orbit
 from carto.framework.products.ancillary import CameraSpec
-from carto.framework.simulation import acquisition
+from carto.framework.simulation.reference.attitude import AttitudeLaw
 
 
 # ----------------------------------------------------------------------------- errors
@@ -25,19 +25,35 @@ from carto.framework.simulation import acquisition
 class ErrorModel:
     """Error sources of a simulated product (design brief section 4); 0 switches one off.
 
-    Attributes (one-sigma sizes; each drawn value is normal with that sigma):
+    Attributes (one-sigma sizes; each drawn value is normal with that sigma unless said):
         ephemeris_bias_m: position bias per axis (along, across, radial), metres.
         attitude_bias_deg: attitude bias per axis (roll, pitch, yaw).
         attitude_drift_deg_s: attitude drift per axis.
         attitude_smooth_deg: amplitude of the smooth higher-order (tau^2, tau^3) attitude
             error over a segment (agile platforms).
-        jitter_deg: amplitude of attitude jitter (sinusoids at ``jitter_hz``) in the true
-            motion, which the 8 Hz attitude samples do not carry.
+        jitter_deg: amplitude of attitude jitter (sinusoids at ``jitter_hz``, about the body
+            axes) in the true motion, which the 8 Hz attitude samples do not carry; each
+            frequency's amplitude is drawn in 0.5-1 times this over ``sqrt(k + 1)`` (k: its
+            rank in ``jitter_hz``).
         misalignment_deg: residual camera alignment error per axis (Fore/Aft relative).
         gcp_planimetric_m: GCP ground error, planimetric RMS (east and north each
             ``/sqrt(2)``).
         gcp_height_m: GCP height error.
         gcp_image_px: GCP image measurement error per image axis, pixels.
+
+    Errors outside every adjuster's parameterisation (``--errors full``):
+        attitude_wander_deg: low-frequency attitude measurement error per axis, three
+            sinusoids of periods 15-90 s (amplitudes drawn in 0.5-1 times this): what a
+            polynomial of low order cannot follow.
+        focal_length_ppm: true focal length against the product's nominal one.
+        detector_line_offset_px: along-track position of the detector line in the focal
+            plane, in detector pitches.
+        principal_point_px: across-track position of the optical axis on the line, pixels.
+        ccd_rotation_deg: rotation of the detector line in the focal plane.
+        line_time_offset_s: true line times against the product's (a clock offset).
+        line_period_ppm: true line period against the product's.
+        ephemeris_noise_m: white noise per axis on each ephemeris sample.
+        checkpoint_image_px: checkpoint image measurement error per image axis, pixels.
     """
 
     ephemeris_bias_m: float = 0.0
@@ -50,10 +66,20 @@ class ErrorModel:
     gcp_planimetric_m: float = 0.0
     gcp_height_m: float = 0.0
     gcp_image_px: float = 0.0
+    attitude_wander_deg: float = 0.0
+    focal_length_ppm: float = 0.0
+    detector_line_offset_px: float = 0.0
+    principal_point_px: float = 0.0
+    ccd_rotation_deg: float = 0.0
+    line_time_offset_s: float = 0.0
+    line_period_ppm: float = 0.0
+    ephemeris_noise_m: float = 0.0
+    checkpoint_image_px: float = 0.0
 
     @classmethod
     def realistic(cls, *, agile: bool = False) -> ErrorModel:
-        """The sizes of the design brief, section 4 (``agile`` adds the Cartosat-2 terms)."""
+        """The sizes of the design brief, section 4 (``agile`` adds the Cartosat-2 terms):
+        errors of the adjusters' own form, plus GCP measurement errors."""
         return cls(
             ephemeris_bias_m=15.0,
             attitude_bias_deg=0.02,
@@ -67,9 +93,45 @@ class ErrorModel:
         )
 
     @classmethod
+    def full(cls, *, agile: bool = False) -> ErrorModel:
+        """:meth:`realistic` plus the errors no adjuster's parameters have: attitude jitter of
+        1-100 Hz (RMS about 0.25 px on the ground for Cartosat-1, 1 px for Cartosat-2), attitude
+        wander of 0.0002 deg (about 2.4 m from 690 km), a 50 ppm focal length, half a pixel
+        of detector-line and principal-point offsets, 10 arcsec of line rotation, 0.1 ms of
+        clock offset, 10 ppm of line period, 0.3 m of ephemeris noise and 0.3 px of
+        checkpoint measurement noise."""
+        return attrs.evolve(
+            cls.realistic(agile=agile),
+            jitter_deg=1e-4 if agile else 6e-5,
+            jitter_hz=(1.3, 4.7, 11.9, 29.0, 67.0, 97.0),
+            attitude_wander_deg=2e-4,
+            focal_length_ppm=50.0,
+            detector_line_offset_px=0.5,
+            principal_point_px=0.5,
+            ccd_rotation_deg=10.0 / 3600.0,
+            line_time_offset_s=1e-4,
+            line_period_ppm=10.0,
+            ephemeris_noise_m=0.3,
+            checkpoint_image_px=0.3,
+        )
+
+    @classmethod
     def none(cls) -> ErrorModel:
         """No errors: the product carries the true values."""
         return cls()
+
+    @classmethod
+    def named(cls, profile: str, *, agile: bool = False) -> ErrorModel:
+        """``"none"``, ``"realistic"`` or ``"full"``."""
+        if profile == "none":
+            return cls.none()
+        if profile == "realistic":
+            return cls.realistic(agile=agile)
+        if profile == "full":
+            return cls.full(agile=agile)
+        from carto.framework.errors import InputError
+
+        raise InputError(f"--errors must be 'none', 'realistic' or 'full', got {profile!r}")
 
     def as_dict(self) -> dict[str, Any]:
         return attrs.asdict(
@@ -107,13 +169,14 @@ class SegmentPlan:
     Attributes:
         name: segment name (file ``<name>.ancillary.json``).
         span_s: time range of the ancillary samples (s since the epoch).
-        law: true attitude law (see :mod:`carto.framework.simulation.acquisition`).
+        attitude: the true attitude law, in the reference geometry's terms
+            (:mod:`carto.framework.simulation.reference.attitude`).
         views: the images of the segment.
     """
 
     name: str
     span_s: tuple[float, float]
-    law: acquisition.OrbitAttitudeLaw
+    attitude: AttitudeLaw
     views: tuple[ViewPlan, ...]
 
 

@@ -62,6 +62,8 @@ def _render_kernel(
     spacing: float,
     pos: NDArray,
     rot: NDArray,
+    beta: NDArray,
+    omega_c: NDArray,
     tan_x: NDArray,
     tan_y: NDArray,
     half: float,
@@ -94,7 +96,7 @@ def _render_kernel(
                 for b in range(supersample):
                     s = k + (b + 0.5) * inv
                     if not camera_ray(
-                        t, s, stagger, node0, spacing, pos, rot, tan_x, tan_y, half, ray
+                        t, s, stagger, node0, spacing, pos, rot, beta, tan_x, tan_y, half, ray
                     ):
                         continue
                     lon, lat, _h = ray_dem(
@@ -112,6 +114,7 @@ def _render_kernel(
                         h_top,
                         h_bottom,
                         max_slope,
+                        omega_c,
                     )
                     if not np.isfinite(lon):
                         continue
@@ -174,6 +177,8 @@ def render_reflectance(
         arr["spacing"],
         arr["pos"],
         arr["rot"],
+        arr["beta"],
+        arr["omega_c"],
         arr["tan_x"],
         arr["tan_y"],
         arr["half"],
@@ -237,6 +242,8 @@ def render_band(
         arr["spacing"],
         arr["pos"],
         arr["rot"],
+        arr["beta"],
+        arr["omega_c"],
         arr["tan_x"],
         arr["tan_y"],
         arr["half"],

@@ -42,26 +42,22 @@ from numpy.typing import NDArray
 from carto.framework.errors import InputError
 from carto.framework.files.documents import write_json_atomic
 from carto.framework.files.point_table import write_point_table
-from carto.framework.geometry import frames, orbit
-from carto.framework.geometry.camera import Camera
-from carto.framework.geometry.linescan import LineScanner
+from carto.framework.geometry import frames
 from carto.framework.geometry.linescan_timing import LineTiming
-from carto.framework.geometry.trajectory import AttitudeSamples, EphemerisSamples, Trajectory
-from carto.framework.products.ancillary import Ancillary, CameraSpec, ImageSpec
+from carto.framework.products.ancillary import ImageSpec
 from carto.framework.products.scene import SCENE_FORMAT, SCENE_VERSION
-from carto.framework.simulation import acquisition
+from carto.framework.simulation import truth_geometry as tg
 from carto.framework.simulation.control import control_points
 from carto.framework.simulation.plan import (
     ErrorModel,
     ScenePlan,
-    SegmentPlan,
     SimulationOptions,
     ViewPlan,
 )
+from carto.framework.simulation.reference.pushbroom import ReferenceImager
+from carto.framework.simulation.truth_products import ERRORS_NOTE, measured_ancillary
 
 FloatArray = NDArray[np.float64]
-TRUTH_STEP_S = 0.025
-"""Sampling of the true motion (40 Hz: resolves jitter up to ~10 Hz with Lagrange)."""
 DN_MAX = 1023
 
 
@@ -83,94 +79,50 @@ class _Stage:
 
 
 # ----------------------------------------------------------------------------- engine
-@attrs.frozen(eq=False)
-class _Truth:
-    """True trajectory of a segment and its dense ECI samples."""
-
-    trajectory: Trajectory
-    dt: FloatArray
-    p_eci: FloatArray
-    v_eci: FloatArray
-
-
-def _true_segment(
-    plan: ScenePlan,
-    seg: SegmentPlan,
+def _draw_unmodelled(
     errors: ErrorModel,
     rng: np.random.Generator,
-    p0: FloatArray,
-    v0: FloatArray,
-) -> _Truth:
-    epoch = frames.utc_to_j2000_s(plan.epoch_utc)
-    lo, hi = seg.span_s
-    # the truth also covers a full image beyond the span (long windows of a view near its
-    # end; the samples stay on the same lattice, so the truth inside the span is unchanged)
-    pad = max((v.n_lines_full * v.period_s for v in seg.views), default=0.0)
-    lo, hi = lo - pad, hi + pad
-    dt = np.arange(math.floor(lo / TRUTH_STEP_S) - 8, math.ceil(hi / TRUTH_STEP_S) + 9) * (
-        TRUTH_STEP_S
-    )
-    p, v = orbit.propagate(p0, v0, dt)
-    r = seg.law(dt, p, v)
-    if errors.jitter_deg > 0:
-        phases = rng.uniform(0, 2 * np.pi, (3, len(errors.jitter_hz)))
-        amps = np.radians(errors.jitter_deg) * rng.uniform(0.5, 1.0, (3, len(errors.jitter_hz)))
-        j = np.zeros((3, dt.size))
-        for k, f in enumerate(errors.jitter_hz):
-            j += amps[:, k, None] * np.sin(2 * np.pi * f * dt[None, :] + phases[:, k, None])
-        r = frames.rpy_to_matrix(j[0], j[1], j[2]) @ r
-    traj = Trajectory.from_samples(
-        epoch,
-        EphemerisSamples(dt, p, v, "eci"),
-        AttitudeSamples(dt, frames.matrix_to_quat(r), "orbit"),
-        interpolation="lagrange",
-        lagrange_points=8,
-    )
-    return _Truth(traj, dt, p, v)
+    n_segments: int,
+    cameras: Sequence[str],
+    views: Sequence[str],
+) -> dict[str, Any]:
+    """The draws of the errors outside the adjusters' parameters (``--errors full``). Every
+    draw is made whatever the sizes (scaled by them), so switching one source off leaves the
+    others unchanged."""
+    deg = math.radians
 
+    def normal(sigma: float, n: int | None = None) -> Any:
+        z = rng.standard_normal(n)
+        return (np.asarray(z) * sigma).tolist()
 
-def _measured_ancillary(
-    plan: ScenePlan, seg: SegmentPlan, truth: _Truth, drawn: dict, images: Sequence[ImageSpec]
-) -> Ancillary:
-    """Ancillary samples every 125 ms as the platform measures them (with the errors)."""
-    epoch = frames.utc_to_j2000_s(plan.epoch_utc)
-    lo, hi = seg.span_s
-    for image in images:  # windows of many lines may reach beyond the planned span
-        t_first = float(image.timing.time(0.0))
-        t_last = float(image.timing.time(float(image.n_lines)))
-        if t_first < lo + 0.5:  # keep four samples before the first line
-            lo = min(lo, t_first - 1.0)
-        if t_last > hi - 0.5:
-            hi = max(hi, t_last + 1.0)
-    step = acquisition.ANCILLARY_STEP_S
-    dt = np.arange(math.floor(lo / step), math.ceil(hi / step) + 1) * step
-    p_eci, v_eci = truth.trajectory.state_eci(dt)
-    r_true = seg.law(dt, p_eci, v_eci)  # the attitude sensors see the smooth motion
-    # attitude error e(t) in the orbit frame: measured = rpy(e)^T @ true, so that the
-    # correction rpy(e) @ measured restores the truth exactly
-    t_mid, t_half = 0.5 * (lo + hi), 0.5 * (hi - lo)
-    tau = (dt - t_mid) / t_half
-    e = (
-        np.asarray(drawn["attitude_bias_rad"])[:, None]
-        + np.asarray(drawn["attitude_drift_rad_s"])[:, None] * dt[None, :]
-        + np.asarray(drawn["attitude_tau2_rad"])[:, None] * tau[None, :] ** 2
-        + np.asarray(drawn["attitude_tau3_rad"])[:, None] * tau[None, :] ** 3
-    )
-    r_meas = np.swapaxes(frames.rpy_to_matrix(e[0], e[1], e[2]), -1, -2) @ r_true
-    # ephemeris bias along / across / radial: measured = true - R_orbit (along, across, -radial)
-    b = np.asarray(drawn["ephemeris_bias_m"])
-    r_o2i = frames.orbit_to_eci_matrix(p_eci, v_eci)
-    p_meas_eci = p_eci - np.einsum("nij,j->ni", r_o2i, np.array([b[0], b[1], -b[2]]))
-    p_ecef, v_ecef = frames.eci_to_ecef(epoch + dt, p_meas_eci, v_eci)
-    cams = {v.camera.name: v.camera for v in seg.views}
-    return Ancillary(
-        plan.platform,
-        plan.epoch_utc,
-        EphemerisSamples(dt, p_ecef, v_ecef, "ecef"),
-        AttitudeSamples(dt, frames.matrix_to_quat(r_meas), "orbit"),
-        cams,
-        {i.name: i for i in images},
-    )
+    interior = {
+        c: {
+            "focal_ppm": normal(errors.focal_length_ppm),
+            "line_offset_px": normal(errors.detector_line_offset_px),
+            "principal_point_px": normal(errors.principal_point_px),
+            "rotation_rad": normal(deg(errors.ccd_rotation_deg)),
+        }
+        for c in cameras
+    }
+    timing = {
+        v: {
+            "offset_s": normal(errors.line_time_offset_s),
+            "period_ppm": normal(errors.line_period_ppm),
+        }
+        for v in views
+    }
+    wander = [
+        {
+            "amplitude_rad": (
+                deg(errors.attitude_wander_deg) * rng.uniform(0.5, 1.0, (3, 3))
+            ).tolist(),
+            "period_s": rng.uniform(15.0, 90.0, 3).tolist(),
+            "phase_rad": rng.uniform(0.0, 2.0 * math.pi, (3, 3)).tolist(),
+            "ephemeris_noise_seed": int(rng.integers(2**31)),
+        }
+        for _ in range(n_segments)
+    ]
+    return {"camera_interior": interior, "line_timing": timing, "segments": wander}
 
 
 def _draw_errors(
@@ -196,12 +148,6 @@ def _draw_errors(
     return {"segments": seg, "camera_misalignment_rad": mis}
 
 
-def _true_camera(spec: CameraSpec, misalignment_rad: Sequence[float]) -> Camera:
-    nominal = spec.camera("odd")
-    align = tuple(a + m for a, m in zip(nominal.alignment_rpy_rad, misalignment_rad, strict=True))
-    return attrs.evolve(nominal, alignment_rpy_rad=align)
-
-
 def _window(
     view: ViewPlan, size: tuple[int, int], target_line: float, target_sample: float
 ) -> tuple[int, int, int, int]:
@@ -219,30 +165,6 @@ def _window(
     first_sample = int(np.clip(round(c_s - width / 2.0), 0, n_det - width))
     first_line = int(np.clip(round(c_l - height / 2.0), 0, view.n_lines_full - height))
     return first_line, first_sample, height, width
-
-
-def _footprint_bounds(
-    sensors: Sequence[LineScanner], h_range: tuple[float, float], margin_m: float
-) -> tuple[float, float, float, float]:
-    lons, lats = [], []
-    for s in sensors:
-        n_l, n_s = s.image_shape
-        line = np.array([0, 0, n_l, n_l, n_l / 2, 0, n_l / 2, n_l], float)
-        sample = np.array([0, n_s, 0, n_s, 0, n_s / 2, n_s, n_s / 2], float)
-        for h in h_range:
-            lon, lat = s.image_to_ground(line, sample, np.full(line.size, h))
-            lons.append(lon)
-            lats.append(lat)
-    lon = np.concatenate(lons)
-    lat = np.concatenate(lats)
-    m_lat = margin_m / 111_320.0
-    m_lon = m_lat / math.cos(math.radians(float(np.mean(lat))))
-    return (
-        float(lon.min() - m_lon),
-        float(lat.min() - m_lat),
-        float(lon.max() + m_lon),
-        float(lat.max() + m_lat),
-    )
 
 
 def _radiometry(
@@ -270,8 +192,7 @@ def simulate_scene(
     from carto.framework.simulation.texture import GroundTexture
 
     out = Path(out_dir)
-    if options.errors not in ("realistic", "none"):
-        raise InputError(f"--errors must be 'realistic' or 'none', got {options.errors!r}")
+    errors = ErrorModel.named(options.errors, agile=plan.agile)
     terrain_name = options.terrain or plan.default_terrain
     if options.dem_path is None and terrain_name not in terrain_mod.TERRAINS:
         raise InputError(
@@ -282,11 +203,6 @@ def simulate_scene(
     n_check = plan.default_checkpoints if options.n_checkpoints is None else options.n_checkpoints
     if n_gcps < 0 or n_check < 0:
         raise InputError("--gcps and --checkpoints must be >= 0")
-    errors = (
-        ErrorModel.realistic(agile=plan.agile)
-        if options.errors == "realistic"
-        else ErrorModel.none()
-    )
     if options.error_sizes:
         known = {f.name for f in attrs.fields(ErrorModel) if f.name != "jitter_hz"}
         for name, value in options.error_sizes:
@@ -298,13 +214,23 @@ def simulate_scene(
                 raise InputError(f"error size {name}={value}: must be a number >= 0")
         errors = attrs.evolve(errors, **dict(options.error_sizes))
     streams = np.random.SeedSequence(int(options.seed)).spawn(8)
-    rng_err, rng_jit, rng_terrain, rng_tex, rng_ctl, rng_noise, rng_init = (
-        np.random.default_rng(s) for s in streams[:7]
+    rng_err, rng_jit, rng_terrain, rng_tex, rng_ctl, rng_noise, rng_init, rng_full = (
+        np.random.default_rng(s) for s in streams
     )
     epoch = frames.utc_to_j2000_s(plan.epoch_utc)
-    p0, v0 = orbit.elements_to_state(plan.elements)
     cameras = sorted({v.camera.name for s in plan.segments for v in s.views})
     drawn = _draw_errors(errors, rng_err, len(plan.segments), cameras)
+    view_names = [v.name for seg in plan.segments for v in seg.views]
+    unmodelled = _draw_unmodelled(errors, rng_full, len(plan.segments), cameras, view_names)
+    drawn["camera_interior"] = unmodelled["camera_interior"]
+    drawn["line_timing"] = unmodelled["line_timing"]
+    for seg_draw, extra in zip(drawn["segments"], unmodelled["segments"], strict=True):
+        seg_draw.update(
+            {
+                f"attitude_wander_{k}" if k != "ephemeris_noise_seed" else k: v
+                for k, v in extra.items()
+            }
+        )
     if options.platform_seed is not None:
         platform_rng = np.random.default_rng(int(options.platform_seed))
         drawn["camera_misalignment_rad"] = {
@@ -321,61 +247,57 @@ def simulate_scene(
                     f"{view.camera.n_detectors} x {view.n_lines_full} of {view.name}"
                 )
 
-    # --- true geometry: full images, then windows centred on the target
+    # --- true geometry (the reference): full images, then windows centred on the target
     h_range = _terrain_range(terrain_name, options.dem_path)
     h_mid = 0.5 * sum(h_range)
-    with _Stage("true trajectories", quiet):
-        truths, full_sensors, views = [], {}, {}
+    with _Stage("true orbit and attitude (reference geometry)", quiet):
+        w = tg.world(plan)
+        laws, full_imagers, views, cameras, seg_of = [], {}, {}, {}, {}
         for seg in plan.segments:
-            truth = _true_segment(plan, seg, errors, rng_jit, p0, v0)
-            truths.append(truth)
+            law = tg.jittered(seg.attitude, errors.jitter_deg, errors.jitter_hz, rng_jit)
+            laws.append(law)
+            if law is not seg.attitude:  # the jitter drawn, for whoever rebuilds the truth
+                drawn["segments"][len(laws) - 1]["attitude_jitter"] = {
+                    "amplitude_rad": [list(a) for a in law.amplitude_rad],
+                    "frequency_hz": list(law.frequency_hz),
+                    "phase_rad": [list(p) for p in law.phase_rad],
+                }
             for view in seg.views:
-                cam = _true_camera(view.camera, drawn["camera_misalignment_rad"][view.camera.name])
-                if view.centre_dt_s is None:
-                    t_c = acquisition.crossing_time(
-                        truth.trajectory,
-                        cam,
-                        *(view.target or plan.target),
-                        h_mid,
-                        t_range_s=seg.span_s,
-                    )
-                else:
-                    t_c = view.centre_dt_s
-                timing = LineTiming.constant(
-                    t_c - (view.n_lines_full / 2.0 - 0.5) * view.period_s, view.period_s
+                mis = drawn["camera_misalignment_rad"][view.camera.name]
+                interior = drawn["camera_interior"][view.camera.name]
+                period = view.period_s * (
+                    1.0 + 1e-6 * drawn["line_timing"][view.name]["period_ppm"]
                 )
-                full_sensors[view.name] = LineScanner(
-                    view.name, view.n_lines_full, timing, cam, truth.trajectory
+                full_imagers[view.name] = tg.full_imager(
+                    w,
+                    view,
+                    tg.camera_geometry(view.camera, mis, interior),
+                    law,
+                    seg,
+                    view.target or plan.target,
+                    h_mid,
+                    period_s=period,
                 )
                 views[view.name] = view
+                cameras[view.name] = tg.model_camera(view.camera, mis, interior)
+                seg_of[view.name] = len(laws) - 1
 
-    def place(h_target: float) -> dict[str, LineScanner]:
+    def place(h_target: float) -> dict[str, tuple[ReferenceImager, int]]:
         """Windows centred on the target seen at height ``h_target``."""
         placed = {}
-        for name, full in full_sensors.items():
-            t_line, t_sample, _ = full.project(*(views[name].target or plan.target), h_target)
+        for name, full in full_imagers.items():
+            target = views[name].target or plan.target
+            t_line, t_sample = full.ground_to_image(target[0], target[1], h_target)
             first_line, first_sample, height, width = _window(
                 views[name], size, float(t_line), float(t_sample)
             )
-            timing = LineTiming.constant(
-                float(full.timing.time(first_line + 0.5)), views[name].period_s
-            )
-            placed[name] = LineScanner(
-                name,
-                height,
-                timing,
-                full.camera,
-                full.trajectory,
-                first_sample=first_sample,
-                width=width,
-                first_line=first_line,
-            )
+            placed[name] = (tg.window(full, first_line, first_sample, height, width), first_line)
         return placed
 
     # the terrain must cover the windows wherever the target's true height puts them
     candidates = [place(h) for h in h_range]
-    sensors_all = [s for c in candidates for s in c.values()]
-    bounds = _footprint_bounds(sensors_all, h_range, margin_m=20 * plan.gsd_m)
+    imagers_all = [im for c in candidates for im, _ in c.values()]
+    bounds = tg.footprint_bounds(imagers_all, h_range, margin_m=20 * plan.gsd_m)
     dem_posting = max(2.0 * plan.gsd_m, 1.0)
     with _Stage(f"terrain {terrain_name if options.dem_path is None else options.dem_path}", quiet):
         if options.dem_path is not None:
@@ -388,9 +310,21 @@ def simulate_scene(
                 terrain_name, bounds, dem_posting, int(rng_terrain.integers(2**31))
             )
     h_target = float(terrain.height(*plan.target))
-    true_sensors = place(h_target if np.isfinite(h_target) else h_mid)
+    placed = place(h_target if np.isfinite(h_target) else h_mid)
     if any(v.target is not None for v in views.values()):
-        true_sensors = place(h_mid)  # several targets: centre on the middle height
+        placed = place(h_mid)  # several targets: centre on the middle height
+    imagers = {name: im for name, (im, _) in placed.items()}
+    with _Stage("true line-scanner models", quiet):
+        true_sensors = {
+            name: tg.truth_scanner(
+                im,
+                cameras[name],
+                tg.truth_trajectory(w, laws[seg_of[name]], tg.image_span(im)),
+                first_line,
+            )
+            for name, (im, first_line) in placed.items()
+        }
+    # the product's line timing: the clock's offset and the nominal period
     specs = {
         name: ImageSpec(
             name,
@@ -400,7 +334,10 @@ def simulate_scene(
             s.n_samples,
             s.first_line,
             s.first_sample,
-            s.timing,
+            LineTiming.constant(
+                float(s.timing.time(0.5)) - drawn["line_timing"][name]["offset_s"],
+                views[name].period_s,
+            ),
         )
         for name, s in true_sensors.items()
     }
@@ -416,7 +353,14 @@ def simulate_scene(
     # --- control points (before rendering: point targets may mark them)
     with _Stage("control points", quiet):
         gcp_rows, check_rows, targets = control_points(
-            true_sensors, terrain, n_gcps, n_check, errors, rng_ctl, plan.control_min_views
+            true_sensors,
+            terrain,
+            n_gcps,
+            n_check,
+            errors,
+            rng_ctl,
+            plan.control_min_views,
+            exact=imagers,
         )
     if options.point_targets and targets[0].size:
         ground = ground.with_targets(
@@ -452,8 +396,17 @@ def simulate_scene(
     # --- products
     with _Stage("ancillary, control, initial DEM and truth", quiet):
         anc_files = {}
-        for seg, truth, seg_err in zip(plan.segments, truths, drawn["segments"], strict=True):
-            anc = _measured_ancillary(plan, seg, truth, seg_err, [specs[v.name] for v in seg.views])
+        for seg, seg_err in zip(plan.segments, drawn["segments"], strict=True):
+            anc = measured_ancillary(
+                plan.platform,
+                w,
+                seg.span_s,
+                seg.attitude,
+                seg_err,
+                {v.camera.name: v.camera for v in seg.views},
+                [specs[v.name] for v in seg.views],
+                ephemeris_noise_m=errors.ephemeris_noise_m,
+            )
             path = anc.write(out / f"{seg.name}.ancillary.json")
             for v in seg.views:
                 anc_files[v.name] = path.name
@@ -471,10 +424,7 @@ def simulate_scene(
             {
                 "error_model": errors.as_dict(),
                 "drawn": drawn,
-                "note": "attitude errors: measured R_body_to_orbit = rpy(e)^T @ true, with "
-                "e = bias + drift * dt_s + tau2 * tau^2 + tau3 * tau^3 (tau over the "
-                "ancillary samples of the segment); ephemeris: measured = true - "
-                "R_orbit_to_ecef @ (along, across, -radial)",
+                "note": ERRORS_NOTE,
             },
         )
     manifest = {

@@ -38,6 +38,7 @@ from carto.framework.matching.gcp_transfer import (
 from carto.framework.plugins.registry import get_registry
 from carto.framework.workflows.opening import open_options, open_product, sensor_type_for
 from carto.framework.workflows.reporting import jsonable, progress, write_report
+from carto.framework.workflows.residual_plot import residual_misfit, residual_plot
 
 Table = dict[str, NDArray]
 
@@ -81,74 +82,6 @@ def choose_adjuster(requested: str | None, types: Mapping[str, SensorType]) -> s
     raise InputError(
         f"no default adjuster for these images (sensor types {named}); name one with --adjuster"
     )
-
-
-def residual_plot(result: AdjustmentResult, path: Path, title: str) -> Path:
-    """Image residual vectors per image (scaled) and GCP ground residuals, as a PNG."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from carto.framework.files.atomic import atomic_output
-
-    res = result.image_residuals
-    images = list(result.sensors)
-    fig, axes = plt.subplots(1, len(images) + 1, figsize=(4.2 * (len(images) + 1), 4.2))
-    for ax, name in zip(axes, images, strict=False):
-        m = (res["image"] == name) & np.isfinite(res["d_line"])
-        n_l, n_s = result.sensors[name].image_shape
-        pts = np.array([p for p in res["point_id"][m]])
-        lines = np.array([result.points.get(p, (np.nan,) * 3) for p in pts])
-        if lines.size:
-            line_px, sample_px, _ = result.sensors[name].project(
-                lines[:, 0], lines[:, 1], lines[:, 2]
-            )
-            scale = (
-                0.05
-                * max(n_l, n_s)
-                / max(float(np.nanmax(np.hypot(res["d_line"][m], res["d_sample"][m]))), 1e-9)
-            )
-            ax.quiver(
-                sample_px,
-                line_px,
-                res["d_sample"][m] * scale,
-                -res["d_line"][m] * scale,
-                angles="xy",
-                scale_units="xy",
-                scale=1,
-                width=0.004,
-            )
-        else:
-            scale = float("nan")
-        ax.set_xlim(0, n_s)
-        ax.set_ylim(n_l, 0)
-        ax.set_aspect("equal")
-        rms = (
-            float(np.sqrt(np.nanmean(res["d_line"][m] ** 2 + res["d_sample"][m] ** 2)))
-            if (m.any())
-            else float("nan")
-        )
-        ax.set_title(f"{name}: {m.sum()} obs, RMS {rms:.2f} px (arrows x{scale:.0f})", fontsize=9)
-        ax.set_xlabel("sample (px)")
-        ax.set_ylabel("line (px)")
-    ax = axes[-1]
-    cr = result.control_residuals
-    if len(cr["id"]):
-        ax.scatter(cr["d_east_m"], cr["d_north_m"], c=cr["d_up_m"], cmap="coolwarm")
-        for i, cid in enumerate(cr["id"]):
-            ax.annotate(str(cid), (cr["d_east_m"][i], cr["d_north_m"][i]), fontsize=7)
-        ax.axhline(0, color="grey", lw=0.5)
-        ax.axvline(0, color="grey", lw=0.5)
-    ax.set_title("GCP residuals (m; colour: up)", fontsize=9)
-    ax.set_xlabel("east (m)")
-    ax.set_ylabel("north (m)")
-    fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
-    with atomic_output(path) as tmp:
-        fig.savefig(tmp, dpi=110, format="png")
-    plt.close(fig)
-    return path
 
 
 RESERVED_OUTPUTS = frozenset(
@@ -408,11 +341,15 @@ def _adjust_into(
         if isinstance(document, dict) and document.get("sources") == []:
             document = document | {"sources": [str(src)]}  # what the adjuster did not know
         files[product] = write_json_atomic(out / f"{product}.json", jsonable(document)).name
+    misfit = residual_misfit(result)
     plot = residual_plot(
         result,
         out / "residuals.png",
         f"{name}: {n_used} GCPs, {n_ties} tie points, sigma0 {result.sigma0:.2f}",
+        misfit,
     )
+    for flag in misfit["flags"]:
+        progress("adjust", f"model misfit: {flag}", quiet)
     report: dict[str, Any] = {
         "source": str(src),
         "adjuster": name,
@@ -438,6 +375,7 @@ def _adjust_into(
         "converged": result.converged,
         "iterations": result.iterations,
         "adjustment": result.summary(),
+        "misfit": misfit,
         "files": {**files, "residual_plot": plot.name},
         "seconds": round(time.perf_counter() - t0, 1),
         "workers": engine.workers,
