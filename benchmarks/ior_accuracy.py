@@ -18,7 +18,7 @@ session-4 JSON came from an earlier version of this script).
 
 Usage: ``python benchmarks/ior_accuracy.py [--seeds 0 1 2 3 4] [--size 1000 4000] [--data
 ../shared/data] [--work DIR] [--error-size NAME=VALUE ...] [--no-true-models]
-[--simulated-only]``
+[--simulated-only] [--errors realistic|full]``
 """
 
 from __future__ import annotations
@@ -89,13 +89,19 @@ def simulated(
     size: tuple[int, int],
     error_sizes: tuple[tuple[str, float], ...] = (),
     true_models: bool = True,
+    errors: str = "realistic",
 ) -> dict:
     scene = work / f"hilly-{seed}"
     if not (scene / "scene.json").is_file():
         get_registry().get("scene-preset", "cartosat1-pair").simulate(
             scene,
             SimulationOptions(
-                seed=seed, terrain="hilly", size=size, n_checkpoints=50, error_sizes=error_sizes
+                seed=seed,
+                terrain="hilly",
+                size=size,
+                n_checkpoints=50,
+                error_sizes=error_sizes,
+                errors=errors,
             ),
             quiet=True,
         )
@@ -204,6 +210,12 @@ def main() -> int:
         "--no-true-models", action="store_true", help="skip the runs with the true models"
     )
     parser.add_argument("--simulated-only", action="store_true", help="skip Reunion")
+    parser.add_argument(
+        "--errors",
+        choices=("realistic", "full"),
+        default="realistic",
+        help="the simulated scenes' error profile (full: errors no adjuster models, issue 18)",
+    )
     args = parser.parse_args()
     work = args.work or Path(tempfile.mkdtemp(prefix="carto-ior-bench-"))
     work.mkdir(parents=True, exist_ok=True)
@@ -211,13 +223,15 @@ def main() -> int:
     result: dict = {
         "error_sizes": dict(sizes),
         "simulated": [
-            simulated(work, s, tuple(args.size), sizes, not args.no_true_models) for s in args.seeds
+            simulated(work, s, tuple(args.size), sizes, not args.no_true_models, args.errors)
+            for s in args.seeds
         ],
     }
     result["simulated_summary"] = summary(result["simulated"])
     if args.data.is_dir() and not args.simulated_only:
         result["reunion"] = reunion(args.data, work)
     result["work"] = str(work)
+    result["errors"] = args.errors
     json.dump(
         result,
         sys.stdout,

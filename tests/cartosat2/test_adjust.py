@@ -35,10 +35,23 @@ def test_block_adjustment_with_two_gcps(cartosat2_triplet_scene):
     check = {k: v[~m] for k, v in cps.items()}
     obs = Observations.from_tables(select_gcps(scene.control("gcps"), 2), ties)
     adjuster = get_registry().get("adjuster", "cartosat2-bba")
-    result = adjuster.adjust(scene.sensors(), obs)
-    # independent corrections per image: prefixed by the image name, quadratic by default
+    result = adjuster.adjust(scene.sensors(), obs, jitter_hz=[1.7, 4.3])
+    # independent corrections per image: prefixed by the image name, cubic by default, and
+    # the given jitter frequencies; the delivered models are line scanners, the jitter a product
     assert {n.split(".")[0] for n in result.parameters} == {"fore", "nadir", "aft"}
-    assert any(n.endswith(".c2") for n in result.parameters)
+    assert any(n.endswith(".c3") for n in result.parameters)
+    assert "nadir.trajectory.jitter.pitch.f1.cos" in result.parameters
+    assert all(isinstance(s, LineScanner) for s in result.sensors.values())
+    jitter = result.products["jitter"]
+    assert set(jitter["images"]) == {"fore", "nadir", "aft"}
+    assert [r["frequency_hz"] for r in jitter["images"]["aft"]["axes"]["yaw"]] == [1.7, 4.3]
+    assert jitter["detection"] == {"method": "given"}
+    plain = adjuster.adjust(scene.sensors(), obs, jitter_hz=[], attitude_order=2)
+    assert not plain.products["jitter"]["images"]
+    assert not any(".jitter." in n or n.endswith(".c3") for n in plain.parameters)
+    # 'auto' (the default) searches the residuals; 25 ties show no significant period here
+    auto = adjuster.adjust(scene.sensors(), obs)
+    assert auto.products["jitter"]["detection"]["method"] == "residual periodogram"
     before = checkpoint_accuracy(scene.sensors(), check)
     after = checkpoint_accuracy(result.sensors, check)
     assert before["rmse_planimetric_m"] > 50.0
@@ -46,3 +59,5 @@ def test_block_adjustment_with_two_gcps(cartosat2_triplet_scene):
     assert after["rmse_height_m"] < 3.0
     with pytest.raises(InputError, match=r"attitude_order must be 0\.\.3"):
         adjuster.adjust(scene.sensors(), obs, attitude_order=5)
+    with pytest.raises(InputError, match="jitter_hz must be 'auto' or a list"):
+        adjuster.adjust(scene.sensors(), obs, jitter_hz="1.7")

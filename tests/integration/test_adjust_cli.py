@@ -89,6 +89,12 @@ def test_adjust_errors_are_one_line(run_carto, tmp_path, cartosat1_scene):
     assert res.returncode == 2  # a usage error
     assert "--gcp-offset-sigma must be > 0, got 0" in res.stderr
     assert "Traceback" not in res.stderr
+    res = run_carto(
+        ["adjust", str(cartosat1_scene), "--jitter", "4.3,fast", "--out", str(tmp_path / "z")],
+        with_test_plugins=False,
+    )
+    assert res.returncode == 2
+    assert "--jitter must be auto, none or frequencies in Hz, got '4.3,fast'" in res.stderr
 
 
 def test_calibration_from_the_command_line(run_carto, tmp_path, cartosat1_scene):

@@ -26,6 +26,10 @@ the tied adjustment then weights the residual alignment by that calibration's si
 The position bias is estimated too (``estimate_position``, default true): Fore and Aft see the
 ground from different distances, so a position error is not one rotation for both.
 
+Option ``jitter_hz`` (``"auto"``: frequencies found in the residuals, or a list of Hz; off by
+default) adds periodic attitude jitter terms (:mod:`carto.framework.adjustment.jitter`, a-priori
+amplitude ``jitter_sigma_deg``, default :data:`JITTER_SIGMA_DEG`).
+
 Option ``self_calibration`` (a list of ``scale``, ``line_offset``, ``centre_offset``, or a
 mapping of them to a-priori sigmas; off by default: one scene with one GCP cannot separate a
 camera's detector-line offset from its pitch alignment) adds interior corrections per camera
@@ -49,6 +53,7 @@ from carto.cartosat1 import constants
 from carto.cartosat1.calibration import AlignmentCalibration, load_calibration
 from carto.framework.adjustment.base import Adjuster, AdjustmentResult
 from carto.framework.adjustment.bundle import adjust_bundle
+from carto.framework.adjustment.jitter import adjust_with_jitter
 from carto.framework.adjustment.observations import Observations
 from carto.framework.adjustment.priors import (
     AncillaryPrior,
@@ -140,6 +145,11 @@ def prepare_sensors(
     return prepared
 
 
+JITTER_SIGMA_DEG = 6e-5
+"""A-priori amplitude of Cartosat-1 attitude jitter per axis and frequency (a few tenths of a
+pixel on the ground)."""
+
+
 class Cartosat1Adjuster(Adjuster):
     """Tied Fore/Aft adjustment: one set of body corrections (attitude bias + drift, position
     bias) for both cameras."""
@@ -165,7 +175,17 @@ class Cartosat1Adjuster(Adjuster):
             None if calibration is None else load_calibration(calibration),
         )
         prepared = with_self_calibration(prepared, self_calibration, self.name)
-        result = adjust_bundle(prepared, observations, **options)
+        jitter_hz = options.pop("jitter_hz", None)
+        if jitter_hz:
+            result = adjust_with_jitter(
+                prepared,
+                observations,
+                jitter_hz,
+                math.radians(float(options.pop("jitter_sigma_deg", JITTER_SIGMA_DEG))),
+                **options,
+            )
+        else:
+            result = adjust_bundle(prepared, observations, **options)
         if mode == "calibration":
             calibrated = {
                 n: attrs.evolve(s, camera=s.camera.with_calibrated_alignment())

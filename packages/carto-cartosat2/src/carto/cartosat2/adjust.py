@@ -3,27 +3,46 @@
 All images of a block (a fore/nadir/aft triplet, the swaths of a paint-brush set) are adjusted
 together (Radhadevi et al. 2010, eq. 5-6): the unknowns are per-image corrections to the
 imaging-event parameters (attitude polynomials of order 0-3 in normalised time, optionally a
-position bias) and the ground coordinates of every tie point; GCPs and the a-priori values of
-the parameters are weighted observations. The shared engine
-(:func:`carto.framework.adjustment.bundle.adjust_bundle`) eliminates the 3 x 3 point blocks (Schur
-complement), so the cost grows linearly with the number of tie points.
+position bias, and the platform's periodic attitude jitter) and the ground coordinates of every
+tie point; GCPs and the a-priori values of the parameters are weighted observations. The shared
+engine (:func:`carto.framework.adjustment.bundle.adjust_bundle`) eliminates the 3 x 3 point
+blocks (Schur complement), so the cost grows linearly with the number of tie points.
 
-The default attitude order is 2 (bias, drift and a quadratic term per image): the step-and-stare
-attitude of an agile view, with its jitter, leaves systematic height errors of several metres
-after a linear correction on a 2000-line window (measured with ``benchmarks/bba_scaling.py``),
-which the quadratic term removes.
+The default attitude order is 3 (bias, drift, quadratic and cubic terms per image): the smooth
+attitude error of an agile segment (tau^2 and tau^3 over the segment, a-priori
+:data:`constants.ATTITUDE_SMOOTH_SIGMA_DEG`) leaves metres of height error after a quadratic
+correction on windows of several seconds of imaging (10 000 lines: 6-10 m, sigma0 1.2-1.6);
+on 2000-line windows orders 2 and 3 give the same figures, the priors holding the cubic term
+(``benchmarks/bba_scaling.py`` compares them).
+
+Attitude jitter (sinusoids at the platform's frequencies, in the true motion but not in the 8 Hz
+attitude samples) is estimated as a sine and a cosine term per image, axis and frequency
+(:mod:`carto.framework.adjustment.jitter`); the frequencies are found in the residuals of a
+first adjustment (``jitter_hz="auto"``, Lomb-Scargle periodogram against imaging time) unless
+given. Without them the
+polynomials cannot fit it: the misfit, common to every tie point on a line, pulls the block
+deformations that only the priors and the GCPs hold harder the more tie points there are, and
+the checkpoint accuracy got worse with more ties (issue 18: heights 1 -> 5 m from 1k to 100k
+ties, sigma0 1.3). The delivered models are line scanners with the polynomial corrections; the
+estimated jitter is the ``jitter`` product of the result.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+import math
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 from carto.cartosat2 import constants
 from carto.framework.adjustment.base import Adjuster, AdjustmentResult
-from carto.framework.adjustment.bundle import adjust_bundle
+from carto.framework.adjustment.jitter import adjust_with_jitter
 from carto.framework.adjustment.observations import Observations
-from carto.framework.adjustment.priors import AncillaryPrior, line_scanner_corrections
+from carto.framework.adjustment.priors import (
+    AncillaryPrior,
+    line_scanner_corrections,
+    with_self_calibration,
+)
+from carto.framework.errors import InputError
 from carto.framework.geometry.linescan import LineScanner
 from carto.framework.geometry.sensor import Sensor
 
@@ -33,11 +52,13 @@ PRIOR = AncillaryPrior.from_degrees(
     constants.ATTITUDE_SMOOTH_SIGMA_DEG,
 )
 """A-priori attitude accuracy of Cartosat-2 products (bias, drift, smooth variation)."""
+DEFAULT_ATTITUDE_ORDER = 3
+"""Attitude correction polynomials up to tau^3, as the smooth error of an agile segment."""
 
 
 def prepare_sensors(
     sensors: Mapping[str, Sensor],
-    attitude_order: int = 2,
+    attitude_order: int = DEFAULT_ATTITUDE_ORDER,
     estimate_position: bool = False,
     prior: AncillaryPrior | None = None,
 ) -> dict[str, LineScanner]:
@@ -66,16 +87,43 @@ class Cartosat2BlockAdjuster(Adjuster):
     def adjust(
         self, sensors: Mapping[str, Sensor], observations: Observations, **options: Any
     ) -> AdjustmentResult:
+        """Options: ``attitude_order`` (0-3, default 3), ``estimate_position``, the a-priori
+        sigmas ``bias_sigma_deg``, ``drift_sigma_deg_s``, ``smooth_sigma_deg``, the jitter
+        frequencies ``jitter_hz`` (``"auto"``, the default: found in the residuals; a list
+        when the platform's are known; empty: no jitter terms) and ``jitter_sigma_deg``,
+        ``self_calibration`` (as the Cartosat-1 adjuster's, off by default), and those of
+        :func:`~carto.framework.adjustment.bundle.adjust_bundle`."""
         prior = AncillaryPrior.from_degrees(
             float(options.pop("bias_sigma_deg", constants.ATTITUDE_BIAS_SIGMA_DEG)),
             float(options.pop("drift_sigma_deg_s", constants.ATTITUDE_DRIFT_SIGMA_DEG_S)),
             float(options.pop("smooth_sigma_deg", constants.ATTITUDE_SMOOTH_SIGMA_DEG)),
         )
+        jitter_hz = _frequencies(options.pop("jitter_hz", "auto"))
+        jitter_sigma = math.radians(
+            float(options.pop("jitter_sigma_deg", constants.ATTITUDE_JITTER_SIGMA_DEG))
+        )
         prepared = prepare_sensors(
             sensors,
-            int(options.pop("attitude_order", 2)),
+            int(options.pop("attitude_order", DEFAULT_ATTITUDE_ORDER)),
             bool(options.pop("estimate_position", False)),
             prior,
         )
+        prepared = with_self_calibration(prepared, options.pop("self_calibration", None), self.name)
         options.pop("mode", None)
-        return adjust_bundle(prepared, observations, **options)
+        return adjust_with_jitter(prepared, observations, jitter_hz, jitter_sigma, **options)
+
+
+def _frequencies(value: Any) -> tuple[float, ...] | str:
+    """``jitter_hz`` as ``"auto"`` or a tuple of floats (a single number is one frequency;
+    None: none)."""
+    if value is None:
+        return ()
+    if value == "auto":
+        return "auto"
+    if isinstance(value, int | float):
+        return (float(value),)
+    if isinstance(value, str) or not isinstance(value, Sequence):
+        raise InputError(
+            f"cartosat2-bba: jitter_hz must be 'auto' or a list of frequencies, got {value!r}"
+        )
+    return tuple(float(v) for v in value)

@@ -20,11 +20,14 @@ weight), and says so in ``report.json``'s ``misfit`` and in ``residuals.png``:
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy import stats
+
+if TYPE_CHECKING:
+    from carto.framework.adjustment.base import AdjustmentResult
 
 FloatArray = NDArray[np.float64]
 MIN_POINTS = 30
@@ -73,6 +76,31 @@ def periodic_component(line: FloatArray, residual: FloatArray) -> dict[str, floa
         "power": round(float(power[k]), 4),
         "false_alarm": min(max(fap, 0.0), 1.0),
     }
+
+
+def residual_lines(result: AdjustmentResult) -> NDArray[np.float64]:
+    """The image line of each image-residual row (its point projected by the adjusted
+    sensor; NaN for points without an estimate)."""
+    res = result.image_residuals
+    out = np.full(len(res["image"]), np.nan)
+    if not result.points or not len(out):
+        return out
+    ids = np.array(list(result.points), dtype=object).astype(str)
+    order = np.argsort(ids)
+    ids = ids[order]
+    xyz = np.array(list(result.points.values()), dtype=np.float64)[order]
+    rows = np.asarray(res["point_id"]).astype(str)
+    k = np.clip(np.searchsorted(ids, rows), 0, ids.size - 1)
+    known = ids[k] == rows
+    images = np.asarray(res["image"])
+    for name, sensor in result.sensors.items():
+        m = (images == name) & known
+        if not m.any():
+            continue
+        p = xyz[k[m]]
+        line, _, _ = sensor.project(p[:, 0], p[:, 1], p[:, 2])
+        out[m] = line
+    return out
 
 
 def misfit_report(

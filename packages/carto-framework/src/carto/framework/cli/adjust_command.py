@@ -31,6 +31,8 @@ def cmd_adjust(args: argparse.Namespace) -> int:
         options["calibration"] = list(args.calibration)
     if args.self_calibration:
         options["self_calibration"] = [k.strip() for k in args.self_calibration.split(",")]
+    if args.jitter is not None:
+        options["jitter_hz"] = _jitter(args.jitter)
     for option, value in (
         ("--dem-heights", args.dem_heights),
         ("--dem-offset-sigma", args.dem_offset_sigma),
@@ -89,6 +91,22 @@ def cmd_adjust(args: argparse.Namespace) -> int:
     return 0
 
 
+def _jitter(text: str) -> str | list[float]:
+    """``--jitter``: ``"auto"``, ``[]`` for none, or the frequencies."""
+    text = text.strip().lower()
+    if text in ("auto", "none"):
+        return "auto" if text == "auto" else []
+    try:
+        freqs = [float(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise UsageError(
+            f"--jitter must be auto, none or frequencies in Hz, got {text!r}"
+        ) from None
+    if not freqs or not all(math.isfinite(f) and f > 0 for f in freqs):
+        raise UsageError(f"--jitter frequencies must be > 0 Hz, got {text!r}")
+    return freqs
+
+
 def add_adjust(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "adjust",
@@ -109,6 +127,7 @@ def add_adjust(sub: argparse._SubParsersAction) -> None:
             "carto adjust big-scene --gcps 1 --scheduler tcp://10.0.0.5:8786 --out adj-big",
             "carto adjust calib-scene --mode calibration --out calib   # many GCPs",
             "carto adjust scene2 --gcps 1 --calibration calib/calibration.json --out adj2",
+            "carto adjust triplet --gcps 2 --jitter 1.7,4.3 --out adj-triplet   # known jitter",
             "carto adjust pair.json --adjuster rpc-bias --out adj",
             "carto adjust pair.json --adjuster rpc-bias --dem-heights 10 --dem-offset-sigma 4 "
             "--out adj",
@@ -129,6 +148,13 @@ def add_adjust(sub: argparse._SubParsersAction) -> None:
         help="also estimate camera interior corrections, comma-separated: scale (focal "
         "length), line_offset (detector line along track), centre_offset (principal point); "
         "line scanners only, off by default",
+    )
+    p.add_argument(
+        "--jitter",
+        metavar="auto|none|HZ,...",
+        help="attitude jitter terms: 'auto' finds the frequencies in the residuals (the "
+        "cartosat2-bba default), 'none', or the platform's frequencies in Hz (cartosat1 and "
+        "cartosat2 adjusters)",
     )
     p.add_argument(
         "--attitude-order",

@@ -8,25 +8,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
 from carto.framework.adjustment.base import AdjustmentResult
-from carto.framework.adjustment.misfit import misfit_report
-
-
-def residual_lines(result: AdjustmentResult) -> NDArray[np.float64]:
-    """The image line of each image-residual row (its point projected by the adjusted
-    sensor; NaN for points without an estimate)."""
-    res = result.image_residuals
-    out = np.full(len(res["image"]), np.nan)
-    for name, sensor in result.sensors.items():
-        m = res["image"] == name
-        if not m.any():
-            continue
-        xyz = np.array([result.points.get(p, (np.nan,) * 3) for p in res["point_id"][m]])
-        line, _, _ = sensor.project(xyz[:, 0], xyz[:, 1], xyz[:, 2])
-        out[m] = line
-    return out
+from carto.framework.adjustment.misfit import misfit_report, residual_lines
 
 
 def residual_misfit(result: AdjustmentResult) -> dict[str, Any]:

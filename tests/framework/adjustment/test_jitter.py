@@ -1,0 +1,165 @@
+"""Periodic attitude jitter terms (``carto.framework.adjustment.jitter``) on an analytic
+line scanner: the image shift is the attitude correction's, partials are right, ground <->
+image round trips, the delivered models are unwrapped and the estimate is reported."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from carto.framework.adjustment.jitter import (
+    JitterCorrected,
+    jitter_document,
+    with_jitter_terms,
+    without_jitter_terms,
+)
+from carto.framework.errors import InputError
+
+FREQS = (1.7, 4.3)
+
+
+@pytest.fixture(scope="module")
+def fore(cartosat1_pair):
+    return with_jitter_terms({"fore": cartosat1_pair["fore"]}, FREQS, 3.5e-7)["fore"]
+
+
+def _ground(sensor, n=40, seed=0):
+    rng = np.random.default_rng(seed)
+    n_l, n_s = sensor.image_shape
+    line = rng.uniform(100, n_l - 100, n)
+    sample = rng.uniform(100, n_s - 100, n)
+    h = rng.uniform(0, 1000, n)
+    lon, lat = sensor.image_to_ground(line, sample, h)
+    return lon, lat, h
+
+
+def test_parameters_and_zero_jitter_is_the_base_model(fore):
+    assert isinstance(fore, JitterCorrected)
+    names = [p.name for p in fore.jitter]
+    assert len(names) == 3 * len(FREQS) * 2
+    assert names[0] == "trajectory.jitter.roll.f0.sin"
+    assert "1.7 Hz" in fore.jitter[0].description
+    lon, lat, h = _ground(fore.base)
+    line, sample, inside = fore.project(lon, lat, h)
+    b_line, b_sample, _ = fore.base.project(lon, lat, h)
+    assert inside.all()
+    np.testing.assert_allclose(line, b_line, atol=1e-9)
+    np.testing.assert_allclose(sample, b_sample, atol=1e-9)
+
+
+def test_jitter_moves_the_image_as_the_attitude_correction_does(fore):
+    """At one imaging time, a roll (pitch, yaw) jitter angle d shifts the image point as a
+    constant correction of d does (same axes and sign, first order)."""
+    lon, lat, h = _ground(fore.base, n=1)
+    line, _, _ = fore.base.project(lon, lat, h)
+    t = float(fore.base.timing.time(line[0])) - fore.base.trajectory.t_mid_s
+    d = 1e-6
+    for axis in ("roll", "pitch", "yaw"):
+        coef = d / math.sin(2 * math.pi * FREQS[0] * t)
+        jittered = fore.with_parameters({f"trajectory.jitter.{axis}.f0.sin": coef})
+        c0 = f"trajectory.attitude.{axis}.c0"
+        value = next(p.value for p in fore.base.parameters if p.name == c0)
+        rotated = fore.base.with_parameters({c0: value + d})
+        j_line, j_sample, _ = jittered.project(lon, lat, h)
+        r_line, r_sample, _ = rotated.project(lon, lat, h)
+        b_line, b_sample, _ = fore.base.project(lon, lat, h)
+        assert abs(r_line[0] - b_line[0]) + abs(r_sample[0] - b_sample[0]) > 0.05, axis
+        assert abs(j_line[0] - r_line[0]) < 1e-3, axis
+        assert abs(j_sample[0] - r_sample[0]) < 1e-3, axis
+
+
+def test_partials_match_differences_and_round_trip(fore):
+    values = {p.name: 2e-7 * (-1) ** i for i, p in enumerate(fore.jitter)}
+    sensor = fore.with_parameters(values)
+    lon, lat, h = _ground(fore.base)
+    names = ["trajectory.attitude.pitch.c1", "trajectory.jitter.yaw.f1.cos", *values][:6]
+    line, sample, _, a_param = sensor.linearize(lon, lat, h, names)
+    # the line scanner's own partials are its own; the jitter ones match differences
+    np.testing.assert_array_equal(
+        a_param[:, :, 0], fore.base.linearize(lon, lat, h, names[:1])[3][:, :, 0]
+    )
+    for k, name in enumerate(names[1:], start=1):
+        step = 1e-8
+        v = next(p.value for p in sensor.parameters if p.name == name)
+        plus = sensor.with_parameters({name: v + step}).project(lon, lat, h)
+        minus = sensor.with_parameters({name: v - step}).project(lon, lat, h)
+        for axis in (0, 1):
+            np.testing.assert_allclose(
+                a_param[:, axis, k], (plus[axis] - minus[axis]) / (2 * step), rtol=1e-4, atol=1.0
+            )
+    back_lon, back_lat = sensor.image_to_ground(line, sample, h)
+    again = sensor.ground_to_image(back_lon, back_lat, h)
+    np.testing.assert_allclose(again[0], line, atol=1e-6)
+    np.testing.assert_allclose(again[1], sample, atol=1e-6)
+
+
+
+def test_frequency_parameters_partials_match_differences(cartosat1_pair):
+    """With ``frequency_sigma_hz`` the frequencies are parameters shared by all images; their
+    partials (``2 pi tau (s cos - c sin)`` through the attitude partials) match differences."""
+    wrapped = with_jitter_terms(cartosat1_pair, FREQS, 3.5e-7, frequency_sigma_hz=0.5)
+    fore = wrapped["fore"]
+    rates = [p.name for p in fore.parameters if p.units == "Hz"]
+    assert rates == ["jitter.f0.hz", "jitter.f1.hz"]
+    assert rates == [p.name for p in wrapped["aft"].parameters if p.units == "Hz"]
+    values = {p.name: 4e-7 * (-1) ** i for i, p in enumerate(fore.jitter)}
+    sensor = fore.with_parameters({**values, "jitter.f1.hz": 4.6})
+    assert sensor.frequencies == (1.7, 4.6)
+    lon, lat, h = _ground(fore.base)
+    _, _, _, a_param = sensor.linearize(lon, lat, h, rates)
+    assert np.abs(a_param).max() > 0.01  # px per Hz: the test can see a wrong partial
+    for k, name in enumerate(rates):
+        step = 1e-4
+        v = sensor.frequencies[k]
+        plus = sensor.with_parameters({name: v + step}).project(lon, lat, h)
+        minus = sensor.with_parameters({name: v - step}).project(lon, lat, h)
+        for axis in (0, 1):
+            np.testing.assert_allclose(
+                a_param[:, axis, k], (plus[axis] - minus[axis]) / (2 * step), rtol=1e-3, atol=1e-5
+            )
+
+def test_unwrap_report_and_refusals(fore, cartosat1_pair):
+    sensors = {"fore": fore.with_parameters({"trajectory.jitter.roll.f1.cos": 3e-7})}
+    assert without_jitter_terms(sensors)["fore"] is sensors["fore"].base
+    names = [p.name for p in sensors["fore"].parameters]
+    doc = jitter_document(sensors, names, np.full(len(names), 1e-7))
+    row = doc["images"]["fore"]["axes"]["roll"][1]
+    assert row["frequency_hz"] == 4.3
+    assert row["amplitude_rad"] == pytest.approx(3e-7)
+    assert row["phase_rad"] == pytest.approx(math.pi / 2)
+    assert doc["applied_to_models"] is False
+    assert jitter_document(cartosat1_pair, [], []) is None
+    assert with_jitter_terms(cartosat1_pair, (), 1e-7) == cartosat1_pair
+    with pytest.raises(InputError, match="distinct and > 0"):
+        with_jitter_terms(cartosat1_pair, (1.7, 1.7), 1e-7)
+    with pytest.raises(InputError, match="sigma must be > 0"):
+        with_jitter_terms(cartosat1_pair, (1.7,), 0.0)
+
+
+def test_frequencies_are_found_in_residuals_and_white_noise_finds_none():
+    """Two sinusoids (0.15 and 0.1 px at 23 and 61 Hz) in 0.2 px noise at random imaging
+    times over 1.2 s, in two series of which one has only the 23 Hz: both found within the
+    frequency resolution (1 / 1.2 s); pure noise gives nothing (false alarms 1e-4)."""
+    from carto.framework.adjustment.jitter import detect_jitter_frequencies
+
+    rng = np.random.default_rng(3)
+    t1 = np.sort(rng.uniform(0.0, 1.2, 3000))
+    t2 = np.sort(rng.uniform(0.3, 1.5, 3000))
+    r1 = 0.15 * np.sin(2 * np.pi * 23.0 * t1 + 1.0) + 0.1 * np.sin(2 * np.pi * 61.0 * t1)
+    r2 = 0.15 * np.cos(2 * np.pi * 23.0 * t2)
+    series = [(t1, r1 + rng.normal(0, 0.2, t1.size)), (t2, r2 + rng.normal(0, 0.2, t2.size))]
+    found = detect_jitter_frequencies(series, max_frequencies=4)
+    assert len(found) == 2
+    assert detect_jitter_frequencies(series) == found[:1]  # one at a time by default
+    assert abs(found[0] - 23.0) < 0.3  # the stronger (found in both series) first
+    assert abs(found[1] - 61.0) < 0.3
+    noise = [(t1, rng.normal(0, 0.2, t1.size)), (t2, rng.normal(0, 0.2, t2.size))]
+    assert detect_jitter_frequencies(noise, max_frequencies=4) == ()
+    # a slow wander (0.6 cycles per series) once the trajectory's cubic has taken it, as an
+    # adjustment's residuals show it
+    wander = 0.3 * np.sin(2 * np.pi * 0.5 * t1)
+    wander -= np.polynomial.polynomial.polyval(t1, np.polynomial.polynomial.polyfit(t1, wander, 3))
+    slow = [(t1, wander + rng.normal(0, 0.2, t1.size))]
+    assert detect_jitter_frequencies(slow, max_frequencies=4) == ()
