@@ -99,7 +99,15 @@ def triplet(work: Path, seed: int, terrain: str, size: int) -> dict:
         "rmse_planimetric_m": round(cp["rmse_planimetric_m"], 3),
         "rmse_height_m": round(cp["rmse_height_m"], 3),
         "predicted_sigma_planimetric_m": round(cp["predicted_sigma_planimetric_m"], 3),
+        "predicted_sigma_height_m": round(cp.get("predicted_sigma_height_m", math.nan), 3),
         "checkpoints": cp["count"],
+        "misfit_flags": len(rep.get("misfit", {}).get("flags", [])),
+        "jitter_hz": [
+            round(f, 3)
+            for f in json.loads((out / "jitter.json").read_text()).get("frequencies_hz", [])
+        ]
+        if (out / "jitter.json").is_file()
+        else [],
         "sigma0": round(rep["sigma0"], 3),
         "outliers": len(rep["outliers"]),
         "tie_points": _tie_quality(Scene.open(folder), out, rep["outliers"]),
@@ -189,6 +197,16 @@ def main() -> int:
             "predicted_over_measured_planimetric": float(np.median(ratios)),
             "tie_points_kept": float(np.median([r["tie_points"]["kept"] for r in runs])),
         },
+        "rms_over_runs": {
+            k: float(np.sqrt(np.mean([r[k] ** 2 for r in runs])))
+            for k in ("rmse_planimetric_m", "rmse_height_m")
+        },
+        "predicted_over_measured_height_median": float(
+            np.median([r["predicted_sigma_height_m"] / r["rmse_height_m"] for r in runs])
+        ),
+        "runs_within_issue_18_targets": sum(
+            r["rmse_planimetric_m"] <= 1.5 and r["rmse_height_m"] <= 2.0 for r in runs
+        ),
         "min_tie_points_kept": min(r["tie_points"]["kept"] for r in runs),
         "wrong_tie_observations_fraction": wrong / checked if checked else None,
         "n_runs": len(runs),
