@@ -56,6 +56,10 @@ DETECTION_FALSE_ALARM = 1e-4
 """A periodogram peak is a jitter frequency when its false-alarm probability is below this."""
 MIN_DETECTION_POINTS = 50
 """Residual series shorter than this are not searched."""
+MAX_JITTER_HZ = 250.0
+"""The fastest jitter searched (Hz): platform structures damp faster vibrations, and with 100k
+tie points four median spacings would reach tens of kHz (a grid of 10^5 frequencies per
+series)."""
 MIN_CYCLES = 1.0
 """The slowest frequency searched makes this many cycles over a series: slower wander is the
 trajectory's polynomial corrections' (over a 0.8 s window a 1.36-cycle jitter is not: left out,
@@ -399,9 +403,10 @@ def detect_jitter_frequencies(
     adjustment, against their imaging times). The platform's jitter frequencies are common to
     all of them (the phases are not), so their Lomb-Scargle periodograms (astropy, floating
     mean) are summed on one frequency grid, from :data:`MIN_CYCLES` over the longest series
-    to a period of four median sample spacings. The highest peak is a jitter frequency when,
-    in at least one series, its false-alarm probability (Baluev's bound) is below
-    ``false_alarm``; it is then subtracted from every series and the search repeated, up to
+    to a period of four median sample spacings (at most :data:`MAX_JITTER_HZ`). The highest
+    peak is a jitter frequency when, in at least one series, its false-alarm probability
+    (Baluev's bound) is below ``false_alarm``; it is then subtracted from every series and the
+    search repeated, up to
     ``max_frequencies`` (one per adjustment by default: a frequency found next to a misfit
     frequency is biased, so :func:`adjust_with_jitter` re-adjusts between searches).
     """
@@ -419,7 +424,7 @@ def detect_jitter_frequencies(
     if not kept:
         return ()
     low = MIN_CYCLES / max(k[2] for k in kept)
-    high = 1.0 / max(4.0 * max(k[3] for k in kept), 1e-9)
+    high = min(1.0 / max(4.0 * max(k[3] for k in kept), 1e-9), MAX_JITTER_HZ)
     if not high > 4.0 * low:
         return ()
     resolution = 1.0 / max(k[2] for k in kept)
