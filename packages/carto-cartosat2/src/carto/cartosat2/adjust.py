@@ -10,21 +10,22 @@ blocks (Schur complement), so the cost grows linearly with the number of tie poi
 
 The default attitude order is 3 (bias, drift, quadratic and cubic terms per image): the smooth
 attitude error of an agile segment (tau^2 and tau^3 over the segment, a-priori
-:data:`constants.ATTITUDE_SMOOTH_SIGMA_DEG`) leaves metres of height error after a quadratic
-correction on windows of several seconds of imaging (10 000 lines: 6-10 m, sigma0 1.2-1.6);
-on 2000-line windows orders 2 and 3 give the same figures, the priors holding the cubic term
-(``benchmarks/bba_scaling.py`` compares them).
+:data:`constants.ATTITUDE_SMOOTH_SIGMA_DEG`) is not quadratic over a long window: on an
+8000-line window (3.2 s of imaging, 10k tie points, 2 GCPs) order 2 leaves 2.7 m planimetric /
+4.5 m height at the checkpoints and order 3 0.55 / 1.14 m (``benchmarks/bba_scaling.py``,
+``long_window``; realistic errors, our simulator: a best case).
 
 Attitude jitter (sinusoids at the platform's frequencies, in the true motion but not in the 8 Hz
 attitude samples) is estimated as a sine and a cosine term per image, axis and frequency
-(:mod:`carto.framework.adjustment.jitter`); the frequencies are found in the residuals of a
-first adjustment (``jitter_hz="auto"``, Lomb-Scargle periodogram against imaging time) unless
-given. Without them the
-polynomials cannot fit it: the misfit, common to every tie point on a line, pulls the block
-deformations that only the priors and the GCPs hold harder the more tie points there are, and
-the checkpoint accuracy got worse with more ties (issue 18: heights 1 -> 5 m from 1k to 100k
-ties, sigma0 1.3). The delivered models are line scanners with the polynomial corrections; the
-estimated jitter is the ``jitter`` product of the result.
+(:mod:`carto.framework.adjustment.jitter`); the frequencies are found in the residuals
+(``jitter_hz="auto"``, summed Lomb-Scargle periodograms against imaging time, one frequency per
+re-adjustment, refined with the block) unless given. Without them the polynomials cannot fit
+it: the misfit, common to every tie point on a line, pulls the block harder the more tie points
+there are (2000 x 2000 triplet, 2 GCPs: sigma0 1.35 / 1.24 and checkpoint heights 0.97 / 2.04 m
+with 1k / 10k ties; with them sigma0 0.99-1.00 and 0.37 / 0.16 / 0.20 m with 1k / 10k / 100k,
+the frequencies found within 0.03 Hz of the simulator's 1.7 and 4.3 Hz). The delivered models
+are line scanners with the polynomial corrections; the estimated jitter is the ``jitter``
+product of the result (``jitter.json``).
 """
 
 from __future__ import annotations
