@@ -95,7 +95,6 @@ def test_partials_match_differences_and_round_trip(fore):
     np.testing.assert_allclose(again[1], sample, atol=1e-6)
 
 
-
 def test_frequency_parameters_partials_match_differences(cartosat1_pair):
     """With ``frequency_sigma_hz`` the frequencies are parameters shared by all images; their
     partials (``2 pi tau (s cos - c sin)`` through the attitude partials) match differences."""
@@ -119,6 +118,7 @@ def test_frequency_parameters_partials_match_differences(cartosat1_pair):
             np.testing.assert_allclose(
                 a_param[:, axis, k], (plus[axis] - minus[axis]) / (2 * step), rtol=1e-3, atol=1e-5
             )
+
 
 def test_unwrap_report_and_refusals(fore, cartosat1_pair):
     sensors = {"fore": fore.with_parameters({"trajectory.jitter.roll.f1.cos": 3e-7})}

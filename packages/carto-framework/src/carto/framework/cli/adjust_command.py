@@ -152,9 +152,9 @@ def add_adjust(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--jitter",
         metavar="auto|none|HZ,...",
-        help="attitude jitter terms: 'auto' finds the frequencies in the residuals (the "
-        "cartosat2-bba default), 'none', or the platform's frequencies in Hz (cartosat1 and "
-        "cartosat2 adjusters)",
+        help="attitude jitter terms, for adjusters that estimate them: 'auto' finds the "
+        "frequencies in the residuals, 'none', or the platform's frequencies in Hz (default: "
+        "the adjuster's)",
     )
     p.add_argument(
         "--attitude-order",
