@@ -51,6 +51,44 @@ def _short(acc: dict) -> dict:
     return {k: round(float(acc[k]), 3) for k in acc if k in KEYS or k.startswith("predicted")}
 
 
+DEM_HEIGHTS = {
+    "tie_heights": True,
+    "height_sigma_m": 10.0,
+    # the SRTM-like DEM's absolute vertical error is one estimated offset (see ventoux())
+    "height_offset_sigma_m": SRTM_OFFSET_SIGMA_M,
+}
+"""The initial (SRTM-like) DEM as a weighted height constraint of the tie points (``carto adjust
+--dem-heights 10 --dem-offset-sigma 4``; ASP's ``--heights-from-dem``): what holds the Aft
+image's pitch trend, which tie points cannot see (a height trend)."""
+
+
+def cases_for(errors: str) -> list[tuple[str, dict]]:
+    """The adjustments of each scene: label -> adjuster options."""
+    cases: list[tuple[str, dict]] = [
+        ("combined_1gcp", {"mode": "combined"}),
+        ("separate_1gcp", {"mode": "separate"}),
+    ]
+    if errors == "full":
+        return [
+            *cases,
+            ("combined_dem_1gcp", {"mode": "combined"} | DEM_HEIGHTS),
+            ("separate_dem_1gcp", {"mode": "separate"} | DEM_HEIGHTS),
+            # ablation: the tied model without the Aft image's own attitude trend
+            ("combined_without_trends_1gcp", {"mode": "combined", "image_trend_order": 0}),
+        ]
+    return [
+        *cases,
+        # ablation: the tied model without the ephemeris bias (attitude absorbs it)
+        ("combined_without_position_1gcp", {"mode": "combined", "estimate_position": False}),
+        # ablation: the GCP's hand measurements alone carry its stereo parallax
+        ("combined_without_gcp_transfer_1gcp", {"mode": "combined", "gcp_transfer": False}),
+    ]
+
+
+PAIRS = (("combined_1gcp", "separate_1gcp"), ("combined_dem_1gcp", "separate_dem_1gcp"))
+"""Paired comparisons (tied, separate) on the same scenes, tie points and GCP."""
+
+
 def run_scene(
     work: Path, seed: int, terrain: str, size: tuple[int, int], errors: str = "realistic"
 ) -> dict:
@@ -74,14 +112,7 @@ def run_scene(
     out: dict = {"seed": seed, "terrain": terrain, "simulate_s": round(time.perf_counter() - t0, 1)}
     out["system_level"] = _short(checkpoint_accuracy(scene.sensors(), scene.control("checkpoints")))
     ties = "auto"
-    for label, options in (
-        ("combined_1gcp", {"mode": "combined"}),
-        ("separate_1gcp", {"mode": "separate"}),
-        # ablation: the tied model without the ephemeris bias (attitude absorbs it)
-        ("combined_without_position_1gcp", {"mode": "combined", "estimate_position": False}),
-        # ablation: the GCP's hand measurements alone carry its stereo parallax
-        ("combined_without_gcp_transfer_1gcp", {"mode": "combined", "gcp_transfer": False}),
-    ):
+    for label, options in cases_for(errors):
         t0 = time.perf_counter()
         rep = adjust_product(
             scene_dir,
@@ -233,6 +264,69 @@ def ventoux(data: Path, work: Path) -> dict:
     }
 
 
+def _stats(values: list[float]) -> dict:
+    v = np.asarray(values, dtype=np.float64)
+    return {"median": round(float(np.median(v)), 3), "rms": round(float(np.sqrt(np.mean(v**2))), 3)}
+
+
+def summarise(runs: list[dict]) -> dict:
+    """Medians and RMS over runs per case, predicted against measured, paired comparisons."""
+    labels = [k for k in runs[0] if isinstance(runs[0][k], dict) and "rmse_height_m" in runs[0][k]]
+    summary: dict = {}
+    for label in labels:
+        entry = {k: _stats([r[label][k] for r in runs]) for k in KEYS}
+        if "predicted_sigma_height_m" in runs[0][label]:
+            for what in ("planimetric", "height"):
+                ratios = [
+                    r[label][f"predicted_sigma_{what}_m"] / r[label][f"rmse_{what}_m"] for r in runs
+                ]
+                entry[f"predicted_over_measured_{what}"] = {
+                    "median": round(float(np.median(ratios)), 3),
+                    "runs_within_factor_1.5": int(sum(1 / 1.5 <= x <= 1.5 for x in ratios)),
+                }
+        summary[label] = entry
+    for tied, separate in PAIRS:
+        if tied not in labels or separate not in labels:
+            continue
+        pair: dict = {}
+        for key in ("rmse_planimetric_m", "rmse_height_m"):
+            diff = [r[separate][key] - r[tied][key] for r in runs]
+            pair[f"separate_minus_tied_{key}"] = {
+                "median": round(float(np.median(diff)), 3),
+                "runs_tied_better": int(sum(d > 0 for d in diff)),
+            }
+        pair["runs_tied_better_in_planimetric_plus_height"] = int(
+            sum(
+                r[tied]["rmse_planimetric_m"] + r[tied]["rmse_height_m"]
+                < r[separate]["rmse_planimetric_m"] + r[separate]["rmse_height_m"]
+                for r in runs
+            )
+        )
+        pair["table"] = {
+            "columns": [
+                "terrain",
+                "seed",
+                "tied_plan_m",
+                "separate_plan_m",
+                "tied_h_m",
+                "separate_h_m",
+            ],
+            "rows": [
+                [
+                    r["terrain"],
+                    r["seed"],
+                    r[tied]["rmse_planimetric_m"],
+                    r[separate]["rmse_planimetric_m"],
+                    r[tied]["rmse_height_m"],
+                    r[separate]["rmse_height_m"],
+                ]
+                for r in runs
+            ],
+        }
+        summary[f"{tied}_vs_{separate}"] = pair
+    return summary
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=5)
@@ -277,67 +371,10 @@ def main() -> int:
                 flush=True,
             )
 
-    def median(label: str, key: str) -> float:
-        return float(np.median([r[label][key] for r in runs]))
-
-    summary = {
-        label: {k: round(median(label, k), 3) for k in KEYS}
-        for label in (
-            "system_level",
-            "combined_1gcp",
-            "separate_1gcp",
-            "combined_without_position_1gcp",
-            "combined_without_gcp_transfer_1gcp",
-        )
-    }
-    ratios = [
-        r["combined_1gcp"]["predicted_sigma_planimetric_m"]
-        / r["combined_1gcp"]["rmse_planimetric_m"]
-        for r in runs
-    ]
-    summary["combined_1gcp"]["median_predicted_over_measured_planimetric"] = round(
-        float(np.median(ratios)), 3
-    )
-    summary["combined_1gcp"]["runs_with_prediction_within_factor_1.5"] = int(
-        sum(1 / 1.5 <= x <= 1.5 for x in ratios)
-    )
-    for key in ("rmse_planimetric_m", "rmse_height_m"):
-        diff = [r["separate_1gcp"][key] - r["combined_1gcp"][key] for r in runs]
-        summary[f"separate_minus_tied_{key}"] = {
-            "median": round(float(np.median(diff)), 3),
-            "runs_tied_better": int(sum(d > 0 for d in diff)),
-        }
-    summary["tied_vs_separate_table"] = {
-        "columns": [
-            "terrain",
-            "seed",
-            "tied_planimetric_m",
-            "separate_planimetric_m",
-            "tied_height_m",
-            "separate_height_m",
-        ],
-        "rows": [
-            [
-                r["terrain"],
-                r["seed"],
-                r["combined_1gcp"]["rmse_planimetric_m"],
-                r["separate_1gcp"]["rmse_planimetric_m"],
-                r["combined_1gcp"]["rmse_height_m"],
-                r["separate_1gcp"]["rmse_height_m"],
-            ]
-            for r in runs
-        ],
-    }
-    summary["tied_beats_separate_runs"] = int(
-        sum(
-            r["combined_1gcp"]["rmse_planimetric_m"] + r["combined_1gcp"]["rmse_height_m"]
-            < r["separate_1gcp"]["rmse_planimetric_m"] + r["separate_1gcp"]["rmse_height_m"]
-            for r in runs
-        )
-    )
+    summary = summarise(runs)
     result = {
         "runs": runs,
-        "median": summary,
+        "summary": summary,
         "n_runs": len(runs),
         "errors": args.errors,
         "size_px": args.size,

@@ -50,8 +50,11 @@ def test_combined_shares_one_set_of_body_corrections(setup, adjuster):
     assert sorted(position) == [
         f"trajectory.position.{a}.c0" for a in ("across", "along", "radial")
     ]
+    # plus the Aft image's own attitude trend relative to the Fore image's (Legendre 1, 2)
+    trends = {n for n in result.parameters if ".trend." in n}
+    assert trends == {f"aft.trend.{a}.p{k}" for a in ("roll", "pitch", "yaw") for k in (1, 2)}
     # plus the residual Fore/Aft relative alignment, weighted by what calibration leaves
-    align = set(result.parameters) - set(body) - set(position)
+    align = set(result.parameters) - set(body) - set(position) - trends
     assert align == {f"camera.aft.align.{a}" for a in ("roll", "pitch", "yaw")}
     prepared = prepare_sensors(sensors)
     priors = {p.name: p.sigma for s in prepared.values() for p in s.parameters if p.free}
@@ -146,9 +149,14 @@ def test_the_pair_shares_one_position_bias(tmp_path, adjuster):
     scene = Scene.open(scene_dir)
     obs = Observations.from_tables(scene.control("gcps"), _ideal_ties(scene_dir, 1500, 0.1))
     check = scene.control("checkpoints")
-    with_bias = checkpoint_accuracy(adjuster.adjust(scene.sensors(), obs).sensors, check)
+    # without image trends (the truth has none; with them the GCP pulls the Aft image's
+    # unobservable pitch trend a little: planimetric 0.214 m instead of 0.117 m)
+    with_bias = checkpoint_accuracy(
+        adjuster.adjust(scene.sensors(), obs, image_trend_order=0).sensors, check
+    )
     without = checkpoint_accuracy(
-        adjuster.adjust(scene.sensors(), obs, estimate_position=False).sensors, check
+        adjuster.adjust(scene.sensors(), obs, estimate_position=False, image_trend_order=0).sensors,
+        check,
     )
     # measured: planimetric 0.117 m, height 0.356 m with the bias; height 8.44 m (23.7 times)
     # without. Bounds about 1.4x: the old ones (0.5 / 0.8 m, 3 times) passed the residual

@@ -26,6 +26,25 @@ the tied adjustment then weights the residual alignment by that calibration's si
 The position bias is estimated too (``estimate_position``, default true): Fore and Aft see the
 ground from different distances, so a position error is not one rotation for both.
 
+Option ``image_trend_order`` (combined mode; default 2, 0: off) adds each image's own attitude
+trend but the reference camera's: Legendre polynomials of orders 1..K of the image's time per
+axis, a-priori ``image_trend_sigma_deg`` (default :data:`constants.IMAGE_TREND_SIGMA_DEG`)
+(:mod:`carto.framework.adjustment.image_trends`). The images, 52 s apart, do not share attitude
+motion of shorter periods; without these terms its across-track trend in the Fore image drove
+the shared yaw drift and tilted the heights across the swath. The adjusted models carry the
+trends: the result's sensors are the estimated ones (the trend applied to first order), and
+:func:`carto.framework.adjustment.image_trends.fold_image_trends` (what ``carto adjust`` does
+before writing them) folds each trend into its image's attitude polynomials, under image-own
+parameter names.
+
+Option ``relative_calibration`` (combined mode; default ``["scale"]``; a list as for
+``self_calibration``, empty: off) adds interior corrections to the other cameras only, relative
+to the reference camera: tie points see the difference of the Fore and Aft focal lengths (an
+across-track parallax growing across the swath; 50 ppm each puts 0.4 px at the swath's edges),
+not their common error. Without it the tied model bent the pitch and the position (along-track
+bias 50-110 m, 3-7 a-priori sigmas) to fit that parallax, and the along-track error at
+checkpoints doubled (``--errors full``).
+
 Option ``jitter_hz`` (``"auto"``: frequencies found in the residuals, or a list of Hz; off by
 default) adds periodic attitude jitter terms (:mod:`carto.framework.adjustment.jitter`, a-priori
 amplitude ``jitter_sigma_deg``, default :data:`JITTER_SIGMA_DEG`).
@@ -53,6 +72,7 @@ from carto.cartosat1 import constants
 from carto.cartosat1.calibration import AlignmentCalibration, load_calibration
 from carto.framework.adjustment.base import Adjuster, AdjustmentResult
 from carto.framework.adjustment.bundle import adjust_bundle
+from carto.framework.adjustment.image_trends import trend_document, with_image_trends
 from carto.framework.adjustment.jitter import adjust_with_jitter
 from carto.framework.adjustment.observations import Observations
 from carto.framework.adjustment.priors import (
@@ -108,10 +128,7 @@ def prepare_sensors(
         )
     if calibration is not None:
         sensors = calibration.apply(sensors)
-        reference = calibration.reference_camera
-    else:
-        first = next(iter(sensors.values()), None)
-        reference = first.camera.name if isinstance(first, LineScanner) else None
+    reference = reference_camera(sensors, calibration)
     # the other cameras' alignment relative to the reference: residual (combined) or loose
     # (calibration: the default sigma of the camera model)
     relative = math.radians(alignment_sigma_deg) * math.sqrt(2.0)
@@ -145,6 +162,17 @@ def prepare_sensors(
     return prepared
 
 
+def reference_camera(
+    sensors: Mapping[str, Sensor], calibration: AlignmentCalibration | None = None
+) -> str | None:
+    """The camera the others' residual alignment (and image trends) are relative to: the
+    calibration's, else the first image's."""
+    if calibration is not None:
+        return calibration.reference_camera
+    first = next(iter(sensors.values()), None)
+    return first.camera.name if isinstance(first, LineScanner) else None
+
+
 JITTER_SIGMA_DEG = 6e-5
 """A-priori amplitude of Cartosat-1 attitude jitter per axis and frequency (a few tenths of a
 pixel on the ground)."""
@@ -163,6 +191,17 @@ class Cartosat1Adjuster(Adjuster):
         mode = options.pop("mode", "combined")
         calibration = options.pop("calibration", None)
         self_calibration = options.pop("self_calibration", None)
+        trend_order = int(options.pop("image_trend_order", 2 if mode == "combined" else 0))
+        trend_sigma = math.radians(
+            float(options.pop("image_trend_sigma_deg", constants.IMAGE_TREND_SIGMA_DEG))
+        )
+        if trend_order and mode != "combined":
+            raise InputError(
+                "cartosat1-combined: image trends are relative to the reference camera's image "
+                f"in a tied adjustment (mode combined); mode {mode} takes image_trend_order 0"
+            )
+        if calibration is not None:
+            calibration = load_calibration(calibration)
         prepared = prepare_sensors(
             sensors,
             mode,
@@ -172,9 +211,19 @@ class Cartosat1Adjuster(Adjuster):
             float(options.pop("drift_sigma_deg_s", constants.ATTITUDE_DRIFT_SIGMA_DEG_S)),
             float(options.pop("alignment_sigma_deg", constants.RESIDUAL_ALIGNMENT_SIGMA_DEG)),
             float(options.pop("ephemeris_sigma_m", constants.EPHEMERIS_BIAS_SIGMA_M)),
-            None if calibration is None else load_calibration(calibration),
+            calibration,
         )
         prepared = with_self_calibration(prepared, self_calibration, self.name)
+        reference = reference_camera(prepared, calibration)
+        others = [
+            n
+            for n, s in prepared.items()
+            if isinstance(s, LineScanner) and s.camera.name != reference
+        ]
+        relative = options.pop("relative_calibration", ["scale"] if mode == "combined" else [])
+        if relative:
+            prepared |= with_self_calibration({n: prepared[n] for n in others}, relative, self.name)
+        prepared = with_image_trends(prepared, trend_order, trend_sigma, images=others)
         jitter_hz = options.pop("jitter_hz", None)
         if jitter_hz:
             result = adjust_with_jitter(
@@ -186,6 +235,9 @@ class Cartosat1Adjuster(Adjuster):
             )
         else:
             result = adjust_bundle(prepared, observations, **options)
+        trends = trend_document(result.sensors, list(result.parameters), result.sigmas)
+        if trends is not None:
+            result = attrs.evolve(result, products={**result.products, "image_trends": trends})
         if mode == "calibration":
             calibrated = {
                 n: attrs.evolve(s, camera=s.camera.with_calibrated_alignment())

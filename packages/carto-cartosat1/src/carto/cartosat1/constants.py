@@ -39,3 +39,8 @@ the session-4 simulator, a best case)."""
 RESIDUAL_ALIGNMENT_SIGMA_DEG = 0.002
 """Residual alignment error of each camera after in-flight calibration, per axis; the
 Fore/Aft relative alignment is uncertain by sqrt(2) times this."""
+IMAGE_TREND_SIGMA_DEG = 1e-4
+"""A-priori size of each Legendre coefficient of an image's own attitude trend relative to
+the reference camera's image (about 1.2 m on the ground): the slowest jitter and the
+attitude-control motion over the image's seconds, which the Fore and Aft images, 52 s apart,
+do not share (:mod:`carto.framework.adjustment.image_trends`)."""

@@ -38,18 +38,20 @@ import attrs
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from carto.framework.adjustment.attitude_terms import (
+    AXES,
+    AttitudeTermsCorrected,
+    line_scanner_of,
+)
 from carto.framework.adjustment.base import AdjustmentResult
 from carto.framework.adjustment.bundle import adjust_bundle
 from carto.framework.adjustment.misfit import residual_lines
 from carto.framework.adjustment.observations import Observations
-from carto.framework.arrays import as_float_arrays
 from carto.framework.errors import InputError
-from carto.framework.geometry.linescan import LineScanner
-from carto.framework.geometry.sensor import Parameter, Sensor, replace_parameters
+from carto.framework.geometry.sensor import Parameter, Sensor
 
 FloatArray = NDArray[np.float64]
 
-AXES = ("roll", "pitch", "yaw")
 MAX_DETECTED_FREQUENCIES = 6
 """At most this many jitter frequencies are taken from the residuals (one per re-adjustment)."""
 DETECTION_FALSE_ALARM = 1e-4
@@ -64,9 +66,6 @@ MIN_CYCLES = 1.0
 """The slowest frequency searched makes this many cycles over a series: slower wander is the
 trajectory's polynomial corrections' (over a 0.8 s window a 1.36-cycle jitter is not: left out,
 the checkpoint heights of a 10k-tie triplet are 1.3 m instead of 0.2 m)."""
-IMAGE_TO_GROUND_ITERATIONS = 3
-"""Fixed-point steps of :meth:`JitterCorrected.image_to_ground` (each divides the error by
-the ratio of the jitter shift's variation over a pixel to a pixel, < 1e-3)."""
 
 
 def jitter_parameter_names(prefix: str, n_frequencies: int) -> list[str]:
@@ -80,202 +79,63 @@ def jitter_parameter_names(prefix: str, n_frequencies: int) -> list[str]:
 
 
 @attrs.frozen(eq=False)
-class JitterCorrected(Sensor):
+class JitterCorrected(AttitudeTermsCorrected):
     """A line scanner plus periodic attitude corrections (see the module docstring).
 
     Attributes:
         base: the line scanner (its own parameters stay as they are).
+        terms: the coefficients, named by :func:`jitter_parameter_names` (radians).
         frequencies_hz: the jitter frequencies (their starting values when ``rates`` are
             given).
-        jitter: the coefficients, named by :func:`jitter_parameter_names` (radians).
         rates: the frequencies as parameters (Hz, named ``jitter.f<k>.hz``: the platform's,
             shared by every image), estimated with the coefficients; empty: fixed.
     """
 
-    base: LineScanner
-    frequencies_hz: tuple[float, ...]
-    jitter: tuple[Parameter, ...]
+    frequencies_hz: tuple[float, ...] = ()
     rates: tuple[Parameter, ...] = ()
 
     @property
-    def name(self) -> str:
-        return self.base.name
-
-    @property
-    def image_shape(self) -> tuple[int, int]:
-        return self.base.image_shape
-
-    @property
-    def parameters(self) -> tuple[Parameter, ...]:
-        return self.base.parameters + self.jitter + self.rates
+    def jitter(self) -> tuple[Parameter, ...]:
+        """The jitter coefficients (:attr:`terms`)."""
+        return self.terms
 
     @property
     def frequencies(self) -> tuple[float, ...]:
         """The current jitter frequencies (Hz)."""
         return tuple(p.value for p in self.rates) if self.rates else self.frequencies_hz
 
-    def with_parameters(
-        self,
-        values: Mapping[str, float] | None = None,
-        free: Mapping[str, bool] | None = None,
-        sigmas: Mapping[str, float] | None = None,
-    ) -> JitterCorrected:
-        groups = {"jitter": {p.name for p in self.jitter}, "rates": {p.name for p in self.rates}}
-
-        def part(mapping: Mapping[str, Any] | None, group: str) -> dict[str, Any] | None:
-            if mapping is None:
-                return None
-            if group == "base":
-                return {
-                    k: v for k, v in mapping.items() if not any(k in g for g in groups.values())
-                }
-            return {k: v for k, v in mapping.items() if k in groups[group]}
-
-        def update(params: tuple[Parameter, ...], group: str) -> tuple[Parameter, ...]:
-            return replace_parameters(
-                params, part(values, group), part(free, group), part(sigmas, group)
-            )
-
-        return attrs.evolve(
-            self,
-            base=self.base.with_parameters(
-                part(values, "base"), part(free, "base"), part(sigmas, "base")
-            ),
-            jitter=update(self.jitter, "jitter"),
-            rates=update(self.rates, "rates") if self.rates else (),
-        )
-
-    # ------------------------------------------------------------------ the correction
-    def _c0_names(self) -> list[str]:
-        prefix = self.base.trajectory.prefix
-        names = [f"{prefix}attitude.{axis}.c0" for axis in AXES]
-        known = {p.name for p in self.base.parameters}
-        missing = [n for n in names if n not in known]
-        if missing:
-            raise InputError(
-                f"sensor {self.base.name}: jitter terms need the constant attitude corrections "
-                f"({', '.join(missing)} missing: attitude correction order >= 0)"
-            )
-        return names
+    def _extra_parameters(self) -> dict[str, tuple[Parameter, ...]]:
+        return {"rates": self.rates}
 
     def _basis(self, t: FloatArray) -> FloatArray:
         """``(N, 2F)``: sin and cos of each frequency at times ``t`` (s since the epoch)."""
-        tau = t - self.base.trajectory.t_mid_s
+        tau = t - self.line_scanner.trajectory.t_mid_s
         cols = []
         for f in self.frequencies:
             w = 2.0 * math.pi * f * tau
             cols += [np.sin(w), np.cos(w)]
         return np.stack(cols, axis=-1)
 
+    def _extra_partials(self, name: str, a_c0: FloatArray, tau: FloatArray) -> FloatArray:
+        """d/df of ``s sin(2 pi f tau) + c cos(2 pi f tau)``, per axis, into image space."""
+        j = [p.name for p in self.rates].index(name)
+        coeffs = np.array([p.value for p in self.terms]).reshape(3, -1)
+        w = 2.0 * math.pi * self.frequencies[j] * tau
+        sin_j, cos_j = np.sin(w), np.cos(w)
+        d_angle = (
+            2.0
+            * math.pi
+            * tau[:, None]
+            * (
+                coeffs[None, :, 2 * j] * cos_j[:, None]
+                - coeffs[None, :, 2 * j + 1] * sin_j[:, None]
+            )
+        )
+        return np.einsum("nka,na->nk", a_c0, d_angle)
+
     def jitter_angles(self, t: ArrayLike) -> FloatArray:
         """The jitter corrections (roll, pitch, yaw; radians) at times ``t``, ``(..., 3)``."""
-        t = np.asarray(t, dtype=np.float64)
-        coeffs = np.array([p.value for p in self.jitter]).reshape(3, -1)
-        return self._basis(t) @ coeffs.T
-
-    def linearize(
-        self,
-        lon_deg: ArrayLike,
-        lat_deg: ArrayLike,
-        h_m: ArrayLike,
-        names: Sequence[str] | None = None,
-    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-        if names is None:
-            names = [p.name for p in self.parameters if p.free]
-        names = list(names)
-        own = [p.name for p in self.jitter]
-        rates = [p.name for p in self.rates]
-        base_names = [n for n in names if n not in own and n not in rates]
-        line, sample, a_ground, a_base, a_c0, basis, tau = self._linearize_base(
-            lon_deg, lat_deg, h_m, base_names
-        )
-        shift = self._shift(a_c0, basis)
-        a_param = np.empty((line.size, 2, len(names)))
-        per_axis = basis.shape[1]
-        if rates:
-            coeffs = np.array([p.value for p in self.jitter]).reshape(3, -1)
-        for k, name in enumerate(names):
-            if name in own:
-                axis, j = divmod(own.index(name), per_axis)
-                a_param[:, :, k] = a_c0[:, :, axis] * basis[:, j, None]
-            elif name in rates:
-                # d/df of s sin(2 pi f tau) + c cos(2 pi f tau), per axis
-                j = rates.index(name)
-                sin_j, cos_j = basis[:, 2 * j], basis[:, 2 * j + 1]
-                d_angle = (
-                    2.0
-                    * math.pi
-                    * tau[:, None]
-                    * (
-                        coeffs[None, :, 2 * j] * cos_j[:, None]
-                        - coeffs[None, :, 2 * j + 1] * sin_j[:, None]
-                    )
-                )
-                a_param[:, :, k] = np.einsum("nka,na->nk", a_c0, d_angle)
-            else:
-                a_param[:, :, k] = a_base[:, :, base_names.index(name)]
-        return line + shift[:, 0], sample + shift[:, 1], a_ground, a_param
-
-    def _linearize_base(
-        self, lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike, names: list[str]
-    ) -> tuple[FloatArray, ...]:
-        """The base model's ``linearize`` for ``names``, its partials w.r.t. the constant
-        attitude corrections ``(N, 2, 3)``, the jitter basis at the imaging times and those
-        times from the trajectory's middle."""
-        c0 = self._c0_names()
-        asked = names + [n for n in c0 if n not in names]
-        line, sample, a_ground, a_all = self.base.linearize(lon_deg, lat_deg, h_m, asked)
-        a_c0 = a_all[:, :, [asked.index(n) for n in c0]]
-        li = np.where(np.isfinite(line), line, 0.5 * self.base.n_lines)
-        t = self.base.timing.time(li)
-        basis = self._basis(t)
-        tau = t - self.base.trajectory.t_mid_s
-        return line, sample, a_ground, a_all[:, :, : len(names)], a_c0, basis, tau
-
-    def _shift(self, a_c0: FloatArray, basis: FloatArray) -> FloatArray:
-        """Image shift ``(N, 2)`` (line, sample) of the jitter corrections, first order."""
-        coeffs = np.array([p.value for p in self.jitter]).reshape(3, -1)
-        return np.einsum("nka,na->nk", a_c0, basis @ coeffs.T)
-
-    @property
-    def _still(self) -> bool:
-        """No jitter (all coefficients zero, as an adjustment starts): the base model."""
-        return not any(p.value for p in self.jitter)
-
-    # ------------------------------------------------------------------ Sensor interface
-    def project(
-        self, lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike
-    ) -> tuple[FloatArray, FloatArray, NDArray[np.bool_]]:
-        if self._still:
-            return self.base.project(lon_deg, lat_deg, h_m)
-        lon, lat, h = as_float_arrays(lon_deg, lat_deg, h_m)
-        shape = lon.shape
-        line, sample, _, _ = self.linearize(lon.ravel(), lat.ravel(), h.ravel(), [])
-        n_l, n_s = self.image_shape
-        inside = (line >= 0) & (line <= n_l) & (sample >= 0) & (sample <= n_s)
-        return line.reshape(shape), sample.reshape(shape), inside.reshape(shape)
-
-    def ground_to_image(
-        self, lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike
-    ) -> tuple[FloatArray, FloatArray]:
-        line, sample, inside = self.project(lon_deg, lat_deg, h_m)
-        return np.where(inside, line, np.nan), np.where(inside, sample, np.nan)
-
-    def image_to_ground(
-        self, line: ArrayLike, sample: ArrayLike, h_m: ArrayLike
-    ) -> tuple[FloatArray, FloatArray]:
-        if self._still:
-            return self.base.image_to_ground(line, sample, h_m)
-        line, sample, h = as_float_arrays(line, sample, h_m)
-        shape = line.shape
-        line, sample, h = line.ravel(), sample.ravel(), h.ravel()
-        lon, lat = self.base.image_to_ground(line, sample, h)
-        for _ in range(IMAGE_TO_GROUND_ITERATIONS):
-            # where the base model sees the point the corrected model sees at (line, sample)
-            _, _, _, _, a_c0, basis, _ = self._linearize_base(lon, lat, h, [])
-            shift = self._shift(a_c0, basis)
-            lon, lat = self.base.image_to_ground(line - shift[:, 0], sample - shift[:, 1], h)
-        return lon.reshape(shape), lat.reshape(shape)
+        return self.term_angles(t)
 
 
 def with_jitter_terms(
@@ -312,10 +172,11 @@ def with_jitter_terms(
         )
     out: dict[str, Sensor] = {}
     for name, sensor in sensors.items():
-        if not isinstance(sensor, LineScanner):
+        scanner = line_scanner_of(sensor)
+        if scanner is None:
             out[name] = sensor
             continue
-        prefix = sensor.trajectory.prefix
+        prefix = scanner.trajectory.prefix
         params = []
         for pname in jitter_parameter_names(prefix, len(freqs)):
             axis, k, part = pname[len(prefix) :].split(".")[1:]
@@ -328,15 +189,26 @@ def with_jitter_terms(
                     description=f"{axis} jitter at {freqs[int(k[1:])]:g} Hz, {part} coefficient",
                 )
             )
-        wrapped = JitterCorrected(sensor, freqs, tuple(params), rates)
+        wrapped = JitterCorrected(
+            base=sensor, terms=tuple(params), frequencies_hz=freqs, rates=rates
+        )
         wrapped._c0_names()  # refuse a model without constant attitude corrections now
         out[name] = wrapped
     return out
 
 
 def without_jitter_terms(sensors: Mapping[str, Sensor]) -> dict[str, Sensor]:
-    """The line scanners inside :class:`JitterCorrected` sensors (others as they are)."""
-    return {n: s.base if isinstance(s, JitterCorrected) else s for n, s in sensors.items()}
+    """The sensors without their :class:`JitterCorrected` layers (other attitude terms and
+    sensors as they are)."""
+    return {n: _without_jitter(s) for n, s in sensors.items()}
+
+
+def _without_jitter(sensor: Sensor) -> Sensor:
+    if isinstance(sensor, JitterCorrected):
+        return _without_jitter(sensor.base)
+    if isinstance(sensor, AttitudeTermsCorrected):
+        return attrs.evolve(sensor, base=_without_jitter(sensor.base))
+    return sensor
 
 
 def jitter_document(
@@ -351,7 +223,7 @@ def jitter_document(
         if not isinstance(sensor, JitterCorrected):
             continue
         values = {p.name: p.value for p in sensor.jitter}
-        prefix = sensor.base.trajectory.prefix
+        prefix = sensor.line_scanner.trajectory.prefix
         axes: dict[str, Any] = {}
         for axis in AXES:
             rows = []
@@ -371,7 +243,7 @@ def jitter_document(
                     }
                 )
             axes[axis] = rows
-        images[name] = {"t_mid_s": sensor.base.trajectory.t_mid_s, "axes": axes}
+        images[name] = {"t_mid_s": sensor.line_scanner.trajectory.t_mid_s, "axes": axes}
     if not images:
         return None
     first = next(s for s in sensors.values() if isinstance(s, JitterCorrected))
@@ -461,8 +333,8 @@ def residual_series(
     res = result.image_residuals
     out = []
     for name, sensor in result.sensors.items():
-        base = sensor.base if isinstance(sensor, JitterCorrected) else sensor
-        if not isinstance(base, LineScanner):
+        base = line_scanner_of(sensor)
+        if base is None:
             continue
         m = (res["image"] == name) & np.isfinite(lines)
         if not m.any():
@@ -544,7 +416,7 @@ def _frequency_sigma(result: AdjustmentResult, freqs: tuple[float, ...]) -> floa
     longest image's imaging time."""
     spans = [
         abs(float(s.timing.time(float(s.n_lines)) - s.timing.time(0.0)))
-        for s in (x.base if isinstance(x, JitterCorrected) else x for x in result.sensors.values())
-        if isinstance(s, LineScanner)
+        for s in (line_scanner_of(x) for x in result.sensors.values())
+        if s is not None
     ]
     return 1.0 / max(max(spans, default=1.0), 1e-3)

@@ -20,6 +20,8 @@ def cmd_adjust(args: argparse.Namespace) -> int:
         options["mode"] = args.mode
     if args.attitude_order is not None:
         options["attitude_order"] = args.attitude_order
+    if args.image_trends is not None:
+        options["image_trend_order"] = args.image_trends
     if args.no_robust:
         options["robust"] = False
     if args.dem_heights is not None:
@@ -48,6 +50,8 @@ def cmd_adjust(args: argparse.Namespace) -> int:
         raise UsageError(f"--gcps must be >= 0, got {args.gcps}")
     if args.attitude_order is not None and not 0 <= args.attitude_order <= 10:
         raise UsageError(f"--attitude-order must be 0..10, got {args.attitude_order}")
+    if args.image_trends is not None and not 0 <= args.image_trends <= 2:
+        raise UsageError(f"--image-trends must be 0..2, got {args.image_trends}")
     if args.no_gcp_transfer:
         options["gcp_transfer"] = False
     if args.gcp_offset_sigma is not None:
@@ -161,6 +165,14 @@ def add_adjust(sub: argparse._SubParsersAction) -> None:
         type=int,
         metavar="K",
         help="order of the attitude correction polynomials (0 bias, 1 + drift ...)",
+    )
+    p.add_argument(
+        "--image-trends",
+        type=int,
+        metavar="K",
+        help="order of each image's own attitude trend relative to the reference camera's "
+        "image (Legendre 1..K over the image; adjusters that tie images on one trajectory; "
+        "0: off; default: the adjuster's)",
     )
     p.add_argument(
         "--ties",

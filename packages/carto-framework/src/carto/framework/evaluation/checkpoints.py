@@ -124,15 +124,18 @@ def checkpoint_accuracy(
 
 
 def predicted_checkpoint_sigma(
-    result: Any, table: Mapping[str, NDArray], sigma_px: float = 0.0
+    result: Any, table: Mapping[str, NDArray], sigma_px: float | None = None
 ) -> dict[str, float]:
     """Predicted accuracy of points intersected with adjusted sensors (covariance propagation).
 
     For each point of ``table`` (long format, as for :func:`checkpoint_accuracy`) the ground
     position intersected from its image coordinates depends on the estimated parameters
     ``c`` as ``dX/dc = -(A_X^T A_X)^-1 A_X^T A_c``; its covariance is
-    ``dX/dc Cov_c dX/dc^T`` plus, when ``sigma_px > 0``, the measurement term
-    ``sigma_px^2 (A_X^T A_X)^-1``. ``Cov_c`` is the a-priori covariance ``S^-1`` scaled by
+    ``dX/dc Cov_c dX/dc^T`` plus the measurement term ``sigma_px^2 (A_X^T A_X)^-1`` of the
+    checkpoints' own image coordinates: ``sigma_px`` given, else the table's ``sigma_px``
+    column (RMS over the point's rows; 0 without the column), so that the prediction is of
+    what checkpoint RMSEs measure (adjustment error and checkpoint measurement error).
+    ``Cov_c`` is the a-priori covariance ``S^-1`` scaled by
     ``max(1, sigma0)^2`` (a sigma0 below 1 comes from too few redundant ground observations to
     judge, not from better data).
 
@@ -146,8 +149,17 @@ def predicted_checkpoint_sigma(
     cov = result.covariance_unit * max(1.0, float(np.nan_to_num(result.sigma0, nan=1.0))) ** 2
     ids = sorted(set(table["id"].tolist()))
     e2, u2 = [], []
+    column = table.get("sigma_px")
     for pid in ids:
         rows = np.flatnonzero(table["id"] == pid)
+        if sigma_px is not None:
+            point_px = float(sigma_px)
+        elif column is not None:
+            px = np.asarray(column[rows], np.float64)
+            px = px[np.isfinite(px)]
+            point_px = float(np.sqrt(np.mean(px**2))) if px.size else 0.0
+        else:
+            point_px = 0.0
         a_x, a_c = [], []
         for r in rows:
             image = table["image"][r]
@@ -168,7 +180,7 @@ def predicted_checkpoint_sigma(
         ac = np.concatenate(a_c)
         n_inv = np.linalg.inv(ax.T @ ax)
         dxdc = -n_inv @ ax.T @ ac
-        c_x = dxdc @ cov @ dxdc.T + sigma_px**2 * n_inv
+        c_x = dxdc @ cov @ dxdc.T + point_px**2 * n_inv
         e2.append(c_x[0, 0] + c_x[1, 1])
         u2.append(c_x[2, 2])
     if not e2:

@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 
 from carto.framework.adjustment.base import AdjustmentResult
 from carto.framework.adjustment.control_checks import check_control, check_tie_points
+from carto.framework.adjustment.image_trends import fold_image_trends
 from carto.framework.adjustment.observations import Observations
 from carto.framework.errors import AdjustmentError, InputError
 from carto.framework.files.control_table import read_control_table, read_tie_table
@@ -533,7 +534,8 @@ def _write_models(
     cannot save one are listed (``not_saved``) and named on stderr."""
     files: dict[str, Any] = {"models": {}, "rpc": {}, "not_saved": {}}
     h_range = _height_range(result)
-    for name, sensor in result.sensors.items():
+    # image trends (:mod:`carto.framework.adjustment.image_trends`) into the models' polynomials
+    for name, sensor in fold_image_trends(result.sensors).items():
         try:
             written = types[name].save(sensor, out, name, h_range_m=h_range)
         except NotImplementedError as exc:
