@@ -243,3 +243,24 @@ def test_a_matched_offset_carries_the_gcp_parallax(scene):
         adjust_bundle(sensors, obs.with_offsets(["nowhere"], "fore", "aft", 1.0, 1.0, 0.1))
     with pytest.raises(InputError, match="without a sensor"):
         adjust_bundle(sensors, obs.with_offsets([gid], "fore", "pan", 1.0, 1.0, 0.1))
+
+
+def test_an_outlier_beside_a_point_no_solution_can_place(scene):
+    """A tie point measured in one image only (no height: it cannot be placed) and a blundered
+    tie point in one block: the engine drops the first, flags the second and keeps the robust
+    weights of the others aligned (an IndexError before)."""
+    sensors = scene.sensors()
+    ties, check = _split(scene.control("checkpoints"))
+    ties = {k: np.asarray(v).copy() for k, v in ties.items()}
+    first = ties["id"][0]
+    # across the parallax (a line shift would be a height)
+    ties["sample"] = np.where(
+        (ties["id"] == first) & (ties["image"] == "aft"), ties["sample"] + 40.0, ties["sample"]
+    )
+    lone = {k: v[:1].copy() for k, v in ties.items()}
+    lone["id"] = np.array(["LONE"], object)
+    ties = {k: np.concatenate([ties[k], lone[k]]) for k in ties}
+    result = adjust_bundle(sensors, Observations.from_tables(scene.control("gcps"), ties))
+    assert first in result.outliers
+    assert "LONE" not in result.points
+    assert checkpoint_accuracy(result.sensors, check)["rmse_planimetric_m"] < 1.0

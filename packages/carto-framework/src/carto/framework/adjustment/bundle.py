@@ -304,6 +304,10 @@ def adjust_bundle(
         if not robust or not flagged:
             break
         outliers.extend(flagged)
+        # points the solution could not place (one image, no height) are out of its weights
+        unplaced = sorted(set(current.point_id.tolist()) - set(result.points))
+        if unplaced:
+            current = current.without_points(unplaced)
         drop = set(flagged)
         weights = (
             weights[0][[p not in drop for p in current.point_id]],
