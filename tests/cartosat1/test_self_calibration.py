@@ -87,14 +87,21 @@ def test_the_focal_length_error_is_estimated_and_removes_the_misfit(pair):
     gcps = [f"P{i:03d}" for i in (0, 4, 55, 59, 30)]
     obs = _observations(rows, ground, gcps)
     adjuster = get_registry().get("adjuster", "cartosat1-combined")
-    plain = adjuster.adjust(models, obs)
+    plain = adjuster.adjust(models, obs, relative_calibration=[])
+    relative = adjuster.adjust(models, obs)  # the default: Aft's focal length relative to Fore's
     calibrated = adjuster.adjust(models, obs, self_calibration=["scale"])
     est = dict(zip(calibrated.parameters, calibrated.values, strict=True))
     for cam, ppm in FOCAL_PPM.items():
         assert est[f"camera.{cam}.interior.scale"] * 1e6 == pytest.approx(ppm, abs=15.0)
+    # the relative focal length alone: Aft's scale against Fore's (-120 - 150 ppm), the common
+    # part left to the GCPs and the orbit's radial position
+    rel = dict(zip(relative.parameters, relative.values, strict=True))
+    assert "camera.fore.interior.scale" not in rel
+    assert rel["camera.aft.interior.scale"] * 1e6 == pytest.approx(-270.0, abs=40.0)
     # 0.05 px measurements: the focal error (up to 0.9 px at the swath's edges) is a misfit
     # the attitude cannot absorb; estimated, sigma0 falls to the measurement noise
     assert plain.sigma0 > 2.0
+    assert relative.sigma0 < 1.5
     assert calibrated.sigma0 < 1.5
 
 
