@@ -133,22 +133,27 @@ def _ideal_ties(scene_dir, n: int, sigma_px: float, seed: int = 0) -> dict:
     return out | {"sigma_px": np.full(out["id"].size, sigma_px)}
 
 
+def _exact_gcp_scene(tmp_path, seed: int, lines: int):
+    """A full-swath window (12000 x ``lines``) with one error-free GCP and 30 checkpoints."""
+    from ..scenes import simulate
+
+    return simulate(
+        "cartosat1-pair",
+        tmp_path / "s",
+        seed=seed,
+        size=(12000, lines),
+        n_gcps=1,
+        n_checkpoints=30,
+        error_sizes=(("gcp_planimetric_m", 0.0), ("gcp_height_m", 0.0), ("gcp_image_px", 0.0)),
+    )
+
+
 def test_the_pair_shares_one_position_bias(tmp_path, adjuster):
     """Fore and Aft see the ground from different distances and angles, so the ephemeris bias
     is not one attitude rotation for both: the tied model estimates it (default), and without
     it precise tie points over the full swath pull the shared attitude off. Error-free GCP,
     ideal tie points: with the bias unknown the pair is recovered, without it it is not."""
-    from ..scenes import simulate
-
-    scene_dir = simulate(
-        "cartosat1-pair",
-        tmp_path / "s",
-        seed=2,
-        size=(12000, 80),
-        n_gcps=1,
-        n_checkpoints=30,
-        error_sizes=(("gcp_planimetric_m", 0.0), ("gcp_height_m", 0.0), ("gcp_image_px", 0.0)),
-    )
+    scene_dir = _exact_gcp_scene(tmp_path, seed=2, lines=80)
     scene = Scene.open(scene_dir)
     obs = Observations.from_tables(scene.control("gcps"), _ideal_ties(scene_dir, 1500, 0.1))
     check = scene.control("checkpoints")
@@ -192,17 +197,7 @@ def test_the_aft_images_own_attitude_trend_stays_out_of_the_body(tmp_path, adjus
     from carto.framework.geometry.linescan import LineScanner
     from carto.framework.raster.dem import DEM
 
-    from ..scenes import simulate
-
-    scene_dir = simulate(
-        "cartosat1-pair",
-        tmp_path / "s",
-        seed=4,
-        size=(12000, 300),
-        n_gcps=1,
-        n_checkpoints=30,
-        error_sizes=(("gcp_planimetric_m", 0.0), ("gcp_height_m", 0.0), ("gcp_image_px", 0.0)),
-    )
+    scene_dir = _exact_gcp_scene(tmp_path, seed=4, lines=300)
     scene = Scene.open(scene_dir)
     truth = {n: LineScanner.load(scene_dir / f"truth/{n}.model.json") for n in ("fore", "aft")}
     aft = line_scanner_corrections(

@@ -15,7 +15,7 @@ partials are the innermost line scanner's.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import attrs
@@ -50,6 +50,18 @@ def without_attitude_terms(sensors: Mapping[str, Sensor]) -> dict[str, Sensor]:
             sensor = sensor.base
         out[name] = sensor
     return out
+
+
+def map_layers(
+    sensor: Sensor, kind: type[AttitudeTermsCorrected], transform: Callable[[Any], Sensor]
+) -> Sensor:
+    """``sensor`` with each of its attitude-term layers of type ``kind`` replaced by
+    ``transform(layer)`` (e.g. its base: the layer removed), the other layers kept."""
+    if isinstance(sensor, kind):
+        return map_layers(transform(sensor), kind, transform)
+    if isinstance(sensor, AttitudeTermsCorrected):
+        return attrs.evolve(sensor, base=map_layers(sensor.base, kind, transform))
+    return sensor
 
 
 @attrs.frozen(eq=False)

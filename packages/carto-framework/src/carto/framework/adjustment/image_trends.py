@@ -45,6 +45,7 @@ from carto.framework.adjustment.attitude_terms import (
     AttitudeTermsCorrected,
     FloatArray,
     line_scanner_of,
+    map_layers,
 )
 from carto.framework.errors import InputError
 from carto.framework.geometry.linescan import LineScanner
@@ -165,15 +166,10 @@ def with_image_trends(
 def fold_image_trends(sensors: Mapping[str, Sensor]) -> dict[str, Sensor]:
     """The sensors with their :class:`ImageTrendCorrected` layers folded into their line
     scanners (:meth:`ImageTrendCorrected.folded`); others as they are."""
-    return {n: _fold(s) for n, s in sensors.items()}
-
-
-def _fold(sensor: Sensor) -> Sensor:
-    if isinstance(sensor, ImageTrendCorrected):
-        return _fold(sensor.folded())
-    if isinstance(sensor, AttitudeTermsCorrected):
-        return attrs.evolve(sensor, base=_fold(sensor.base))
-    return sensor
+    return {
+        n: map_layers(s, ImageTrendCorrected, lambda layer: layer.folded())
+        for n, s in sensors.items()
+    }
 
 
 def trend_document(

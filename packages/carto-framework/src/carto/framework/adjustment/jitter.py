@@ -42,6 +42,7 @@ from carto.framework.adjustment.attitude_terms import (
     AXES,
     AttitudeTermsCorrected,
     line_scanner_of,
+    map_layers,
 )
 from carto.framework.adjustment.base import AdjustmentResult
 from carto.framework.adjustment.bundle import adjust_bundle
@@ -200,15 +201,7 @@ def with_jitter_terms(
 def without_jitter_terms(sensors: Mapping[str, Sensor]) -> dict[str, Sensor]:
     """The sensors without their :class:`JitterCorrected` layers (other attitude terms and
     sensors as they are)."""
-    return {n: _without_jitter(s) for n, s in sensors.items()}
-
-
-def _without_jitter(sensor: Sensor) -> Sensor:
-    if isinstance(sensor, JitterCorrected):
-        return _without_jitter(sensor.base)
-    if isinstance(sensor, AttitudeTermsCorrected):
-        return attrs.evolve(sensor, base=_without_jitter(sensor.base))
-    return sensor
+    return {n: map_layers(s, JitterCorrected, lambda layer: layer.base) for n, s in sensors.items()}
 
 
 def jitter_document(
