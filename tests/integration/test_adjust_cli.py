@@ -95,6 +95,24 @@ def test_adjust_errors_are_one_line(run_carto, tmp_path, cartosat1_scene):
     )
     assert res.returncode == 2
     assert "--jitter must be auto, none or frequencies in Hz, got '4.3,fast'" in res.stderr
+    res = run_carto(
+        ["adjust", str(cartosat1_scene), "--image-trends", "3", "--out", str(tmp_path / "z")],
+        with_test_plugins=False,
+    )
+    assert res.returncode == 2
+    assert "--image-trends must be 0..2, got 3" in res.stderr
+    # image trends belong to the tied mode: a separate adjustment refuses them (bad data, 1)
+    res = run_carto(
+        [
+            *("adjust", str(cartosat1_scene), "--ties", "none", "--mode", "separate"),
+            *("--image-trends", "1", "--out", str(tmp_path / "z"), "--quiet"),
+        ],
+        with_test_plugins=False,
+    )
+    assert res.returncode == 1
+    assert "mode separate takes image_trend_order 0" in res.stderr
+    assert "Traceback" not in res.stderr
+    assert not (tmp_path / "z").exists()
 
 
 def test_calibration_from_the_command_line(run_carto, tmp_path, cartosat1_scene):
