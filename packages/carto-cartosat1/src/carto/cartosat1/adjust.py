@@ -42,8 +42,8 @@ Option ``relative_calibration`` (combined mode; default ``["scale"]``; a list as
 to the reference camera: tie points see the difference of the Fore and Aft focal lengths (an
 across-track parallax growing across the swath; 50 ppm each puts 0.4 px at the swath's edges),
 not their common error. Without it the tied model bent the pitch and the position (along-track
-bias 50-110 m, 3-7 a-priori sigmas) to fit that parallax, and the along-track error at
-checkpoints doubled (``--errors full``).
+bias 50-110 m, 3-7 a-priori sigmas) to fit that parallax (``--errors full``, plains 2 and
+hilly 0 of ``benchmarks/cartosat1_accuracy.py``).
 
 Option ``jitter_hz`` (``"auto"``: frequencies found in the residuals, or a list of Hz; off by
 default) adds periodic attitude jitter terms (:mod:`carto.framework.adjustment.jitter`, a-priori
