@@ -21,7 +21,7 @@ unbiased ``right_image.geom`` and with a run without the height constraint.
 
 Usage: ``python benchmarks/cartosat1_accuracy.py [--seeds 5] [--terrains plains hilly
 mountains] [--size 12000 1000] [--jobs 2] [--data ../shared/data] [--work DIR]
-[--errors realistic|full] [--reuse-reports]``
+[--errors realistic|full] [--reuse-reports] [--reuse-ties]``
 """
 
 from __future__ import annotations
@@ -29,6 +29,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import shutil
 import sys
 import tempfile
 import time
@@ -97,6 +98,7 @@ def run_scene(
     size: tuple[int, int],
     errors: str = "realistic",
     reuse_reports: bool = False,
+    reuse_ties: bool = False,
 ) -> dict:
     scene_dir = work / f"{terrain}-{seed}"
     preset = get_registry().get("scene-preset", "cartosat1-pair")
@@ -118,6 +120,11 @@ def run_scene(
     out: dict = {"seed": seed, "terrain": terrain, "simulate_s": round(time.perf_counter() - t0, 1)}
     out["system_level"] = _short(checkpoint_accuracy(scene.sensors(), scene.control("checkpoints")))
     ties = "auto"
+    first = work / f"{terrain}-{seed}-{cases_for(errors)[0][0]}" / "tie_points.csv"
+    if reuse_ties and first.is_file():  # matched by an earlier run (adjusting replaces it)
+        ties = str(work / f"{terrain}-{seed}-ties.csv")
+        shutil.copyfile(first, ties)
+        out["tie_points_reused"] = True
     for label, options in cases_for(errors):
         t0 = time.perf_counter()
         kept = work / f"{terrain}-{seed}-{label}" / "report.json"
@@ -165,8 +172,6 @@ def blunder_case(work: Path, seed: int, terrain: str) -> dict:
     )
     bad_id = sorted(set(gcps["id"]))[1]
     # write a scene copy whose gcps.csv has the blunder (north + 50 m)
-    import shutil
-
     from carto.framework.files.point_table import write_point_table
 
     copy = work / "blunder-scene"
@@ -375,6 +380,12 @@ def main() -> int:
         "(the same code) left it there, instead of adjusting again",
     )
     parser.add_argument(
+        "--reuse-ties",
+        action="store_true",
+        help="adjust with the tie points an earlier run in --work matched (the same scenes "
+        "and matcher: what changed is downstream of the matching)",
+    )
+    parser.add_argument(
         "--errors",
         choices=("realistic", "full"),
         default="realistic",
@@ -390,7 +401,16 @@ def main() -> int:
     cases = [(seed, terrain) for terrain in args.terrains for seed in range(args.seeds)]
     with ProcessPoolExecutor(max_workers=max(1, args.jobs)) as pool:
         futures = [
-            pool.submit(run_scene, work, s, t, tuple(args.size), args.errors, args.reuse_reports)
+            pool.submit(
+                run_scene,
+                work,
+                s,
+                t,
+                tuple(args.size),
+                args.errors,
+                args.reuse_reports,
+                args.reuse_ties,
+            )
             for s, t in cases
         ]
         runs = []

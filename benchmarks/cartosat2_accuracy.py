@@ -14,7 +14,8 @@
   ``sigma0 x`` the a-priori 0.3 px) and the tie-point residual RMS.
 
 Usage: ``python benchmarks/cartosat2_accuracy.py [--seeds 5] [--terrains plains hilly
-mountains] [--size 1000] [--data ../shared/data] [--work DIR]``
+mountains] [--size 1000] [--data ../shared/data] [--work DIR] [--errors realistic|full]
+[--reuse-ties]``
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import shutil
 import sys
 import tempfile
 import time
@@ -82,13 +84,18 @@ def _tie_quality(scene: Scene, out: Path, outliers: list[str]) -> dict:
     }
 
 
-def triplet(work: Path, seed: int, terrain: str, size: int) -> dict:
+def triplet(work: Path, seed: int, terrain: str, size: int, reuse_ties: bool = False) -> dict:
     t0 = time.perf_counter()
     folder = _simulate("cartosat2-triplet", work / f"triplet-{terrain}-{seed}", seed, terrain, size)
     simulated_s = time.perf_counter() - t0
     out = work / f"triplet-{terrain}-{seed}-adj"
+    ties = "auto"
+    if reuse_ties and (out / "tie_points.csv").is_file():  # matched by an earlier run
+        ties = str(work / f"triplet-{terrain}-{seed}-ties.csv")
+        shutil.copyfile(out / "tie_points.csv", ties)
     t0 = time.perf_counter()
-    rep = adjust_product(folder, out, n_gcps=2, quiet=True)
+    rep = adjust_product(folder, out, n_gcps=2, ties=ties, quiet=True)
+    components = rep["adjustment"].get("variance_components", {})
     cp, before = rep["checkpoints"], rep["checkpoints_before"]
     return {
         "seed": seed,
@@ -109,6 +116,14 @@ def triplet(work: Path, seed: int, terrain: str, size: int) -> dict:
         if (out / "jitter.json").is_file()
         else [],
         "sigma0": round(rep["sigma0"], 3),
+        # a-posteriori over a-priori sigma of the tie points and of the jitter terms (the
+        # latter reported, not applied: carto.framework.adjustment.variance_components)
+        "sigma_ratio": {
+            g: components[g]["sigma_ratio"]
+            for g in ("tie_image", "prior:trajectory.jitter")
+            if g in components
+        },
+        "tie_points_reused": ties != "auto",
         "outliers": len(rep["outliers"]),
         "tie_points": _tie_quality(Scene.open(folder), out, rep["outliers"]),
     }
@@ -176,6 +191,12 @@ def main() -> int:
         default="realistic",
         help="the scenes' error profile (full: errors no adjuster models, issue 18)",
     )
+    parser.add_argument(
+        "--reuse-ties",
+        action="store_true",
+        help="adjust with the tie points an earlier run in --work matched (the same scenes "
+        "and matcher: what changed is downstream of the matching)",
+    )
     args = parser.parse_args()
     ERRORS["profile"] = args.errors
     work = args.work or Path(tempfile.mkdtemp(prefix="carto-c2-bench-"))
@@ -183,7 +204,7 @@ def main() -> int:
     runs = []
     for terrain in args.terrains:
         for seed in range(args.seeds):
-            runs.append(triplet(work, seed, terrain, args.size))
+            runs.append(triplet(work, seed, terrain, args.size, args.reuse_ties))
             print(json.dumps(runs[-1]), file=sys.stderr, flush=True)
     wrong = sum(r["tie_points"]["wrong_over_1px"] for r in runs)
     checked = sum(r["tie_points"]["checked_observations"] for r in runs)
@@ -204,6 +225,21 @@ def main() -> int:
         "predicted_over_measured_height_median": float(
             np.median([r["predicted_sigma_height_m"] / r["rmse_height_m"] for r in runs])
         ),
+        # the RMS over runs of the predicted sigma against that of the measured RMSE (each
+        # run's 50 checkpoints share one datum error: one run is one draw of it)
+        "predicted_over_measured_rms_over_runs": {
+            axis: float(
+                np.sqrt(np.mean([r[f"predicted_sigma_{axis}_m"] ** 2 for r in runs]))
+                / np.sqrt(np.mean([r[f"rmse_{axis}_m"] ** 2 for r in runs]))
+            )
+            for axis in ("planimetric", "height")
+        },
+        "runs_predicted_within_1_5x": {
+            axis: sum(
+                1 / 1.5 <= r[f"predicted_sigma_{axis}_m"] / r[f"rmse_{axis}_m"] <= 1.5 for r in runs
+            )
+            for axis in ("planimetric", "height")
+        },
         "runs_within_issue_18_targets": sum(
             r["rmse_planimetric_m"] <= 1.5 and r["rmse_height_m"] <= 2.0 for r in runs
         ),

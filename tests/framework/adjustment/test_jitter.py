@@ -11,6 +11,7 @@ import pytest
 
 from carto.framework.adjustment.jitter import (
     JitterCorrected,
+    fold_jitter_terms,
     jitter_document,
     with_jitter_terms,
     without_jitter_terms,
@@ -129,13 +130,17 @@ def test_unwrap_report_and_refusals(fore, cartosat1_pair):
     assert row["frequency_hz"] == 4.3
     assert row["amplitude_rad"] == pytest.approx(3e-7)
     assert row["phase_rad"] == pytest.approx(math.pi / 2)
-    assert doc["applied_to_models"] is False
+    assert doc["applied_to_models"] is True
     assert jitter_document(cartosat1_pair, [], []) is None
     assert with_jitter_terms(cartosat1_pair, (), 1e-7) == cartosat1_pair
     with pytest.raises(InputError, match="distinct and > 0"):
         with_jitter_terms(cartosat1_pair, (1.7, 1.7), 1e-7)
-    with pytest.raises(InputError, match="sigma must be > 0"):
+    with pytest.raises(InputError, match="amplitude must be > 0"):
         with_jitter_terms(cartosat1_pair, (1.7,), 0.0)
+    # an RMS amplitude A: sigma A / sqrt(2) on each sine and cosine term (E[s^2 + c^2] = A^2)
+    terms = with_jitter_terms(cartosat1_pair, (1.7,), 2e-6)["fore"].jitter
+    assert terms
+    assert all(p.sigma == pytest.approx(2e-6 / math.sqrt(2.0)) for p in terms)
 
 
 def test_frequencies_are_found_in_residuals_and_white_noise_finds_none():
@@ -163,3 +168,40 @@ def test_frequencies_are_found_in_residuals_and_white_noise_finds_none():
     wander -= np.polynomial.polynomial.polyval(t1, np.polynomial.polynomial.polyfit(t1, wander, 3))
     slow = [(t1, wander + rng.normal(0, 0.2, t1.size))]
     assert detect_jitter_frequencies(slow, max_frequencies=4) == ()
+
+
+def test_folded_jitter_is_carried_by_the_delivered_model(fore, tmp_path):
+    """The delivered line scanner carries the estimated jitter as periodic attitude
+    corrections of its trajectory (exact rotations, at the imaging time of the line that sees
+    the point), which the first-order wrapper's image points (the jitter at the time of the
+    line without it) match within 1e-3 px for jitter of a few tenths of a pixel, also after
+    the model file's round trip; and the delivered model has no jitter parameters left."""
+    from carto.framework.geometry.linescan import LineScanner
+
+    rng = np.random.default_rng(3)
+    values = {p.name: float(v) for p, v in zip(fore.jitter, rng.normal(0, 3e-7, 12), strict=True)}
+    wrapped = fore.with_parameters(values)
+    folded = fold_jitter_terms({"fore": wrapped})["fore"]
+    assert isinstance(folded, LineScanner)
+    assert not any("jitter" in p.name for p in folded.parameters)
+    assert folded.trajectory.attitude_periodic_hz == FREQS
+    path = folded.save(tmp_path / "fore.model.json")
+    loaded = LineScanner.load(path)
+    lon, lat, h = _ground(fore.base, n=200)
+    line, sample, _ = wrapped.project(lon, lat, h)
+    base_line, _, _ = fore.base.project(lon, lat, h)
+    assert np.abs(line - base_line).max() > 0.2  # the jitter moves the image
+    for model in (folded, loaded):
+        m_line, m_sample, _ = model.project(lon, lat, h)
+        np.testing.assert_allclose(m_line, line, atol=1e-3)
+        np.testing.assert_allclose(m_sample, sample, atol=1e-3)
+    # a second fold (a re-adjusted model) adds to what the trajectory carries
+    again = loaded.trajectory.with_attitude_periodic((2.0,), np.zeros((3, 2)))
+    assert again.attitude_periodic_hz == (*FREQS, 2.0)
+    with pytest.raises(InputError, match="attitude_periodic"):
+        type(again).from_dict(
+            {
+                **again.to_dict(),
+                "attitude_periodic": {"frequencies_hz": [1.0], "coefficients_rad": [0.0]},
+            }
+        )

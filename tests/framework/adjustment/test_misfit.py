@@ -56,3 +56,28 @@ def test_sigma0_is_flagged_only_when_significant_and_far_from_one():
     assert not sigma0_check(1.05, 100_000)["misfit"]  # significant, but within 10 %
     assert not sigma0_check(1.3, 5)["misfit"]  # 5 redundant observations: chance
     assert sigma0_check(0.5, 1000)["misfit"]
+
+
+def test_the_group_whose_weights_are_wrong_is_named():
+    """sigma0 0.5 from tie points matched three times better than said; the GCP group, too
+    little redundant, and the a-priori values are not judged."""
+    from carto.framework.adjustment.variance_components import VarianceComponent
+
+    rng = np.random.default_rng(1)
+    lines = rng.uniform(0, 12000, 3000)
+    components = (
+        VarianceComponent("tie_image", 6000, 2990.0, 0.11, 0.11),
+        VarianceComponent("gcp_ground", 6, 0.5, 4.0, 1.0),
+        VarianceComponent("prior:trajectory.jitter", 100, 40.0, 0.08, 1.0),
+        VarianceComponent("image_offsets", 400, 300.0, 1.02, 1.02),
+    )
+    table = _table(rng.normal(0, 0.1, 3000), rng.normal(0, 0.1, 3000))
+    rep = misfit_report(table, lines, 0.5, 3000, components)
+    assert set(rep["groups"]) == {"tie_image", "image_offsets"}
+    named = [
+        f for f in rep["flags"] if f.startswith(("tie_image", "image_offsets", "gcp", "prior"))
+    ]
+    assert named == [
+        "tie_image: a-posteriori sigma 0.33 x the a-priori (redundancy 2990): their a-priori "
+        "sigma is too large"
+    ]

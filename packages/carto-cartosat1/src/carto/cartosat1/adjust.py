@@ -47,7 +47,7 @@ hilly 0 of ``benchmarks/cartosat1_accuracy.py``).
 
 Option ``jitter_hz`` (``"auto"``: frequencies found in the residuals, or a list of Hz; off by
 default) adds periodic attitude jitter terms (:mod:`carto.framework.adjustment.jitter`, a-priori
-amplitude ``jitter_sigma_deg``, default :data:`JITTER_SIGMA_DEG`).
+RMS amplitude ``jitter_amplitude_deg``, default :data:`JITTER_AMPLITUDE_DEG`).
 
 Option ``self_calibration`` (a list of ``scale``, ``line_offset``, ``centre_offset``, or a
 mapping of them to a-priori sigmas; off by default: one scene with one GCP cannot separate a
@@ -173,9 +173,9 @@ def reference_camera(
     return first.camera.name if isinstance(first, LineScanner) else None
 
 
-JITTER_SIGMA_DEG = 6e-5
-"""A-priori amplitude of Cartosat-1 attitude jitter per axis and frequency (a few tenths of a
-pixel on the ground)."""
+JITTER_AMPLITUDE_DEG = 6e-5
+"""A-priori RMS amplitude of Cartosat-1 attitude jitter per axis and frequency (a few tenths of
+a pixel on the ground)."""
 
 
 class Cartosat1Adjuster(Adjuster):
@@ -230,7 +230,7 @@ class Cartosat1Adjuster(Adjuster):
                 prepared,
                 observations,
                 jitter_hz,
-                math.radians(float(options.pop("jitter_sigma_deg", JITTER_SIGMA_DEG))),
+                math.radians(float(options.pop("jitter_amplitude_deg", JITTER_AMPLITUDE_DEG))),
                 **options,
             )
         else:

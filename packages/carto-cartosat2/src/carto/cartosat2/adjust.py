@@ -91,7 +91,9 @@ class Cartosat2BlockAdjuster(Adjuster):
         """Options: ``attitude_order`` (0-3, default 3), ``estimate_position``, the a-priori
         sigmas ``bias_sigma_deg``, ``drift_sigma_deg_s``, ``smooth_sigma_deg``, the jitter
         frequencies ``jitter_hz`` (``"auto"``, the default: found in the residuals; a list
-        when the platform's are known; empty: no jitter terms) and ``jitter_sigma_deg``,
+        when the platform's are known; empty: no jitter terms) and their a-priori RMS
+        amplitude ``jitter_amplitude_deg`` (default
+        :data:`constants.ATTITUDE_JITTER_AMPLITUDE_DEG`),
         ``self_calibration`` (as the Cartosat-1 adjuster's, off by default), and those of
         :func:`~carto.framework.adjustment.bundle.adjust_bundle`."""
         prior = AncillaryPrior.from_degrees(
@@ -100,8 +102,8 @@ class Cartosat2BlockAdjuster(Adjuster):
             float(options.pop("smooth_sigma_deg", constants.ATTITUDE_SMOOTH_SIGMA_DEG)),
         )
         jitter_hz = _frequencies(options.pop("jitter_hz", "auto"))
-        jitter_sigma = math.radians(
-            float(options.pop("jitter_sigma_deg", constants.ATTITUDE_JITTER_SIGMA_DEG))
+        jitter_amplitude = math.radians(
+            float(options.pop("jitter_amplitude_deg", constants.ATTITUDE_JITTER_AMPLITUDE_DEG))
         )
         prepared = prepare_sensors(
             sensors,
@@ -111,7 +113,7 @@ class Cartosat2BlockAdjuster(Adjuster):
         )
         prepared = with_self_calibration(prepared, options.pop("self_calibration", None), self.name)
         options.pop("mode", None)
-        return adjust_with_jitter(prepared, observations, jitter_hz, jitter_sigma, **options)
+        return adjust_with_jitter(prepared, observations, jitter_hz, jitter_amplitude, **options)
 
 
 def _frequencies(value: Any) -> tuple[float, ...] | str:

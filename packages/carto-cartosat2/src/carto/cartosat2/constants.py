@@ -24,5 +24,6 @@ ATTITUDE_DRIFT_SIGMA_DEG_S = 2e-5
 """Attitude drift per axis."""
 ATTITUDE_SMOOTH_SIGMA_DEG = 0.002
 """Smooth higher-order attitude variation over an agile segment (tau^2, tau^3 terms)."""
-ATTITUDE_JITTER_SIGMA_DEG = 1e-4
-"""Jitter amplitude per axis and frequency: the a-priori sigma of its sine and cosine terms."""
+ATTITUDE_JITTER_AMPLITUDE_DEG = 1e-4
+"""A-priori RMS jitter amplitude per axis and frequency (each of its sine and cosine terms: this
+over sqrt(2))."""

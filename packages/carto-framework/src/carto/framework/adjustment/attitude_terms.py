@@ -42,6 +42,14 @@ def line_scanner_of(sensor: Sensor) -> LineScanner | None:
     return sensor if isinstance(sensor, LineScanner) else None
 
 
+def replace_line_scanner(sensor: Sensor, scanner: LineScanner) -> Sensor:
+    """``sensor`` (a line scanner or attitude-term wrappers around one) with its line scanner
+    replaced by ``scanner``, the wrappers kept."""
+    if isinstance(sensor, AttitudeTermsCorrected):
+        return attrs.evolve(sensor, base=replace_line_scanner(sensor.base, scanner))
+    return scanner
+
+
 def without_attitude_terms(sensors: Mapping[str, Sensor]) -> dict[str, Sensor]:
     """The line scanners inside attitude-term wrappers (other sensors as they are)."""
     out: dict[str, Sensor] = {}

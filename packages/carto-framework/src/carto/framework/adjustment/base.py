@@ -16,6 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from carto.framework.adjustment.observations import Observations
+from carto.framework.adjustment.variance_components import VarianceComponent
 from carto.framework.component import Component
 from carto.framework.geometry.sensor import Sensor
 
@@ -50,6 +51,15 @@ class AdjustmentResult:
             weighted RMS of normalised residuals.
         products: adjuster-specific JSON documents (name -> document), written beside the
             adjusted models as ``<name>.json`` (e.g. an in-flight camera calibration).
+        variance_components: each observation group's variance factor (tie points, GCP
+            image and ground coordinates, image offsets, height constraints; see
+            :mod:`carto.framework.adjustment.variance_components`).
+        covariance_by_group: covariance of the parameters with each group's own
+            a-posteriori variance (groups too little redundant to judge themselves, and the
+            a-priori parameter values, at their a-priori weights); empty when not computed.
+        parameter_sensors: the sensors as estimated, carrying every parameter of
+            ``parameters`` (e.g. jitter terms that ``sensors`` carry as fixed corrections),
+            for propagating the covariance; empty: ``sensors`` carry them.
     """
 
     sensors: dict[str, Sensor]
@@ -69,6 +79,9 @@ class AdjustmentResult:
     history: tuple[dict[str, float], ...]
     products: dict[str, Any] = attrs.field(factory=dict)
     offset_residuals: dict[str, NDArray] = attrs.field(factory=dict)
+    variance_components: tuple[VarianceComponent, ...] = ()
+    covariance_by_group: FloatArray = attrs.field(factory=lambda: np.zeros((0, 0)))
+    parameter_sensors: dict[str, Sensor] = attrs.field(factory=dict)
 
     def summary(self) -> dict[str, Any]:
         """JSON-ready summary (for ``report.json``)."""
@@ -86,6 +99,7 @@ class AdjustmentResult:
             "converged": self.converged,
             "outliers": list(self.outliers),
             "image_residual_rms_px": rms,
+            "variance_components": {c.group: c.summary() for c in self.variance_components},
             "parameters": {
                 n: {"value": float(v), "sigma": float(s)}
                 for n, v, s in zip(self.parameters, self.values, self.sigmas, strict=True)

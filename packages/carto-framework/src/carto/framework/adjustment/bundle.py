@@ -30,8 +30,11 @@ Robustness
     being left out unsaid. (Gross control errors are refused before, at the boundary:
     :mod:`carto.framework.adjustment.control_checks`.)
 Results
-    a-posteriori sigma0, the parameter covariance (``sigma0^2 S^-1``), residuals of every
-    observation, flagged outliers and a convergence report (:class:`AdjustmentResult`).
+    a-posteriori sigma0, the parameter covariance (``sigma0^2 S^-1``), each observation
+    group's variance component and the covariance under them
+    (:mod:`carto.framework.adjustment.variance_components`: tie points judged by their own
+    residuals, a few GCPs by their a-priori sigmas), residuals of every observation, flagged
+    outliers and a convergence report (:class:`AdjustmentResult`).
 """
 
 from __future__ import annotations
@@ -46,6 +49,11 @@ from numpy.typing import NDArray
 
 from carto.framework.adjustment.base import AdjustmentResult
 from carto.framework.adjustment.observations import HEIGHT_OFFSET, Observations
+from carto.framework.adjustment.variance_components import (
+    GroupAccumulator,
+    VarianceComponent,
+    prior_group,
+)
 from carto.framework.errors import AdjustmentError, InputError
 from carto.framework.geometry import frames
 from carto.framework.geometry.sensor import Parameter, Sensor
@@ -368,6 +376,11 @@ def _solve(
     history: list[dict[str, float]] = []
     converged = False
     s_inv = np.zeros((n_par, n_par))
+    # the last linearisation (kept for the variance components)
+    linear: dict[str, tuple] = {}
+    offset_linear: list[tuple] = []
+    inv_pp = np.zeros((n_pts, 3, 3))
+    cp_inv = np.zeros((n_pts, n_par, 3))
     iterations = 0
 
     def current_sensors() -> dict[str, Sensor]:
@@ -417,7 +430,8 @@ def _solve(
             wsig = np.sqrt(w_img[rows]) / obs.sigma_px[rows]
             _add_rows(normal, pi, idx, a_p, a_c, r, wsig, ok)
         # image offsets (matching between two images)
-        for rows, idx, a_p, a_c, r in _offset_rows(cur, obs, oidx, names, lon, lat, h):
+        offset_linear = _offset_rows(cur, obs, oidx, names, lon, lat, h)
+        for rows, idx, a_p, a_c, r in offset_linear:
             ok = np.all(np.isfinite(r), axis=1) & np.all(np.isfinite(a_p), axis=(1, 2))
             ok &= np.all(np.isfinite(a_c), axis=(1, 2))
             _add_rows(normal, oidx[rows], idx, a_p, a_c, r, 1.0 / obs.offset_sigma_px[rows], ok)
@@ -526,9 +540,7 @@ def _solve(
         n_rows += 3 * int(np.sum(gidx >= 0))
     if hidx.size:
         ok = hidx >= 0
-        offset = values[par_index[HEIGHT_OFFSET]] if HEIGHT_OFFSET in par_index else 0.0
-        hh = hidx[ok]
-        v_h = _height_targets(obs.height_m[ok], dem, lon[hh], lat[hh]) - h[hh] - offset
+        v_h = _height_residuals(obs, hidx, dem, lon, lat, h, values, par_index)
         vpv += float(np.sum((v_h / obs.height_sigma_m[ok]) ** 2))
         n_rows += int(ok.sum())
     finite = np.isfinite(prior_sigma)
@@ -538,6 +550,22 @@ def _solve(
     sigma0 = math.sqrt(vpv / redundancy) if redundancy > 0 else float("nan")
     scale = sigma0**2 if redundancy > 0 else 1.0
     cov = s_inv * scale
+    components, cov_by_group = _variance_components(
+        obs,
+        linear,
+        offset_linear,
+        names,
+        prior_sigma,
+        values - prior_value,
+        s_inv,
+        inv_pp,
+        cp_inv,
+        w_img,
+        w_gcp,
+        (gidx, hidx, oidx),
+        (d_line, d_sample, v_gcp, v_off),
+        lambda: _height_residuals(obs, hidx, dem, lon, lat, h, values, par_index),
+    )
     # outliers: normalised residuals above the threshold
     flagged: list[str] = []
     controls = set(obs.control_id.tolist())
@@ -583,6 +611,8 @@ def _solve(
         sigmas=np.sqrt(np.clip(np.diag(cov), 0, None)),
         covariance=cov,
         covariance_unit=s_inv,
+        covariance_by_group=cov_by_group,
+        variance_components=components,
         sigma0=sigma0,
         redundancy=redundancy,
         points=points,
@@ -611,6 +641,88 @@ def _solve(
         },
     )
     return result, flagged, (w_img, w_gcp)
+
+
+def _height_residuals(
+    obs: Observations,
+    hidx: NDArray[np.intp],
+    dem: Any,
+    lon: FloatArray,
+    lat: FloatArray,
+    h: FloatArray,
+    values: FloatArray,
+    par_index: Mapping[str, int],
+) -> FloatArray:
+    """Residuals (target minus computed, metres) of the height constraints of placed points."""
+    ok = hidx >= 0
+    offset = values[par_index[HEIGHT_OFFSET]] if HEIGHT_OFFSET in par_index else 0.0
+    hh = hidx[ok]
+    return _height_targets(obs.height_m[ok], dem, lon[hh], lat[hh]) - h[hh] - offset
+
+
+def _variance_components(
+    obs: Observations,
+    linear: Mapping[str, tuple],
+    offsets: list[tuple],
+    names: list[str],
+    prior_sigma: FloatArray,
+    prior_residual: FloatArray,
+    s_inv: FloatArray,
+    inv_pp: FloatArray,
+    cp_inv: FloatArray,
+    w_img: FloatArray,
+    w_gcp: FloatArray,
+    indices: tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.intp]],
+    residuals: tuple[FloatArray, FloatArray, FloatArray, FloatArray],
+    height_residuals: Any,
+) -> tuple[tuple[VarianceComponent, ...], FloatArray]:
+    """Each observation group's variance factor and the covariance under them
+    (:mod:`carto.framework.adjustment.variance_components`), from the last linearisation
+    (``linear``: the image rows by sensor, as the normal equations took them)."""
+    d_line, d_sample, v_gcp, v_off = residuals
+    images = set(linear) | set(obs.image.tolist())
+    gidx, hidx, oidx = indices  # points of the GCPs, height constraints, offsets (-1: none)
+    n_par = len(names)
+    acc = GroupAccumulator(n_par, inv_pp, cp_inv)
+    par_index = {n: i for i, n in enumerate(names)}
+    controls = set(obs.control_id.tolist())
+    is_control = np.array([p in controls for p in obs.point_id.tolist()], dtype=bool)
+    for rows, pi, own, a_p, a_c, _r, ok in linear.values():
+        idx = np.array([par_index[n] for n in own], dtype=np.intp)
+        v = np.stack([d_line[rows], d_sample[rows]], -1)
+        v[~ok] = np.nan
+        wsig = np.sqrt(w_img[rows]) / obs.sigma_px[rows]
+        for group, m in (("gcp_image", is_control[rows]), ("tie_image", ~is_control[rows])):
+            if m.any():
+                acc.add(group, pi[m], idx, a_p[m], a_c[m] if own else None, v[m], wsig[m])
+    for rows, idx, a_p, a_c, _r in offsets:
+        v = v_off[rows]
+        acc.add("image_offsets", oidx[rows], idx, a_p, a_c, v, 1.0 / obs.offset_sigma_px[rows])
+    if gidx.size:
+        ok = gidx >= 0
+        sp = obs.control_sigma_planimetric_m[ok] / math.sqrt(2.0)
+        wsig = np.sqrt(w_gcp[ok])[:, None] / np.stack([sp, sp, obs.control_sigma_h_m[ok]], -1)
+        a_p = np.broadcast_to(np.eye(3), (int(ok.sum()), 3, 3))
+        acc.add("gcp_ground", gidx[ok], np.zeros(0, np.intp), a_p, None, v_gcp[ok], wsig)
+    if hidx.size:
+        ok = hidx >= 0
+        n = int(ok.sum())
+        a_p = np.zeros((n, 1, 3))
+        a_p[:, 0, 2] = 1.0
+        idx = np.zeros(0, np.intp)
+        a_c = None
+        if HEIGHT_OFFSET in par_index:
+            idx = np.array([par_index[HEIGHT_OFFSET]], np.intp)
+            a_c = np.ones((n, 1, 1))
+        v = np.asarray(height_residuals(), np.float64)[:, None]
+        acc.add("heights", hidx[ok], idx, a_p, a_c, v, 1.0 / obs.height_sigma_m[ok])
+    finite = np.isfinite(prior_sigma)
+    kinds = [prior_group(n, images) for n in names]
+    for kind in dict.fromkeys(kinds):
+        idx = np.flatnonzero(finite & np.array([k == kind for k in kinds]))
+        if idx.size:
+            acc.add_parameter_rows(kind, idx, prior_residual[idx], prior_sigma[idx])
+    return acc.components(s_inv)
 
 
 def _solve_reduced(

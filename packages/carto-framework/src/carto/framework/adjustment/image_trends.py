@@ -46,6 +46,7 @@ from carto.framework.adjustment.attitude_terms import (
     FloatArray,
     line_scanner_of,
     map_layers,
+    replace_line_scanner,
 )
 from carto.framework.errors import InputError
 from carto.framework.geometry.linescan import LineScanner
@@ -112,13 +113,7 @@ class ImageTrendCorrected(AttitudeTermsCorrected):
                 name = f"{prefix}attitude.{axis}.c{k}"
                 values[name] = current[name] + float(c)
         folded = folded.with_parameters(values=values)
-        return _replace_scanner(self.base, scanner.with_trajectory(folded))
-
-
-def _replace_scanner(sensor: Sensor, scanner: LineScanner) -> Sensor:
-    if isinstance(sensor, AttitudeTermsCorrected):
-        return attrs.evolve(sensor, base=_replace_scanner(sensor.base, scanner))
-    return scanner
+        return replace_line_scanner(self.base, scanner.with_trajectory(folded))
 
 
 def with_image_trends(

@@ -20,6 +20,7 @@ weight), and says so in ``report.json``'s ``misfit`` and in ``residuals.png``:
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -28,6 +29,7 @@ from scipy import stats
 
 if TYPE_CHECKING:
     from carto.framework.adjustment.base import AdjustmentResult
+    from carto.framework.adjustment.variance_components import VarianceComponent
 
 FloatArray = NDArray[np.float64]
 MIN_POINTS = 30
@@ -108,14 +110,29 @@ def misfit_report(
     lines: FloatArray,
     sigma0: float,
     redundancy: int,
+    components: Sequence[VarianceComponent] = (),
 ) -> dict[str, Any]:
     """The misfit checks of the module docstring. ``image_residuals``: the result's table
-    (``image``, ``d_line``, ``d_sample``); ``lines``: the line of each of its rows."""
+    (``image``, ``d_line``, ``d_sample``); ``lines``: the line of each of its rows;
+    ``components``: the result's variance components, each observation group whose factor is
+    applied checked as sigma0 is (which weights are wrong, when sigma0 is)."""
     out: dict[str, Any] = {"sigma0": sigma0_check(sigma0, redundancy), "images": {}}
     flags = []
     if out["sigma0"]["misfit"]:
         lo, hi = out["sigma0"]["interval_99"]
         flags.append(f"sigma0 {sigma0:.3f} is outside {lo:.3f}..{hi:.3f} (99 %) and 10 % from 1")
+    out["groups"] = {}
+    for c in components:
+        if c.applied != c.factor:  # too little redundancy, or a-priori knowledge
+            continue
+        check = sigma0_check(math.sqrt(c.factor), max(round(c.redundancy), 1))
+        out["groups"][c.group] = check
+        if check["misfit"]:
+            flags.append(
+                f"{c.group}: a-posteriori sigma {math.sqrt(c.factor):.2f} x the a-priori "
+                f"(redundancy {c.redundancy:.0f}): their a-priori sigma is "
+                f"{'too large' if c.factor < 1 else 'too small, or the model misses something'}"
+            )
     images = image_residuals["image"]
     for name in sorted({str(i) for i in images}):
         sel = (images == name) & np.isfinite(image_residuals["d_line"]) & np.isfinite(lines)

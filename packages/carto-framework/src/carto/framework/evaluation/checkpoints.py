@@ -131,22 +131,29 @@ def predicted_checkpoint_sigma(
     For each point of ``table`` (long format, as for :func:`checkpoint_accuracy`) the ground
     position intersected from its image coordinates depends on the estimated parameters
     ``c`` as ``dX/dc = -(A_X^T A_X)^-1 A_X^T A_c``; its covariance is
-    ``dX/dc Cov_c dX/dc^T`` plus the measurement term ``sigma_px^2 (A_X^T A_X)^-1`` of the
+    ``dX/dc Cov_c dX/dc^T`` (partials of the sensors as estimated, ``parameter_sensors``
+    when the result has them) plus the measurement term ``sigma_px^2 (A_X^T A_X)^-1`` of the
     checkpoints' own image coordinates: ``sigma_px`` given, else the table's ``sigma_px``
     column (RMS over the point's rows; 0 without the column), so that the prediction is of
     what checkpoint RMSEs measure (adjustment error and checkpoint measurement error).
-    ``Cov_c`` is the a-priori covariance ``S^-1`` scaled by
-    ``max(1, sigma0)^2`` (a sigma0 below 1 comes from too few redundant ground observations to
-    judge, not from better data).
+    ``Cov_c`` is the result's covariance with each observation group's own a-posteriori
+    variance (:attr:`~carto.framework.adjustment.base.AdjustmentResult.covariance_by_group`:
+    tie points matched better than their a-priori sigma shrink their share, the few GCPs keep
+    theirs); for a result without it, ``S^-1`` scaled by ``max(1, sigma0)^2``.
 
     Returns:
         ``{predicted_sigma_planimetric_m, predicted_sigma_height_m}``: RMS over the points of
         the predicted east/north (together) and up standard deviations.
     """
     _checked(table)
-    sensors = result.sensors
+    sensors = getattr(result, "parameter_sensors", None) or result.sensors
     names = list(result.parameters)
-    cov = result.covariance_unit * max(1.0, float(np.nan_to_num(result.sigma0, nan=1.0))) ** 2
+    by_group = getattr(result, "covariance_by_group", None)
+    if by_group is not None and np.shape(by_group) == np.shape(result.covariance_unit):
+        cov = np.asarray(by_group, np.float64)
+    else:
+        sigma0 = float(np.nan_to_num(result.sigma0, nan=1.0))
+        cov = result.covariance_unit * max(1.0, sigma0) ** 2
     ids = sorted(set(table["id"].tolist()))
     e2, u2 = [], []
     column = table.get("sigma_px")

@@ -11,7 +11,10 @@ adjustment are polynomials added on top:
   (so a roll correction always moves the line of sight across track, a pitch correction along
   track, whatever the pointing);
 * position corrections ``(d_along, d_across, d_radial)(tau)`` in metres along the orbit frame
-  axes ``X_o, Y_o, -Z_o`` (radial is up).
+  axes ``X_o, Y_o, -Z_o`` (radial is up);
+* periodic attitude corrections (the platform's jitter an adjustment estimated, fixed values:
+  :meth:`Trajectory.with_attitude_periodic`), ``sum_f s sin(2 pi f (dt_s - t_mid_s)) + c
+  cos(...)`` per axis, added to the polynomial attitude corrections.
 
 Times: ``dt_s`` is seconds since the trajectory's ``epoch_j2000_s`` (an absolute time in seconds
 since J2000, see :mod:`carto.framework.geometry.frames`). Working relative to an epoch keeps
@@ -94,6 +97,9 @@ class Trajectory:
         attitude_correction_order, position_correction_order: polynomial order of the
             corrections (-1 = none), coefficients of normalised time ``tau``.
         parameters: the correction parameters (see module docstring), prefixed ``prefix``.
+        attitude_periodic_hz: frequencies of the periodic attitude corrections (Hz).
+        attitude_periodic_rad: their coefficients, axis-major (roll, pitch, yaw), for each
+            axis ``sin, cos`` per frequency (radians; ``3 x 2F`` values).
     """
 
     epoch_j2000_s: float
@@ -108,10 +114,23 @@ class Trajectory:
     attitude_correction_order: int
     position_correction_order: int
     fit_report: FitReport | None = None
+    attitude_periodic_hz: tuple[float, ...] = ()
+    attitude_periodic_rad: tuple[float, ...] = ()
     _earth: frames.EarthOrientation = attrs.field(init=False)
 
     def __attrs_post_init__(self) -> None:
         object.__setattr__(self, "_earth", frames.EarthOrientation.at(self.epoch_j2000_s))
+        freqs, coeffs = self.attitude_periodic_hz, self.attitude_periodic_rad
+        if len(coeffs) != 6 * len(freqs):
+            raise InputError(
+                f"trajectory: attitude_periodic has {len(freqs)} frequencies but "
+                f"{len(coeffs)} coefficients (3 axes x sin, cos per frequency: {6 * len(freqs)})"
+            )
+        if not all(np.isfinite(f) and f > 0 for f in freqs) or not np.all(np.isfinite(coeffs)):
+            raise InputError(
+                f"trajectory: attitude_periodic frequencies must be > 0 Hz and its coefficients "
+                f"finite, got {list(freqs)}"
+            )
 
     @property
     def model(self) -> str:
@@ -248,6 +267,33 @@ class Trajectory:
             self, parameters=params, attitude_correction_order=att, position_correction_order=pos
         )
 
+    def with_attitude_periodic(
+        self, frequencies_hz: tuple[float, ...], coefficients_rad: ArrayLike
+    ) -> Trajectory:
+        """The trajectory with periodic attitude corrections added to those it has:
+        ``coefficients_rad`` ``(3, 2F)`` (roll, pitch, yaw; ``sin, cos`` per frequency of
+        ``frequencies_hz``, time from ``t_mid_s``)."""
+        c = np.asarray(coefficients_rad, dtype=np.float64).reshape(3, 2 * len(frequencies_hz))
+        old = np.asarray(self.attitude_periodic_rad, dtype=np.float64).reshape(3, -1)
+        return attrs.evolve(
+            self,
+            attitude_periodic_hz=(*self.attitude_periodic_hz, *map(float, frequencies_hz)),
+            attitude_periodic_rad=tuple(np.concatenate([old, c], axis=1).ravel().tolist()),
+        )
+
+    def attitude_periodic_angles(self, dt_s: ArrayLike) -> FloatArray:
+        """The periodic attitude corrections (roll, pitch, yaw; radians) at ``dt_s``,
+        ``(3, ...)``."""
+        t = np.asarray(dt_s, dtype=np.float64) - self.t_mid_s
+        out = np.zeros((3, *t.shape))
+        c = np.asarray(self.attitude_periodic_rad, dtype=np.float64).reshape(3, -1)
+        for k, f in enumerate(self.attitude_periodic_hz):
+            w = 2.0 * np.pi * f * t
+            sin_w, cos_w = np.sin(w), np.cos(w)
+            for a in range(3):
+                out[a] += c[a, 2 * k] * sin_w + c[a, 2 * k + 1] * cos_w
+        return out
+
     def with_prefix(self, prefix: str) -> Trajectory:
         """The same trajectory whose parameter names start with ``prefix`` instead (so that
         sensors sharing it can be given independent corrections)."""
@@ -331,11 +377,17 @@ class Trajectory:
             else:
                 r_b2o = np.swapaxes(r_o2e, -1, -2) @ r_b2f
         d = np.zeros((3, *t.shape))
+        corrected = False
         if self.attitude_correction_order >= 0:
             c = self._correction_coeffs("attitude", _ANGLE_NAMES, self.attitude_correction_order)
             if c.any():
                 d = npoly.polyval(tau, c)
-                r_b2o = frames.rpy_to_matrix(d[0], d[1], d[2]) @ r_b2o
+                corrected = True
+        if self.attitude_periodic_hz:
+            d = d + self.attitude_periodic_angles(t)
+            corrected = True
+        if corrected:
+            r_b2o = frames.rpy_to_matrix(d[0], d[1], d[2]) @ r_b2o
         p_ecef = np.einsum("...ij,...j->...i", r_i2e, p_eci)
         if not axes:
             return p_ecef, r_o2e @ r_b2o, None
@@ -376,6 +428,16 @@ class Trajectory:
             "attitude_correction_order": self.attitude_correction_order,
             "position_correction_order": self.position_correction_order,
             "parameters": [attrs.asdict(p) for p in self.parameters],
+            **(
+                {
+                    "attitude_periodic": {
+                        "frequencies_hz": list(self.attitude_periodic_hz),
+                        "coefficients_rad": list(self.attitude_periodic_rad),
+                    }
+                }
+                if self.attitude_periodic_hz
+                else {}
+            ),
             "fit_report": None
             if self.fit_report is None
             else {
@@ -405,6 +467,7 @@ class Trajectory:
                 return components.get("trajectory", kind).series_from_dict(s)
 
             fr = d.get("fit_report")
+            periodic = d.get("attitude_periodic") or {}
             return cls(
                 float(d["epoch_j2000_s"]),
                 d["attitude_frame"],
@@ -420,6 +483,8 @@ class Trajectory:
                 None
                 if fr is None
                 else FitReport(tuple(fr["components"]), tuple(fr["rms"]), tuple(fr["max_abs"])),
+                tuple(float(f) for f in periodic.get("frequencies_hz", ())),
+                tuple(float(c) for c in periodic.get("coefficients_rad", ())),
             )
         except KeyError as exc:
             raise InputError(f"trajectory: missing field {exc.args[0]!r}") from None

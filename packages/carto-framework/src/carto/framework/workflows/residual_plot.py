@@ -16,7 +16,11 @@ from carto.framework.adjustment.misfit import misfit_report, residual_lines
 def residual_misfit(result: AdjustmentResult) -> dict[str, Any]:
     """:func:`~carto.framework.adjustment.misfit.misfit_report` of an adjustment."""
     return misfit_report(
-        result.image_residuals, residual_lines(result), result.sigma0, result.redundancy
+        result.image_residuals,
+        residual_lines(result),
+        result.sigma0,
+        result.redundancy,
+        result.variance_components,
     )
 
 
