@@ -21,15 +21,14 @@ the reduced normal matrix, and every ``f_k = 1`` gives back ``S^-1``). A group w
 redundancy than :data:`MIN_REDUNDANCY` cannot judge itself (two GCPs share a fraction of one
 redundant observation): it keeps its a-priori weight, ``f_k = 1``.
 
-The parameters' a-priori values (the ancillary data's accuracy, per kind: ``prior:<kind>``,
-:func:`prior_group`) get a factor too, reported and never applied: one factor for a kind
-lumps terms of very different observability and size. On the Cartosat-2 triplets of
-``benchmarks/cartosat2_accuracy.py`` (``--errors full``) the jitter terms' factor is 0.08-0.11
-(the estimated sine and cosine coefficients are about 0.3 of their a-priori sigma), but it
-comes from the frequencies the tie points see, while the checkpoint heights depend on the low
-frequencies they cannot (a slow pitch jitter of the fore and aft views is a height ramp along
-track to the tie points), the largest ones: applied, it shrank the predicted height sigma to
-0.5-0.7 of the measured error.
+The parameters' a-priori values are groups too, one per kind of knowledge (``prior:<kind>``,
+:func:`prior_group`: ephemeris, attitude, jitter, calibration), judged the same way (an
+empirical-Bayes estimate of the prior's size): the terms the observations determine show how
+large the kind's corrections really are, and the terms they cannot see (a slow pitch jitter of
+a triplet's fore and aft views is a height ramp to the tie points) are assumed as large. On
+the Cartosat-2 triplets of ``benchmarks/cartosat2_accuracy.py`` (``--errors full``) the jitter
+coefficients come out at 0.4-0.5 of their a-priori sigma, the attitude polynomials' group
+stays below the redundancy that could judge it.
 
 The weights are not changed: the solution is the one of the a-priori weights, and
 :attr:`AdjustmentResult.covariance_by_group` is its covariance under the variances the data
@@ -185,9 +184,7 @@ class GroupAccumulator:
         for group in self.m:
             r = self.count[group] - self.point_trace[group] - float(np.sum(s_inv * self.m[group]))
             factor = self.vpv[group] / r if r > 1e-9 else float("nan")
-            usable = (
-                not group.startswith(PRIOR_PREFIX) and r >= min_redundancy and np.isfinite(factor)
-            )
+            usable = r >= min_redundancy and np.isfinite(factor)
             applied = float(factor) if usable else 1.0
             total += applied * self.m[group]
             out.append(
