@@ -157,6 +157,21 @@ def predicted_checkpoint_sigma(
     ids = sorted(set(table["id"].tolist()))
     e2, u2 = [], []
     column = table.get("sigma_px")
+    # the partials of every row, one call per image (rows of images without a sensor: NaN)
+    n_rows = len(table["id"])
+    row_ax = np.full((n_rows, 2, 3), np.nan)
+    row_ac = np.zeros((n_rows, 2, len(names)))
+    for image in sorted(set(table["image"].tolist()) & set(sensors)):
+        rows = np.flatnonzero(table["image"] == image)
+        s = sensors[image]
+        own = [n for n in names if n in {p.name for p in s.parameters}]
+        lon = np.asarray(table["lon_deg"][rows], np.float64)
+        lat = np.asarray(table["lat_deg"][rows], np.float64)
+        h = np.asarray(table["h_m"][rows], np.float64)
+        _, _, a_p, a_c = s.linearize(lon, lat, h, own)
+        row_ax[rows] = a_p
+        if own:
+            row_ac[np.ix_(rows, [0, 1], [names.index(n) for n in own])] = a_c
     for pid in ids:
         rows = np.flatnonzero(table["id"] == pid)
         if sigma_px is not None:
@@ -167,20 +182,9 @@ def predicted_checkpoint_sigma(
             point_px = float(np.sqrt(np.mean(px**2))) if px.size else 0.0
         else:
             point_px = 0.0
-        a_x, a_c = [], []
-        for r in rows:
-            image = table["image"][r]
-            if image not in sensors:
-                continue
-            s = sensors[image]
-            lon, lat, h = table["lon_deg"][r], table["lat_deg"][r], table["h_m"][r]
-            a_x.append(s.ground_partials(lon, lat, h)[0])
-            own = [n for n in names if n in {p.name for p in s.parameters}]
-            block = np.zeros((2, len(names)))
-            if own:
-                part = s.parameter_partials(lon, lat, h, own)[0]
-                block[:, [names.index(n) for n in own]] = part
-            a_c.append(block)
+        rows = rows[np.all(np.isfinite(row_ax[rows]), axis=(1, 2))]
+        a_x = list(row_ax[rows])
+        a_c = list(row_ac[rows])
         if len(a_x) < 2:
             continue
         ax = np.concatenate(a_x)
