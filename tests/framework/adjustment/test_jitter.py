@@ -195,6 +195,11 @@ def test_folded_jitter_is_carried_by_the_delivered_model(fore, tmp_path):
         m_line, m_sample, _ = model.project(lon, lat, h)
         np.testing.assert_allclose(m_line, line, atol=1e-3)
         np.testing.assert_allclose(m_sample, sample, atol=1e-3)
+    # its RPC is fitted to the smooth motion and says how far the jitter moves the image
+    from carto.framework.geometry.linescan import save_line_scanner
+
+    written = save_line_scanner(folded, tmp_path, "rpc", (0.0, 1000.0))
+    assert written["rpc"]["periodic_attitude_left_out_max_px"] > 0.2
     # a second fold (a re-adjusted model) adds to what the trajectory carries
     again = loaded.trajectory.with_attitude_periodic((2.0,), np.zeros((3, 2)))
     assert again.attitude_periodic_hz == (*FREQS, 2.0)

@@ -621,21 +621,48 @@ def save_line_scanner(
     sensor: Sensor, out_dir: Path, name: str, h_range_m: tuple[float, float]
 ) -> dict[str, Any]:
     """Write an adjusted :class:`LineScanner` as ``<name>.model.json`` and an RPC fitted to it
-    over ``h_range_m`` (``<name>_RPC.TXT``, GDAL's sidecar of ``<name>.tif``)."""
+    over ``h_range_m`` (``<name>_RPC.TXT``, GDAL's sidecar of ``<name>.tif``).
+
+    An RPC is a smooth rational function: it is fitted to the model without its periodic
+    attitude corrections (jitter, which it cannot follow and which can make the fit's
+    denominator vanish), and the entry says how far the jitter moves the image
+    (``periodic_attitude_left_out_max_px``): the model file is the rigorous product."""
     from carto.framework.geometry.rpc_fitting import fit_rpc
     from carto.framework.geometry.rpc_writers import write_rpc_txt
 
     if not isinstance(sensor, LineScanner):
         raise InputError(f"image {name}: not a line scanner ({type(sensor).__name__})")
     model = sensor.save(out_dir / f"{name}.model.json").name
-    rpc, report = fit_rpc(sensor, h_range=h_range_m)
+    smooth = sensor
+    entry: dict[str, Any] = {}
+    if sensor.trajectory.attitude_periodic_hz:
+        smooth = sensor.with_trajectory(sensor.trajectory.without_attitude_periodic())
+        entry["periodic_attitude_left_out_max_px"] = _periodic_effect_px(sensor, smooth, h_range_m)
+    rpc, report = fit_rpc(smooth, h_range=h_range_m)
     return {
         "model": model,
         "rpc": {
             "file": write_rpc_txt(rpc, out_dir / f"{name}_RPC.TXT").name,
             "fit_check_max_px": report.check_max_px,
+            **entry,
         },
     }
+
+
+def _periodic_effect_px(
+    sensor: LineScanner, smooth: LineScanner, h_range_m: tuple[float, float]
+) -> float:
+    """Largest image displacement (px) between ``sensor`` and ``smooth`` over a grid of lines
+    (every line up to 20 000) and 5 samples, at the middle of ``h_range_m``."""
+    n_l, n_s = sensor.image_shape
+    line, sample = np.meshgrid(
+        np.linspace(0.5, n_l - 0.5, min(n_l, 20_000)), np.linspace(0.5, n_s - 0.5, 5)
+    )
+    h = np.full(line.size, 0.5 * (h_range_m[0] + h_range_m[1]))
+    lon, lat = sensor.image_to_ground(line.ravel(), sample.ravel(), h)
+    l2, s2, _ = smooth.project(lon, lat, h)
+    d = np.hypot(l2 - line.ravel(), s2 - sample.ravel())
+    return round(float(np.nanmax(d)), 3) if np.isfinite(d).any() else float("nan")
 
 
 def shared_parameter_names(sensors: Sequence[Sensor]) -> list[str]:

@@ -281,6 +281,10 @@ class Trajectory:
             attitude_periodic_rad=tuple(np.concatenate([old, c], axis=1).ravel().tolist()),
         )
 
+    def without_attitude_periodic(self) -> Trajectory:
+        """The trajectory without its periodic attitude corrections (the smooth motion)."""
+        return attrs.evolve(self, attitude_periodic_hz=(), attitude_periodic_rad=())
+
     def attitude_periodic_angles(self, dt_s: ArrayLike) -> FloatArray:
         """The periodic attitude corrections (roll, pitch, yaw; radians) at ``dt_s``,
         ``(3, ...)``."""
