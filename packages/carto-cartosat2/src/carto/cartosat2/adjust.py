@@ -24,8 +24,9 @@ it: the misfit, common to every tie point on a line, pulls the block harder the 
 there are (2000 x 2000 triplet, 2 GCPs: sigma0 1.35 / 1.24 and checkpoint heights 0.97 / 2.04 m
 with 1k / 10k ties; with them sigma0 0.99-1.00 and 0.37 / 0.16 / 0.20 m with 1k / 10k / 100k,
 the frequencies found within 0.03 Hz of the simulator's 1.7 and 4.3 Hz). The delivered models
-are line scanners with the polynomial corrections; the estimated jitter is the ``jitter``
-product of the result (``jitter.json``).
+are line scanners with the polynomial corrections and the estimated jitter as periodic attitude
+corrections of their trajectories (their RPC files are fitted to the smooth motion); the jitter
+is also the ``jitter`` product of the result (``jitter.json``).
 """
 
 from __future__ import annotations

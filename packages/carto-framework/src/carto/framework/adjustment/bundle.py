@@ -49,11 +49,7 @@ from numpy.typing import NDArray
 
 from carto.framework.adjustment.base import AdjustmentResult
 from carto.framework.adjustment.observations import HEIGHT_OFFSET, Observations
-from carto.framework.adjustment.variance_components import (
-    GroupAccumulator,
-    VarianceComponent,
-    prior_group,
-)
+from carto.framework.adjustment.variance_components import solution_components
 from carto.framework.errors import AdjustmentError, InputError
 from carto.framework.geometry import frames
 from carto.framework.geometry.sensor import Parameter, Sensor
@@ -550,7 +546,7 @@ def _solve(
     sigma0 = math.sqrt(vpv / redundancy) if redundancy > 0 else float("nan")
     scale = sigma0**2 if redundancy > 0 else 1.0
     cov = s_inv * scale
-    components, cov_by_group = _variance_components(
+    components, cov_by_group = solution_components(
         obs,
         linear,
         offset_linear,
@@ -658,71 +654,6 @@ def _height_residuals(
     offset = values[par_index[HEIGHT_OFFSET]] if HEIGHT_OFFSET in par_index else 0.0
     hh = hidx[ok]
     return _height_targets(obs.height_m[ok], dem, lon[hh], lat[hh]) - h[hh] - offset
-
-
-def _variance_components(
-    obs: Observations,
-    linear: Mapping[str, tuple],
-    offsets: list[tuple],
-    names: list[str],
-    prior_sigma: FloatArray,
-    prior_residual: FloatArray,
-    s_inv: FloatArray,
-    inv_pp: FloatArray,
-    cp_inv: FloatArray,
-    w_img: FloatArray,
-    w_gcp: FloatArray,
-    indices: tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.intp]],
-    residuals: tuple[FloatArray, FloatArray, FloatArray, FloatArray],
-    height_residuals: Any,
-) -> tuple[tuple[VarianceComponent, ...], FloatArray]:
-    """Each observation group's variance factor and the covariance under them
-    (:mod:`carto.framework.adjustment.variance_components`), from the last linearisation
-    (``linear``: the image rows by sensor, as the normal equations took them)."""
-    d_line, d_sample, v_gcp, v_off = residuals
-    images = set(linear) | set(obs.image.tolist())
-    gidx, hidx, oidx = indices  # points of the GCPs, height constraints, offsets (-1: none)
-    n_par = len(names)
-    acc = GroupAccumulator(n_par, inv_pp, cp_inv)
-    par_index = {n: i for i, n in enumerate(names)}
-    controls = set(obs.control_id.tolist())
-    is_control = np.array([p in controls for p in obs.point_id.tolist()], dtype=bool)
-    for rows, pi, own, a_p, a_c, _r, ok in linear.values():
-        idx = np.array([par_index[n] for n in own], dtype=np.intp)
-        v = np.stack([d_line[rows], d_sample[rows]], -1)
-        v[~ok] = np.nan
-        wsig = np.sqrt(w_img[rows]) / obs.sigma_px[rows]
-        for group, m in (("gcp_image", is_control[rows]), ("tie_image", ~is_control[rows])):
-            if m.any():
-                acc.add(group, pi[m], idx, a_p[m], a_c[m] if own else None, v[m], wsig[m])
-    for rows, idx, a_p, a_c, _r in offsets:
-        v = v_off[rows]
-        acc.add("image_offsets", oidx[rows], idx, a_p, a_c, v, 1.0 / obs.offset_sigma_px[rows])
-    if gidx.size:
-        ok = gidx >= 0
-        sp = obs.control_sigma_planimetric_m[ok] / math.sqrt(2.0)
-        wsig = np.sqrt(w_gcp[ok])[:, None] / np.stack([sp, sp, obs.control_sigma_h_m[ok]], -1)
-        a_p = np.broadcast_to(np.eye(3), (int(ok.sum()), 3, 3))
-        acc.add("gcp_ground", gidx[ok], np.zeros(0, np.intp), a_p, None, v_gcp[ok], wsig)
-    if hidx.size:
-        ok = hidx >= 0
-        n = int(ok.sum())
-        a_p = np.zeros((n, 1, 3))
-        a_p[:, 0, 2] = 1.0
-        idx = np.zeros(0, np.intp)
-        a_c = None
-        if HEIGHT_OFFSET in par_index:
-            idx = np.array([par_index[HEIGHT_OFFSET]], np.intp)
-            a_c = np.ones((n, 1, 1))
-        v = np.asarray(height_residuals(), np.float64)[:, None]
-        acc.add("heights", hidx[ok], idx, a_p, a_c, v, 1.0 / obs.height_sigma_m[ok])
-    finite = np.isfinite(prior_sigma)
-    kinds = [prior_group(n, images) for n in names]
-    for kind in dict.fromkeys(kinds):
-        idx = np.flatnonzero(finite & np.array([k == kind for k in kinds]))
-        if idx.size:
-            acc.add_parameter_rows(kind, idx, prior_residual[idx], prior_sigma[idx])
-    return acc.components(s_inv)
 
 
 def _solve_reduced(
