@@ -27,8 +27,8 @@ empirical-Bayes estimate of the prior's size): the terms the observations determ
 large the kind's corrections really are, and the terms they cannot see (a slow pitch jitter of
 a triplet's fore and aft views is a height ramp to the tie points) are assumed as large. On
 the Cartosat-2 triplets of ``benchmarks/cartosat2_accuracy.py`` (``--errors full``) the jitter
-coefficients come out at 0.4-0.5 of their a-priori sigma, the attitude polynomials' group
-stays below the redundancy that could judge it.
+coefficients come out at 0.37-0.49 of their a-priori sigma (``cartosat2_accuracy_full.json``),
+the attitude polynomials' group below the redundancy that could judge it.
 
 The weights are not changed: the solution is the one of the a-priori weights, and
 :attr:`AdjustmentResult.covariance_by_group` is its covariance under the variances the data
