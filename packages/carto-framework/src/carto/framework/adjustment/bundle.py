@@ -534,6 +534,7 @@ def _solve(
         sp = obs.control_sigma_planimetric_m / math.sqrt(2.0)
         vpv += float(np.sum((v_gcp / np.stack([sp, sp, obs.control_sigma_h_m], -1)) ** 2))
         n_rows += 3 * int(np.sum(gidx >= 0))
+    v_h = np.zeros(0)
     if hidx.size:
         ok = hidx >= 0
         v_h = _height_residuals(obs, hidx, dem, lon, lat, h, values, par_index)
@@ -560,7 +561,7 @@ def _solve(
         w_gcp,
         (gidx, hidx, oidx),
         (d_line, d_sample, v_gcp, v_off),
-        lambda: _height_residuals(obs, hidx, dem, lon, lat, h, values, par_index),
+        v_h,
     )
     # outliers: normalised residuals above the threshold
     flagged: list[str] = []

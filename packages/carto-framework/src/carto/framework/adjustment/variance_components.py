@@ -211,7 +211,7 @@ def solution_components(
     w_gcp: FloatArray,
     indices: tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.intp]],
     residuals: tuple[FloatArray, FloatArray, FloatArray, FloatArray],
-    height_residuals: Any,
+    height_residuals: FloatArray,
 ) -> tuple[tuple[VarianceComponent, ...], FloatArray]:
     """Each observation group's variance factor and the covariance under them, for the
     bundle (:mod:`carto.framework.adjustment.bundle`) from its last linearisation
@@ -253,7 +253,7 @@ def solution_components(
         if HEIGHT_OFFSET in par_index:
             idx = np.array([par_index[HEIGHT_OFFSET]], np.intp)
             a_c = np.ones((n, 1, 1))
-        v = np.asarray(height_residuals(), np.float64)[:, None]
+        v = np.asarray(height_residuals, np.float64)[:, None]
         acc.add("heights", hidx[ok], idx, a_p, a_c, v, 1.0 / obs.height_sigma_m[ok])
     finite = np.isfinite(prior_sigma)
     kinds = [prior_group(n, images) for n in names]
