@@ -173,6 +173,7 @@ def cmd_dem(args: argparse.Namespace) -> int:
         workers=args.workers,
         scheduler=args.scheduler,
         resume=args.resume,
+        relative_orientation=args.relative_orientation,
     )
     print(_dem_summary(report))
     grid = report["dem_grid"]
@@ -234,6 +235,7 @@ def add_dem(sub: argparse._SubParsersAction) -> None:
             "carto dem scene1 --models adj1 --geoid egm96_15.gtx --vertical geoid --out dem1",
             "carto dem scene1 --models adj1 --scheduler tcp://10.0.0.5:8786 --out dem1",
             "carto dem scene1 --models adj1 --out dem1 --resume   # after an interruption",
+            "carto dem scene1 --models adj1 --relative-orientation none --out dem1",
         ),
         formatter_class=formatter,
     )
@@ -317,6 +319,15 @@ def add_dem(sub: argparse._SubParsersAction) -> None:
         metavar="NAME",
         help="dense matcher the generator uses (default sgm, semi-global along the stereo base; "
         "ncc, the NCC pyramid; carto plugins --kind matcher)",
+    )
+    p.add_argument(
+        "--relative-orientation",
+        choices=("auto", "none", "shift", "line"),
+        default="auto",
+        help="correct the right image to the left one from tie points on the starting DEM "
+        "before the DEM (default auto: a line-varying correction with attitude jitter for "
+        "line scanners, a shift for other models; the datum from the GCPs of --models, "
+        "else the starting DEM); none: off",
     )
     p.add_argument("--reference", metavar="DEM", help="reference DEM to evaluate against")
     p.add_argument(

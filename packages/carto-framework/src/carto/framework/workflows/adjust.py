@@ -410,6 +410,9 @@ def _adjust_into(
                 "rmse_height_m",
             )
         }
+    if gcps is not None and gcps["id"].size:  # the datum of a later relative orientation
+        write_point_table(out / "gcps.csv", gcps)
+        report["files"]["gcps"] = "gcps.csv"
     if tie_table is not None:
         write_point_table(out / "tie_points.csv", tie_table)
         report["files"]["tie_points"] = "tie_points.csv"

@@ -315,6 +315,7 @@ def dem_product(
     workers: int | None = None,
     scheduler: str | None = None,
     resume: bool = False,
+    relative_orientation: str = "auto",
 ) -> dict[str, Any]:
     """Generate a DEM and ortho-images and write them to ``out_dir``; return the report.
 
@@ -334,11 +335,20 @@ def dem_product(
     A run that matched less than :data:`MIN_MATCHED_FRACTION` of the nodes fails unless
     ``allow_poor``. The outputs are written into a staging folder that replaces ``out_dir``
     only when all are complete (:func:`carto.framework.files.staging.staged_folder`).
+    Before the generator runs, the right image is corrected to the left one
+    (``relative_orientation``: a mode of
+    :data:`~carto.framework.adjustment.relative_orientation.MODES`, see
+    :func:`orient_pair`).
     """
+    from carto.framework.adjustment.relative_orientation import RelativeOrientationSettings
     from carto.framework.parallel.engine import open_engine
 
     settings = dict(options or {})
     _check_options(settings)
+    try:
+        ro_settings = RelativeOrientationSettings(mode=relative_orientation)
+    except InputError as exc:
+        raise UsageError(str(exc)) from None
     if vertical not in ("ellipsoid", "geoid"):
         raise UsageError(f"--vertical must be 'ellipsoid' or 'geoid', got {vertical!r}")
     if vertical == "geoid" and geoid is None:
@@ -365,6 +375,7 @@ def dem_product(
         "settings": {k: str(v) for k, v in sorted(settings.items())},
         "allow_poor": allow_poor,
         "vertical": vertical,
+        "relative_orientation": relative_orientation,
     }
     work: Path | None = None
     try:
@@ -386,6 +397,7 @@ def dem_product(
                     allow_poor=allow_poor,
                     engine=engine,
                     work=work,
+                    ro_settings=ro_settings,
                 )
     except BaseException as exc:
         if work is not None and work.is_dir():
@@ -396,6 +408,63 @@ def dem_product(
         raise
     shutil.rmtree(work, ignore_errors=True)
     return report
+
+
+def orient_pair(
+    images: Mapping[str, Any],
+    sensors: Mapping[str, Sensor],
+    start: DEM,
+    settings: Any,
+    *,
+    gcps: Mapping[str, Any] | None,
+    constant_dem: bool,
+    engine: Any,
+    quiet: bool,
+) -> Any:
+    """The pair's relative orientation before its DEM
+    (:func:`carto.framework.adjustment.relative_orientation.relative_orientation`): the
+    right image corrected to the left one from tie points on the starting DEM, held by
+    ``gcps`` (measured in both images) when there are some."""
+    from carto.framework.adjustment.relative_orientation import relative_orientation
+
+    return relative_orientation(
+        images,
+        sensors,
+        start,
+        settings,
+        gcps=gcps,
+        constant_dem=constant_dem,
+        engine=engine,
+        progress=None if quiet else (lambda line: progress("dem", line, False)),
+    )
+
+
+def _datum_gcps(inputs: StereoInputs, names: Sequence[str]) -> dict[str, Any] | None:
+    """The GCPs of the adjustment whose models the run uses (``gcps.csv`` of a ``carto
+    adjust`` output, with its GCP transfer's matched offsets, ``gcp_offsets.csv``), measured
+    in both images of the pair; None without."""
+    from carto.framework.files.control_table import read_control_table
+
+    if inputs.models is None:
+        return None
+    path = Path(inputs.models) / "gcps.csv"
+    if not path.is_file():
+        return None
+    from carto.framework.adjustment.relative_orientation import gcps_with_offsets
+    from carto.framework.files.point_table import read_point_table
+
+    table = read_control_table(path, "gcps")
+    keep = np.isin(table["image"], list(names))
+    table = {k: np.asarray(v)[keep] for k, v in table.items()}
+    offsets_path = Path(inputs.models) / "gcp_offsets.csv"
+    offsets = None
+    if offsets_path.is_file():
+        offsets = read_point_table(
+            offsets_path,
+            numeric=("d_line", "d_sample", "sigma_px"),
+            text=("id", "image_a", "image_b"),
+        )
+    return gcps_with_offsets(table, offsets)
 
 
 def _has_finished_work(work: Path) -> bool:
@@ -448,6 +517,7 @@ def _dem_into(
     allow_poor: bool,
     engine: Any,
     work: Path,
+    ro_settings: Any,
 ) -> dict[str, Any]:
     """:func:`dem_product` writing into ``out`` (its staging folder), tiles on ``engine``,
     intermediate files in ``work``."""
@@ -482,6 +552,17 @@ def _dem_into(
                 desc=f"merge staggered arrays of {n}",
             )
         )
+    oriented = orient_pair(
+        dict(zip(names, images, strict=True)),
+        sensors,
+        start,
+        ro_settings,
+        gcps=_datum_gcps(inputs, names),
+        constant_dem=init_height_m is not None,
+        engine=engine,
+        quiet=quiet,
+    )
+    sensors = {**sensors, names[1]: oriented.right}
     generator = choose_dem_generator(generator, pair.types)
     registry = get_registry()
     component = registry.get("dem-generator", generator)
@@ -574,6 +655,7 @@ def _dem_into(
         "engine": engine.description,
         "failed_tiles": list(product.failed_tiles),
         "initial_dem": start.name,
+        "relative_orientation": oriented.record,
         "dem_grid": {
             "crs": product.dem_grid.crs.to_string(),
             "posting_m": product.dem_grid.resolution[0],

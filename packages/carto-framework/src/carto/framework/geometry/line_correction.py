@@ -1,0 +1,293 @@
+"""An image-space correction that varies with the image line: :class:`LineCorrected`.
+
+A pushbroom image is recorded line by line, so whatever moves its lines of sight over time
+(attitude jitter, slow attitude wander, a clock error) moves its image points by amounts that
+are functions of the line: to first order a shift along the lines (pitch), across them (roll)
+and, far smaller, a rotation (yaw; 0.006 px at the edge of a 12 000-pixel line for 6e-5 deg,
+left out). :class:`LineCorrected` adds to any sensor's image coordinates
+
+    ``line'   = line   + sum_j B_j(line) * a_j``
+    ``sample' = sample + sum_j B_j(line) * b_j``
+
+with the basis :class:`LineBasis`: a constant, a cubic B-spline of the line with knots every
+``knot_lines`` lines (slow motion), and a sine and a cosine per frequency in cycles per line
+(jitter). It works on every sensor kind (line scanners, RPCs, a plugin's) because it only
+needs the wrapped sensor's projections; its own coefficients are fixed values, estimated by
+:mod:`carto.framework.adjustment.relative_orientation`. The wrapped sensor's parameters stay
+adjustable through it.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+
+import attrs
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from carto.framework.arrays import as_float_arrays
+from carto.framework.errors import InputError
+from carto.framework.geometry.sensor import Parameter, Sensor
+
+FloatArray = NDArray[np.float64]
+
+__all__ = ["LineBasis", "LineCorrected"]
+
+INVERSE_ITERATIONS = 6
+"""Fixed-point steps of :meth:`LineCorrected.image_to_ground` (each divides the error by the
+slope of the correction along the lines, a few hundredths of a pixel per pixel)."""
+
+
+def _as_frequencies(values: Sequence[float]) -> tuple[float, ...]:
+    return tuple(float(v) for v in values)
+
+
+@attrs.frozen
+class LineBasis:
+    """The basis functions of a line correction.
+
+    Attributes:
+        n_lines: the image's lines (the spline spans ``[0, n_lines]``).
+        knot_lines: spacing of the cubic B-spline's knots, lines; 0: no spline (a constant
+            only).
+        frequencies: jitter frequencies, cycles per line (a sine and a cosine each).
+    """
+
+    n_lines: int = attrs.field(converter=int)
+    knot_lines: float = attrs.field(default=0.0, converter=float)
+    frequencies: tuple[float, ...] = attrs.field(default=(), converter=_as_frequencies)
+
+    def __attrs_post_init__(self) -> None:
+        if self.n_lines < 1:
+            raise InputError(f"line correction: n_lines must be >= 1, got {self.n_lines}")
+        if not (math.isfinite(self.knot_lines) and self.knot_lines >= 0):
+            raise InputError(f"line correction: knot_lines must be >= 0, got {self.knot_lines}")
+        bad = [f for f in self.frequencies if not (math.isfinite(f) and 0 < f <= 0.5)]
+        if bad:
+            raise InputError(
+                f"line correction: frequencies must be in (0, 0.5] cycles per line, got {bad}"
+            )
+
+    @property
+    def knots(self) -> FloatArray:
+        """The spline's full knot vector (clamped: end knots repeated), or empty."""
+        if self.knot_lines <= 0:
+            return np.zeros(0)
+        n_spans = max(1, round(self.n_lines / self.knot_lines))
+        inner = np.linspace(0.0, float(self.n_lines), n_spans + 1)
+        return np.r_[[inner[0]] * 3, inner, [inner[-1]] * 3]
+
+    @property
+    def n_spline(self) -> int:
+        """Spline functions (0 without a spline)."""
+        knots = self.knots
+        return max(0, knots.size - 4)
+
+    @property
+    def size(self) -> int:
+        """Basis functions: the spline's (it sums to one: it holds the constant), else one
+        constant, plus two per frequency."""
+        return (self.n_spline or 1) + 2 * len(self.frequencies)
+
+    def labels(self) -> list[str]:
+        """One name per basis function (``spline.k``, ``const``, ``sin.f``, ``cos.f``)."""
+        names = [f"spline.{k}" for k in range(self.n_spline)] or ["const"]
+        for k in range(len(self.frequencies)):
+            names += [f"sin.{k}", f"cos.{k}"]
+        return names
+
+    def design(self, lines: ArrayLike) -> tuple[FloatArray, FloatArray]:
+        """``(B, dB/dline)``, each ``(N, size)``: the basis and its derivative at ``lines``
+        (clipped to the spline's span; NaN lines give zero rows)."""
+        x = np.asarray(lines, dtype=np.float64).ravel()
+        ok = np.isfinite(x)
+        xc = np.clip(np.where(ok, x, 0.0), 0.0, float(self.n_lines) * (1 - 1e-12))
+        parts, slopes = [], []
+        if self.n_spline:
+            from scipy.interpolate import BSpline
+
+            knots = self.knots
+            eye = np.eye(self.n_spline)
+            spline = BSpline(knots, eye, 3, extrapolate=False)
+            value = spline(xc)
+            slope = spline.derivative()(xc)
+            parts.append(np.nan_to_num(value))
+            slopes.append(np.nan_to_num(slope))
+        else:
+            parts.append(np.ones((x.size, 1)))
+            slopes.append(np.zeros((x.size, 1)))
+        for f in self.frequencies:
+            w = 2.0 * math.pi * f
+            parts.append(np.stack([np.sin(w * xc), np.cos(w * xc)], axis=1))
+            slopes.append(np.stack([w * np.cos(w * xc), -w * np.sin(w * xc)], axis=1))
+        basis, d_basis = np.concatenate(parts, axis=1), np.concatenate(slopes, axis=1)
+        basis[~ok] = 0.0
+        d_basis[~ok] = 0.0
+        return basis, d_basis
+
+    def evaluate(self, lines: ArrayLike, coefficients: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """``(value, slope)``, each ``(N, m)``: the functions with ``coefficients``
+        ``(m, size)`` and their derivatives along the lines, at ``lines`` (the design
+        matrix is never formed: a whole image's pixels at once)."""
+        x = np.asarray(lines, dtype=np.float64).ravel()
+        ok = np.isfinite(x)
+        xc = np.clip(np.where(ok, x, 0.0), 0.0, float(self.n_lines) * (1 - 1e-12))
+        c = np.asarray(coefficients, dtype=np.float64)
+        n0 = self.n_spline or 1
+        if self.n_spline:
+            from scipy.interpolate import BSpline
+
+            spline = BSpline(self.knots, c[:, :n0].T, 3, extrapolate=False)
+            value = np.nan_to_num(spline(xc))
+            slope = np.nan_to_num(spline.derivative()(xc))
+        else:
+            value = np.repeat(c[None, :, 0], x.size, axis=0)
+            slope = np.zeros_like(value)
+        for k, f in enumerate(self.frequencies):
+            w = 2.0 * math.pi * f
+            s_k, c_k = c[:, n0 + 2 * k], c[:, n0 + 2 * k + 1]
+            sin, cos = np.sin(w * xc)[:, None], np.cos(w * xc)[:, None]
+            value = value + sin * s_k + cos * c_k
+            slope = slope + w * (cos * s_k - sin * c_k)
+        value[~ok] = 0.0
+        slope[~ok] = 0.0
+        return value, slope
+
+    def as_dict(self) -> dict[str, object]:
+        return {
+            "n_lines": self.n_lines,
+            "knot_lines": self.knot_lines,
+            "frequencies_cycles_per_line": list(self.frequencies),
+        }
+
+
+def _coefficients(value: ArrayLike) -> FloatArray:
+    out = np.array(value, dtype=np.float64)
+    if out.ndim != 2 or out.shape[0] != 2:
+        raise InputError(f"line correction: coefficients must be (2, n), got shape {out.shape}")
+    out.flags.writeable = False
+    return out
+
+
+@attrs.frozen(eq=False)
+class LineCorrected(Sensor):
+    """``base`` with an image-space correction varying with the line (module docstring).
+
+    Attributes:
+        base: the corrected sensor.
+        basis: the correction's basis functions.
+        coefficients: ``(2, basis.size)``: row 0 the line shifts' coefficients, row 1 the
+            sample shifts', pixels.
+    """
+
+    base: Sensor
+    basis: LineBasis
+    coefficients: FloatArray = attrs.field(converter=_coefficients)
+
+    def __attrs_post_init__(self) -> None:
+        if self.coefficients.shape[1] != self.basis.size:
+            raise InputError(
+                f"line correction: {self.coefficients.shape[1]} coefficients per axis for "
+                f"{self.basis.size} basis functions"
+            )
+
+    # ------------------------------------------------------------------ the correction
+    def shift(self, line: ArrayLike) -> tuple[FloatArray, FloatArray]:
+        """``(d_line, d_sample)`` added at base-model lines ``line``, pixels."""
+        line = np.asarray(line, dtype=np.float64)
+        d, _ = self.basis.evaluate(line, self.coefficients)
+        return d[:, 0].reshape(line.shape), d[:, 1].reshape(line.shape)
+
+    def _shift_and_slope(self, line: FloatArray) -> tuple[FloatArray, FloatArray]:
+        return self.basis.evaluate(line, self.coefficients)
+
+    # ------------------------------------------------------------------ Sensor data
+    @property
+    def name(self) -> str:
+        return str(getattr(self.base, "name", ""))
+
+    @property
+    def image_shape(self) -> tuple[int, int]:
+        return self.base.image_shape
+
+    @property
+    def parameters(self) -> tuple[Parameter, ...]:
+        return self.base.parameters
+
+    def with_parameters(
+        self,
+        values: Mapping[str, float] | None = None,
+        free: Mapping[str, bool] | None = None,
+        sigmas: Mapping[str, float] | None = None,
+    ) -> LineCorrected:
+        return attrs.evolve(self, base=self.base.with_parameters(values, free, sigmas))
+
+    def for_raster(self, raster: object) -> Sensor:  # type: ignore[override]
+        return self
+
+    @property
+    def raw_needs_preparation(self) -> bool:
+        return self.base.raw_needs_preparation
+
+    def prepare_raw(self, raw: ArrayLike, dem: object) -> NDArray[np.float32]:
+        return self.base.prepare_raw(raw, dem)
+
+    def prepare_rows(self, raw: object, dem: object, rows: slice) -> NDArray[np.float32]:
+        return self.base.prepare_rows(raw, dem, rows)
+
+    # ------------------------------------------------------------------ Sensor interface
+    def project(
+        self, lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike
+    ) -> tuple[FloatArray, FloatArray, NDArray[np.bool_]]:
+        line, sample, _ = self.base.project(lon_deg, lat_deg, h_m)
+        line, sample = np.asarray(line, np.float64), np.asarray(sample, np.float64)
+        d_line, d_sample = self.shift(line)
+        line, sample = line + d_line, sample + d_sample
+        n_l, n_s = self.image_shape
+        inside = (line >= 0) & (line <= n_l) & (sample >= 0) & (sample <= n_s)
+        return line, sample, inside
+
+    def ground_to_image(
+        self, lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike
+    ) -> tuple[FloatArray, FloatArray]:
+        line0, sample0 = self.base.ground_to_image(lon_deg, lat_deg, h_m)
+        line0, sample0 = np.asarray(line0, np.float64), np.asarray(sample0, np.float64)
+        d_line, d_sample = self.shift(line0)
+        line, sample = line0 + d_line, sample0 + d_sample
+        _n_l, _n_s = self.image_shape
+        seen = np.isfinite(line0) & np.isfinite(sample0)
+        # the base's own clipping (its margin beyond the image) on the base's coordinates
+        return np.where(seen, line, np.nan), np.where(seen, sample, np.nan)
+
+    def image_to_ground(
+        self, line: ArrayLike, sample: ArrayLike, h_m: ArrayLike
+    ) -> tuple[FloatArray, FloatArray]:
+        line, sample, h = as_float_arrays(line, sample, h_m)
+        base_line = line.copy()
+        for _ in range(INVERSE_ITERATIONS):  # the base line whose corrected line is `line`
+            d_line, _ = self.shift(base_line)
+            base_line = line - d_line
+        d_line, d_sample = self.shift(base_line)
+        return self.base.image_to_ground(line - d_line, sample - d_sample, h)
+
+    def linearize(
+        self,
+        lon_deg: ArrayLike,
+        lat_deg: ArrayLike,
+        h_m: ArrayLike,
+        names: Sequence[str] | None = None,
+    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        line, sample, a_ground, a_param = self.base.linearize(lon_deg, lat_deg, h_m, names)
+        shift, slope = self._shift_and_slope(line)
+        # d(line + s(line)) = (1 + s'(line)) d line; the sample shift follows the line too
+        chain = np.stack(
+            [
+                np.stack([1.0 + slope[:, 0], np.zeros_like(line)], axis=1),
+                np.stack([slope[:, 1], np.ones_like(line)], axis=1),
+            ],
+            axis=1,
+        )  # (N, 2, 2): rows (line', sample'), columns (line, sample)
+        a_ground = np.einsum("nij,njk->nik", chain, a_ground)
+        a_param = np.einsum("nij,njk->nik", chain, a_param)
+        return line + shift[:, 0], sample + shift[:, 1], a_ground, a_param

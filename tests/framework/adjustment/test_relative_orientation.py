@@ -1,0 +1,148 @@
+"""Relative orientation of a pair from tie points on a noisy starting DEM: a known
+line-varying error of the right image (a constant and two jitter frequencies, built with the
+analytic Cartosat-1 geometry of ``builders.py``) is recovered, across and along the base."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from affine import Affine
+
+from carto.framework.adjustment import relative_orientation as ro
+from carto.framework.geometry.line_correction import LineBasis, LineCorrected
+from carto.framework.raster.dem import DEM
+
+
+def _terrain(aft):
+    corners = aft.image_to_ground(
+        np.array([0.0, 0.0, 12000.0, 12000.0]), np.array([0.0, 12000.0, 0.0, 12000.0]), 500.0
+    )
+    west, east = corners[0].min() - 0.05, corners[0].max() + 0.05
+    south, north = corners[1].min() - 0.05, corners[1].max() + 0.05
+    step = 3.0 / 3600.0
+    n_c, n_r = int((east - west) / step) + 1, int((north - south) / step) + 1
+    lon = west + (np.arange(n_c) + 0.5) * step
+    lat = north - (np.arange(n_r) + 0.5) * step
+    heights = 500.0 + 150.0 * np.sin(lat[:, None] * 90.0) * np.cos(lon[None, :] * 70.0)
+    transform = Affine(step, 0.0, west, 0.0, -step, north)
+    return heights, transform
+
+
+@pytest.fixture(scope="module")
+def synthetic(cartosat1_pair):
+    aft, fore = cartosat1_pair["aft"], cartosat1_pair["fore"]
+    basis = LineBasis(12000, 0.0, (0.01, 0.003))
+    truth = np.array([[0.4, 0.15, -0.1, 0.05, 0.2], [-0.3, 0.1, 0.08, -0.12, 0.0]])
+    right_true = LineCorrected(fore, basis, truth)
+    heights, transform = _terrain(aft)
+    dem_true = DEM.from_array(heights, transform, "EPSG:4326")
+    rng = np.random.default_rng(5)
+    start = DEM.from_array(heights + rng.normal(0.0, 3.0, heights.shape), transform, "EPSG:4326")
+    lines, samples = np.meshgrid(np.arange(20.0, 11980.0, 40.0), np.arange(200.0, 11900.0, 400.0))
+    lines, samples = lines.ravel(), samples.ravel()
+    lon, lat, h = aft.locate_on_dem(lines, samples, dem_true)
+    r_line, r_sample = right_true.ground_to_image(lon, lat, h)
+    r_line = r_line + rng.normal(0.0, 0.05, r_line.size)
+    r_sample = r_sample + rng.normal(0.0, 0.05, r_sample.size)
+    ok = np.isfinite(r_line) & np.isfinite(r_sample)
+    n = int(ok.sum())
+    ids = np.array([f"T{k}" for k in range(n)])
+    table = {
+        "id": np.r_[ids, ids],
+        "image": np.r_[np.full(n, "aft"), np.full(n, "fore")],
+        "line": np.r_[lines[ok], r_line[ok]],
+        "sample": np.r_[samples[ok], r_sample[ok]],
+    }
+    return aft, fore, right_true, table, start
+
+
+def test_jitter_and_offset_are_recovered_from_ties_on_a_noisy_dem(synthetic):
+    aft, fore, right_true, table, start = synthetic
+    obs = ro.ties_to_observations(table, ("aft", "fore"), aft, fore, start)
+    settings = ro.RelativeOrientationSettings(knot_lines=12000.0)
+    basis, fit, keep = ro.estimate_correction(obs, 12000, "line", "dem", settings)
+    found = sorted(basis.frequencies)[:2]
+    assert found == pytest.approx([0.003, 0.01], abs=1e-5)  # the periodogram grid: 8e-6
+    assert keep.mean() > 0.99
+    # the correction against the true one, along every right-image line the ties cover
+    lines = np.arange(obs.line.min(), obs.line.max(), 10.0)
+    estimated = np.stack(LineCorrected(fore, basis, fit.coefficients).shift(lines), axis=1)
+    true = np.stack(right_true.shift(lines), axis=1)
+    u, v, _ = ro._axes(obs.parallax[:1])  # the base's direction in the right image
+    across = (estimated - true) @ v[0]
+    along = (estimated - true) @ u[0]
+    assert np.abs(across).max() < 0.03  # px: matching noise only (the largest at the ends)
+    # along the base, the DEM's 3 m noise averaged along each line (0.27 px/m)
+    assert np.sqrt(np.mean(along**2)) < 0.06
+    assert np.abs(along).max() < 0.15
+    assert fit.sigma_m == pytest.approx(0.05 * np.sqrt(2), rel=0.3)  # both images' noise
+    assert 1.5 < fit.sigma_h < 4.5  # the DEM's 3 m (and its interpolation)
+
+
+def test_gcps_hold_the_datum_against_a_biased_dem(synthetic):
+    aft, fore, right_true, table, start = synthetic
+    biased = DEM.from_array(start.heights + 8.0, start.transform, "EPSG:4326")
+    obs = ro.ties_to_observations(table, ("aft", "fore"), aft, fore, biased)
+    settings = ro.RelativeOrientationSettings(knot_lines=12000.0)
+    lines = np.arange(obs.line.min(), obs.line.max(), 10.0)
+    true = np.stack(right_true.shift(lines), axis=1)
+    u = ro._axes(obs.parallax[:1])[0][0]
+
+    def along_error(basis, fit):
+        est = np.stack(LineCorrected(fore, basis, fit.coefficients).shift(lines), axis=1)
+        return float(np.median((est - true) @ u))
+
+    # the DEM as datum: its 8 m bias is a shift along the base (8 m x 0.27 px/m)
+    basis, fit, _ = ro.estimate_correction(obs, 12000, "line", "dem", settings)
+    assert abs(along_error(basis, fit)) > 1.5
+    # three exact GCPs measured in both images hold it instead
+    left = np.flatnonzero(table["image"] == "aft")
+    pick = left[np.linspace(0, left.size - 1, 5).astype(int)[1:4]]  # seen by both
+    g_lines, g_samples = table["line"][pick], table["sample"][pick]
+    lon, lat = aft.image_to_ground(g_lines, g_samples, 600.0)
+    r_line, r_sample = right_true.ground_to_image(lon, lat, 600.0)
+    gcps = {
+        "id": np.array(["G1", "G2", "G3"] * 2),
+        "image": np.array(["aft"] * 3 + ["fore"] * 3),
+        "line": np.r_[g_lines, r_line],
+        "sample": np.r_[g_samples, r_sample],
+        "h_m": np.full(6, 600.0),
+        "sigma_h_m": np.full(6, 0.2),
+        "sigma_px": np.full(6, 0.05),
+    }
+    control = ro.gcps_to_observations(gcps, ("aft", "fore"), aft, fore)
+    assert control.line.size == 3
+    basis, fit, _ = ro.estimate_correction(ro._concat(obs, control), 12000, "line", "gcp", settings)
+    assert abs(along_error(basis, fit)) < 0.1
+    assert fit.dem_offset_m == pytest.approx(-8.0, abs=1.0)  # the DEM's bias, seen
+
+
+def test_gcp_offsets_replace_the_second_measurement():
+    gcps = {
+        "id": np.array(["G1", "G1", "G2"]),
+        "image": np.array(["fore", "aft", "fore"]),
+        "line": np.array([100.0, 93.5, 50.0]),
+        "sample": np.array([20.0, 21.0, 5.0]),
+        "sigma_px": np.array([0.3, 0.3, 0.3]),
+    }
+    offsets = {
+        "id": np.array(["G1"]),
+        "image_a": np.array(["fore"]),
+        "image_b": np.array(["aft"]),
+        "d_line": np.array([-7.25]),
+        "d_sample": np.array([1.5]),
+        "sigma_px": np.array([0.15]),
+    }
+    out = ro.gcps_with_offsets(gcps, offsets)
+    assert out["line"][1] == pytest.approx(92.75)
+    assert out["sample"][1] == pytest.approx(21.5)
+    assert np.hypot(out["sigma_px"][0], out["sigma_px"][1]) == pytest.approx(0.15)
+    assert out["sigma_px"][2] == 0.3  # no offset: as measured
+    assert gcps["line"][1] == 93.5  # the input is not changed
+
+
+def test_settings_are_checked():
+    with pytest.raises(Exception, match="--relative-orientation"):
+        ro.RelativeOrientationSettings(mode="bogus")
+    with pytest.raises(Exception, match="knot_lines"):
+        ro.RelativeOrientationSettings(knot_lines=0)
