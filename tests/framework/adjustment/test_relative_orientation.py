@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from affine import Affine
 
+from carto.framework.adjustment import pair_observations as po
 from carto.framework.adjustment import relative_orientation as ro
 from carto.framework.geometry.line_correction import LineBasis, LineCorrected
 from carto.framework.raster.dem import DEM
@@ -58,7 +59,7 @@ def synthetic(cartosat1_pair):
 
 def test_jitter_and_offset_are_recovered_from_ties_on_a_noisy_dem(synthetic):
     aft, fore, right_true, table, start = synthetic
-    obs = ro.ties_to_observations(table, ("aft", "fore"), aft, fore, start)
+    obs = po.ties_to_observations(table, ("aft", "fore"), aft, fore, start)
     settings = ro.RelativeOrientationSettings(knot_lines=12000.0)
     basis, fit, keep = ro.estimate_correction(obs, 12000, "line", "dem", settings)
     found = sorted(basis.frequencies)[:2]
@@ -68,25 +69,25 @@ def test_jitter_and_offset_are_recovered_from_ties_on_a_noisy_dem(synthetic):
     lines = np.arange(obs.line.min(), obs.line.max(), 10.0)
     estimated = np.stack(LineCorrected(fore, basis, fit.coefficients).shift(lines), axis=1)
     true = np.stack(right_true.shift(lines), axis=1)
-    u, v, _ = ro._axes(obs.parallax[:1])  # the base's direction in the right image
+    u, v, _ = po.axes(obs.parallax[:1])  # the base's direction in the right image
     across = (estimated - true) @ v[0]
     along = (estimated - true) @ u[0]
     assert np.abs(across).max() < 0.03  # px: matching noise only (the largest at the ends)
     # along the base, the DEM's 3 m noise averaged along each line (0.27 px/m)
     assert np.sqrt(np.mean(along**2)) < 0.06
     assert np.abs(along).max() < 0.15
-    assert fit.sigma_m == pytest.approx(0.05 * np.sqrt(2), rel=0.3)  # both images' noise
-    assert 1.5 < fit.sigma_h < 4.5  # the DEM's 3 m (and its interpolation)
+    assert fit.noise.sigma_m == pytest.approx(0.05 * np.sqrt(2), rel=0.3)  # both images' noise
+    assert 1.5 < fit.noise.sigma_h < 4.5  # the DEM's 3 m (and its interpolation)
 
 
 def test_gcps_hold_the_datum_against_a_biased_dem(synthetic):
     aft, fore, right_true, table, start = synthetic
     biased = DEM.from_array(start.heights + 8.0, start.transform, "EPSG:4326")
-    obs = ro.ties_to_observations(table, ("aft", "fore"), aft, fore, biased)
+    obs = po.ties_to_observations(table, ("aft", "fore"), aft, fore, biased)
     settings = ro.RelativeOrientationSettings(knot_lines=12000.0)
     lines = np.arange(obs.line.min(), obs.line.max(), 10.0)
     true = np.stack(right_true.shift(lines), axis=1)
-    u = ro._axes(obs.parallax[:1])[0][0]
+    u = po.axes(obs.parallax[:1])[0][0]
 
     def along_error(basis, fit):
         est = np.stack(LineCorrected(fore, basis, fit.coefficients).shift(lines), axis=1)
@@ -110,9 +111,9 @@ def test_gcps_hold_the_datum_against_a_biased_dem(synthetic):
         "sigma_h_m": np.full(6, 0.2),
         "sigma_px": np.full(6, 0.05),
     }
-    control = ro.gcps_to_observations(gcps, ("aft", "fore"), aft, fore)
+    control = po.gcps_to_observations(gcps, ("aft", "fore"), aft, fore)
     assert control.line.size == 3
-    basis, fit, _ = ro.estimate_correction(ro._concat(obs, control), 12000, "line", "gcp", settings)
+    basis, fit, _ = ro.estimate_correction(po.concat(obs, control), 12000, "line", "gcp", settings)
     assert abs(along_error(basis, fit)) < 0.1
     assert fit.dem_offset_m == pytest.approx(-8.0, abs=1.0)  # the DEM's bias, seen
 
@@ -133,7 +134,7 @@ def test_gcp_offsets_replace_the_second_measurement():
         "d_sample": np.array([1.5]),
         "sigma_px": np.array([0.15]),
     }
-    out = ro.gcps_with_offsets(gcps, offsets)
+    out = po.gcps_with_offsets(gcps, offsets)
     assert out["line"][1] == pytest.approx(92.75)
     assert out["sample"][1] == pytest.approx(21.5)
     assert np.hypot(out["sigma_px"][0], out["sigma_px"][1]) == pytest.approx(0.15)

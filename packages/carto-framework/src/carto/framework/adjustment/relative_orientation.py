@@ -29,18 +29,22 @@ one image line: the physics that lets a pair's jitter be estimated from the pair
 sigma_h^2 p p^T``); ``sigma_m`` and ``sigma_h`` are estimated from the residuals across and
 along the base (two variance components).
 
-The correction. Line scanners (and wrappers of one) get a line-varying correction: a cubic
-B-spline of the line (knots every ``knot_lines``: wander and slow jitter) plus a sine and a
-cosine per jitter frequency found in the residuals (the Lomb-Scargle periodogram of the
-across-base residuals binned by line, :func:`~carto.framework.adjustment.jitter.
-detect_jitter_frequencies`; not the along-base ones, where the starting DEM's own errors,
-correlated over hundreds of metres, look like peaks to a white-noise test), re-fitted after
-each search; each frequency's sine and cosine are then fitted on both axes. The spline's knots
-are far apart by default (:attr:`RelativeOrientationSettings.knot_lines`): finer, it copies the
-DEM's band errors (on a 1000-pixel Cartosat-1 swath, the SRTM-like DEM's mean over 250 lines
-errs by up to 1.8 m). Other sensors (RPCs) get a shift.
-The right sensor comes back as a :class:`~carto.framework.geometry.line_correction.
-LineCorrected`; the left stays as it is.
+The correction. Line scanners (and wrappers of one) get a line-varying correction. Across
+the base: a cubic B-spline of the line (knots every ``knot_lines``, spanning the lines the
+points cover) plus a sine and a cosine per jitter frequency. Along the base: a constant and
+the same sinusoids only. The slow shape along the base is not taken from the starting DEM:
+its long-wavelength errors are of the same size (with the true models of a 300 x 400 pixel
+scene, a spline along the base copied a 2 m tilt of the SRTM-like DEM into the DEM: NMAD 0.15
+-> 1.0 m), and nothing in a pair tells them from the models' own slow errors (with
+adjusted models under ``--errors full`` the same spline helped: 1.05 -> 0.7 m); that needs the
+models' accuracy as a prior (issue 30). Jitter frequencies come from the Lomb-Scargle
+periodogram of the across-base residuals binned by line
+(:func:`~carto.framework.adjustment.jitter.detect_jitter_frequencies`; along the base the
+DEM's correlated errors look like peaks to a white-noise test), one at a time with a re-fit
+after each. Priors: :data:`SHAPE_SIGMA_PX`, :data:`JITTER_SIGMA_PX`; the DEM rows' along-base
+weight carries the DEM's correlated share (:attr:`Noise.band_factor`). Other sensors (RPCs)
+get a shift. The right sensor comes back as a
+:class:`~carto.framework.geometry.line_correction.LineCorrected`; the left stays as it is.
 
 The datum (what holds the along-base constant, which a pair cannot see): GCPs when given
 (rows like the ties, with the GCP's height and sigma and no DEM offset; the right image's
@@ -50,7 +54,7 @@ against the DEM offset ``dH`` with its a-priori sigma (the DEM's absolute accura
 own bias remains, as when it is the only height reference); for a constant starting height,
 the models (``dH`` free and the along-base correction of zero mean over the points). One GCP
 holds it to its own accuracy: on the simulator's ``--errors full`` pair (seed 0, hilly), the
-GCP's height error put the DEM's median 2.5 m off, as it did the adjusted models'.
+GCP's height error put the DEM's median about 3 m off, as it did the adjusted models' (2.6 m).
 
 Outliers: points whose normalised residual exceeds :data:`REJECT_SIGMAS` are dropped and the
 fit repeated.
@@ -66,6 +70,14 @@ import attrs
 import numpy as np
 from numpy.typing import NDArray
 
+from carto.framework.adjustment.pair_observations import (
+    Noise,
+    Observations,
+    axes,
+    concat,
+    gcps_to_observations,
+    ties_to_observations,
+)
 from carto.framework.errors import InputError
 from carto.framework.geometry.line_correction import LineBasis, LineCorrected
 from carto.framework.geometry.sensor import Sensor
@@ -88,8 +100,6 @@ REJECT_SIGMAS = 4.0
 """Points whose residual exceeds this many sigmas (either axis, normalised) are dropped."""
 DATUM_SIGMA_PX = 1e-3
 """Sigma of the zero-mean condition of the along-base correction (datum from the models)."""
-GCP_SIGMA_H_M = 1.0
-"""Height sigma of a GCP whose table states none, metres."""
 MIN_POINTS = 30
 """Fewer tie points than this: no relative orientation (the pair is reported as is)."""
 
@@ -131,99 +141,116 @@ SHIFT_SPACING_PX = 32.0
 
 
 @attrs.frozen(eq=False)
-class Observations:
-    """The rows of the fit: right-image residuals and what they depend on.
-
-    Attributes:
-        line: right-image line of each row (where the basis is evaluated).
-        residual: ``(N, 2)`` right residual (line, sample), measured minus computed, px.
-        parallax: ``(N, 2)`` right image motion per metre of height along the left ray, px/m.
-        sigma_h: ``(N,)`` height sigma of each row's height (NaN: the DEM's, estimated).
-        on_dem: rows whose height is the DEM's (they share the DEM offset).
-        sigma_px: ``(N,)`` image sigma of the right-minus-left measurement per axis (NaN:
-            the matching's, estimated).
-    """
-
-    line: FloatArray
-    residual: FloatArray
-    parallax: FloatArray
-    sigma_h: FloatArray
-    on_dem: NDArray[np.bool_]
-    sigma_px: FloatArray
-
-    def subset(self, keep: NDArray[np.bool_]) -> Observations:
-        return Observations(
-            self.line[keep], self.residual[keep], self.parallax[keep], self.sigma_h[keep],
-            self.on_dem[keep], self.sigma_px[keep],
-        )  # fmt: skip
-
-    def sigmas(self, sigma_m: float, sigma_h: float) -> tuple[FloatArray, FloatArray]:
-        """Each row's sigma along and across the base, pixels."""
-        norm = np.linalg.norm(self.parallax, axis=1)
-        s_m = np.where(np.isfinite(self.sigma_px), self.sigma_px, sigma_m)
-        s_h = np.where(np.isfinite(self.sigma_h), self.sigma_h, sigma_h)
-        return np.sqrt(s_m**2 + (s_h * norm) ** 2), s_m
-
-
-def right_residuals(
-    left: Sensor,
-    right: Sensor,
-    left_lines: FloatArray,
-    left_samples: FloatArray,
-    right_lines: FloatArray,
-    right_samples: FloatArray,
-    lon: FloatArray,
-    lat: FloatArray,
-    h: FloatArray,
-    dh_m: float = 10.0,
-) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """For points seen at ``left_*`` and located at ``(lon, lat, h)`` on the left ray: the
-    right residual (measured ``right_*`` minus the right model's projection, ``(N, 2)``), the
-    parallax per metre along the left ray ``(N, 2)`` and the projected right line."""
-    line0, sample0, _ = right.project(lon, lat, h)
-    lon2, lat2 = left.image_to_ground(left_lines, left_samples, h + dh_m)
-    line1, sample1, _ = right.project(lon2, lat2, h + dh_m)
-    residual = np.stack([right_lines - line0, right_samples - sample0], axis=1)
-    parallax = np.stack([(line1 - line0) / dh_m, (sample1 - sample0) / dh_m], axis=1)
-    return residual, parallax, np.asarray(line0, np.float64)
-
-
-def _axes(parallax: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Unit along-base ``u``, across-base ``v`` (``(N, 2)``) and ``|p|`` (px/m)."""
-    norm = np.linalg.norm(parallax, axis=1)
-    u = parallax / np.maximum(norm, 1e-12)[:, None]
-    v = np.stack([-u[:, 1], u[:, 0]], axis=1)
-    return u, v, norm
-
-
-@attrs.frozen(eq=False)
 class Fit:
-    """One least-squares fit: coefficients ``(2, basis.size)``, the DEM offset (m), the
-    normalised residuals along and across the base and the variance components."""
+    """One least-squares fit: coefficients ``(2, basis.size)``, the DEM offset (m) and the
+    variance components its residuals give."""
 
     coefficients: FloatArray
     dem_offset_m: float
-    along: FloatArray
-    across: FloatArray
-    sigma_m: float
-    sigma_h: float
+    noise: Noise
+
+
+BAND_LINES = 64.0
+"""Bins of this many lines measure the DEM's correlated share (:attr:`Noise.band_factor`)."""
+BAND_NEIGHBOURS = 5
+"""Each bin's mean is compared with the mean of this many bins around it."""
+SHAPE_SIGMA_PX = 0.25
+"""A-priori sigma of the change of the spline between neighbouring coefficients, px: slow
+attitude wander (0.0002 deg of 15-90 s periods moves a Cartosat-1 point by about a pixel)
+changes by a fraction of a pixel over a knot spacing of 0.6 s."""
+JITTER_SIGMA_PX = 0.3
+"""A-priori sigma of each jitter sine and cosine coefficient, px (jitter of a few tenths of a
+pixel; the prior keeps a frequency the DEM's errors alone pretend to see small)."""
+COEFFICIENT_SIGMA_PX = 10.0
+"""A weak prior on every coefficient (knots without points stay determined)."""
+
+
+def _expansion(basis: LineBasis, u0: FloatArray) -> FloatArray:
+    """``T``: full coefficients ``[line (size), sample (size), dH]`` from the estimated
+    ``[along (1 + 2 F), across (size), dH]``. Along the base the correction is a constant
+    and the jitter sinusoids only: its slow shape is not taken from the starting DEM, whose
+    long-wavelength errors are of its size (a 2 m tilt over a 1 km scene, issue 30); across
+    the base the spline follows it too."""
+    n_b, n_f = basis.size, len(basis.frequencies)
+    n0 = basis.n_spline or 1
+    n_a = 1 + 2 * n_f
+    expand = np.zeros((n_b, n_a))  # along parameters -> coefficients of the basis
+    expand[:n0, 0] = 1.0  # the spline sums to one: equal coefficients are a constant
+    expand[n0:, 1:] = np.eye(2 * n_f)
+    v0 = np.array([-u0[1], u0[0]])
+    t = np.zeros((2 * n_b + 1, n_a + n_b + 1))
+    for axis in range(2):
+        rows = slice(axis * n_b, (axis + 1) * n_b)
+        t[rows, :n_a] = u0[axis] * expand
+        t[rows, n_a : n_a + n_b] = v0[axis] * np.eye(n_b)
+    t[-1, -1] = 1.0
+    return t
+
+
+def _priors(basis: LineBasis) -> FloatArray:
+    """The normal-matrix share of the priors on the estimated parameters ``[along, across,
+    dH]`` (:func:`_expansion`; the DEM offset's is the caller's)."""
+    n_b, n_f = basis.size, len(basis.frequencies)
+    n0, n_s = basis.n_spline or 1, basis.n_spline
+    n_a = 1 + 2 * n_f
+    sigma = np.r_[
+        COEFFICIENT_SIGMA_PX,
+        np.full(2 * n_f, JITTER_SIGMA_PX),
+        np.full(n0, COEFFICIENT_SIGMA_PX),
+        np.full(2 * n_f, JITTER_SIGMA_PX),
+    ]
+    prior = np.zeros((n_a + n_b + 1, n_a + n_b + 1))
+    prior[np.arange(sigma.size), np.arange(sigma.size)] = 1.0 / sigma**2
+    for k in range(n_a, n_a + n_s - 1):  # neighbouring spline coefficients across the base
+        d = np.zeros(n_a + n_b + 1)
+        d[k], d[k + 1] = -1.0, 1.0
+        prior += np.outer(d, d) / SHAPE_SIGMA_PX**2
+    return prior
+
+
+def _band_factor(obs: Observations, along_px: FloatArray, noise: Noise) -> float:
+    """:attr:`Noise.band_factor` from the along-base residuals of the DEM rows: the spread of
+    their means over :data:`BAND_LINES` lines, each less the mean of its
+    :data:`BAND_NEIGHBOURS` neighbours (slow motion the model leaves along the base is not
+    the DEM's), against what independent rows would give."""
+    rows = obs.dem_rows
+    if rows.sum() < 10:
+        return 1.0
+    s_along, _ = obs.subset(rows).sigmas(noise, banded=False)
+    k = np.floor(obs.line[rows] / BAND_LINES).astype(np.int64)
+    k -= k.min()
+    count = np.bincount(k)
+    full = count >= 5
+    if full.sum() < 2 * BAND_NEIGHBOURS:
+        return 1.0
+    mean = (np.bincount(k, weights=along_px[rows]) / np.maximum(count, 1))[full]
+    predicted = (np.bincount(k, weights=s_along**2) / np.maximum(count, 1) ** 2)[full]
+    window = np.ones(BAND_NEIGHBOURS) / BAND_NEIGHBOURS
+    detail = (mean - np.convolve(mean, window, mode="same"))[BAND_NEIGHBOURS:-BAND_NEIGHBOURS]
+    if detail.size < 4:
+        return 1.0
+    # a point less its window's mean keeps (1 - 1/n) of an independent variance
+    spread = 1.4826 * np.median(np.abs(detail - np.median(detail)))
+    independent = (1.0 - 1.0 / BAND_NEIGHBOURS) * np.median(predicted)
+    return max(1.0, float(spread**2 / independent))
 
 
 def _fit(
     obs: Observations,
     basis: LineBasis,
-    sigma_m: float,
-    sigma_h_dem: float,
+    noise: Noise,
     datum: str,
     dem_offset_sigma_m: float,
 ) -> Fit:
     """Weighted least squares of :class:`Observations` (module docstring), whitened along and
-    across the base."""
-    u, v, norm = _axes(obs.parallax)
-    s_along, s_across = obs.sigmas(sigma_m, sigma_h_dem)
+    across the base, with the priors of :func:`_priors`; returns the variance components of
+    its residuals too."""
+    u, v, norm = axes(obs.parallax)
+    s_along, s_across = obs.sigmas(noise)
     b, _ = basis.design(obs.line)
     n_b = basis.size
     n_p = 2 * n_b + 1  # the DEM offset last
+    expand = _expansion(basis, np.median(u, axis=0) / np.linalg.norm(np.median(u, axis=0)))
 
     def rows(axis: FloatArray, scale: FloatArray) -> tuple[FloatArray, FloatArray]:
         a = np.zeros((obs.line.size, n_p))
@@ -235,7 +262,7 @@ def _fit(
 
     a_al, y_al = rows(u, s_along)
     a_ac, y_ac = rows(v, s_across)
-    design = np.vstack([a_al, a_ac])
+    design = np.vstack([a_al, a_ac]) @ expand
     target = np.concatenate([y_al, y_ac])
     normal = design.T @ design
     rhs = design.T @ target
@@ -243,12 +270,13 @@ def _fit(
         cond = np.zeros(n_p)
         cond[:n_b] = (b * u[:, 0:1]).mean(axis=0)
         cond[n_b : 2 * n_b] = (b * u[:, 1:2]).mean(axis=0)
+        cond = cond @ expand
         normal += np.outer(cond, cond) / DATUM_SIGMA_PX**2
-    # a weak prior on every coefficient (10 px) keeps knots without points determined; the
-    # DEM offset's prior is the DEM's absolute accuracy (free when the models hold the datum)
-    normal[np.arange(2 * n_b), np.arange(2 * n_b)] += 1.0 / 10.0**2
+    # the DEM offset's prior is the DEM's absolute accuracy (free when the models hold the
+    # datum)
+    normal += _priors(basis)
     normal[-1, -1] += 0.0 if datum == "models" else 1.0 / dem_offset_sigma_m**2
-    x = np.linalg.solve(normal, rhs)
+    x = expand @ np.linalg.solve(normal, rhs)
     coefficients = x[: 2 * n_b].reshape(2, n_b)
     offset = float(x[-1])
     model = b @ coefficients.T + np.where(obs.on_dem, offset, 0.0)[:, None] * obs.parallax
@@ -257,15 +285,16 @@ def _fit(
     across = np.einsum("ij,ij->i", v, res)
     # variance components: matching from across the base, DEM from along it
     mad = 1.4826
-    dem_rows = obs.on_dem & ~np.isfinite(obs.sigma_h)
+    dem_rows = obs.dem_rows
     a_ties = across[dem_rows] if dem_rows.any() else across
     s_m = max(float(mad * np.median(np.abs(a_ties - np.median(a_ties)))), 1e-3)
+    s_h = noise.sigma_h
     if dem_rows.any():
         s_al = float(mad * np.median(np.abs(along[dem_rows] - np.median(along[dem_rows]))))
         s_h = math.sqrt(max(s_al**2 - s_m**2, 1e-6)) / float(np.median(norm[dem_rows]))
-    else:
-        s_h = sigma_h_dem
-    return Fit(coefficients, offset, along / s_along, across / s_across, s_m, max(s_h, 0.05))
+    new = Noise(s_m, max(s_h, 0.05))
+    new = attrs.evolve(new, band_factor=_band_factor(obs, along, new))
+    return Fit(coefficients, offset, new)
 
 
 def _binned(line: FloatArray, value: FloatArray, width: float) -> tuple[FloatArray, FloatArray]:
@@ -285,66 +314,71 @@ def estimate_correction(
     kind: str,
     datum: str,
     settings: RelativeOrientationSettings,
-    sigma_m: float = 0.2,
-    sigma_h: float = 3.0,
 ) -> tuple[LineBasis, Fit, NDArray[np.bool_]]:
     """The right image's correction from ``obs``: ``kind`` ``"shift"`` or ``"line"``,
-    ``datum`` ``"gcp"``, ``"dem"`` or ``"models"`` (module docstring). Returns the basis, the
-    fit and the rows kept."""
-    from carto.framework.adjustment.jitter import detect_jitter_frequencies
-
+    ``datum`` ``"gcp"``, ``"dem"`` or ``"models"`` (module docstring). The spline spans the
+    lines the tie points cover. Returns the basis, the fit and the rows kept."""
     if kind == "shift":
         basis = LineBasis(n_lines)
     else:
-        basis = LineBasis(n_lines, min(settings.knot_lines, float(n_lines)))
+        lines = obs.line[obs.dem_rows] if obs.dem_rows.any() else obs.line
+        first, last = float(lines.min()), float(lines.max())
+        if not last > first:
+            last = first + 1.0
+        basis = LineBasis(n_lines, min(settings.knot_lines, last - first), (), (first, last))
     keep = np.ones(obs.line.size, bool)
-    fit = _fit(obs, basis, sigma_m, sigma_h, datum, settings.dem_offset_sigma_m)
+    fit = Fit(np.zeros((2, basis.size)), 0.0, Noise())
     for _ in range(3):  # variance components and outliers settle in a few rounds
-        fit = _fit(
-            obs.subset(keep), basis, fit.sigma_m, fit.sigma_h, datum, settings.dem_offset_sigma_m
-        )
-        full = _fit_residuals(obs, basis, fit)
-        keep = (np.abs(full[0]) < REJECT_SIGMAS) & (np.abs(full[1]) < REJECT_SIGMAS)
+        fit = _fit(obs.subset(keep), basis, fit.noise, datum, settings.dem_offset_sigma_m)
+        keep = _inliers(obs, basis, fit)
     if kind == "line" and settings.max_frequencies > 0:
         found: list[float] = []
         for _ in range(settings.max_frequencies):
-            kept = obs.subset(keep)
-            _along, across = _fit_residuals(kept, basis, fit)
-            width = max(1.0, float(n_lines) / 4096.0)
-            # in kilolines: the detector rounds frequencies to 1e-4 (cycles per kiloline)
-            # across the base only: along it, the starting DEM's own errors, correlated over
-            # hundreds of metres, make peaks a white-noise test takes for jitter
-            t, r = _binned(kept.line, across * fit.sigma_m, width)
-            series = [(t / 1000.0, r)]
-            new = [
-                f / 1000.0
-                for f in detect_jitter_frequencies(series, max_frequencies=1)
-                if all(abs(f / 1000.0 - g) > 0.5 / n_lines for g in found) and f <= 500.0
-            ]
-            if not new:
+            new = _next_frequency(obs.subset(keep), basis, fit, found)
+            if new is None:
                 break
-            found += new
+            found.append(new)
             basis = attrs.evolve(basis, frequencies=tuple(found))
-            fit = _fit(kept, basis, fit.sigma_m, fit.sigma_h, datum, settings.dem_offset_sigma_m)
-        full = _fit_residuals(obs, basis, fit)
-        keep = (np.abs(full[0]) < REJECT_SIGMAS) & (np.abs(full[1]) < REJECT_SIGMAS)
-        fit = _fit(
-            obs.subset(keep), basis, fit.sigma_m, fit.sigma_h, datum, settings.dem_offset_sigma_m
-        )
+            fit = _fit(obs.subset(keep), basis, fit.noise, datum, settings.dem_offset_sigma_m)
+        keep = _inliers(obs, basis, fit)
+        fit = _fit(obs.subset(keep), basis, fit.noise, datum, settings.dem_offset_sigma_m)
     return basis, fit, keep
 
 
-def _fit_residuals(obs: Observations, basis: LineBasis, fit: Fit) -> tuple[FloatArray, FloatArray]:
-    """Normalised residuals (along, across the base) of every row under ``fit``."""
-    u, v, _ = _axes(obs.parallax)
-    s_along, s_across = obs.sigmas(fit.sigma_m, fit.sigma_h)
+def _next_frequency(
+    obs: Observations, basis: LineBasis, fit: Fit, found: list[float]
+) -> float | None:
+    """The strongest jitter frequency (cycles per line) left in the across-base residuals,
+    or None. Across the base only: along it, the starting DEM's own errors, correlated over
+    hundreds of metres, make peaks a white-noise test takes for jitter. The series is given
+    in kilolines (the detector rounds frequencies to 1e-4 of its unit)."""
+    from carto.framework.adjustment.jitter import detect_jitter_frequencies
+
+    _, across = _residuals_px(obs, basis, fit)
+    width = max(1.0, float(basis.n_lines) / 4096.0)
+    t, r = _binned(obs.line, across, width)
+    for f in detect_jitter_frequencies([(t / 1000.0, r)], max_frequencies=1):
+        f = f / 1000.0
+        if f <= 0.5 and all(abs(f - g) > 0.5 / basis.n_lines for g in found):
+            return f
+    return None
+
+
+def _residuals_px(obs: Observations, basis: LineBasis, fit: Fit) -> tuple[FloatArray, FloatArray]:
+    """Residuals of every row under ``fit``, along and across the base, pixels."""
+    u, v, _ = axes(obs.parallax)
     b, _ = basis.design(obs.line)
     model = b @ fit.coefficients.T
     model = model + np.where(obs.on_dem, fit.dem_offset_m, 0.0)[:, None] * obs.parallax
     res = obs.residual - model
-    along = np.einsum("ij,ij->i", u, res) / s_along
-    across = np.einsum("ij,ij->i", v, res) / s_across
-    return along, across
+    return np.einsum("ij,ij->i", u, res), np.einsum("ij,ij->i", v, res)
+
+
+def _inliers(obs: Observations, basis: LineBasis, fit: Fit) -> NDArray[np.bool_]:
+    """Rows within :data:`REJECT_SIGMAS` of ``fit`` on both axes (each row's own sigma)."""
+    along, across = _residuals_px(obs, basis, fit)
+    s_along, s_across = obs.sigmas(fit.noise, banded=False)
+    return (np.abs(along / s_along) < REJECT_SIGMAS) & (np.abs(across / s_across) < REJECT_SIGMAS)
 
 
 @attrs.frozen(eq=False)
@@ -374,7 +408,7 @@ def _kind(mode: str, right: Sensor) -> str:
 def _stats(obs: Observations, correction: FloatArray | None = None) -> dict[str, float]:
     """Median and RMS of the across-base residual (px) and the median along it."""
     res = obs.residual if correction is None else obs.residual - correction
-    u, v, _ = _axes(obs.parallax)
+    u, v, _ = axes(obs.parallax)
     across = np.einsum("ij,ij->i", v, res)
     along = np.einsum("ij,ij->i", u, res)
     return {
@@ -397,110 +431,6 @@ def _line_rate_hz(sensor: Sensor) -> float | None:
     n = float(scanner.n_lines)
     t0, t1 = (float(t) for t in scanner.timing.time(np.array([0.0, n])))
     return n / (t1 - t0) if t1 != t0 else None
-
-
-def ties_to_observations(
-    table: Mapping[str, NDArray],
-    names: tuple[str, str],
-    left: Sensor,
-    right: Sensor,
-    dem: Any,
-) -> Observations:
-    """The rows of the tie-point table ``table`` (``id, image, line, sample``) seen in both
-    images, located on ``dem`` through the left image."""
-    ids_l, ids_r = (np.asarray(table["id"])[np.asarray(table["image"]) == n] for n in names)
-    _common, il, ir = np.intersect1d(ids_l, ids_r, return_indices=True)
-    rows_l = np.flatnonzero(np.asarray(table["image"]) == names[0])[il]
-    rows_r = np.flatnonzero(np.asarray(table["image"]) == names[1])[ir]
-    line_l = np.asarray(table["line"], np.float64)[rows_l]
-    samp_l = np.asarray(table["sample"], np.float64)[rows_l]
-    line_r = np.asarray(table["line"], np.float64)[rows_r]
-    samp_r = np.asarray(table["sample"], np.float64)[rows_r]
-    lon, lat, h = left.locate_on_dem(line_l, samp_l, dem)
-    ok = np.isfinite(lon) & np.isfinite(lat) & np.isfinite(h)
-    residual, parallax, _line0 = right_residuals(
-        left, right, line_l[ok], samp_l[ok], line_r[ok], samp_r[ok], lon[ok], lat[ok], h[ok]
-    )
-    good = np.isfinite(residual).all(axis=1) & np.isfinite(parallax).all(axis=1)
-    n = int(good.sum())
-    return Observations(
-        line_r[ok][good], residual[good], parallax[good], np.full(n, np.nan), np.ones(n, bool),
-        np.full(n, np.nan),
-    )  # fmt: skip
-
-
-def gcps_to_observations(
-    gcps: Mapping[str, NDArray], names: tuple[str, str], left: Sensor, right: Sensor
-) -> Observations:
-    """Rows of GCPs measured in both images (a control table: ``id, lon_deg, lat_deg, h_m,
-    image, line, sample, sigma_h_m``): the left measurement located at the GCP's height,
-    projected into the right image (the GCP's height holds the along-base datum)."""
-    image = np.asarray(gcps["image"])
-    ids_l, ids_r = (np.asarray(gcps["id"])[image == n] for n in names)
-    _, il, ir = np.intersect1d(ids_l, ids_r, return_indices=True)
-    rows_l = np.flatnonzero(image == names[0])[il]
-    rows_r = np.flatnonzero(image == names[1])[ir]
-
-    def col(key: str, rows: NDArray) -> FloatArray:
-        return np.asarray(gcps[key], np.float64)[rows]
-
-    h = col("h_m", rows_l)
-    line_l, samp_l = col("line", rows_l), col("sample", rows_l)
-    lon, lat = left.image_to_ground(line_l, samp_l, h)
-    residual, parallax, _ = right_residuals(
-        left, right, line_l, samp_l, col("line", rows_r), col("sample", rows_r), lon, lat, h
-    )
-    sigma = col("sigma_h_m", rows_l) if "sigma_h_m" in gcps else np.full(h.size, np.nan)
-    sigma = np.where(np.isfinite(sigma) & (sigma > 0), sigma, GCP_SIGMA_H_M)
-    if "sigma_px" in gcps:  # both images' measurement errors
-        s_px = np.hypot(col("sigma_px", rows_l), col("sigma_px", rows_r))
-        s_px = np.where(np.isfinite(s_px) & (s_px > 0), s_px, np.nan)
-    else:
-        s_px = np.full(h.size, np.nan)
-    good = np.isfinite(residual).all(axis=1) & np.isfinite(parallax).all(axis=1)
-    return Observations(
-        col("line", rows_r)[good], residual[good], parallax[good], sigma[good],
-        np.zeros(int(good.sum()), bool), s_px[good],
-    )  # fmt: skip
-
-
-def gcps_with_offsets(
-    gcps: Mapping[str, NDArray], offsets: Mapping[str, NDArray] | None
-) -> dict[str, NDArray]:
-    """``gcps`` with each GCP's measurement in a second image replaced by its first
-    measurement plus the matched offset of the GCP transfer (``gcp_offsets.csv``: ``id,
-    image_a, image_b, d_line, d_sample, sigma_px``), and the two rows' ``sigma_px`` such that
-    their difference has the offset's sigma: the pair's relative measurement is the matcher's
-    (0.1-0.2 px), not two hand measurements' (0.3 px each)."""
-    out = {k: np.array(v, copy=True) for k, v in gcps.items()}
-    if offsets is None or not len(offsets["id"]):
-        return out
-    if "sigma_px" not in out:
-        out["sigma_px"] = np.full(out["id"].size, np.nan)
-    out["sigma_px"] = out["sigma_px"].astype(np.float64)
-    for k in range(len(offsets["id"])):
-        gid, a, b = (str(offsets[c][k]) for c in ("id", "image_a", "image_b"))
-        row_a = np.flatnonzero((out["id"] == gid) & (out["image"] == a))
-        row_b = np.flatnonzero((out["id"] == gid) & (out["image"] == b))
-        if not (row_a.size and row_b.size):
-            continue
-        out["line"][row_b] = out["line"][row_a[0]] + float(offsets["d_line"][k])
-        out["sample"][row_b] = out["sample"][row_a[0]] + float(offsets["d_sample"][k])
-        sigma = float(offsets["sigma_px"][k]) if "sigma_px" in offsets else np.nan
-        if np.isfinite(sigma) and sigma > 0:
-            out["sigma_px"][row_a] = out["sigma_px"][row_b] = sigma / math.sqrt(2.0)
-    return out
-
-
-def _concat(a: Observations, b: Observations) -> Observations:
-    return Observations(
-        np.concatenate([a.line, b.line]),
-        np.concatenate([a.residual, b.residual]),
-        np.concatenate([a.parallax, b.parallax]),
-        np.concatenate([a.sigma_h, b.sigma_h]),
-        np.concatenate([a.on_dem, b.on_dem]),
-        np.concatenate([a.sigma_px, b.sigma_px]),
-    )
 
 
 def relative_orientation(
@@ -552,7 +482,7 @@ def relative_orientation(
     if gcps is not None:
         control = gcps_to_observations(gcps, names, left, right)
         if control.line.size:
-            obs = _concat(obs, control)
+            obs = concat(obs, control)
             datum = "gcp"
             record["gcps"] = int(control.line.size)
     n_lines = int(right.image_shape[0])
@@ -561,7 +491,7 @@ def relative_orientation(
     b, _ = basis.design(obs.line)
     model = b @ fit.coefficients.T
     kept = obs.subset(keep)
-    u, _, norm = _axes(obs.parallax)
+    u, _, norm = axes(obs.parallax)
     along_shift = np.einsum("ij,ij->i", u, model)
     rate = _line_rate_hz(right)
     record.update(
@@ -573,8 +503,9 @@ def relative_orientation(
             kept,
             model[keep] + np.where(kept.on_dem, fit.dem_offset_m, 0.0)[:, None] * kept.parallax,
         ),
-        matching_sigma_px=round(fit.sigma_m, 4),
-        dem_sigma_m=round(fit.sigma_h, 3),
+        matching_sigma_px=round(fit.noise.sigma_m, 4),
+        dem_sigma_m=round(fit.noise.sigma_h, 3),
+        dem_band_factor=round(fit.noise.band_factor, 2),
         dem_offset_m=round(fit.dem_offset_m, 3),
         correction_along_base_px={
             "min": round(float(along_shift.min()), 4),

@@ -43,20 +43,27 @@ def _as_frequencies(values: Sequence[float]) -> tuple[float, ...]:
     return tuple(float(v) for v in values)
 
 
+def _as_span(value: Sequence[float] | None) -> tuple[float, float] | None:
+    return None if value is None else (float(value[0]), float(value[1]))
+
+
 @attrs.frozen
 class LineBasis:
     """The basis functions of a line correction.
 
     Attributes:
-        n_lines: the image's lines (the spline spans ``[0, n_lines]``).
+        n_lines: the image's lines.
         knot_lines: spacing of the cubic B-spline's knots, lines; 0: no spline (a constant
             only).
         frequencies: jitter frequencies, cycles per line (a sine and a cosine each).
+        span_lines: the lines the spline spans (default ``(0, n_lines)``); beyond them it
+            keeps its end values (a spline is not extrapolated where nothing measured it).
     """
 
     n_lines: int = attrs.field(converter=int)
     knot_lines: float = attrs.field(default=0.0, converter=float)
     frequencies: tuple[float, ...] = attrs.field(default=(), converter=_as_frequencies)
+    span_lines: tuple[float, float] | None = attrs.field(default=None, converter=_as_span)
 
     def __attrs_post_init__(self) -> None:
         if self.n_lines < 1:
@@ -68,21 +75,29 @@ class LineBasis:
             raise InputError(
                 f"line correction: frequencies must be in (0, 0.5] cycles per line, got {bad}"
             )
+        first, last = self.span
+        if not (math.isfinite(first) and math.isfinite(last) and first < last):
+            raise InputError(f"line correction: span_lines must be increasing, got {self.span}")
+
+    @property
+    def span(self) -> tuple[float, float]:
+        """The spline's first and last line."""
+        return self.span_lines if self.span_lines is not None else (0.0, float(self.n_lines))
 
     @property
     def knots(self) -> FloatArray:
         """The spline's full knot vector (clamped: end knots repeated), or empty."""
         if self.knot_lines <= 0:
             return np.zeros(0)
-        n_spans = max(1, round(self.n_lines / self.knot_lines))
-        inner = np.linspace(0.0, float(self.n_lines), n_spans + 1)
+        first, last = self.span
+        n_spans = max(1, round((last - first) / self.knot_lines))
+        inner = np.linspace(first, last, n_spans + 1)
         return np.r_[[inner[0]] * 3, inner, [inner[-1]] * 3]
 
     @property
     def n_spline(self) -> int:
         """Spline functions (0 without a spline)."""
-        knots = self.knots
-        return max(0, knots.size - 4)
+        return max(0, self.knots.size - 4)
 
     @property
     def size(self) -> int:
@@ -98,56 +113,35 @@ class LineBasis:
         return names
 
     def design(self, lines: ArrayLike) -> tuple[FloatArray, FloatArray]:
-        """``(B, dB/dline)``, each ``(N, size)``: the basis and its derivative at ``lines``
-        (clipped to the spline's span; NaN lines give zero rows)."""
-        x = np.asarray(lines, dtype=np.float64).ravel()
-        ok = np.isfinite(x)
-        xc = np.clip(np.where(ok, x, 0.0), 0.0, float(self.n_lines) * (1 - 1e-12))
-        parts, slopes = [], []
-        if self.n_spline:
-            from scipy.interpolate import BSpline
-
-            knots = self.knots
-            eye = np.eye(self.n_spline)
-            spline = BSpline(knots, eye, 3, extrapolate=False)
-            value = spline(xc)
-            slope = spline.derivative()(xc)
-            parts.append(np.nan_to_num(value))
-            slopes.append(np.nan_to_num(slope))
-        else:
-            parts.append(np.ones((x.size, 1)))
-            slopes.append(np.zeros((x.size, 1)))
-        for f in self.frequencies:
-            w = 2.0 * math.pi * f
-            parts.append(np.stack([np.sin(w * xc), np.cos(w * xc)], axis=1))
-            slopes.append(np.stack([w * np.cos(w * xc), -w * np.sin(w * xc)], axis=1))
-        basis, d_basis = np.concatenate(parts, axis=1), np.concatenate(slopes, axis=1)
-        basis[~ok] = 0.0
-        d_basis[~ok] = 0.0
-        return basis, d_basis
+        """``(B, dB/dline)``, each ``(N, size)``: the basis functions and their derivatives
+        at ``lines`` (NaN lines give zero rows)."""
+        return self.evaluate(lines, np.eye(self.size))
 
     def evaluate(self, lines: ArrayLike, coefficients: FloatArray) -> tuple[FloatArray, FloatArray]:
         """``(value, slope)``, each ``(N, m)``: the functions with ``coefficients``
-        ``(m, size)`` and their derivatives along the lines, at ``lines`` (the design
-        matrix is never formed: a whole image's pixels at once)."""
+        ``(m, size)`` and their derivatives along the lines, at ``lines`` (for a whole
+        image's pixels at once: the design matrix is not formed)."""
         x = np.asarray(lines, dtype=np.float64).ravel()
         ok = np.isfinite(x)
-        xc = np.clip(np.where(ok, x, 0.0), 0.0, float(self.n_lines) * (1 - 1e-12))
+        x0 = np.where(ok, x, 0.0)
         c = np.asarray(coefficients, dtype=np.float64)
         n0 = self.n_spline or 1
         if self.n_spline:
             from scipy.interpolate import BSpline
 
+            first, last = self.span
+            inside = (x0 >= first) & (x0 <= last)
+            xc = np.clip(x0, first, last - 1e-9 * max(1.0, abs(last)))
             spline = BSpline(self.knots, c[:, :n0].T, 3, extrapolate=False)
             value = np.nan_to_num(spline(xc))
-            slope = np.nan_to_num(spline.derivative()(xc))
+            slope = np.where(inside[:, None], np.nan_to_num(spline.derivative()(xc)), 0.0)
         else:
             value = np.repeat(c[None, :, 0], x.size, axis=0)
             slope = np.zeros_like(value)
         for k, f in enumerate(self.frequencies):
             w = 2.0 * math.pi * f
             s_k, c_k = c[:, n0 + 2 * k], c[:, n0 + 2 * k + 1]
-            sin, cos = np.sin(w * xc)[:, None], np.cos(w * xc)[:, None]
+            sin, cos = np.sin(w * x0)[:, None], np.cos(w * x0)[:, None]
             value = value + sin * s_k + cos * c_k
             slope = slope + w * (cos * s_k - sin * c_k)
         value[~ok] = 0.0
@@ -158,6 +152,7 @@ class LineBasis:
         return {
             "n_lines": self.n_lines,
             "knot_lines": self.knot_lines,
+            "span_lines": list(self.span),
             "frequencies_cycles_per_line": list(self.frequencies),
         }
 

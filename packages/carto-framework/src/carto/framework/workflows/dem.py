@@ -19,6 +19,7 @@ from typing import Any
 import attrs
 import numpy as np
 
+from carto.framework.adjustment.relative_orientation import RelativeOrientationSettings
 from carto.framework.errors import InputError, UsageError
 from carto.framework.files.staging import require_complete_output, staged_folder
 from carto.framework.geometry.sensor import Sensor, SensorType
@@ -338,9 +339,8 @@ def dem_product(
     Before the generator runs, the right image is corrected to the left one
     (``relative_orientation``: a mode of
     :data:`~carto.framework.adjustment.relative_orientation.MODES`, see
-    :func:`orient_pair`).
+    :func:`~carto.framework.adjustment.relative_orientation.relative_orientation`).
     """
-    from carto.framework.adjustment.relative_orientation import RelativeOrientationSettings
     from carto.framework.parallel.engine import open_engine
 
     settings = dict(options or {})
@@ -410,48 +410,19 @@ def dem_product(
     return report
 
 
-def orient_pair(
-    images: Mapping[str, Any],
-    sensors: Mapping[str, Sensor],
-    start: DEM,
-    settings: Any,
-    *,
-    gcps: Mapping[str, Any] | None,
-    constant_dem: bool,
-    engine: Any,
-    quiet: bool,
-) -> Any:
-    """The pair's relative orientation before its DEM
-    (:func:`carto.framework.adjustment.relative_orientation.relative_orientation`): the
-    right image corrected to the left one from tie points on the starting DEM, held by
-    ``gcps`` (measured in both images) when there are some."""
-    from carto.framework.adjustment.relative_orientation import relative_orientation
-
-    return relative_orientation(
-        images,
-        sensors,
-        start,
-        settings,
-        gcps=gcps,
-        constant_dem=constant_dem,
-        engine=engine,
-        progress=None if quiet else (lambda line: progress("dem", line, False)),
-    )
-
-
 def _datum_gcps(inputs: StereoInputs, names: Sequence[str]) -> dict[str, Any] | None:
     """The GCPs of the adjustment whose models the run uses (``gcps.csv`` of a ``carto
     adjust`` output, with its GCP transfer's matched offsets, ``gcp_offsets.csv``), measured
     in both images of the pair; None without."""
+    from carto.framework.adjustment.pair_observations import gcps_with_offsets
     from carto.framework.files.control_table import read_control_table
+    from carto.framework.files.point_table import read_point_table
 
     if inputs.models is None:
         return None
     path = Path(inputs.models) / "gcps.csv"
     if not path.is_file():
         return None
-    from carto.framework.adjustment.relative_orientation import gcps_with_offsets
-    from carto.framework.files.point_table import read_point_table
 
     table = read_control_table(path, "gcps")
     keep = np.isin(table["image"], list(names))
@@ -517,10 +488,11 @@ def _dem_into(
     allow_poor: bool,
     engine: Any,
     work: Path,
-    ro_settings: Any,
+    ro_settings: RelativeOrientationSettings,
 ) -> dict[str, Any]:
     """:func:`dem_product` writing into ``out`` (its staging folder), tiles on ``engine``,
     intermediate files in ``work``."""
+    from carto.framework.adjustment.relative_orientation import relative_orientation
     from carto.framework.dem_generation.base import DEMProduct
     from carto.framework.imaging.ortho import write_ortho
     from carto.framework.imaging.preparation import prepare_image
@@ -552,7 +524,7 @@ def _dem_into(
                 desc=f"merge staggered arrays of {n}",
             )
         )
-    oriented = orient_pair(
+    oriented = relative_orientation(
         dict(zip(names, images, strict=True)),
         sensors,
         start,
@@ -560,7 +532,7 @@ def _dem_into(
         gcps=_datum_gcps(inputs, names),
         constant_dem=init_height_m is not None,
         engine=engine,
-        quiet=quiet,
+        progress=None if quiet else (lambda line: progress("dem", line, False)),
     )
     sensors = {**sensors, names[1]: oriented.right}
     generator = choose_dem_generator(generator, pair.types)
