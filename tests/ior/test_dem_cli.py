@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 
 import numpy as np
 import pytest
@@ -145,3 +146,69 @@ def test_dem_needs_a_starting_dem_for_loose_images(run_carto, scene, tmp_path):
     )
     assert proc.returncode == 1
     assert "initial DEM" in proc.stderr
+
+
+def test_dem_coregistered_to_a_reference(run_carto, scene, tmp_path):
+    """A reference displaced by a known 3-D shift (the truth moved 8 m east, 5 m south and
+    3 m up): the DEM of the true models is moved onto it by that shift."""
+    from affine import Affine
+
+    truth = DEM.open(scene / "truth" / "dem.tif")
+    shifted = tmp_path / "shifted.tif"
+    assert truth.crs.is_geographic
+    lat = np.radians(truth.transform.f)
+    east_deg, north_deg = 8.0 / (111_320.0 * np.cos(lat)), 5.0 / 110_950.0
+    moved_transform = Affine.translation(east_deg, -north_deg) @ truth.transform
+    DEM.from_array(truth.heights + 3.0, moved_transform, truth.crs).write(shifted)
+    base = ["dem", str(scene), "--models", str(scene / "truth"), "--posting", "10"]
+    args = ["--coregister", str(shifted), "--coregister-accuracy", "15"]
+    proc = run_carto([*base, "--out", str(tmp_path / "co"), *args])
+    assert proc.returncode == 0, proc.stderr
+    assert "co-registered to" in proc.stderr
+    c = json.loads((tmp_path / "co" / "report.json").read_text())["coregistration"]
+    assert c["applied"]
+    assert not c["flagged"]
+    assert (c["dx_m"], c["dy_m"]) == pytest.approx((-8.0, 5.0), abs=1.5)
+    assert c["dz_m"] == pytest.approx(-3.0, abs=0.5)
+    after = dem_accuracy(DEM.open(tmp_path / "co" / "dem.tif"), DEM.open(shifted))
+    assert abs(after["median_m"]) < 0.2
+    assert after["nmad_m"] < 1.0
+    # an adjustment without GCPs co-registers to the starting DEM by default; this scene's
+    # 90 m start is too coarse over 750 m: the DEM is left as it is, and the report says why
+    adjusted = tmp_path / "adj0"
+    shutil.copytree(scene / "truth", adjusted)
+    (adjusted / ".carto-output.json").write_text(json.dumps({"command": "adjust"}))
+    auto = run_carto(
+        [*base[:2], "--models", str(adjusted), "--posting", "10", "--out", str(tmp_path / "auto")]
+    )
+    assert auto.returncode == 0, auto.stderr
+    c = json.loads((tmp_path / "auto" / "report.json").read_text())["coregistration"]
+    assert not c["applied"]
+    assert "span only" in c["reason"]
+
+
+def test_dem_coregister_errors(run_carto, scene, tmp_path):
+    proc = run_carto(["dem", str(scene), "--out", str(tmp_path / "x"), "--coregister", "nope"])
+    assert proc.returncode == 2
+    assert "--coregister must be auto, none or a reference DEM file" in proc.stderr
+    far = tmp_path / "far.tif"
+    d = DEM.open(scene / "truth" / "dem.tif")
+    DEM.from_array(d.heights, d.transform * d.transform.translation(5000, 0), d.crs).write(far)
+    proc = run_carto(
+        [
+            "dem",
+            str(scene),
+            "--models",
+            str(scene / "truth"),
+            "--out",
+            str(tmp_path / "y"),
+            "--posting",
+            "10",
+            "--coregister",
+            str(far),
+        ]
+    )
+    assert proc.returncode == 1
+    assert "does not cover" in proc.stderr or "do not overlap" in proc.stderr
+    assert len(proc.stderr.strip().splitlines()[-1:]) == 1
+    assert not (tmp_path / "y").exists()

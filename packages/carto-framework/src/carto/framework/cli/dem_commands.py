@@ -57,6 +57,22 @@ def _accuracy_summary(report: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def _coregistration_summary(c: dict[str, Any]) -> str:
+    lines = [
+        f"co-registered to the reference (Nuth & Kaab, then a plane), {c['nodes']} nodes:",
+        f"  shift dx {c['dx_m']:+.3f} m, dy {c['dy_m']:+.3f} m, dz {c['dz_m']:+.3f} m "
+        f"(formal sigma {', '.join(f'{v:.3f}' for v in c['formal_sigma_m'])} m)",
+        f"  tilt {c['tilt_x_m_per_km']:+.4f} m/km east, {c['tilt_y_m_per_km']:+.4f} m/km north",
+        f"  NMAD {c['before']['nmad_m']:.3f} -> {c['after']['nmad_m']:.3f} m on the DEM's grid",
+    ]
+    if c["flagged"]:
+        lines.append(
+            f"  warning: the shift ({c['shift_m']:.1f} m) exceeds the reference's stated "
+            f"accuracy ({c['reference_accuracy_m']:g} m)"
+        )
+    return "\n".join(lines) + "\n"
+
+
 def cmd_evaluate(args: argparse.Namespace) -> int:
     from carto.framework.evaluation.dem_accuracy import dem_accuracy_by_blocks
     from carto.framework.files.atomic import atomic_output
@@ -72,8 +88,18 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
             check_output_file(value, option)
     dem = DEM.open(args.dem)
     geoid = None if args.geoid is None else Geoid.open(args.geoid)
+    coregistration = None
+    if args.coregister:
+        from carto.framework.evaluation.coregistration import CoregistrationSettings, coregister
+
+        settings = CoregistrationSettings(accuracy_m=args.coregister_accuracy)
+        result = coregister(dem, args.reference, geoid=geoid, settings=settings)
+        dem, coregistration = result.apply(dem), result.as_dict()
     comparison = dem_accuracy_by_blocks(dem, args.reference, geoid=geoid)
     report: dict[str, Any] = comparison.report
+    if coregistration is not None:
+        report["coregistration"] = coregistration
+        print(_coregistration_summary(coregistration))
     print(_accuracy_summary(report))
     outputs = []
     if args.out:
@@ -114,6 +140,7 @@ def add_evaluate(sub: argparse._SubParsersAction) -> None:
             "carto evaluate out/dem.tif --reference scene1/truth/dem.tif",
             "carto evaluate dem.tif --reference lidar.tif --out report.json --plot diff.png",
             "carto evaluate dem.tif --reference srtm.hgt --geoid egm96_15.gtx --hillshade hs.png",
+            "carto evaluate dem.tif --reference lidar.tif --coregister --out report.json",
         ),
         formatter_class=formatter,
     )
@@ -129,7 +156,38 @@ def add_evaluate(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", metavar="REPORT.json", help="write the figures as JSON")
     p.add_argument("--plot", metavar="DIFF.png", help="write a map of the differences")
     p.add_argument("--hillshade", metavar="HS.png", help="write a hillshade of DEM")
+    p.add_argument(
+        "--coregister",
+        action="store_true",
+        help="co-register DEM to the reference first (Nuth & Kaab 3-D shift, then a tilt) and "
+        "give the accuracy after it, with the transformation",
+    )
+    p.add_argument(
+        "--coregister-accuracy",
+        type=float,
+        default=10.0,
+        metavar="M",
+        help="the reference's stated accuracy (default 10 m); a larger move is flagged",
+    )
     p.set_defaults(handler=cmd_evaluate, needs_registry=False)
+
+
+def _add_coregister(p: argparse.ArgumentParser, default: str | None, when: str) -> None:
+    p.add_argument(
+        "--coregister",
+        default=default,
+        metavar="auto|none|REF",
+        help="co-register the DEM to a reference DEM (Nuth & Kaab 3-D shift, then a tilt; "
+        f"{when}the transformation goes to report.json)",
+    )
+    p.add_argument(
+        "--coregister-accuracy",
+        type=float,
+        default=10.0,
+        metavar="M",
+        help="the reference's stated accuracy (default 10 m, SRTM-like); a co-registration "
+        "that moves the DEM farther is flagged as a warning",
+    )
 
 
 # --------------------------------------------------------------------------- dem
@@ -174,6 +232,8 @@ def cmd_dem(args: argparse.Namespace) -> int:
         scheduler=args.scheduler,
         resume=args.resume,
         relative_orientation=args.relative_orientation,
+        coregister=args.coregister,
+        coregister_accuracy_m=args.coregister_accuracy,
     )
     print(_dem_summary(report))
     grid = report["dem_grid"]
@@ -236,6 +296,7 @@ def add_dem(sub: argparse._SubParsersAction) -> None:
             "carto dem scene1 --models adj1 --scheduler tcp://10.0.0.5:8786 --out dem1",
             "carto dem scene1 --models adj1 --out dem1 --resume   # after an interruption",
             "carto dem scene1 --models adj1 --relative-orientation none --out dem1",
+            "carto dem scene1 --models adj0 --coregister lidar.tif --out dem1",
         ),
         formatter_class=formatter,
     )
@@ -328,6 +389,9 @@ def add_dem(sub: argparse._SubParsersAction) -> None:
         "before the DEM (default auto: a line-varying correction with attitude jitter for "
         "line scanners, a shift for other models; the datum from the GCPs of --models, "
         "else the starting DEM); none: off",
+    )
+    _add_coregister(
+        p, "auto", "default auto: to the starting DEM when no GCP of --models holds the datum; "
     )
     p.add_argument("--reference", metavar="DEM", help="reference DEM to evaluate against")
     p.add_argument(

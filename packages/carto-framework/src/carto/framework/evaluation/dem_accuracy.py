@@ -60,7 +60,7 @@ def _same_grid(dem: DEM, reference: DEM) -> bool:
     return bool(dem.transform.almost_equals(t, precision=tol))
 
 
-def _warp(source: FloatArray, dem: DEM, reference: DEM, resampling: str) -> FloatArray:
+def warp_heights(source: FloatArray, dem: DEM, reference: DEM, resampling: str) -> FloatArray:
     """``source`` (on the grid of ``dem``) resampled onto the grid of ``reference``; NaN
     where it has no value."""
     from rasterio.errors import RasterioError
@@ -93,7 +93,7 @@ def _warp(source: FloatArray, dem: DEM, reference: DEM, resampling: str) -> Floa
     return out
 
 
-def _same_vertical(dem: DEM, reference: DEM, geoid: Geoid | None) -> tuple[DEM, DEM]:
+def reconcile_vertical(dem: DEM, reference: DEM, geoid: Geoid | None) -> tuple[DEM, DEM]:
     """Both DEMs in one vertical reference, converting a geoid one to ellipsoidal heights
     with ``geoid`` when the other is ellipsoidal; InputError otherwise."""
     if dem.vertical == reference.vertical:
@@ -148,13 +148,13 @@ def dem_difference(
         geoid = Geoid.open(geoid)
     if not np.isfinite(reference.heights).any():
         raise InputError(f"reference DEM {reference.name}: no valid height (all nodata)")
-    dem, reference = _same_vertical(dem, reference, geoid)
+    dem, reference = reconcile_vertical(dem, reference, geoid)
     if _same_grid(dem, reference):
         resampled = np.array(dem.heights, dtype=np.float64)
     else:
-        resampled = _warp(dem.heights, dem, reference, "bilinear")
+        resampled = warp_heights(dem.heights, dem, reference, "bilinear")
         if not np.isfinite(resampled).any():
-            footprint = _warp(np.ones(dem.shape), dem, reference, "nearest")
+            footprint = warp_heights(np.ones(dem.shape), dem, reference, "nearest")
             if not np.isfinite(footprint).any():
                 raise InputError(
                     f"DEM {dem.name} and reference {reference.name} do not overlap: "
@@ -451,15 +451,15 @@ def dem_accuracy_by_blocks(
         part = DEM.open(path, rows=(a, b))
         inner = slice(r0 - a, r0 - a + (r1 - r0))
         if np.isfinite(part.heights).any():
-            evaluated, part = _same_vertical(_covering(dem, part), part, geoid)
+            evaluated, part = reconcile_vertical(_covering(dem, part), part, geoid)
             name, vertical = part.name, part.vertical
             if _same_grid(evaluated, part):
                 resampled = np.array(evaluated.heights, np.float64)
             else:
-                resampled = _warp(evaluated.heights, evaluated, part, "bilinear")
+                resampled = warp_heights(evaluated.heights, evaluated, part, "bilinear")
             overlap = overlap or bool(np.isfinite(resampled).any())
             if not overlap:
-                footprint = _warp(np.ones(evaluated.shape), evaluated, part, "nearest")
+                footprint = warp_heights(np.ones(evaluated.shape), evaluated, part, "nearest")
                 overlap = bool(np.isfinite(footprint).any())
             diff = (resampled - part.heights)[inner]
             slope = slope_deg(part)[inner]

@@ -26,6 +26,12 @@ from carto.framework.geometry.sensor import Sensor, SensorType
 from carto.framework.plugins.registry import get_registry
 from carto.framework.raster.dem import DEM, Geoid
 from carto.framework.raster.vertical_reference import vertical_tag
+from carto.framework.workflows.dem_datum import (
+    auto_coregisters,
+    coregistered,
+    datum_gcps,
+    resolve_coregister,
+)
 from carto.framework.workflows.opening import open_options, open_sensor, sensor_type_for
 from carto.framework.workflows.reporting import jsonable, progress, write_report
 
@@ -317,6 +323,8 @@ def dem_product(
     scheduler: str | None = None,
     resume: bool = False,
     relative_orientation: str = "auto",
+    coregister: str | os.PathLike[str] | None = "auto",
+    coregister_accuracy_m: float = 10.0,
 ) -> dict[str, Any]:
     """Generate a DEM and ortho-images and write them to ``out_dir``; return the report.
 
@@ -339,7 +347,10 @@ def dem_product(
     Before the generator runs, the right image is corrected to the left one
     (``relative_orientation``: a mode of
     :data:`~carto.framework.adjustment.relative_orientation.MODES`, see
-    :func:`~carto.framework.adjustment.relative_orientation.relative_orientation`).
+    :func:`~carto.framework.adjustment.relative_orientation.relative_orientation`). The DEM
+    is then co-registered (``coregister``: ``"auto"``, ``"none"`` or a reference DEM file,
+    :func:`~carto.framework.workflows.dem_datum.coregistered`; a move beyond
+    ``coregister_accuracy_m`` is a warning).
     """
     from carto.framework.parallel.engine import open_engine
 
@@ -349,6 +360,9 @@ def dem_product(
         ro_settings = RelativeOrientationSettings(mode=relative_orientation)
     except InputError as exc:
         raise UsageError(str(exc)) from None
+    coregister = resolve_coregister(coregister)
+    if not (np.isfinite(coregister_accuracy_m) and coregister_accuracy_m > 0):
+        raise UsageError(f"--coregister-accuracy must be > 0 m, got {coregister_accuracy_m:g}")
     if vertical not in ("ellipsoid", "geoid"):
         raise UsageError(f"--vertical must be 'ellipsoid' or 'geoid', got {vertical!r}")
     if vertical == "geoid" and geoid is None:
@@ -365,6 +379,7 @@ def dem_product(
         init_dem,
         geoid,
         reference,
+        None if isinstance(coregister, str) else coregister,
     ]
     facts = {
         "generator": generator,
@@ -376,6 +391,8 @@ def dem_product(
         "allow_poor": allow_poor,
         "vertical": vertical,
         "relative_orientation": relative_orientation,
+        "coregister": str(coregister),
+        "coregister_accuracy_m": coregister_accuracy_m,
     }
     work: Path | None = None
     try:
@@ -398,6 +415,8 @@ def dem_product(
                     engine=engine,
                     work=work,
                     ro_settings=ro_settings,
+                    coregister=coregister,
+                    coregister_accuracy_m=coregister_accuracy_m,
                 )
     except BaseException as exc:
         if work is not None and work.is_dir():
@@ -408,34 +427,6 @@ def dem_product(
         raise
     shutil.rmtree(work, ignore_errors=True)
     return report
-
-
-def _datum_gcps(inputs: StereoInputs, names: Sequence[str]) -> dict[str, Any] | None:
-    """The GCPs of the adjustment whose models the run uses (``gcps.csv`` of a ``carto
-    adjust`` output, with its GCP transfer's matched offsets, ``gcp_offsets.csv``), measured
-    in both images of the pair; None without."""
-    from carto.framework.adjustment.pair_observations import gcps_with_offsets
-    from carto.framework.files.control_table import read_control_table
-    from carto.framework.files.point_table import read_point_table
-
-    if inputs.models is None:
-        return None
-    path = Path(inputs.models) / "gcps.csv"
-    if not path.is_file():
-        return None
-
-    table = read_control_table(path, "gcps")
-    keep = np.isin(table["image"], list(names))
-    table = {k: np.asarray(v)[keep] for k, v in table.items()}
-    offsets_path = Path(inputs.models) / "gcp_offsets.csv"
-    offsets = None
-    if offsets_path.is_file():
-        offsets = read_point_table(
-            offsets_path,
-            numeric=("d_line", "d_sample", "sigma_px"),
-            text=("id", "image_a", "image_b"),
-        )
-    return gcps_with_offsets(table, offsets)
 
 
 def _has_finished_work(work: Path) -> bool:
@@ -489,6 +480,8 @@ def _dem_into(
     engine: Any,
     work: Path,
     ro_settings: RelativeOrientationSettings,
+    coregister: str | Path,
+    coregister_accuracy_m: float,
 ) -> dict[str, Any]:
     """:func:`dem_product` writing into ``out`` (its staging folder), tiles on ``engine``,
     intermediate files in ``work``."""
@@ -524,12 +517,13 @@ def _dem_into(
                 desc=f"merge staggered arrays of {n}",
             )
         )
+    control = datum_gcps(inputs.models, names)
     oriented = relative_orientation(
         dict(zip(names, images, strict=True)),
         sensors,
         start,
         ro_settings,
-        gcps=_datum_gcps(inputs, names),
+        gcps=control,
         constant_dem=init_height_m is not None,
         engine=engine,
         progress=None if quiet else (lambda line: progress("dem", line, False)),
@@ -582,7 +576,18 @@ def _dem_into(
     for warning in warnings:
         progress("dem", f"warning: {warning}", quiet)
     geoid_grid = Geoid.open(geoid) if geoid else None
-    written = product.dem.to_geoid(geoid_grid) if vertical == "geoid" else product.dem
+    dem, coregistration = coregistered(
+        product.dem,
+        coregister,
+        start=start,
+        auto=auto_coregisters(inputs.models, init_height_m is not None),
+        geoid=geoid_grid,
+        accuracy_m=coregister_accuracy_m,
+        say=lambda line: progress("dem", line, quiet),
+    )
+    if coregistration and coregistration.get("warning"):
+        warnings.append(coregistration["warning"])
+    written = dem.to_geoid(geoid_grid) if vertical == "geoid" else dem
     vertical_reference = vertical_tag(written.vertical)
     files = {
         "dem": write_ortho(
@@ -628,6 +633,7 @@ def _dem_into(
         "failed_tiles": list(product.failed_tiles),
         "initial_dem": start.name,
         "relative_orientation": oriented.record,
+        "coregistration": coregistration,
         "dem_grid": {
             "crs": product.dem_grid.crs.to_string(),
             "posting_m": product.dem_grid.resolution[0],
@@ -652,7 +658,7 @@ def _dem_into(
     if reference is not None:
         from carto.framework.evaluation.dem_accuracy import dem_accuracy_by_blocks
 
-        comparison = dem_accuracy_by_blocks(product.dem, reference, geoid=geoid_grid)
+        comparison = dem_accuracy_by_blocks(dem, reference, geoid=geoid_grid)
         report["accuracy"] = comparison.report
         files["difference"] = difference_png(
             comparison.preview,
