@@ -30,6 +30,7 @@ GDAL's RPC transformer extrapolates everywhere; OSSIM and ASP warn outside the d
 
 from __future__ import annotations
 
+import math
 import types
 import warnings
 from collections.abc import Mapping, Sequence
@@ -65,7 +66,13 @@ __all__ = [
 
 
 DEFAULT_OFFSET_SIGMA_PX = 100.0
-"""A-priori sigma of the image-space offsets ``rpc.line.c0``/``rpc.sample.c0``, pixels."""
+"""A-priori sigma of the image-space offsets ``rpc.line.c0``/``rpc.sample.c0``, pixels, where
+the RPC gives no ground sampling to convert :data:`DEFAULT_BIAS_M` with."""
+DEFAULT_BIAS_M = 10.0
+"""A-priori bias of an RPC without ``ERR_BIAS``, metres per horizontal axis (1 sigma): the
+stated geolocation of current very-high-resolution products without GCPs (Pleiades 8.5 m
+CE90, WorldView 3.5-5 m CE90, SPOT 6/7 35 m CE90 at 1.5 m pixels is 10 m per axis) put
+together; the offsets' sigma in pixels is this over the image's ground sampling."""
 DEFAULT_AFFINE_SIGMA = 1e-4
 """A-priori sigma of the affine terms (``c_line``, ``c_sample``), pixels per pixel."""
 IMAGE_MARGIN = 0.1
@@ -84,13 +91,42 @@ _PARAMETER_NAMES = (
 )
 
 
-def default_rpc_parameters() -> tuple[Parameter, ...]:
-    """The six image-space correction parameters, zero, offsets free and affine terms fixed."""
+def ground_sampling_m(rpc: RPCCoefficients) -> float | None:
+    """The image's ground sampling at its centre and mean height, metres per pixel (the
+    larger of a line's and a sample's step on the ground), or None where the RPC does not
+    locate it."""
+    line = rpc.line_off + 0.5 + np.array([0.0, 1.0, 0.0])
+    sample = rpc.samp_off + 0.5 + np.array([0.0, 0.0, 1.0])
+    lon, lat = rpc.locate(line, sample, np.full(3, rpc.height_off))
+    if not (np.isfinite(lon).all() and np.isfinite(lat).all()):
+        return None
+    metres_lat = 111_132.0
+    metres_lon = metres_lat * math.cos(math.radians(float(lat[0])))
+    steps = np.hypot((lon[1:] - lon[0]) * metres_lon, (lat[1:] - lat[0]) * metres_lat)
+    gsd = float(steps.max())
+    return gsd if math.isfinite(gsd) and gsd > 0 else None
+
+
+def apriori_offset_sigma_px(rpc: RPCCoefficients) -> float:
+    """A-priori sigma of the image-space offsets, pixels: the RPC's ``ERR_BIAS`` (RMS bias
+    per horizontal axis, metres) when it states one, else :data:`DEFAULT_BIAS_M`, over its
+    ground sampling (:func:`ground_sampling_m`); :data:`DEFAULT_OFFSET_SIGMA_PX` when that
+    is unknown."""
+    bias = rpc.err_bias if rpc.err_bias is not None and rpc.err_bias > 0 else DEFAULT_BIAS_M
+    gsd = ground_sampling_m(rpc)
+    return DEFAULT_OFFSET_SIGMA_PX if gsd is None else float(bias / gsd)
+
+
+def default_rpc_parameters(
+    offset_sigma_px: float = DEFAULT_OFFSET_SIGMA_PX,
+) -> tuple[Parameter, ...]:
+    """The six image-space correction parameters, zero, offsets free (a-priori sigma
+    ``offset_sigma_px``) and affine terms fixed."""
     out = []
     for name in _PARAMETER_NAMES:
         axis, term = name.split(".")[1:]
         if term == "c0":
-            out.append(Parameter(name, 0.0, DEFAULT_OFFSET_SIGMA_PX, "px", True, f"{axis} offset"))
+            out.append(Parameter(name, 0.0, offset_sigma_px, "px", True, f"{axis} offset"))
         else:
             out.append(
                 Parameter(
@@ -112,8 +148,8 @@ class RPCSensor(Sensor):
     where ``(line, sample)`` is the RPC projection (project convention, pixels) and the
     adjustable parameters are ``a0, a1, a2 = rpc.line.c0, rpc.line.c_line, rpc.line.c_sample``
     and ``b0, b1, b2 = rpc.sample.c0, rpc.sample.c_line, rpc.sample.c_sample`` (px, px/px); only
-    the offsets ``a0, b0`` are free by default (a-priori sigmas :data:`DEFAULT_OFFSET_SIGMA_PX`
-    and :data:`DEFAULT_AFFINE_SIGMA`).
+    the offsets ``a0, b0`` are free by default (a-priori sigmas from the product,
+    :func:`apriori_offset_sigma_px`, and :data:`DEFAULT_AFFINE_SIGMA`).
 
     Args:
         rpc: the RPC model.
@@ -144,7 +180,8 @@ class RPCSensor(Sensor):
             raise InputError(f"RPC sensor image_shape must be two positive ints, got {image_shape}")
         self._shape: tuple[int, int] = (shape[0], shape[1])
         if parameters is None:
-            params = tuple(attrs.evolve(p, name=prefix + p.name) for p in default_rpc_parameters())
+            defaults = default_rpc_parameters(apriori_offset_sigma_px(rpc))
+            params = tuple(attrs.evolve(p, name=prefix + p.name) for p in defaults)
         else:
             params = tuple(parameters)
         expected = tuple(prefix + n for n in _PARAMETER_NAMES)

@@ -24,7 +24,7 @@ from carto.framework.adjustment.base import AdjustmentResult
 from carto.framework.adjustment.control_checks import check_control, check_tie_points
 from carto.framework.adjustment.image_trends import fold_image_trends
 from carto.framework.adjustment.observations import Observations
-from carto.framework.errors import AdjustmentError, InputError
+from carto.framework.errors import AdjustmentError, InputError, UsageError
 from carto.framework.files.control_table import read_control_table, read_tie_table
 from carto.framework.files.documents import read_json, write_json_atomic
 from carto.framework.files.point_table import write_point_table
@@ -201,6 +201,7 @@ def _adjust_into(
         raise InputError(f"gcp_offset_sigma_px must be > 0, got {offset_sigma_px}")
     checkpoints = None
     dem = None
+    flat_height_m = None
     rasters: dict[str, Path] = {}
     if src.is_dir() or src.name == "scene.json":
         scene = Scene.open(src)
@@ -221,7 +222,7 @@ def _adjust_into(
     elif src.suffix.lower() == ".json":
         config = read_configuration(src, sensor_type, trajectory)
         sensors, types, rasters, gcps = config.sensors, config.types, config.rasters, config.gcps
-        dem = config.dem
+        dem, flat_height_m = config.dem, config.flat_height_m
         matcher = matcher or config.matcher or "ncc"
     else:
         raise InputError(f"{src}: expected a scene folder or a JSON configuration file")
@@ -268,7 +269,9 @@ def _adjust_into(
     # points, it would only pull the block towards the coarse DEM's errors. So by default
     # ("auto"): every tie point without GCPs, else only those seen in an image without GCP
     # or whose rays meet at less than WEAK_INTERSECTION_DEG; True: every one; False: none.
-    tie_heights = _auto_flag(options.pop("tie_heights", "auto"), "tie_heights")
+    tie_heights = _flat_heights(
+        _auto_flag(options.pop("tie_heights", "auto"), "tie_heights"), flat_height_m, n_used
+    )
     height_sigma_m = float(options.pop("height_sigma_m", 30.0))
     height_offset_sigma_m = float(options.pop("height_offset_sigma_m", 0.0))
     if dem is not None and tie_table is not None and tie_heights is not False:
@@ -468,6 +471,22 @@ def _auto_flag(value: Any, name: str) -> str | bool:
     raise InputError(f"{name} must be 'auto', true or false, got {value!r}")
 
 
+def _flat_heights(tie_heights: Any, flat_height_m: float | None, n_used: int) -> Any:
+    """``tie_heights`` for a configuration whose DEM is a flat ``height_m``: a flat surface is
+    not the terrain, so it locates the tie points but never constrains their heights by
+    default (on the Reunion pair, 2346 m over 2270-2376 m of relief at 30 m per point moved
+    both RPCs 4-9 px and the DEM 25 m up); asked for without a GCP, it is refused."""
+    if flat_height_m is None or tie_heights is False:
+        return tie_heights
+    if tie_heights is True and n_used == 0:
+        raise UsageError(
+            f"--dem-heights: the configuration's height_m ({flat_height_m:g} m) is a flat "
+            "surface, not the terrain, and cannot hold a block without GCPs; give a DEM "
+            '("dem": FILE, e.g. SRTM with "geoid") or GCPs'
+        )
+    return tie_heights if tie_heights is True else False
+
+
 def _with_dem_heights(
     obs: Observations,
     sensors: Mapping[str, Sensor],
@@ -571,6 +590,7 @@ class Configuration:
     platform: str
     matcher: str | None
     trajectory_model: str | None
+    flat_height_m: float | None = None
 
 
 def read_configuration(
@@ -648,4 +668,5 @@ def read_configuration(
         str(doc.get("platform", "")),
         names["matcher"],
         names["trajectory_model"],
+        float(doc["height_m"]) if doc.get("height_m") is not None and not doc.get("dem") else None,
     )
