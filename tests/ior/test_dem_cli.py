@@ -193,7 +193,7 @@ def test_dem_coregister_errors(run_carto, scene, tmp_path):
     assert "--coregister must be auto, none or a reference DEM file" in proc.stderr
     far = tmp_path / "far.tif"
     d = DEM.open(scene / "truth" / "dem.tif")
-    DEM.from_array(d.heights, d.transform * d.transform.translation(5000, 0), d.crs).write(far)
+    DEM.from_array(d.heights, d.transform @ d.transform.translation(5000, 0), d.crs).write(far)
     proc = run_carto(
         [
             "dem",

@@ -34,6 +34,7 @@ class Observations:
         on_dem: rows whose height is the DEM's (they share the DEM offset).
         sigma_px: ``(N,)`` image sigma of the right-minus-left measurement per axis (NaN:
             the matching's, estimated).
+        sample: right-image sample of each row (where across the swath it is).
     """
 
     line: FloatArray
@@ -42,11 +43,12 @@ class Observations:
     sigma_h: FloatArray
     on_dem: NDArray[np.bool_]
     sigma_px: FloatArray
+    sample: FloatArray
 
     def subset(self, keep: NDArray[np.bool_]) -> Observations:
         return Observations(
             self.line[keep], self.residual[keep], self.parallax[keep], self.sigma_h[keep],
-            self.on_dem[keep], self.sigma_px[keep],
+            self.on_dem[keep], self.sigma_px[keep], self.sample[keep],
         )  # fmt: skip
 
     @property
@@ -142,7 +144,7 @@ def ties_to_observations(
     n = int(good.sum())
     return Observations(
         line_r[ok][good], residual[good], parallax[good], np.full(n, np.nan), np.ones(n, bool),
-        np.full(n, np.nan),
+        np.full(n, np.nan), samp_r[ok][good],
     )  # fmt: skip
 
 
@@ -177,7 +179,7 @@ def gcps_to_observations(
     good = np.isfinite(residual).all(axis=1) & np.isfinite(parallax).all(axis=1)
     return Observations(
         col("line", rows_r)[good], residual[good], parallax[good], sigma[good],
-        np.zeros(int(good.sum()), bool), s_px[good],
+        np.zeros(int(good.sum()), bool), s_px[good], col("sample", rows_r)[good],
     )  # fmt: skip
 
 
@@ -217,4 +219,5 @@ def concat(a: Observations, b: Observations) -> Observations:
         np.concatenate([a.sigma_h, b.sigma_h]),
         np.concatenate([a.on_dem, b.on_dem]),
         np.concatenate([a.sigma_px, b.sigma_px]),
+        np.concatenate([a.sample, b.sample]),
     )

@@ -107,6 +107,9 @@ DATUM_SIGMA_PX = 1e-3
 """Sigma of the zero-mean condition of the along-base correction (datum from the models)."""
 MIN_POINTS = 30
 """Fewer tie points than this: no relative orientation (the pair is reported as is)."""
+MIN_HALF_POINTS = 10
+"""A knot interval needs this many DEM rows each side of the swath to measure the along-base
+shape (:func:`_with_along_shape`)."""
 
 
 def _check_mode(_self: Any, _attr: attrs.Attribute, value: str) -> None:
@@ -136,7 +139,7 @@ class RelativeOrientationSettings:
 
     mode: str = attrs.field(default="auto", validator=_check_mode)
     tie_spacing_px: float = attrs.field(default=8.0, validator=_check_positive)
-    knot_lines: float = attrs.field(default=2048.0, validator=_check_positive)
+    knot_lines: float = attrs.field(default=256.0, validator=_check_positive)
     max_frequencies: int = attrs.field(default=8, converter=int)
     dem_offset_sigma_m: float = attrs.field(default=4.0, validator=_check_positive)
 
@@ -154,6 +157,7 @@ class Fit:
     dem_offset_m: float
     noise: Noise
     datum: str = "dem"
+    shape: Mapping[str, float] | None = None
 
 
 BAND_LINES = 64.0
@@ -364,7 +368,86 @@ def estimate_correction(
             fit = _fit(obs.subset(keep), basis, fit.noise, datum, settings.dem_offset_sigma_m)
         keep = _inliers(obs, basis, fit)
         fit = _fit(obs.subset(keep), basis, fit.noise, datum, settings.dem_offset_sigma_m)
+    if kind == "line" and basis.n_spline > 1:
+        shape = _with_along_shape(obs.subset(keep), basis, fit)
+        if shape.shape and shape.shape["gain"] > 0:  # the rest refitted under the shape
+            delta = shape.coefficients - fit.coefficients
+            b, _ = basis.design(obs.line)
+            less = attrs.evolve(obs, residual=obs.residual - b @ delta.T)
+            fit = _fit(less.subset(keep), basis, fit.noise, datum, settings.dem_offset_sigma_m)
+            shape = attrs.evolve(fit, coefficients=fit.coefficients + delta, shape=shape.shape)
+        fit = shape
     return basis, fit, keep
+
+
+def _half_means(
+    k: NDArray[np.int64], sample: FloatArray, value: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray, NDArray[np.int64]]:
+    """Per line bin ``k``: the mean of ``value`` over the bin, over its points left and right
+    of the bin's median sample, and the count (bins with fewer than
+    :data:`MIN_HALF_POINTS` points a side are NaN)."""
+    n = int(k.max()) + 1
+    order = np.lexsort((sample, k))
+    k_s, v_s = k[order], value[order]
+    count = np.bincount(k_s, minlength=n)
+    rank = np.arange(k_s.size) - np.r_[0, np.cumsum(count)[:-1]][k_s]
+    left = rank < count[k_s] / 2.0
+    c_l = np.bincount(k_s[left], minlength=n)
+    c_r = count - c_l
+    m_l = np.bincount(k_s[left], weights=v_s[left], minlength=n) / np.maximum(c_l, 1)
+    m_r = np.bincount(k_s[~left], weights=v_s[~left], minlength=n) / np.maximum(c_r, 1)
+    full = np.bincount(k_s, weights=v_s, minlength=n) / np.maximum(count, 1)
+    ok = (c_l >= MIN_HALF_POINTS) & (c_r >= MIN_HALF_POINTS)
+    nan = np.full(n, np.nan)
+    return np.where(ok, full, nan), np.where(ok, m_l, nan), np.where(ok, m_r, nan), count
+
+
+def _with_along_shape(obs: Observations, basis: LineBasis, fit: Fit) -> Fit:
+    """``fit`` with the slow shape of the along-base correction (module docstring): the
+    along-base residuals of the DEM rows averaged per knot interval; their left and right
+    halves of the swath see the same orientation but different parts of the DEM, so half
+    their difference measures the DEM's (and matching's) error of a mean, and the spread of
+    the means beyond it the orientation's. The means, shrunk by the gain
+    ``signal / (signal + noise)`` (a Wiener filter) and of zero mean (the datum stays),
+    become spline coefficients along the base."""
+    rows = obs.dem_rows
+    if rows.sum() < 4 * MIN_HALF_POINTS:
+        return fit
+    along, _ = _residuals_px(obs, basis, fit)
+    sub = obs.subset(rows)
+    first, last = basis.span
+    width = (last - first) / max(1, round((last - first) / basis.knot_lines))
+    k = np.clip(np.floor((sub.line - first) / width), 0, None).astype(np.int64)
+    full, m_l, m_r, count = _half_means(k, sub.sample, along[rows])
+    ok = np.isfinite(full)
+    if ok.sum() < 4:
+        return fit
+    mad = 1.4826
+    diff = (m_l - m_r)[ok]
+    noise = (mad * float(np.median(np.abs(diff - np.median(diff))))) ** 2 / 4.0
+    centred = full[ok] - np.average(full[ok], weights=count[ok])
+    spread = (mad * float(np.median(np.abs(centred - np.median(centred))))) ** 2
+    signal = max(spread - noise, 0.0)
+    gain = signal / (signal + noise) if signal + noise > 0 else 0.0
+    record = {
+        "signal_px": round(math.sqrt(signal), 4),
+        "noise_px": round(math.sqrt(noise), 4),
+        "gain": round(gain, 3),
+        "bins": int(ok.sum()),
+    }
+    if gain <= 0.0:
+        return attrs.evolve(fit, shape=record)
+    centres = first + (np.flatnonzero(ok) + 0.5) * width
+    b, _ = basis.design(centres)
+    spline = b[:, : basis.n_spline]
+    target = gain * centred
+    normal = spline.T @ spline + 1e-6 * np.eye(basis.n_spline)
+    c = np.linalg.solve(normal, spline.T @ target)
+    u0 = np.median(axes(obs.parallax)[0], axis=0)
+    u0 = u0 / np.linalg.norm(u0)
+    coefficients = fit.coefficients.copy()
+    coefficients[:, : basis.n_spline] += u0[:, None] * c[None, :]
+    return attrs.evolve(fit, coefficients=coefficients, shape=record)
 
 
 def _dem_coarser_than_models(
@@ -545,6 +628,7 @@ def relative_orientation(
         dem_sigma_m=round(fit.noise.sigma_h, 3),
         dem_band_factor=round(fit.noise.band_factor, 2),
         dem_offset_m=round(fit.dem_offset_m, 3),
+        along_shape=fit.shape,
         correction_along_base_px={
             "min": round(float(along_shift.min()), 4),
             "max": round(float(along_shift.max()), 4),
