@@ -35,6 +35,10 @@ class Observations:
         sigma_px: ``(N,)`` image sigma of the right-minus-left measurement per axis (NaN:
             the matching's, estimated).
         sample: right-image sample of each row (where across the swath it is).
+        left_line: left-image line of each row (where a left correction is evaluated).
+        left_jacobian: ``(N, 2, 2)`` motion of the right point per pixel of the left one at
+            the row's height, ``d(right line, sample) / d(left line, sample)``: how a left
+            correction shows in the right residual.
     """
 
     line: FloatArray
@@ -44,11 +48,14 @@ class Observations:
     on_dem: NDArray[np.bool_]
     sigma_px: FloatArray
     sample: FloatArray
+    left_line: FloatArray
+    left_jacobian: FloatArray
 
     def subset(self, keep: NDArray[np.bool_]) -> Observations:
         return Observations(
             self.line[keep], self.residual[keep], self.parallax[keep], self.sigma_h[keep],
-            self.on_dem[keep], self.sigma_px[keep], self.sample[keep],
+            self.on_dem[keep], self.sigma_px[keep], self.sample[keep], self.left_line[keep],
+            self.left_jacobian[keep],
         )  # fmt: skip
 
     @property
@@ -110,6 +117,22 @@ def right_residuals(
     return residual, parallax, np.asarray(line0, np.float64)
 
 
+def left_jacobian(
+    left: Sensor, right: Sensor, lines: FloatArray, samples: FloatArray, h: FloatArray
+) -> FloatArray:
+    """``(N, 2, 2)``: the right image's motion per pixel of the left one at heights ``h``
+    (finite differences of a pixel: the mapping is smooth at that scale)."""
+    out = np.full((lines.size, 2, 2), np.nan)
+    lon, lat = left.image_to_ground(lines, samples, h)
+    line0, sample0, _ = right.project(lon, lat, h)
+    for k, (dl, ds) in enumerate(((1.0, 0.0), (0.0, 1.0))):
+        lon, lat = left.image_to_ground(lines + dl, samples + ds, h)
+        line1, sample1, _ = right.project(lon, lat, h)
+        out[:, 0, k] = line1 - line0
+        out[:, 1, k] = sample1 - sample0
+    return out
+
+
 def axes(parallax: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Unit along-base ``u``, across-base ``v`` (``(N, 2)``) and ``|p|`` (px/m)."""
     norm = np.linalg.norm(parallax, axis=1)
@@ -140,11 +163,16 @@ def ties_to_observations(
     residual, parallax, _line0 = right_residuals(
         left, right, line_l[ok], samp_l[ok], line_r[ok], samp_r[ok], lon[ok], lat[ok], h[ok]
     )
-    good = np.isfinite(residual).all(axis=1) & np.isfinite(parallax).all(axis=1)
+    jacobian = left_jacobian(left, right, line_l[ok], samp_l[ok], h[ok])
+    good = (
+        np.isfinite(residual).all(axis=1)
+        & np.isfinite(parallax).all(axis=1)
+        & np.isfinite(jacobian).all(axis=(1, 2))
+    )
     n = int(good.sum())
     return Observations(
         line_r[ok][good], residual[good], parallax[good], np.full(n, np.nan), np.ones(n, bool),
-        np.full(n, np.nan), samp_r[ok][good],
+        np.full(n, np.nan), samp_r[ok][good], line_l[ok][good], jacobian[good],
     )  # fmt: skip
 
 
@@ -176,10 +204,16 @@ def gcps_to_observations(
         s_px = np.where(np.isfinite(s_px) & (s_px > 0), s_px, np.nan)
     else:
         s_px = np.full(h.size, np.nan)
-    good = np.isfinite(residual).all(axis=1) & np.isfinite(parallax).all(axis=1)
+    jacobian = left_jacobian(left, right, line_l, samp_l, h)
+    good = (
+        np.isfinite(residual).all(axis=1)
+        & np.isfinite(parallax).all(axis=1)
+        & np.isfinite(jacobian).all(axis=(1, 2))
+    )
     return Observations(
         col("line", rows_r)[good], residual[good], parallax[good], sigma[good],
         np.zeros(int(good.sum()), bool), s_px[good], col("sample", rows_r)[good],
+        line_l[good], jacobian[good],
     )  # fmt: skip
 
 
@@ -220,4 +254,6 @@ def concat(a: Observations, b: Observations) -> Observations:
         np.concatenate([a.on_dem, b.on_dem]),
         np.concatenate([a.sigma_px, b.sigma_px]),
         np.concatenate([a.sample, b.sample]),
+        np.concatenate([a.left_line, b.left_line]),
+        np.concatenate([a.left_jacobian, b.left_jacobian]),
     )

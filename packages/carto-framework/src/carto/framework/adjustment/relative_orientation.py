@@ -32,28 +32,34 @@ along the base (two variance components).
 The correction. Line scanners (and wrappers of one) get a line-varying correction. Across
 the base: a cubic B-spline of the line (knots every ``knot_lines``, spanning the lines the
 points cover) plus a sine and a cosine per jitter frequency. Along the base: a constant and
-the same sinusoids only. The slow shape along the base is not taken from the starting DEM:
-its long-wavelength errors are of the same size (with the true models of a 300 x 400 pixel
-scene, a spline along the base copied a 2 m tilt of the SRTM-like DEM into the DEM: NMAD 0.15
--> 1.0 m), and nothing in a pair tells them from the models' own slow errors (with
-adjusted models under ``--errors full`` the same spline helped: 1.05 -> 0.7 m); that needs the
-models' accuracy as a prior (issue 30). Jitter frequencies come from the Lomb-Scargle
-periodogram of the across-base residuals binned by line
+the same sinusoids in the fit, then the slow shape: the along-base residuals of the DEM rows
+averaged per knot interval, where the left and right halves of the swath see the same
+orientation but different parts of the starting DEM, so half their difference measures the
+DEM's error of a mean and the spread of the means beyond it the orientation's; the means,
+shrunk by the gain ``signal / (signal + noise)`` (a Wiener filter; no shape where the DEM
+cannot tell it), become the spline along the base and the rest is refitted under it
+(:func:`~carto.framework.adjustment.pair_correction.estimate_correction`). With
+``left_jitter`` the left image gets the same jitter frequencies (zero mean: it keeps its
+place): the terrain's parallax changes which left line meets a right line by tens of
+lines, so a per-right-line correction cannot carry the left image's jitter of tens of
+lines' period; a left correction shows in the right residual through the left-to-right
+Jacobian (off by default: measured no better on the DEM). Jitter frequencies come from the Lomb-Scargle periodogram of the
+across-base residuals binned by line
 (:func:`~carto.framework.adjustment.jitter.detect_jitter_frequencies`; along the base the
 DEM's correlated errors look like peaks to a white-noise test), one at a time with a re-fit
-after each. Priors: :data:`SHAPE_SIGMA_PX`, :data:`JITTER_SIGMA_PX`; the DEM rows' along-base
+after each. Priors: ``SHAPE_SIGMA_PX``, ``JITTER_SIGMA_PX``; the DEM rows' along-base
 weight carries the DEM's correlated share (:attr:`Noise.band_factor`). Other sensors (RPCs)
-get a shift. The right sensor comes back as a
-:class:`~carto.framework.geometry.line_correction.LineCorrected`; the left stays as it is.
+get a shift. The sensors come back as
+:class:`~carto.framework.geometry.line_correction.LineCorrected`.
 
 The datum (what holds the along-base constant, which a pair cannot see): GCPs when given
 (rows like the ties, with the GCP's height and sigma and no DEM offset; the right image's
 measurement refined by the adjustment's GCP transfer, :func:`gcps_with_offsets`), weighed
 against the DEM offset ``dH`` with its a-priori sigma (the DEM's absolute accuracy,
-:attr:`RelativeOrientationSettings.dem_offset_sigma_m`, and never less than its post error:
-:func:`~carto.framework.adjustment.pair_correction.offset_sigma_m`); without GCPs the starting DEM (its own bias remains, as when it is
-the only height reference), unless that sigma is worse than the models' own
-(a constant start over relief); then, and for a constant
+:attr:`RelativeOrientationSettings.dem_offset_sigma_m`, and never less than its post
+error, ``pair_correction.offset_sigma_m``); without GCPs the starting DEM (its own bias
+remains, as when it is the only height reference), unless that sigma is worse than the
+models' own (a constant start over relief); then, and for a constant
 starting height, the models (``dH`` free and the along-base correction of zero mean over
 the points). On the Reunion pair (constant 2344 m start, SGM, 0.5 m), the DEM went from
 NMAD 0.399 m / median -0.08 m without the relative orientation to 0.386 m / -0.025 m, the
@@ -79,7 +85,9 @@ from carto.framework.adjustment.pair_correction import (
     MODES,
     SHIFT_SPACING_PX,
     RelativeOrientationSettings,
+    correction_px,
     estimate_correction,
+    left_basis,
 )
 from carto.framework.adjustment.pair_observations import (
     Observations,
@@ -110,10 +118,13 @@ class RelativeOrientation:
     Attributes:
         right: the corrected right sensor (the given one when nothing was corrected).
         record: what ``report.json`` says of it (``relative_orientation``).
+        left: the left sensor with its jitter corrected (zero mean), or None when it stays
+            as given.
     """
 
     right: Sensor
     record: dict[str, Any]
+    left: Sensor | None = None
 
 
 def _kind(mode: str, right: Sensor) -> str:
@@ -210,6 +221,10 @@ def relative_orientation(
     n_lines = int(right.image_shape[0])
     basis, fit, keep = estimate_correction(obs, n_lines, kind, datum, settings)
     corrected = LineCorrected(right, basis, fit.coefficients)
+    left_corrected = left
+    if fit.left_coefficients is not None and fit.left_coefficients.size:
+        full = np.hstack([np.zeros((2, 1)), fit.left_coefficients])
+        left_corrected = LineCorrected(left, left_basis(basis, int(left.image_shape[0])), full)
     b, _ = basis.design(obs.line)
     model = b @ fit.coefficients.T
     kept = obs.subset(keep)
@@ -221,10 +236,7 @@ def relative_orientation(
         datum=fit.datum,
         rejected=int((~keep).sum()),
         before=_stats(kept),
-        after=_stats(
-            kept,
-            model[keep] + np.where(kept.on_dem, fit.dem_offset_m, 0.0)[:, None] * kept.parallax,
-        ),
+        after=_stats(kept, correction_px(kept, basis, fit)),
         matching_sigma_px=round(fit.noise.sigma_m, 4),
         dem_sigma_m=round(fit.noise.sigma_h, 3),
         dem_band_factor=round(fit.noise.band_factor, 2),
@@ -244,6 +256,9 @@ def relative_orientation(
             [round(f * rate, 3) for f in basis.frequencies] if rate is not None else None
         ),
         coefficients=np.round(fit.coefficients, 5).tolist(),
+        left_coefficients=(
+            None if left_corrected is left else np.round(fit.left_coefficients, 5).tolist()  # type: ignore[arg-type]
+        ),
     )
     if progress is not None:
         progress(
@@ -255,4 +270,4 @@ def relative_orientation(
             f"{record['correction_height_m']['max']:+.2f} m"
             + (f", {len(basis.frequencies)} jitter frequencies" if basis.frequencies else "")
         )
-    return RelativeOrientation(corrected, record)
+    return RelativeOrientation(corrected, record, left_corrected)

@@ -528,7 +528,7 @@ def _dem_into(
         engine=engine,
         progress=None if quiet else (lambda line: progress("dem", line, False)),
     )
-    sensors = {**sensors, names[1]: oriented.right}
+    sensors = {**sensors, names[0]: oriented.left or sensors[names[0]], names[1]: oriented.right}
     generator = choose_dem_generator(generator, pair.types)
     registry = get_registry()
     component = registry.get("dem-generator", generator)
