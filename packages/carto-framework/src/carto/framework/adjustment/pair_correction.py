@@ -202,12 +202,12 @@ def _fit(
     basis: LineBasis,
     noise: Noise,
     datum: str,
-    dem_offset_sigma_m: float,
-    left_jitter: bool = True,
+    settings: RelativeOrientationSettings,
 ) -> Fit:
     """Weighted least squares of :class:`Observations` (module docstring), whitened along and
     across the base, with the priors of :func:`_priors`; returns the variance components of
     its residuals too."""
+    left_jitter, dem_offset_sigma_m = settings.left_jitter, settings.dem_offset_sigma_m
     u, v, norm = axes(obs.parallax)
     s_along, s_across = obs.sigmas(noise)
     b, _ = basis.design(obs.line)
@@ -304,26 +304,12 @@ def estimate_correction(
     keep = np.ones(obs.line.size, bool)
     fit = Fit(np.zeros((2, basis.size)), 0.0, Noise())
     for _ in range(3):  # variance components and outliers settle in a few rounds
-        fit = _fit(
-            obs.subset(keep),
-            basis,
-            fit.noise,
-            datum,
-            settings.dem_offset_sigma_m,
-            settings.left_jitter,
-        )
+        fit = _fit(obs.subset(keep), basis, fit.noise, datum, settings)
         keep = _inliers(obs, basis, fit)
     if datum == "dem" and _dem_coarser_than_models(obs.subset(keep), fit.noise, settings):
         datum = "models"
         for _ in range(2):
-            fit = _fit(
-                obs.subset(keep),
-                basis,
-                fit.noise,
-                datum,
-                settings.dem_offset_sigma_m,
-                settings.left_jitter,
-            )
+            fit = _fit(obs.subset(keep), basis, fit.noise, datum, settings)
             keep = _inliers(obs, basis, fit)
     if kind == "line" and settings.max_frequencies > 0:
         found: list[float] = []
@@ -333,37 +319,16 @@ def estimate_correction(
                 break
             found.append(new)
             basis = attrs.evolve(basis, frequencies=tuple(found))
-            fit = _fit(
-                obs.subset(keep),
-                basis,
-                fit.noise,
-                datum,
-                settings.dem_offset_sigma_m,
-                settings.left_jitter,
-            )
+            fit = _fit(obs.subset(keep), basis, fit.noise, datum, settings)
         keep = _inliers(obs, basis, fit)
-        fit = _fit(
-            obs.subset(keep),
-            basis,
-            fit.noise,
-            datum,
-            settings.dem_offset_sigma_m,
-            settings.left_jitter,
-        )
+        fit = _fit(obs.subset(keep), basis, fit.noise, datum, settings)
     if kind == "line" and basis.n_spline > 1:
         shape = _with_along_shape(obs.subset(keep), basis, fit)
         if shape.shape and shape.shape["gain"] > 0:  # the rest refitted under the shape
             delta = shape.coefficients - fit.coefficients
             b, _ = basis.design(obs.line)
             less = attrs.evolve(obs, residual=obs.residual - b @ delta.T)
-            fit = _fit(
-                less.subset(keep),
-                basis,
-                fit.noise,
-                datum,
-                settings.dem_offset_sigma_m,
-                settings.left_jitter,
-            )
+            fit = _fit(less.subset(keep), basis, fit.noise, datum, settings)
             shape = attrs.evolve(fit, coefficients=fit.coefficients + delta, shape=shape.shape)
         fit = shape
     return basis, fit, keep

@@ -43,8 +43,8 @@ cannot tell it), become the spline along the base and the rest is refitted under
 place): the terrain's parallax changes which left line meets a right line by tens of
 lines, so a per-right-line correction cannot carry the left image's jitter of tens of
 lines' period; a left correction shows in the right residual through the left-to-right
-Jacobian (off by default: measured no better on the DEM). Jitter frequencies come from the Lomb-Scargle periodogram of the
-across-base residuals binned by line
+Jacobian (off by default: measured no better on the DEM). Jitter frequencies come from
+the Lomb-Scargle periodogram of the across-base residuals binned by line
 (:func:`~carto.framework.adjustment.jitter.detect_jitter_frequencies`; along the base the
 DEM's correlated errors look like peaks to a white-noise test), one at a time with a re-fit
 after each. Priors: ``SHAPE_SIGMA_PX``, ``JITTER_SIGMA_PX``; the DEM rows' along-base
