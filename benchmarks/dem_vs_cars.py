@@ -133,6 +133,18 @@ def run_carto(
     ]
     result = run_measured(command, log=out.parent / f"carto-{matcher}.log")
     result["dsm"] = str(out / "dem.tif") if (out / "dem.tif").is_file() else None
+    if (out / "report.json").is_file():  # the relative orientation (issue 30)
+        report = json.loads((out / "report.json").read_text())
+        ro = report.get("relative_orientation") or {}
+        result["relative_orientation"] = {
+            "correction": ro.get("correction"),
+            "datum": ro.get("datum"),
+            "median_across_base_px_before": (ro.get("before") or {}).get("median_across_base_px"),
+            "median_across_base_px_after": (ro.get("after") or {}).get("median_across_base_px"),
+            "coefficients_px": ro.get("coefficients"),
+        }
+        iterations = report.get("iterations") or [{}]
+        result["median_across_base_px_last_iteration"] = iterations[-1].get("median_across_base_px")
     return result
 
 

@@ -152,14 +152,17 @@ def test_a_constant_start_over_relief_leaves_the_datum_to_the_models(synthetic):
 
 
 def test_a_slow_shape_along_the_base_is_taken_where_the_dem_can_tell_it(synthetic):
-    """An along-base error of 0.4 px with a 2400-line period, which the across-base residuals
-    do not show: the along-base shape (left and right halves of the swath against the DEM's
-    3 m noise) recovers it; with no such error it stays near zero."""
+    """Attitude wander of a 2400-line period: 0.4 px along the base (a height error) and
+    0.3 px across it. Along the base the shape (left and right halves of the swath against
+    the DEM's 3 m noise, bounded by what the fit found across) recovers it; with no such
+    error it stays near zero."""
     aft, fore, _, table, start, dem_true = synthetic
     u0 = po.axes(po.ties_to_observations(table, ("aft", "fore"), aft, fore, start).parallax)[0]
     u0 = np.median(u0, axis=0)
+    v0 = np.array([-u0[1], u0[0]])
     basis = LineBasis(12000, 0.0, (1.0 / 2400.0,))
-    wander = LineCorrected(fore, basis, np.stack([[0.0, 0.4 * u, 0.0] for u in u0]))
+    motion = 0.4 * u0 + 0.3 * v0
+    wander = LineCorrected(fore, basis, np.stack([[0.0, m, 0.0] for m in motion]))
     settings = ro.RelativeOrientationSettings(max_frequencies=0)
     errors = {}
     still = LineCorrected(fore, basis, np.zeros((2, 3)))
