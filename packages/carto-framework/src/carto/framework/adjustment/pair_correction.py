@@ -115,6 +115,10 @@ motions differ by the views' tilts): with the true models of five simulated pair
 unbounded shape copied the starting DEM's swath-wide errors (NMAD 0.2 -> 0.4-1.2 m)."""
 JITTER_FLOOR_PX = 0.02
 """Least sigma of an along-base jitter term (:func:`_along_jitter_sigmas`)."""
+JITTER_MIN_ACROSS_PX = 0.05
+"""A frequency whose across-base amplitude is below this keeps its along-base terms at
+:data:`JITTER_FLOOR_PX` (the true models of simulated pairs show at most 0.033 px across at
+the frequencies found; adjusted models under ``--errors full`` 0.05-0.14 px)."""
 COEFFICIENT_SIGMA_PX = 10.0
 """A weak prior on every coefficient (knots without points stay determined)."""
 
@@ -349,14 +353,19 @@ def estimate_correction(
 def _along_jitter_sigmas(obs: Observations, basis: LineBasis, fit: Fit) -> FloatArray:
     """Sigmas of the along-base sines and cosines: :data:`SHAPE_ACROSS_RATIO` times the
     amplitude the fit found across the base at the same frequency, plus
-    :data:`JITTER_FLOOR_PX` (the DEM rows alone let the starting DEM's errors at a
-    frequency pass as jitter: with the true models of a simulated pair, NMAD 0.2 -> 0.45 m)."""
+    :data:`JITTER_FLOOR_PX`, and the floor alone below :data:`JITTER_MIN_ACROSS_PX` (the
+    DEM rows alone let the starting DEM's errors at a frequency pass as jitter: with the true
+    models of a simulated pair, NMAD 0.2 -> 0.45 m)."""
     n0 = basis.n_spline or 1
     u0 = np.median(axes(obs.parallax)[0], axis=0)
     u0 = u0 / np.linalg.norm(u0)
     across = np.array([-u0[1], u0[0]]) @ fit.coefficients[:, n0:]  # (2 F,): sin, cos, ...
     amplitude = np.hypot(across[0::2], across[1::2])
-    return np.repeat(SHAPE_ACROSS_RATIO * amplitude + JITTER_FLOOR_PX, 2)
+    sigma = np.where(
+        amplitude >= JITTER_MIN_ACROSS_PX, SHAPE_ACROSS_RATIO * amplitude + JITTER_FLOOR_PX,
+        JITTER_FLOOR_PX,
+    )  # fmt: skip
+    return np.repeat(sigma, 2)
 
 
 def _half_means(
