@@ -144,3 +144,6 @@ def test_cli_evaluate_coregisters_before_the_figures(tmp_path, run_carto, refere
     far = run_carto([*args, "--coregister", "--coregister-accuracy", "5"], cwd=tmp_path)
     assert "exceeds the reference's stated accuracy (5 m)" in far.stdout
     assert json.loads((tmp_path / "r.json").read_text())["coregistration"]["flagged"]
+    bad = run_carto([*args, "--coregister", "--coregister-accuracy", "0"], cwd=tmp_path)
+    assert bad.returncode == 2
+    assert "--coregister-accuracy must be > 0 m" in bad.stderr

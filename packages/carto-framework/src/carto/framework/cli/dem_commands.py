@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from carto.framework.cli.common import examples, formatter, table
-from carto.framework.errors import InputError
+from carto.framework.errors import InputError, UsageError
 from carto.framework.parallel.engine import default_workers
 
 
@@ -89,6 +89,8 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     dem = DEM.open(args.dem)
     geoid = None if args.geoid is None else Geoid.open(args.geoid)
     coregistration = None
+    if not args.coregister_accuracy > 0:
+        raise UsageError(f"--coregister-accuracy must be > 0 m, got {args.coregister_accuracy:g}")
     if args.coregister:
         from carto.framework.evaluation.coregistration import CoregistrationSettings, coregister
 
@@ -391,7 +393,9 @@ def add_dem(sub: argparse._SubParsersAction) -> None:
         "else the starting DEM); none: off",
     )
     _add_coregister(
-        p, "auto", "default auto: to the starting DEM when no GCP of --models holds the datum; "
+        p,
+        "auto",
+        "default auto: to the starting DEM when --models is a carto adjust output without GCPs; ",
     )
     p.add_argument("--reference", metavar="DEM", help="reference DEM to evaluate against")
     p.add_argument(
