@@ -67,7 +67,7 @@ def _ties(aft, right_true, dem_true, rng):
 
 def test_jitter_and_offset_are_recovered_from_ties_on_a_noisy_dem(synthetic):
     aft, fore, right_true, table, start, _ = synthetic
-    obs = po.ties_to_observations(table, ("aft", "fore"), aft, fore, start)
+    obs = po.ties_to_observations(table, ("aft", "fore"), aft, fore, start, jacobian=True)
     settings = ro.RelativeOrientationSettings(knot_lines=12000.0, left_jitter=True)
     basis, fit, keep = ro.estimate_correction(obs, 12000, "line", "dem", settings)
     found = sorted(basis.frequencies)[:2]
@@ -174,8 +174,8 @@ def test_a_slow_shape_along_the_base_is_taken_where_the_dem_can_tell_it(syntheti
         error = (estimated - np.stack(right_true.shift(obs.line), axis=1)) @ u0
         errors[name] = float(np.sqrt(np.mean((error - error.mean()) ** 2)))
         if name == "wander":
-            assert fit.shape["gain"] > 0.8
-            assert fit.shape["signal_px"] == pytest.approx(0.4 / np.sqrt(2), rel=0.3)
+            assert fit.along_shape["gain"] > 0.8
+            assert fit.along_shape["signal_px"] == pytest.approx(0.4 / np.sqrt(2), rel=0.3)
     # px, of 0.28 px RMS uncorrected: what the DEM's noise leaves of a knot interval's mean
     # (0.13 px here, measured by the halves) after the Wiener gain and the spline
     assert errors["wander"] < 0.11

@@ -40,7 +40,7 @@ MIN_POINTS = 30
 """Fewer tie points than this: no relative orientation (the pair is reported as is)."""
 MIN_HALF_POINTS = 10
 """A knot interval needs this many DEM rows each side of the swath to measure the along-base
-shape (:func:`_with_along_shape`)."""
+shape (:func:`_along_shape`)."""
 
 
 def _check_mode(_self: Any, _attr: attrs.Attribute, value: str) -> None:
@@ -93,7 +93,7 @@ class Fit:
     dem_offset_m: float
     noise: Noise
     datum: str = "dem"
-    shape: Mapping[str, float] | None = None
+    along_shape: Mapping[str, float] | None = None
     left_coefficients: FloatArray | None = None
 
 
@@ -128,7 +128,7 @@ def _expansion(basis: LineBasis, u0: FloatArray, left: bool) -> FloatArray:
     estimated ``[along (1 + 2 F), across (size), dH, left (4 F)]`` (``left``: the left
     image's jitter sines and cosines, line then sample, :func:`left_design`). Along the base
     the fit has a constant and the jitter sinusoids only; its slow shape comes after it,
-    filtered against the starting DEM's error (:func:`_with_along_shape`). Across the base
+    filtered against the starting DEM's error (:func:`_along_shape`). Across the base
     the spline follows it too."""
     n_b, n_f = basis.size, len(basis.frequencies)
     n0 = basis.n_spline or 1
@@ -229,8 +229,7 @@ def _fit(
     s_l = left_design(basis, obs.left_line) if left_jitter else np.zeros((obs.line.size, 0))
     n_l = s_l.shape[1]
     n_p = 2 * n_b + 1 + 2 * n_l
-    u0 = np.median(u, axis=0) / np.linalg.norm(np.median(u, axis=0))
-    expand = _expansion(basis, u0, left_jitter)
+    expand = _expansion(basis, _base_direction(obs), left_jitter)
 
     def rows(axis: FloatArray, scale: FloatArray) -> tuple[FloatArray, FloatArray]:
         a = np.zeros((obs.line.size, n_p))
@@ -339,15 +338,20 @@ def estimate_correction(
     if bound is not None:
         fit = _fit(obs.subset(keep), basis, fit.noise, datum, settings, bound)
     if kind == "line" and basis.n_spline > 1:
-        shape = _with_along_shape(obs.subset(keep), basis, fit)
-        if shape.shape and shape.shape["gain"] > 0:  # the rest refitted under the shape
-            delta = shape.coefficients - fit.coefficients
+        delta, record = _along_shape(obs.subset(keep), basis, fit)
+        if delta is not None:  # the rest refitted under the shape
             b, _ = basis.design(obs.line)
             less = attrs.evolve(obs, residual=obs.residual - b @ delta.T)
             fit = _fit(less.subset(keep), basis, fit.noise, datum, settings, bound)
-            shape = attrs.evolve(fit, coefficients=fit.coefficients + delta, shape=shape.shape)
-        fit = shape
+            fit = attrs.evolve(fit, coefficients=fit.coefficients + delta)
+        fit = attrs.evolve(fit, along_shape=record)
     return basis, fit, keep
+
+
+def _base_direction(obs: Observations) -> FloatArray:
+    """The stereo base's median direction in the right image, a unit ``(2,)`` vector."""
+    u0 = np.median(axes(obs.parallax)[0], axis=0)
+    return u0 / np.linalg.norm(u0)
 
 
 def _along_jitter_sigmas(obs: Observations, basis: LineBasis, fit: Fit) -> FloatArray:
@@ -357,8 +361,7 @@ def _along_jitter_sigmas(obs: Observations, basis: LineBasis, fit: Fit) -> Float
     DEM rows alone let the starting DEM's errors at a frequency pass as jitter: with the true
     models of a simulated pair, NMAD 0.2 -> 0.45 m)."""
     n0 = basis.n_spline or 1
-    u0 = np.median(axes(obs.parallax)[0], axis=0)
-    u0 = u0 / np.linalg.norm(u0)
+    u0 = _base_direction(obs)
     across = np.array([-u0[1], u0[0]]) @ fit.coefficients[:, n0:]  # (2 F,): sin, cos, ...
     amplitude = np.hypot(across[0::2], across[1::2])
     sigma = np.where(
@@ -390,8 +393,11 @@ def _half_means(
     return np.where(ok, full, nan), np.where(ok, m_l, nan), np.where(ok, m_r, nan), count
 
 
-def _with_along_shape(obs: Observations, basis: LineBasis, fit: Fit) -> Fit:
-    """``fit`` with the slow shape of the along-base correction (module docstring): the
+def _along_shape(
+    obs: Observations, basis: LineBasis, fit: Fit
+) -> tuple[FloatArray | None, dict[str, float] | None]:
+    """The slow shape of the along-base correction, as coefficients to add to ``fit``'s
+    (None where there is none), and its record (module docstring): the
     along-base residuals of the DEM rows averaged per knot interval; their left and right
     halves of the swath see the same orientation but different parts of the DEM, so half
     their difference measures the DEM's (and matching's) error of a mean, and the spread of
@@ -403,7 +409,7 @@ def _with_along_shape(obs: Observations, basis: LineBasis, fit: Fit) -> Fit:
     orientation, but they have no counterpart across the base."""
     rows = obs.dem_rows
     if rows.sum() < 4 * MIN_HALF_POINTS:
-        return fit
+        return None, None
     along, _ = residuals_px(obs, basis, fit)
     sub = obs.subset(rows)
     first, last = basis.span
@@ -412,7 +418,7 @@ def _with_along_shape(obs: Observations, basis: LineBasis, fit: Fit) -> Fit:
     full, m_l, m_r, count = _half_means(k, sub.sample, along[rows])
     ok = np.isfinite(full)
     if ok.sum() < 4:
-        return fit
+        return None, None
     mad = 1.4826
     diff = (m_l - m_r)[ok]
     noise = (mad * float(np.median(np.abs(diff - np.median(diff))))) ** 2 / 4.0
@@ -421,8 +427,7 @@ def _with_along_shape(obs: Observations, basis: LineBasis, fit: Fit) -> Fit:
     centres = first + (np.flatnonzero(ok) + 0.5) * width
     b, _ = basis.design(centres)
     spline = b[:, : basis.n_spline]
-    u0 = np.median(axes(obs.parallax)[0], axis=0)
-    u0 = u0 / np.linalg.norm(u0)
+    u0 = _base_direction(obs)
     across = spline @ fit.coefficients[:, : basis.n_spline].T @ np.array([-u0[1], u0[0]])
     bound = (SHAPE_ACROSS_RATIO * float(np.std(across))) ** 2
     signal = min(max(spread - noise, 0.0), bound)
@@ -435,13 +440,12 @@ def _with_along_shape(obs: Observations, basis: LineBasis, fit: Fit) -> Fit:
         "bins": int(ok.sum()),
     }
     if gain <= 0.0:
-        return attrs.evolve(fit, shape=record)
-    target = gain * centred
+        return None, record
     normal = spline.T @ spline + 1e-6 * np.eye(basis.n_spline)
-    c = np.linalg.solve(normal, spline.T @ target)
-    coefficients = fit.coefficients.copy()
-    coefficients[:, : basis.n_spline] += u0[:, None] * c[None, :]
-    return attrs.evolve(fit, coefficients=coefficients, shape=record)
+    c = np.linalg.solve(normal, spline.T @ (gain * centred))
+    delta = np.zeros_like(fit.coefficients)
+    delta[:, : basis.n_spline] = u0[:, None] * c[None, :]
+    return delta, record
 
 
 def _dem_coarser_than_models(

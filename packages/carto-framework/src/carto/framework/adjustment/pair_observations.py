@@ -133,6 +133,14 @@ def left_jacobian(
     return out
 
 
+def _jacobian(
+    wanted: bool, left: Sensor, right: Sensor, lines: FloatArray, samples: FloatArray, h: FloatArray
+) -> FloatArray:
+    if wanted:
+        return left_jacobian(left, right, lines, samples, h)
+    return np.zeros((lines.size, 2, 2))
+
+
 def axes(parallax: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Unit along-base ``u``, across-base ``v`` (``(N, 2)``) and ``|p|`` (px/m)."""
     norm = np.linalg.norm(parallax, axis=1)
@@ -147,9 +155,12 @@ def ties_to_observations(
     left: Sensor,
     right: Sensor,
     dem: Any,
+    jacobian: bool = False,
 ) -> Observations:
     """The rows of the tie-point table ``table`` (``id, image, line, sample``) seen in both
-    images, located on ``dem`` through the left image."""
+    images, located on ``dem`` through the left image; ``jacobian``: with the left-to-right
+    Jacobian (:func:`left_jacobian`; zeros without, which a fit without left terms never
+    reads)."""
     ids_l, ids_r = (np.asarray(table["id"])[np.asarray(table["image"]) == n] for n in names)
     _common, il, ir = np.intersect1d(ids_l, ids_r, return_indices=True)
     rows_l = np.flatnonzero(np.asarray(table["image"]) == names[0])[il]
@@ -163,7 +174,7 @@ def ties_to_observations(
     residual, parallax, _line0 = right_residuals(
         left, right, line_l[ok], samp_l[ok], line_r[ok], samp_r[ok], lon[ok], lat[ok], h[ok]
     )
-    jacobian = left_jacobian(left, right, line_l[ok], samp_l[ok], h[ok])
+    jacobian = _jacobian(jacobian, left, right, line_l[ok], samp_l[ok], h[ok])
     good = (
         np.isfinite(residual).all(axis=1)
         & np.isfinite(parallax).all(axis=1)
@@ -177,7 +188,11 @@ def ties_to_observations(
 
 
 def gcps_to_observations(
-    gcps: Mapping[str, NDArray], names: tuple[str, str], left: Sensor, right: Sensor
+    gcps: Mapping[str, NDArray],
+    names: tuple[str, str],
+    left: Sensor,
+    right: Sensor,
+    jacobian: bool = False,
 ) -> Observations:
     """Rows of GCPs measured in both images (a control table: ``id, lon_deg, lat_deg, h_m,
     image, line, sample, sigma_h_m``): the left measurement located at the GCP's height,
@@ -204,7 +219,7 @@ def gcps_to_observations(
         s_px = np.where(np.isfinite(s_px) & (s_px > 0), s_px, np.nan)
     else:
         s_px = np.full(h.size, np.nan)
-    jacobian = left_jacobian(left, right, line_l, samp_l, h)
+    jacobian = _jacobian(jacobian, left, right, line_l, samp_l, h)
     good = (
         np.isfinite(residual).all(axis=1)
         & np.isfinite(parallax).all(axis=1)

@@ -206,14 +206,14 @@ def relative_orientation(
         engine=engine,
         prepared=True,
     )
-    obs = ties_to_observations(table, names, left, right, dem)
+    obs = ties_to_observations(table, names, left, right, dem, settings.left_jitter)
     record["tie_points"] = int(obs.line.size)
     if obs.line.size < MIN_POINTS:
         record.update(applied=False, reason=f"{obs.line.size} tie points (< {MIN_POINTS})")
         return RelativeOrientation(right, record)
     datum = "models" if constant_dem else "dem"
     if gcps is not None:
-        control = gcps_to_observations(gcps, names, left, right)
+        control = gcps_to_observations(gcps, names, left, right, settings.left_jitter)
         if control.line.size:
             obs = concat(obs, control)
             datum = "gcp"
@@ -241,7 +241,7 @@ def relative_orientation(
         dem_sigma_m=round(fit.noise.sigma_h, 3),
         dem_band_factor=round(fit.noise.band_factor, 2),
         dem_offset_m=round(fit.dem_offset_m, 3),
-        along_shape=fit.shape,
+        along_shape=fit.along_shape,
         correction_along_base_px={
             "min": round(float(along_shift.min()), 4),
             "max": round(float(along_shift.max()), 4),

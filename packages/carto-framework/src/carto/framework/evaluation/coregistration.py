@@ -183,18 +183,16 @@ class _Frame:
 
     @classmethod
     def of(cls, dem: DEM) -> _Frame:
+        """The frame of ``dem``'s grid; a geographic grid in the metres of its centre row
+        (:func:`~carto.framework.raster.dem_measures.dem_pixel_size_m`)."""
+        from carto.framework.raster.dem_measures import dem_pixel_size_m
+
         t = dem.transform
         if t.b != 0.0 or t.d != 0.0:
             raise InputError(f"co-registration: {_label(dem)} has a rotated grid {tuple(t)[:6]}")
-        if dem.crs.is_geographic:  # degrees: the local metres of the grid's centre
-            lat = math.radians(t.f + t.e * dem.shape[0] / 2.0)
-            a, e2 = 6378137.0, 0.00669437999014
-            w = math.sqrt(1.0 - e2 * math.sin(lat) ** 2)
-            m_x = math.radians(1.0) * a * math.cos(lat) / w
-            m_y = math.radians(1.0) * a * (1.0 - e2) / w**3
-            return cls(t, m_x, m_y)
-        unit = dem.crs.axis_info[0].unit_conversion_factor if dem.crs.axis_info else 1.0
-        return cls(t, unit, unit)
+        dx, dy = (np.broadcast_to(v, dem.shape) for v in dem_pixel_size_m(dem))
+        centre = (dem.shape[0] // 2, dem.shape[1] // 2)
+        return cls(t, float(dx[centre]) / abs(t.a), float(dy[centre]) / abs(t.e))
 
     def xy(self, rows: FloatArray, cols: FloatArray) -> tuple[FloatArray, FloatArray]:
         """Node centres in metres (east, north) from the grid's origin."""
@@ -218,9 +216,10 @@ class _Frame:
 
     def gradient(self, heights: FloatArray) -> tuple[FloatArray, FloatArray]:
         """``dz/dx`` (east) and ``dz/dy`` (north), metres per metre."""
+        from carto.framework.raster.dem_measures import height_gradient
+
         t = self.transform
-        g_rows, g_cols = np.gradient(heights)
-        return g_cols / (t.a * self.m_per_x), g_rows / (t.e * self.m_per_y)
+        return height_gradient(heights, t.a * self.m_per_x, t.e * self.m_per_y)
 
 
 def _shifted(heights: FloatArray, frame: _Frame, dx_m: float, dy_m: float) -> FloatArray:
