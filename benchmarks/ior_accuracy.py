@@ -144,6 +144,7 @@ def _orientation(rep: dict) -> dict:
         "rms_across_before_px": (ro.get("before") or {}).get("rms_across_base_px"),
         "rms_across_after_px": (ro.get("after") or {}).get("rms_across_base_px"),
         "jitter_found_hz": ro.get("frequencies_hz"),
+        "platform_jitter": ro.get("platform_jitter"),
         "correction_height_m": ro.get("correction_height_m"),
     }
     co = rep.get("coregistration")
@@ -160,6 +161,10 @@ def _simulated_jitter(scene: Path) -> dict:
     amplitude = np.asarray(jitter.get("amplitude_rad", []), float)
     return {
         "frequency_hz": jitter.get("frequency_hz", []),
+        "amplitude_urad": {
+            axis: [round(float(v), 3) for v in 1e6 * row]
+            for axis, row in zip(("roll", "pitch", "yaw"), amplitude, strict=False)
+        },
         "amplitude_urad_rms_over_axes": (
             [round(float(v), 3) for v in 1e6 * np.sqrt(np.mean(amplitude**2, axis=0))]
             if amplitude.size

@@ -35,10 +35,13 @@ class Observations:
         sigma_px: ``(N,)`` image sigma of the right-minus-left measurement per axis (NaN:
             the matching's, estimated).
         sample: right-image sample of each row (where across the swath it is).
-        left_line: left-image line of each row (where a left correction is evaluated).
-        left_jacobian: ``(N, 2, 2)`` motion of the right point per pixel of the left one at
-            the row's height, ``d(right line, sample) / d(left line, sample)``: how a left
-            correction shows in the right residual.
+        time_s: ``(N, 2)`` imaging times of the row in the right and the left image, seconds
+            from the pair's reference (:class:`Platform`; zeros without one).
+        attitude_px: ``(N, 2, 2, 3)`` how an attitude change of the platform (roll, pitch,
+            yaw; per radian) at the right image's time (``[:, 0]``) and at the left image's
+            (``[:, 1]``) moves the right residual (line, sample): the right image's partials,
+            and the left image's seen through the left-to-right Jacobian with their sign
+            (a left correction moves the located ground point); zeros without a platform.
     """
 
     line: FloatArray
@@ -48,14 +51,14 @@ class Observations:
     on_dem: NDArray[np.bool_]
     sigma_px: FloatArray
     sample: FloatArray
-    left_line: FloatArray
-    left_jacobian: FloatArray
+    time_s: FloatArray
+    attitude_px: FloatArray
 
     def subset(self, keep: NDArray[np.bool_]) -> Observations:
         return Observations(
             self.line[keep], self.residual[keep], self.parallax[keep], self.sigma_h[keep],
-            self.on_dem[keep], self.sigma_px[keep], self.sample[keep], self.left_line[keep],
-            self.left_jacobian[keep],
+            self.on_dem[keep], self.sigma_px[keep], self.sample[keep], self.time_s[keep],
+            self.attitude_px[keep],
         )  # fmt: skip
 
     @property
@@ -133,12 +136,98 @@ def left_jacobian(
     return out
 
 
-def _jacobian(
-    wanted: bool, left: Sensor, right: Sensor, lines: FloatArray, samples: FloatArray, h: FloatArray
-) -> FloatArray:
-    if wanted:
-        return left_jacobian(left, right, lines, samples, h)
-    return np.zeros((lines.size, 2, 2))
+@attrs.frozen(eq=False)
+class Platform:
+    """The one platform a pair's line scanners share (same-pass stereo: Cartosat-1 Fore and
+    Aft, an agile satellite's views), whose attitude jitter the relative orientation
+    estimates as one time series for both images (:mod:`~carto.framework.adjustment.
+    relative_orientation`).
+
+    Attributes:
+        left, right: the two line scanners (inside their sensors' wrappers).
+        reference_s: the times' origin, seconds from the left trajectory's epoch (its middle).
+        names: per image, the constant attitude corrections' parameter names (roll, pitch,
+            yaw), whose partials are the image motion per radian of attitude.
+    """
+
+    left: Any
+    right: Any
+    reference_s: float
+    names: tuple[tuple[str, ...], tuple[str, ...]]
+
+    def time_s(self, scanner: Any, line: FloatArray) -> FloatArray:
+        """Imaging times of ``line`` of ``scanner`` (one of the two) from the reference."""
+        t = np.asarray(scanner.timing.time(np.asarray(line, np.float64)), np.float64)
+        epoch = scanner.trajectory.epoch_j2000_s - self.left.trajectory.epoch_j2000_s
+        return t + epoch - self.reference_s
+
+    def phase_s(self, scanner: Any) -> float:
+        """Where ``scanner``'s periodic corrections count time from (its trajectory's
+        middle), seconds from the reference."""
+        trajectory = scanner.trajectory
+        epoch = trajectory.epoch_j2000_s - self.left.trajectory.epoch_j2000_s
+        return float(trajectory.t_mid_s + epoch - self.reference_s)
+
+
+def platform_of(left: Sensor, right: Sensor) -> Platform | None:
+    """The shared :class:`Platform` of two line scanners (None for other sensors, or when one
+    lacks constant attitude corrections: no partials to move its images with)."""
+    from carto.framework.adjustment.attitude_terms import AXES, line_scanner_of
+
+    scanners = (line_scanner_of(left), line_scanner_of(right))
+    if scanners[0] is None or scanners[1] is None:
+        return None
+    names = []
+    for sensor, scanner in zip((left, right), scanners, strict=True):
+        wanted = tuple(f"{scanner.trajectory.prefix}attitude.{a}.c0" for a in AXES)
+        if not set(wanted) <= {p.name for p in sensor.parameters}:
+            return None
+        names.append(wanted)
+    return Platform(
+        scanners[0], scanners[1], float(scanners[0].trajectory.t_mid_s), (names[0], names[1])
+    )
+
+
+def _platform_rows(
+    platform: Platform | None,
+    left: Sensor,
+    right: Sensor,
+    lines: tuple[FloatArray, FloatArray],
+    samples_l: FloatArray,
+    ground: tuple[FloatArray, FloatArray, FloatArray],
+) -> tuple[FloatArray, FloatArray]:
+    """:attr:`Observations.time_s` and :attr:`Observations.attitude_px` of rows seen at
+    ``lines`` (left, right) and located at ``ground`` (zeros without a platform)."""
+    n = lines[0].size
+    if platform is None:
+        return np.zeros((n, 2)), np.zeros((n, 2, 2, 3))
+    lon, lat, h = ground
+    *_, a_right = right.linearize(lon, lat, h, list(platform.names[1]))
+    *_, a_left = left.linearize(lon, lat, h, list(platform.names[0]))
+    jac = left_jacobian(left, right, lines[0], samples_l, h)
+    out = np.empty((n, 2, 2, 3))
+    out[:, 0] = a_right
+    out[:, 1] = -np.einsum("nij,nja->nia", jac, a_left)
+    times = np.stack(
+        [platform.time_s(platform.right, lines[1]), platform.time_s(platform.left, lines[0])],
+        axis=1,
+    )
+    return times, out
+
+
+def base_axes(parallax: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Like :func:`axes`, with one along-base and one across-base direction for every row:
+    the median of the rows' directions. The fit splits residuals with these: a constant
+    along the base then has nothing across it, where per-row directions (which turn by about
+    a milliradian over a swath) let the many precise across-base rows set the along-base
+    constant through that turn (true models of a simulated pair: 1.15 px where the ties say
+    -0.25 px, once the DEM rows' band factor weakened the along-base rows)."""
+    u, _, norm = axes(parallax)
+    u0 = np.median(u, axis=0) if u.size else np.array([1.0, 0.0])
+    u0 = u0 / max(float(np.linalg.norm(u0)), 1e-12)
+    u = np.broadcast_to(u0, parallax.shape)
+    v = np.broadcast_to(np.array([-u0[1], u0[0]]), parallax.shape)
+    return u, v, norm
 
 
 def axes(parallax: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -155,12 +244,11 @@ def ties_to_observations(
     left: Sensor,
     right: Sensor,
     dem: Any,
-    jacobian: bool = False,
+    platform: Platform | None = None,
 ) -> Observations:
     """The rows of the tie-point table ``table`` (``id, image, line, sample``) seen in both
-    images, located on ``dem`` through the left image; ``jacobian``: with the left-to-right
-    Jacobian (:func:`left_jacobian`; zeros without, which a fit without left terms never
-    reads)."""
+    images, located on ``dem`` through the left image; with ``platform``, how its attitude
+    moves them (:func:`_platform_rows`)."""
     ids_l, ids_r = (np.asarray(table["id"])[np.asarray(table["image"]) == n] for n in names)
     _common, il, ir = np.intersect1d(ids_l, ids_r, return_indices=True)
     rows_l = np.flatnonzero(np.asarray(table["image"]) == names[0])[il]
@@ -174,16 +262,19 @@ def ties_to_observations(
     residual, parallax, _line0 = right_residuals(
         left, right, line_l[ok], samp_l[ok], line_r[ok], samp_r[ok], lon[ok], lat[ok], h[ok]
     )
-    jacobian = _jacobian(jacobian, left, right, line_l[ok], samp_l[ok], h[ok])
+    times, attitude = _platform_rows(
+        platform, left, right, (line_l[ok], line_r[ok]), samp_l[ok], (lon[ok], lat[ok], h[ok])
+    )
     good = (
         np.isfinite(residual).all(axis=1)
         & np.isfinite(parallax).all(axis=1)
-        & np.isfinite(jacobian).all(axis=(1, 2))
+        & np.isfinite(attitude).all(axis=(1, 2, 3))
+        & np.isfinite(times).all(axis=1)
     )
     n = int(good.sum())
     return Observations(
         line_r[ok][good], residual[good], parallax[good], np.full(n, np.nan), np.ones(n, bool),
-        np.full(n, np.nan), samp_r[ok][good], line_l[ok][good], jacobian[good],
+        np.full(n, np.nan), samp_r[ok][good], times[good], attitude[good],
     )  # fmt: skip
 
 
@@ -192,7 +283,7 @@ def gcps_to_observations(
     names: tuple[str, str],
     left: Sensor,
     right: Sensor,
-    jacobian: bool = False,
+    platform: Platform | None = None,
 ) -> Observations:
     """Rows of GCPs measured in both images (a control table: ``id, lon_deg, lat_deg, h_m,
     image, line, sample, sigma_h_m``): the left measurement located at the GCP's height,
@@ -219,16 +310,18 @@ def gcps_to_observations(
         s_px = np.where(np.isfinite(s_px) & (s_px > 0), s_px, np.nan)
     else:
         s_px = np.full(h.size, np.nan)
-    jacobian = _jacobian(jacobian, left, right, line_l, samp_l, h)
+    line_r = col("line", rows_r)
+    times, attitude = _platform_rows(platform, left, right, (line_l, line_r), samp_l, (lon, lat, h))
     good = (
         np.isfinite(residual).all(axis=1)
         & np.isfinite(parallax).all(axis=1)
-        & np.isfinite(jacobian).all(axis=(1, 2))
+        & np.isfinite(attitude).all(axis=(1, 2, 3))
+        & np.isfinite(times).all(axis=1)
     )
     return Observations(
-        col("line", rows_r)[good], residual[good], parallax[good], sigma[good],
+        line_r[good], residual[good], parallax[good], sigma[good],
         np.zeros(int(good.sum()), bool), s_px[good], col("sample", rows_r)[good],
-        line_l[good], jacobian[good],
+        times[good], attitude[good],
     )  # fmt: skip
 
 
@@ -269,6 +362,6 @@ def concat(a: Observations, b: Observations) -> Observations:
         np.concatenate([a.on_dem, b.on_dem]),
         np.concatenate([a.sigma_px, b.sigma_px]),
         np.concatenate([a.sample, b.sample]),
-        np.concatenate([a.left_line, b.left_line]),
-        np.concatenate([a.left_jacobian, b.left_jacobian]),
+        np.concatenate([a.time_s, b.time_s]),
+        np.concatenate([a.attitude_px, b.attitude_px]),
     )
