@@ -42,6 +42,9 @@ class Observations:
             (``[:, 1]``) moves the right residual (line, sample): the right image's partials,
             and the left image's seen through the left-to-right Jacobian with their sign
             (a left correction moves the located ground point); zeros without a platform.
+        window_lines: the matching template's extent along the lines, lines: a tie point
+            measures the image motion averaged over it, so jitter of a period near it is
+            seen attenuated (0 for points measured as such).
     """
 
     line: FloatArray
@@ -53,12 +56,13 @@ class Observations:
     sample: FloatArray
     time_s: FloatArray
     attitude_px: FloatArray
+    window_lines: float = 0.0
 
     def subset(self, keep: NDArray[np.bool_]) -> Observations:
         return Observations(
             self.line[keep], self.residual[keep], self.parallax[keep], self.sigma_h[keep],
             self.on_dem[keep], self.sigma_px[keep], self.sample[keep], self.time_s[keep],
-            self.attitude_px[keep],
+            self.attitude_px[keep], self.window_lines,
         )  # fmt: skip
 
     @property
@@ -245,10 +249,12 @@ def ties_to_observations(
     right: Sensor,
     dem: Any,
     platform: Platform | None = None,
+    window_lines: float = 0.0,
 ) -> Observations:
     """The rows of the tie-point table ``table`` (``id, image, line, sample``) seen in both
     images, located on ``dem`` through the left image; with ``platform``, how its attitude
-    moves them (:func:`_platform_rows`)."""
+    moves them (:func:`_platform_rows`); ``window_lines``: the matching template
+    (:attr:`Observations.window_lines`)."""
     ids_l, ids_r = (np.asarray(table["id"])[np.asarray(table["image"]) == n] for n in names)
     _common, il, ir = np.intersect1d(ids_l, ids_r, return_indices=True)
     rows_l = np.flatnonzero(np.asarray(table["image"]) == names[0])[il]
@@ -274,7 +280,7 @@ def ties_to_observations(
     n = int(good.sum())
     return Observations(
         line_r[ok][good], residual[good], parallax[good], np.full(n, np.nan), np.ones(n, bool),
-        np.full(n, np.nan), samp_r[ok][good], times[good], attitude[good],
+        np.full(n, np.nan), samp_r[ok][good], times[good], attitude[good], window_lines,
     )  # fmt: skip
 
 
@@ -364,4 +370,5 @@ def concat(a: Observations, b: Observations) -> Observations:
         np.concatenate([a.sample, b.sample]),
         np.concatenate([a.time_s, b.time_s]),
         np.concatenate([a.attitude_px, b.attitude_px]),
+        max(a.window_lines, b.window_lines),
     )

@@ -223,6 +223,11 @@ def _platform_record(fit: Any) -> dict[str, Any] | None:
 
 
 AXIS_NAMES = ("roll", "pitch", "yaw")
+TIE_TEMPLATE_PX = 15
+"""The tie points' matching template, ortho pixels at the images' ground sampling (about a
+line): jitter of a period near it is seen attenuated (:func:`~carto.framework.adjustment.
+pair_correction.window_gain`). On a simulated ``--errors full`` pair, modelling it took the
+orientation-limited DEM NMAD from 0.73 to 0.68 m."""
 
 
 def relative_orientation(
@@ -260,13 +265,14 @@ def relative_orientation(
         spacing_px=spacing,
         per_cell=1,
         subpixel="lsm",
+        template=TIE_TEMPLATE_PX,
         min_points=0,
         require_closure=False,
         engine=engine,
         prepared=True,
     )
     platform = platform_of(left, right) if kind == "line" and settings.platform_jitter else None
-    obs = ties_to_observations(table, names, left, right, dem, platform)
+    obs = ties_to_observations(table, names, left, right, dem, platform, TIE_TEMPLATE_PX)
     record["tie_points"] = int(obs.line.size)
     if obs.line.size < MIN_POINTS:
         record.update(applied=False, reason=f"{obs.line.size} tie points (< {MIN_POINTS})")
