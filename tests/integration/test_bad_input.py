@@ -393,6 +393,12 @@ def test_configuration_cases(run_carto, tmp_path: Path, configuration, cartosat1
             ("images.fore.raster", "no such file"),
         ),
         ({"gcps": str(tmp_path / "nadir.csv")}, ("nadir.csv", "nadir", "fore")),
+        # a misspelt field would be ignored and the run go ahead without its GCPs
+        ({"gcp": good["gcps"]}, ("pair.json", "unknown field 'gcp'", "did you mean 'gcps'")),
+        (
+            {"images": {**good["images"], "fore": {**good["images"]["fore"], "rastr": "x"}}},
+            ("pair.json", "images.fore.'rastr'", "'raster'"),
+        ),
     ]
     for changes, words in cases:
         res = run_carto(

@@ -290,6 +290,17 @@ def test_error_sizes_switch_single_sources(tmp_path):
     assert drawn["error_model"]["attitude_bias_deg"] == 0.05
     with pytest.raises(InputError, match="unknown error source 'sun'"):
         simulate("cartosat1-pair", tmp_path / "f", size=(80, 80), error_sizes=(("sun", 1.0),))
+    # a slip of the finger (1e308 deg) is no product: refused, nothing simulated
+    with pytest.raises(InputError, match="attitude_bias_deg=1e.308: beyond 2"):
+        simulate(
+            "cartosat1-pair",
+            tmp_path / "g",
+            size=(80, 80),
+            error_sizes=(("attitude_bias_deg", 1e308),),
+        )
+    with pytest.raises(InputError, match="--seed must be an integer >= 0, got -1"):
+        simulate("cartosat1-pair", tmp_path / "h", size=(80, 80), seed=-1)
+    assert not (tmp_path / "g").exists() and not (tmp_path / "h").exists()
 
 
 def test_a_user_dem_becomes_the_terrain(tmp_path, cartosat1_scene):
@@ -353,3 +364,14 @@ def test_cli_error_size_and_platform_seed(run_carto, tmp_path):
     assert bad.returncode != 0
     assert "expected NAME=VALUE" in bad.stderr
     assert "Traceback" not in bad.stderr
+    # usage errors (exit 2, one line): a value out of range, an unknown source, a seed < 0
+    for args, words in (
+        (["--error-size", "attitude_bias_deg=1e308"], "must be between 0 and 2"),
+        (["--error-size", "gcp_heigth_m=1"], "unknown error source 'gcp_heigth_m'"),
+        (["--seed", "-1"], "--seed: must be >= 0, got -1"),
+        (["--size", "0", "80"], "--size: must be >= 1, got 0"),
+    ):
+        bad = run_carto(["simulate", "cartosat1-pair", "--out", str(tmp_path / "x"), *args])
+        assert bad.returncode == 2, bad.stderr
+        assert words in bad.stderr and "Traceback" not in bad.stderr
+        assert not (tmp_path / "x").exists()

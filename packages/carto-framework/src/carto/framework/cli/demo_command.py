@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from carto.framework.cli.common import examples, formatter
+from carto.framework.cli.common import examples, formatter, non_negative_int, positive_int
 
 
 # --------------------------------------------------------------------------- demo
@@ -42,10 +42,10 @@ def add_demo(sub: argparse._SubParsersAction) -> None:
         formatter_class=formatter,
     )
     p.add_argument("--out", default="demo-out", metavar="DIR", help="output folder (demo-out)")
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--seed", type=non_negative_int, default=0, help="random seed (default 0)")
     p.add_argument(
         "--size",
-        type=int,
+        type=positive_int,
         nargs=2,
         metavar=("W", "H"),
         help="image window in pixels (default 2000 2000)",

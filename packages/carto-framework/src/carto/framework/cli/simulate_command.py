@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import time
 from pathlib import Path
 
-from carto.framework.cli.common import examples, formatter
+from carto.framework.cli.common import examples, formatter, non_negative_int, positive_int
 from carto.framework.errors import InputError
 from carto.framework.plugins.registry import get_registry
 
@@ -48,15 +49,31 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
 
 def _parse_error_size(text: str) -> tuple[str, float]:
+    """``NAME=VALUE`` of a known error source, within its range (a usage error otherwise)."""
+    import attrs
+
+    from carto.framework.simulation.plan import ErrorModel, largest_error_size
+
     name, sep, value = text.partition("=")
     try:
         if not sep:
             raise ValueError
-        return name.strip(), float(value)
+        size = float(value)
     except ValueError:
         raise argparse.ArgumentTypeError(
             f"{text!r}: expected NAME=VALUE, e.g. attitude_bias_deg=0.05"
         ) from None
+    name = name.strip()
+    known = sorted(f.name for f in attrs.fields(ErrorModel) if f.name != "jitter_hz")
+    if name not in known:
+        raise argparse.ArgumentTypeError(
+            f"unknown error source {name!r}; known: {', '.join(known)}"
+        )
+    if not (math.isfinite(size) and 0 <= size <= largest_error_size(name)):
+        raise argparse.ArgumentTypeError(
+            f"{name}={value}: must be between 0 and {largest_error_size(name):g}"
+        )
+    return name, size
 
 
 def _simulate_examples() -> list[str]:
@@ -87,7 +104,7 @@ def add_simulate(sub: argparse._SubParsersAction) -> None:
         "preset", metavar="PRESET", help="scene preset (carto plugins --kind scene-preset)"
     )
     p.add_argument("--out", required=True, metavar="DIR", help="scene folder to write")
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--seed", type=non_negative_int, default=0, help="random seed (default 0)")
     p.add_argument(
         "--terrain",
         metavar="NAME",
@@ -96,7 +113,7 @@ def add_simulate(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--dem", metavar="FILE", help="use this DEM (ellipsoidal heights) as terrain")
     p.add_argument(
         "--size",
-        type=int,
+        type=positive_int,
         nargs=2,
         metavar=("W", "H"),
         help="window of each image in pixels (default 2000 2000)",
@@ -120,13 +137,17 @@ def add_simulate(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--platform-seed",
-        type=int,
+        type=non_negative_int,
         metavar="N",
         help="draw the platform's residual camera misalignment from this seed, so that "
         "scenes of one satellite share it (in-flight calibration); default: from --seed",
     )
-    p.add_argument("--gcps", type=int, metavar="N", help="number of GCPs (preset default)")
-    p.add_argument("--checkpoints", type=int, metavar="N", help="number of checkpoints")
+    p.add_argument(
+        "--gcps", type=non_negative_int, metavar="N", help="number of GCPs (preset default)"
+    )
+    p.add_argument(
+        "--checkpoints", type=non_negative_int, metavar="N", help="number of checkpoints"
+    )
     p.add_argument(
         "--point-targets",
         action="store_true",

@@ -10,6 +10,7 @@ renders a plan into a scene folder.
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Any
 
@@ -19,8 +20,25 @@ from carto.framework.geometry import orbit
 from carto.framework.products.ancillary import CameraSpec
 from carto.framework.simulation.reference.attitude import AttitudeLaw
 
-
 # ----------------------------------------------------------------------------- errors
+LARGEST_ERROR_SIZE = {
+    "deg": 2.0, "deg_s": 0.05, "m": 10_000.0, "px": 100.0, "ppm": 10_000.0, "s": 1.0,
+}  # fmt: skip
+"""The largest one-sigma size of an error source by its unit (``--error-size``): 2 deg of
+attitude is 20 km on the ground from 618 km, 0.05 deg/s drifts that far in 40 s, 10 km of
+ephemeris or GCP error and 100 px of image error move a point off a scene, 1 % of scale
+(10^4 ppm) and 1 s of line timing are no product's. Beyond them a simulated product no
+longer sees its target, and a typing slip (1e308) is refused instead of simulated."""
+
+
+def largest_error_size(name: str) -> float:
+    """:data:`LARGEST_ERROR_SIZE` of the error source ``name`` (by its unit suffix)."""
+    for unit in sorted(LARGEST_ERROR_SIZE, key=len, reverse=True):
+        if name.endswith("_" + unit):
+            return LARGEST_ERROR_SIZE[unit]
+    return math.inf
+
+
 @attrs.frozen
 class ErrorModel:
     """Error sources of a simulated product (design brief section 4); 0 switches one off.

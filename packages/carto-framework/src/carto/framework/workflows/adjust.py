@@ -515,6 +515,26 @@ class Configuration:
     flat_height_m: float | None = None
 
 
+CONFIGURATION_KEYS = (
+    "images", "gcps", "dem", "geoid", "height_m", "platform", "matcher", "trajectory_model",
+)  # fmt: skip
+"""The fields of an adjustment configuration (:func:`read_configuration`)."""
+IMAGE_KEYS = ("model", "raster", "sensor")
+"""The fields of one image in it."""
+
+
+def _check_keys(doc: Mapping[str, Any], known: tuple[str, ...], path: Path, where: str) -> None:
+    """Refuse a field ``doc`` does not know: a misspelt one (``"gcp"``) would otherwise be
+    ignored and the run go ahead without what it named."""
+    import difflib
+
+    for key in doc:
+        if key not in known:
+            close = difflib.get_close_matches(str(key), known, n=1)
+            hint = f" (did you mean {close[0]!r}?)" if close else f"; known: {', '.join(known)}"
+            raise InputError(f"{path}: unknown field {where}{key!r}{hint}")
+
+
 def read_configuration(
     path: Path, sensor_type: str | None = None, trajectory: str | None = None
 ) -> Configuration:
@@ -528,6 +548,7 @@ def read_configuration(
     doc = read_json(path, "configuration")
     if not isinstance(doc, dict):
         raise InputError(f"{path}: a configuration is a JSON object, got {type(doc).__name__}")
+    _check_keys(doc, CONFIGURATION_KEYS, path, "")
     base = path.parent
     images = doc.get("images")
     if not isinstance(images, dict) or len(images) < 1:
@@ -547,6 +568,7 @@ def read_configuration(
             raise InputError(
                 f"{path}: images.{name} must be an object with 'model' and 'raster', got {spec!r}"
             )
+        _check_keys(spec, IMAGE_KEYS, path, f"images.{name}.")
         for key in ("model", "raster", "sensor"):
             value = spec.get(key)
             if (key == "model" or value is not None) and (not isinstance(value, str) or not value):
