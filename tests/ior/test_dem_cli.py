@@ -212,3 +212,18 @@ def test_dem_coregister_errors(run_carto, scene, tmp_path):
     assert "does not cover" in proc.stderr or "do not overlap" in proc.stderr
     assert len(proc.stderr.strip().splitlines()[-1:]) == 1
     assert not (tmp_path / "y").exists()
+
+
+def test_a_scene_with_loose_images_is_a_usage_error(run_carto, scene, tmp_path):
+    """``--left``/``--right`` beside a scene folder were silently ignored (issue 31): refused,
+    as is ``--pair`` without a scene; nothing is created."""
+    left = scene / "fore.tif"
+    for args, words in (
+        ([str(scene), "--left", str(left), "--right", str(left)], "--left, --right exclude"),
+        (["--left", str(left), "--right", str(left), "--pair", "a", "b"], "--pair chooses"),
+    ):
+        proc = run_carto(["dem", *args, "--out", str(tmp_path / "x")])
+        assert proc.returncode == 2, proc.stderr
+        assert words in proc.stderr
+        assert "Traceback" not in proc.stderr
+        assert not (tmp_path / "x").exists()

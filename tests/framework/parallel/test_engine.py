@@ -105,6 +105,21 @@ def test_bad_workers(workers):
         pass
 
 
+def test_workers_beyond_the_cores_or_beside_a_scheduler_are_refused():
+    """1000 processes on a few cores only share them (each with its tiles' memory); beside
+    --scheduler, --workers would be ignored: both refused before anything starts."""
+    from carto.framework.parallel.engine import WORKERS_PER_CORE, default_workers
+
+    too_many = WORKERS_PER_CORE * default_workers() + 1
+    with pytest.raises(UsageError, match=f"--workers {too_many}: more than"), open_engine(too_many):
+        pass
+    with (
+        pytest.raises(UsageError, match="--workers and --scheduler exclude each other"),
+        open_engine(2, scheduler="tcp://127.0.0.1:9"),
+    ):
+        pass
+
+
 def test_unreachable_scheduler():
     with (
         pytest.raises(UsageError, match=r"--scheduler tcp://127\.0\.0\.1:9"),

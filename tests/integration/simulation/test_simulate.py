@@ -228,10 +228,6 @@ def _corners(dem: DEM):
             "unknown terrain 'moon'",
         ),
         (
-            ["simulate", "cartosat1-pair", "--out", "X", "--size", "0", "10"],
-            "--size must be positive",
-        ),
-        (
             ["simulate", "cartosat1-pair", "--out", "X", "--size", "20000", "100"],
             "must be within the full image",
         ),
@@ -291,7 +287,7 @@ def test_error_sizes_switch_single_sources(tmp_path):
     with pytest.raises(InputError, match="unknown error source 'sun'"):
         simulate("cartosat1-pair", tmp_path / "f", size=(80, 80), error_sizes=(("sun", 1.0),))
     # a slip of the finger (1e308 deg) is no product: refused, nothing simulated
-    with pytest.raises(InputError, match="attitude_bias_deg=1e.308: beyond 2"):
+    with pytest.raises(InputError, match=r"attitude_bias_deg=1e\+308: beyond 2"):
         simulate(
             "cartosat1-pair",
             tmp_path / "g",
@@ -300,7 +296,8 @@ def test_error_sizes_switch_single_sources(tmp_path):
         )
     with pytest.raises(InputError, match="--seed must be an integer >= 0, got -1"):
         simulate("cartosat1-pair", tmp_path / "h", size=(80, 80), seed=-1)
-    assert not (tmp_path / "g").exists() and not (tmp_path / "h").exists()
+    assert not (tmp_path / "g").exists()
+    assert not (tmp_path / "h").exists()
 
 
 def test_a_user_dem_becomes_the_terrain(tmp_path, cartosat1_scene):
@@ -373,5 +370,6 @@ def test_cli_error_size_and_platform_seed(run_carto, tmp_path):
     ):
         bad = run_carto(["simulate", "cartosat1-pair", "--out", str(tmp_path / "x"), *args])
         assert bad.returncode == 2, bad.stderr
-        assert words in bad.stderr and "Traceback" not in bad.stderr
+        assert words in bad.stderr
+        assert "Traceback" not in bad.stderr
         assert not (tmp_path / "x").exists()

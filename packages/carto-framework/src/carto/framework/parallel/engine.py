@@ -80,6 +80,11 @@ def _cause(exc: BaseException) -> str:
     return f"{type(exc).__name__}: {text[0]}" if text else type(exc).__name__
 
 
+WORKERS_PER_CORE = 4
+"""Most local worker processes per core (``--workers``): tile tasks are compute bound, more
+processes than that only share the cores while each holds its tiles' memory."""
+
+
 def default_workers() -> int:
     """All the cores this process may use."""
     try:
@@ -219,7 +224,8 @@ def open_engine(
 
     Args:
         workers: tasks at once (default: every core, :func:`default_workers`); 1 runs them
-            in this process. Ignored with ``scheduler`` (the cluster has its workers).
+            in this process; at most :data:`WORKERS_PER_CORE` per core. Refused with
+            ``scheduler`` (the cluster has its workers).
         scheduler: the address of a running ``dask.distributed`` scheduler.
         quiet: no progress bars.
 
@@ -230,6 +236,17 @@ def open_engine(
         raise UsageError(f"--workers must be an integer >= 1, got {workers!r}")
     if workers is not None and workers < 1:
         raise UsageError(f"--workers must be >= 1, got {workers}")
+    if scheduler is not None and workers is not None:
+        raise UsageError(
+            "--workers and --scheduler exclude each other: the cluster's workers run the tiles"
+        )
+    most = WORKERS_PER_CORE * default_workers()
+    if scheduler is None and workers is not None and workers > most:
+        raise UsageError(
+            f"--workers {workers}: more than {WORKERS_PER_CORE} per core ({most} for the "
+            f"{default_workers()} cores here) only share them and multiply the memory; give "
+            "--scheduler to use a cluster"
+        )
     if scheduler is not None:
         with _client(scheduler) as client:
             n = max(1, sum(client.nthreads().values()))

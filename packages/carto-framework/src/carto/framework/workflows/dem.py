@@ -90,6 +90,22 @@ class StereoInputs:
     models: str | os.PathLike[str] | None = None
     pair: Sequence[str] | None = None
 
+    def __attrs_post_init__(self) -> None:
+        loose = {
+            "--left": self.left,
+            "--right": self.right,
+            "--left-model": self.left_model,
+            "--right-model": self.right_model,
+        }
+        given = [name for name, value in loose.items() if value is not None]
+        if self.source is not None and given:
+            raise UsageError(
+                f"a scene folder ({self.source}) and {', '.join(given)} exclude each other: "
+                "give the scene (with --pair to choose its images) or two images"
+            )
+        if self.source is None and self.pair is not None:
+            raise UsageError("--pair chooses two images of a scene folder: give the scene")
+
 
 @attrs.frozen(eq=False)
 class StereoPair:
