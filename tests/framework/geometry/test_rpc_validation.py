@@ -197,10 +197,37 @@ def test_all_zero_denominator_is_refused(tmp_path: Path) -> None:
     refused(bad, "RPC field SAMP_DEN_COEFF: all 20 coefficients are zero")
 
 
-def test_negative_ground_scales_are_legal() -> None:
-    """RPC00B's LAT_SCALE/LONG_SCALE/HEIGHT_SCALE are signed; Planet writes LAT_SCALE -0.0234."""
-    rpc = synthetic_rpc(lat_scale=-0.05)
+def test_negative_ground_scales_are_legal(shared_data: Path) -> None:
+    """RPC00B's LAT_SCALE/LONG_SCALE/HEIGHT_SCALE are signed; Planet writes LAT_SCALE -0.0234
+    (with coefficients to match: its image is not mirrored)."""
+    rpc = synthetic_rpc(lat_scale=-0.05, coefficients=_mirrored_lat(synthetic_rpc()))
     assert rpc.lat_scale == -0.05
+    assert read_rpc(shared_data / "rpc-files" / "rpc_PLANET_L1B.txt").lat_scale == -0.0234
+
+
+def _mirrored_lat(rpc: RPCCoefficients) -> np.ndarray:
+    """``rpc``'s coefficients with the normalised latitude P negated (P's odd powers)."""
+    from carto.framework.geometry.rpc_terms import RPC00B_TERMS
+
+    sign = np.array([(-1.0) ** term.count("P") for term in RPC00B_TERMS])
+    return rpc.coefficients * sign[None, :]
+
+
+@pytest.mark.parametrize("field", ["LAT_SCALE", "LONG_SCALE"])
+def test_a_flipped_scale_sign_is_a_mirror_and_refused(
+    field: str, shared_data: Path, tmp_path: Path
+) -> None:
+    """A real product's LAT_SCALE or LONG_SCALE with its sign flipped still reads as a smooth,
+    one-to-one model, 4330 px off (issue 31); it maps the ground as a mirror would, which no
+    delivered image does (every real RPC of ../shared/data has a positive determinant)."""
+    src = shared_data / "rpc-files" / "rpc_IKONOS.txt"
+    text = src.read_text()
+    value = re.search(rf"{field}:\s*([-+]?[0-9.]+)", text)
+    assert value is not None
+    flipped = text.replace(value.group(0), f"{field}: {-float(value.group(1)):.8f}")
+    bad = tmp_path / "flipped_RPC.TXT"
+    bad.write_text(flipped)
+    refused(bad, "LAT_SCALE/LONG_SCALE", "as a mirror would")
 
 
 def test_scales_absurd_for_the_image_size(tmp_path: Path) -> None:

@@ -273,6 +273,14 @@ def validate_model(rpc: RPCCoefficients) -> None:
             f"at {_at(lnorm, pnorm, hnorm, i)}, {np.nanmedian(det):.3g} typically "
             "(the ground must map one-to-one onto the image)",
         )
+    scales = rpc.line_scale * rpc.samp_scale * rpc.lat_scale * rpc.long_scale
+    if np.nanmedian(det) * np.sign(scales) < 0:
+        raise _field_error(
+            "LAT_SCALE/LONG_SCALE",
+            "the model maps the ground onto the image as a mirror would (d(line, sample)/"
+            "d(lon, lat) has a negative determinant; every delivered image is seen from above, "
+            "with a positive one): a sign lost or flipped in a scale or the coefficients?",
+        )
 
 
 def check_pixel_aspect(rpc: RPCCoefficients) -> None:
