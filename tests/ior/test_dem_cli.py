@@ -227,3 +227,19 @@ def test_a_scene_with_loose_images_is_a_usage_error(run_carto, scene, tmp_path):
         assert words in proc.stderr
         assert "Traceback" not in proc.stderr
         assert not (tmp_path / "x").exists()
+
+
+def test_bad_input_found_after_the_work_began_leaves_no_work_to_resume(run_carto, scene, tmp_path):
+    """An initial DEM covering a fraction of the images is found bad once the images are prepared:
+    no hidden work folder stays behind and no '--resume' is advised (it would refuse other
+    inputs), only the cause (issue 31, family 5)."""
+    init = DEM.open(scene / "init_dem.tif")
+    heights = np.array(init.heights, dtype=np.float64)
+    heights[:, heights.shape[1] // 4 :] = np.nan  # a quarter left
+    half = tmp_path / "half.tif"
+    DEM.from_array(heights, init.transform, init.crs).write(half)
+    proc = run_carto(["dem", str(scene), "--init-dem", str(half), "--out", str(tmp_path / "x")])
+    assert proc.returncode == 1, proc.stderr
+    assert "% of the images' footprint" in proc.stderr
+    assert "--resume" not in proc.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["half.tif"]

@@ -22,6 +22,12 @@ class UsageError(InputError):
     ``--out``, ``--workers 0`` ...): the command line exits 2, as for a usage error."""
 
 
+class OutputError(InputError):
+    """An output cannot be written (a full disk, an unwritable file): the inputs were fine,
+    so the work done so far is kept for ``--resume`` (an InputError for compatibility: it
+    exits 1 and names the file)."""
+
+
 class PluginError(CartoError):
     """A plugin could not be loaded or registered, or it broke the plugin contract."""
 

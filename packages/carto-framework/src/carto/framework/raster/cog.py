@@ -18,7 +18,7 @@ from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
-from carto.framework.errors import InputError
+from carto.framework.errors import InputError, OutputError
 from carto.framework.files.atomic import atomic_output
 
 __all__ = ["COG_BLOCK_PX", "cog_writer"]
@@ -55,8 +55,8 @@ def cog_writer(
             ``VERTICAL_REFERENCE`` tag names it and the bands' unit is metres.
 
     Raises:
-        InputError: the file cannot be written (full disk, unwritable folder), a bad
-            resampling name.
+        OutputError: the file cannot be written (full disk, unwritable folder).
+        InputError: a bad resampling name.
     """
     from rasterio.errors import RasterioError
 
@@ -84,7 +84,7 @@ def cog_writer(
                 dst.units = ("metre",) * dst.count
     except (RasterioError, OSError) as exc:
         text = str(exc).strip().splitlines()
-        raise InputError(f"cannot write {what} {path}: {text[0] if text else exc}") from exc
+        raise OutputError(f"cannot write {what} {path}: {text[0] if text else exc}") from exc
 
 
 @contextlib.contextmanager

@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from carto.framework.errors import InputError
+from carto.framework.errors import InputError, OutputError
 from carto.framework.files.atomic import atomic_output
 
 if TYPE_CHECKING:
@@ -103,7 +103,7 @@ def _save(fig: Any, path: str | os.PathLike[str]) -> Path:
         with atomic_output(path) as tmp:
             fig.savefig(tmp, format="png")
     except OSError as exc:
-        raise InputError(f"cannot write figure {path}: {exc.strerror or exc}") from exc
+        raise OutputError(f"cannot write figure {path}: {exc.strerror or exc}") from exc
     return path
 
 

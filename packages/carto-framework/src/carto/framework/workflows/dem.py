@@ -20,7 +20,7 @@ import attrs
 import numpy as np
 
 from carto.framework.adjustment.relative_orientation import RelativeOrientationSettings
-from carto.framework.errors import InputError, UsageError
+from carto.framework.errors import InputError, OutputError, UsageError
 from carto.framework.files.staging import require_complete_output, staged_folder
 from carto.framework.geometry.sensor import Sensor, SensorType
 from carto.framework.plugins.registry import get_registry
@@ -436,7 +436,11 @@ def dem_product(
                 )
     except BaseException as exc:
         if work is not None and work.is_dir():
-            if _has_finished_work(work):
+            # bad data or arguments: a rerun needs other inputs, whose fingerprint no
+            # finished work matches (and --resume would refuse); an interruption or a fault
+            # (disk, workers) keeps it
+            bad_input = isinstance(exc, InputError) and not isinstance(exc, OutputError)
+            if _has_finished_work(work) and not bad_input:
                 exc.add_note(f"finished tiles kept in {work}: rerun with --resume to continue")
             else:
                 shutil.rmtree(work, ignore_errors=True)
