@@ -461,3 +461,54 @@ def test_a_full_disk_during_the_dem_write_leaves_the_earlier_output_as_it_was(
     assert snapshot(out) == before
     # beside it, at most the hidden work folder a --resume would continue from
     assert set(p.name for p in tmp_path.iterdir()) <= {"dem", ".dem.carto-work"}
+
+
+def _digest(path: Path) -> str:
+    import hashlib
+
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def test_an_output_that_is_an_input_is_refused_and_the_input_kept(
+    carto_main, tmp_path: Path, cartosat1_scene: Path, cartosat1_adjusted: Path
+) -> None:
+    """``--out``/``--plot`` naming the DEM evaluated, the reference, the model in use or the
+    points projected, and an adjustment into the folder that holds the models its
+    configuration names (issue 31, family 2): refused before any work, every input intact."""
+    dem, ref = tmp_path / "dem.tif", tmp_path / "ref.tif"
+    shutil.copy(cartosat1_scene / "init_dem.tif", dem)
+    shutil.copy(cartosat1_scene / "truth" / "dem.tif", ref)
+    model, ground = tmp_path / "fore.model.json", tmp_path / "gcps.csv"
+    shutil.copy(cartosat1_adjusted / "fore.model.json", model)
+    shutil.copy(cartosat1_scene / "gcps.csv", ground)
+    earlier = tmp_path / "adj"
+    shutil.copytree(cartosat1_adjusted, earlier)
+    config = tmp_path / "pair.json"
+    config.write_text(
+        json.dumps(
+            {
+                "images": {
+                    n: {"model": f"adj/{n}.model.json", "raster": str(cartosat1_scene / f"{n}.tif")}
+                    for n in ("fore", "aft")
+                },
+                "gcps": str(cartosat1_scene / "gcps.csv"),
+                "dem": str(cartosat1_scene / "init_dem.tif"),
+            }
+        )
+    )
+    kept = {p: _digest(p) for p in (dem, ref, model, ground, *earlier.iterdir())}
+    png = tmp_path / "r.png"
+    cases = [
+        (["evaluate", str(dem), "--reference", str(ref), "--out", str(dem)], "is the input"),
+        (["evaluate", str(dem), "--reference", str(ref), "--plot", str(ref)], "is the input"),
+        (
+            ["evaluate", str(dem), "--reference", str(ref), "--out", str(png), "--plot", str(png)],
+            f"--plot {png}: is --out too",
+        ),
+        (["project", str(model), "--ground", str(ground), "--out", str(model)], "is the input"),
+        (["project", str(model), "--ground", str(ground), "--out", str(ground)], "is the input"),
+        (["adjust", str(config), "--ties", "none", "--out", str(earlier)], "holds the input"),
+    ]
+    for args, words in cases:
+        one_line_error(carto_main(args), 2, words)
+    assert {p: _digest(p) for p in kept} == kept

@@ -79,13 +79,18 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     from carto.framework.files.staging import check_output_file
     from carto.framework.raster.dem import DEM, Geoid
 
+    written: dict[str, str] = {}
     for option, value in (
         ("--out", args.out),
         ("--plot", args.plot),
         ("--hillshade", args.hillshade),
     ):
         if value is not None:
-            check_output_file(value, option)
+            check_output_file(value, option, [args.dem, args.reference, args.geoid])
+            for other, path in written.items():
+                if Path(path).resolve() == Path(value).resolve():
+                    raise UsageError(f"{option} {value}: is {other} too; give two file names")
+            written[option] = value
     dem = DEM.open(args.dem)
     geoid = None if args.geoid is None else Geoid.open(args.geoid)
     coregistration = None

@@ -18,9 +18,9 @@ def _transform_points(
     from carto.framework.files.staging import check_output_file
     from carto.framework.workflows.opening import open_sensor
 
-    check_output_file(args.out)
-    sensor = open_sensor(args.model, args.sensor)
     source = args.ground if forward else args.image
+    check_output_file(args.out, "--out", [args.model, source])
+    sensor = open_sensor(args.model, args.sensor)
     table = read_point_table(source, numeric=inputs)
     method = sensor.ground_to_image if forward else sensor.image_to_ground
     first, second = method(*(table[c] for c in inputs))

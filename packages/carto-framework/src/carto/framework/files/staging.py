@@ -274,14 +274,32 @@ def require_complete_output(folder: str | os.PathLike[str], command: str) -> Pat
     return path
 
 
-def check_output_file(path: str | os.PathLike[str], option: str = "--out") -> Path:
-    """A file destination checked before any work: not empty, not a folder, in a folder that
-    exists (or can be created) and can be written."""
+def _same_file(a: Path, b: Path) -> bool:
+    """Whether two paths name one file (symbolic or hard links included)."""
+    if a.resolve() == b.resolve():
+        return True
+    try:
+        return os.path.samefile(a, b)
+    except OSError:  # one of them does not exist
+        return False
+
+
+def check_output_file(
+    path: str | os.PathLike[str],
+    option: str = "--out",
+    inputs: Iterable[Any] = (),
+) -> Path:
+    """A file destination checked before any work: not empty, not a folder, not one of the
+    command's ``inputs`` (an evaluation's ``--out`` given the DEM it evaluates would replace
+    it), in a folder that exists (or can be created) and can be written."""
     if str(path).strip() == "":
         raise UsageError(f"{option}: empty path; give a file name")
     target = Path(path)
     if target.is_dir():
         raise UsageError(f"{option} {path}: is a folder, expected a file name")
+    for item in inputs:
+        if item is not None and str(item) != "" and _same_file(target, Path(item)):
+            raise UsageError(f"{option} {path}: is the input {item}; give another file name")
     parent = target.parent
     try:
         parent.mkdir(parents=True, exist_ok=True)

@@ -9,6 +9,7 @@ the sidecar of ``<image>.tif``), a residual plot (``residuals.png``) and ``repor
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import time
@@ -143,8 +144,11 @@ def adjust_product(
     from carto.framework.parallel.engine import open_engine
 
     src = Path(source)
+    inputs = [src, *configuration_files(src)]
+    if ties not in ("auto", "none"):
+        inputs.append(Path(ties))
     with (
-        staged_folder(out_dir, "adjust", inputs=[src]) as stage,
+        staged_folder(out_dir, "adjust", inputs=inputs) as stage,
         open_engine(workers, scheduler, quiet=quiet) as engine,
     ):
         work = stage / ".work"
@@ -533,6 +537,27 @@ def _check_keys(doc: Mapping[str, Any], known: tuple[str, ...], path: Path, wher
             close = difflib.get_close_matches(str(key), known, n=1)
             hint = f" (did you mean {close[0]!r}?)" if close else f"; known: {', '.join(known)}"
             raise InputError(f"{path}: unknown field {where}{key!r}{hint}")
+
+
+def configuration_files(path: Path) -> list[Path]:
+    """The files a configuration names (models, rasters, GCPs, DEM, geoid), read leniently
+    (:func:`read_configuration` checks them): the output folder may hold none of them, since
+    it is replaced as a whole. Nothing for a scene folder or an unreadable file."""
+    if not path.is_file():
+        return []
+    try:
+        doc = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+        return []
+    if not isinstance(doc, dict):
+        return []
+    names = [doc.get(key) for key in ("gcps", "dem", "geoid")]
+    images = doc.get("images")
+    if isinstance(images, dict):
+        for spec in images.values():
+            if isinstance(spec, dict):
+                names += [spec.get("model"), spec.get("raster")]
+    return [path.parent / n for n in names if isinstance(n, str) and n]
 
 
 def read_configuration(

@@ -395,7 +395,7 @@ def dem_product(
         init_dem,
         geoid,
         reference,
-        None if isinstance(coregister, str) else coregister,
+        None if str(coregister) in ("auto", "none") else coregister,
     ]
     facts = {
         "generator": generator,
