@@ -512,3 +512,22 @@ def test_an_output_that_is_an_input_is_refused_and_the_input_kept(
     for args, words in cases:
         one_line_error(carto_main(args), 2, words)
     assert {p: _digest(p) for p in kept} == kept
+
+
+def test_a_loop_of_symbolic_links_is_a_one_line_error(
+    carto_main, tmp_path: Path, cartosat1_scene: Path
+) -> None:
+    """A symbolic link loop as --out or as the scene ended as 'internal error' (exit 3,
+    issue 31): a usage error for an output, an input error for an input."""
+    (tmp_path / "a").symlink_to(tmp_path / "b")
+    (tmp_path / "b").symlink_to(tmp_path / "a")
+    loop = str(tmp_path / "a")
+    for args, code in (
+        (["adjust", str(cartosat1_scene), "--out", loop], 2),
+        (["dem", str(cartosat1_scene), "--out", loop], 2),
+        (["simulate", "cartosat1-pair", "--out", loop], 2),
+        (["dem", loop, "--out", str(tmp_path / "o")], 1),
+        (["evaluate", str(cartosat1_scene / "init_dem.tif"), "--reference", loop], 1),
+    ):
+        one_line_error(carto_main(args), code, "loop of symbolic links" if code == 2 else loop)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a", "b"]

@@ -76,6 +76,7 @@ def _coregistration_summary(c: dict[str, Any]) -> str:
 def cmd_evaluate(args: argparse.Namespace) -> int:
     from carto.framework.evaluation.dem_accuracy import dem_accuracy_by_blocks
     from carto.framework.files.atomic import atomic_output
+    from carto.framework.files.paths import resolved
     from carto.framework.files.staging import check_output_file
     from carto.framework.raster.dem import DEM, Geoid
 
@@ -88,7 +89,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         if value is not None:
             check_output_file(value, option, [args.dem, args.reference, args.geoid])
             for other, path in written.items():
-                if Path(path).resolve() == Path(value).resolve():
+                if resolved(path, other, UsageError) == resolved(value, option, UsageError):
                     raise UsageError(f"{option} {value}: is {other} too; give two file names")
             written[option] = value
     dem = DEM.open(args.dem)

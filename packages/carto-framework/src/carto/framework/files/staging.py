@@ -33,6 +33,7 @@ from typing import Any
 
 from carto.framework.errors import InputError, UsageError
 from carto.framework.files.atomic import current_umask
+from carto.framework.files.paths import resolved as _resolved
 
 __all__ = [
     "MARKER",
@@ -108,10 +109,10 @@ def _checked_destination(out: str | os.PathLike[str], inputs: Iterable[Any]) -> 
     if str(out).strip() == "":
         raise UsageError("--out: empty path; give the output folder")
     path = Path(out)
-    resolved = path.resolve()
+    resolved = _resolved(path, "--out", UsageError)
     if resolved == Path(resolved.anchor):
         raise UsageError(f"--out {out}: a file system root cannot be an output folder")
-    if _is_within(Path.cwd().resolve(), resolved):
+    if _is_within(_resolved(Path.cwd(), "the current folder"), resolved):
         raise UsageError(
             f"--out {out}: is the current folder or holds it; an output folder is replaced "
             "as a whole, give a new folder"
@@ -119,7 +120,7 @@ def _checked_destination(out: str | os.PathLike[str], inputs: Iterable[Any]) -> 
     for item in inputs:
         if item is None or str(item) == "":
             continue
-        source = Path(item).resolve()
+        source = _resolved(item, "input")
         if _is_within(source, resolved):
             raise UsageError(
                 f"--out {out}: holds the input {item}; an output folder is replaced as a "
@@ -256,7 +257,7 @@ def require_complete_output(folder: str | os.PathLike[str], command: str) -> Pat
         raise InputError(f"{folder}: no such folder (expected a carto {command} output)")
     marker = path / MARKER
     if not marker.is_file():
-        if any((parent / MARKER).is_file() for parent in path.resolve().parents):
+        if any((parent / MARKER).is_file() for parent in _resolved(path, "folder").parents):
             return path
         raise InputError(
             f"{folder}: not a complete carto {command} output (no {MARKER}: an interrupted "
@@ -274,9 +275,9 @@ def require_complete_output(folder: str | os.PathLike[str], command: str) -> Pat
     return path
 
 
-def _same_file(a: Path, b: Path) -> bool:
+def _same_file(a: Path, b: Path, option: str = "output") -> bool:
     """Whether two paths name one file (symbolic or hard links included)."""
-    if a.resolve() == b.resolve():
+    if _resolved(a, option, UsageError) == _resolved(b, "input"):
         return True
     try:
         return os.path.samefile(a, b)
@@ -298,7 +299,7 @@ def check_output_file(
     if target.is_dir():
         raise UsageError(f"{option} {path}: is a folder, expected a file name")
     for item in inputs:
-        if item is not None and str(item) != "" and _same_file(target, Path(item)):
+        if item is not None and str(item) != "" and _same_file(target, Path(item), option):
             raise UsageError(f"{option} {path}: is the input {item}; give another file name")
     parent = target.parent
     try:

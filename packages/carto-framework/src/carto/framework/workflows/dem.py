@@ -21,6 +21,7 @@ import numpy as np
 
 from carto.framework.adjustment.relative_orientation import RelativeOrientationSettings
 from carto.framework.errors import InputError, OutputError, UsageError
+from carto.framework.files.paths import resolved
 from carto.framework.files.staging import require_complete_output, staged_folder
 from carto.framework.geometry.sensor import Sensor, SensorType
 from carto.framework.plugins.registry import get_registry
@@ -279,7 +280,7 @@ def _fingerprint(sources: Sequence[Any], facts: Mapping[str, Any]) -> dict[str, 
     for item in sources:
         if item is None:
             continue
-        path = Path(item).resolve()
+        path = resolved(item, "input")
         entries = [path] if path.is_file() else sorted(p for p in path.rglob("*") if p.is_file())
         for entry in entries:
             st = entry.stat()
