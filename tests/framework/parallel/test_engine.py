@@ -120,6 +120,32 @@ def test_workers_beyond_the_cores_or_beside_a_scheduler_are_refused():
         pass
 
 
+def test_a_server_that_is_not_dask_is_refused_within_the_timeout(monkeypatch):
+    """A web server on the --scheduler port: dask's Client waited past its own timeout, then
+    printed a traceback at exit (or tried to allocate exabytes, issue 31); one usage error
+    within the probe's timeout instead."""
+    import http.server
+    import threading
+
+    from carto.framework.parallel import engine as engine_module
+
+    server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), http.server.SimpleHTTPRequestHandler)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    monkeypatch.setattr(
+        engine_module, "_identity", functools.partial(engine_module._identity, timeout_s=2.0)
+    )
+    address = f"tcp://127.0.0.1:{server.server_address[1]}"
+    try:
+        with (
+            pytest.raises(UsageError, match=f"--scheduler {address}: no answer from a dask"),
+            open_engine(scheduler=address),
+        ):
+            pass
+    finally:
+        server.shutdown()
+        server.server_close()
+
+
 def test_unreachable_scheduler():
     with (
         pytest.raises(UsageError, match=r"--scheduler tcp://127\.0\.0\.1:9"),

@@ -267,10 +267,48 @@ def open_engine(
         )
 
 
+SCHEDULER_TIMEOUT_S = 10.0
+"""How long ``--scheduler`` may take to answer who it is."""
+
+
+def _identity(address: str, timeout_s: float = SCHEDULER_TIMEOUT_S) -> dict[str, Any]:
+    """What the server at ``address`` says it is (dask's ``identity`` request), each step
+    bounded by ``timeout_s``: a server that is not dask's (a web server on that port) leaves
+    ``Client`` waiting past its own timeout, or decoding its reply as frame lengths of
+    exabytes, then a traceback at exit."""
+    import asyncio
+
+    from distributed.comm import connect
+
+    async def ask() -> Any:
+        # the connection's own timeout first: it says that nothing listens there
+        comm = await asyncio.wait_for(connect(address, timeout=timeout_s), timeout_s + 5.0)
+        try:
+            await asyncio.wait_for(comm.write({"op": "identity", "reply": True}), timeout_s)
+            return await asyncio.wait_for(comm.read(), timeout_s)
+        finally:
+            comm.abort()
+
+    try:
+        reply = asyncio.run(ask())
+    except TimeoutError:
+        raise UsageError(
+            f"--scheduler {address}: no answer from a dask scheduler within {timeout_s:g} s "
+            "(another kind of server on that port?)"
+        ) from None
+    except (OSError, ValueError, TypeError, KeyError, EOFError, MemoryError) as exc:
+        # what a foreign server's bytes make of the protocol (MemoryError: frame lengths)
+        raise UsageError(f"--scheduler {address}: cannot connect: {_cause(exc)}") from None
+    if not isinstance(reply, dict) or reply.get("type") != "Scheduler":
+        raise UsageError(f"--scheduler {address}: not a dask scheduler (it answered {reply!r:.80})")
+    return reply
+
+
 @contextlib.contextmanager
 def _client(address: str) -> Iterator[Any]:
     from distributed import Client
 
+    _identity(address)
     try:
         client = Client(address, timeout="10s", set_as_default=False)
     except (OSError, TimeoutError) as exc:
