@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 
+import pytest
+
 from carto.framework import __version__
 
 
@@ -97,3 +99,25 @@ def test_usage_error_exit_code(run_carto):
     result = run_carto(["plugins", "--kind", "widget"])
     assert result.returncode == 2
     assert "invalid choice" in result.stderr
+
+
+@pytest.mark.parametrize("delay_s", [0.1, 0.4])
+def test_ctrl_c_during_start_up_exits_130_in_one_line(carto_exe, delay_s) -> None:
+    """The command line imports its libraries for a second or more before a command runs;
+    Ctrl-C then gave a KeyboardInterrupt traceback (issue 31): one line and exit 130, as
+    during the command."""
+    import signal
+    import subprocess
+    import time
+
+    proc = subprocess.Popen(
+        [carto_exe, "plugins"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
+    time.sleep(delay_s)
+    if proc.poll() is not None:  # pragma: no cover - a start-up faster than the signal
+        pytest.skip("the command ended before the signal")
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    assert err.strip().splitlines()[-1] == "carto: interrupted"
+    assert "Traceback" not in err
