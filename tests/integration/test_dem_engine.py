@@ -27,6 +27,23 @@ def _dem(out: Path) -> np.ndarray:
         return ds.read(1)
 
 
+def _wait_for_second_iteration(proc: subprocess.Popen, work: Path) -> None:
+    """Until the run in ``proc`` has written the state of its second final iteration (the
+    state is written after the iteration's grid: the grid alone, killed before the state,
+    would still say iteration 1)."""
+    deadline = time.monotonic() + 300
+    while True:
+        try:
+            state = json.loads((work / "generator" / "state.json").read_text())
+            if state["iteration"] >= 2:
+                return
+        except (OSError, ValueError):
+            pass
+        assert proc.poll() is None, "the run ended before it could be stopped"
+        assert time.monotonic() < deadline
+        time.sleep(0.02)
+
+
 @pytest.fixture(scope="module")
 def inputs(cartosat1_scene: Path, cartosat1_adjusted: Path) -> list[str]:
     return ["dem", str(cartosat1_scene), "--models", str(cartosat1_adjusted)]
@@ -93,22 +110,8 @@ def test_killed_then_resumed_gives_the_same_dem(
         stderr=subprocess.DEVNULL,
         env=env,
     )
-    deadline = time.monotonic() + 300
-
-    def at_second_final_iteration() -> bool:
-        # the state is written after the iteration's grid: wait for the state itself (the
-        # grid alone, killed before the state, would still say iteration 1)
-        try:
-            state = json.loads((work / "generator" / "state.json").read_text())
-        except (OSError, ValueError):
-            return False
-        return state["iteration"] >= 2
-
     try:
-        while not at_second_final_iteration():
-            assert proc.poll() is None, "the run ended before it could be killed"
-            assert time.monotonic() < deadline
-            time.sleep(0.02)
+        _wait_for_second_iteration(proc, work)
     finally:
         proc.send_signal(signal.SIGKILL)
         proc.wait()
@@ -196,3 +199,30 @@ def test_vertical_geoid_writes_heights_above_the_geoid_as_a_cog(
     np.testing.assert_allclose(heights[ok], expected[ok], atol=2e-3)  # float32 heights
     report = json.loads((out / "report.json").read_text())
     assert report["vertical_reference"] == "geoid EGM96"
+
+
+def test_ctrl_c_reaches_the_workers_too_and_prints_one_line(carto_exe, inputs, tmp_path):
+    """Ctrl-C in a terminal signals the whole process group, the cluster's workers too: each
+    printed its KeyboardInterrupt traceback (67 lines for two, issue 31). The workers ignore
+    it; the command stops them and says it was interrupted in one line."""
+    out = tmp_path / "dem"
+    work = tmp_path / ".dem.carto-work"
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    proc = subprocess.Popen(
+        [carto_exe, *inputs, *OPTIONS, "--workers", "2", "--out", str(out)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+        start_new_session=True,  # its own process group, as a terminal's job
+    )
+    try:
+        _wait_for_second_iteration(proc, work)  # the final tiles: the workers run them
+    finally:
+        os.killpg(proc.pid, signal.SIGINT)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert len(lines) <= 2, err
+    assert lines[-1].startswith("carto: interrupted")

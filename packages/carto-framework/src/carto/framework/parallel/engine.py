@@ -365,8 +365,9 @@ def _local_cluster(n: int) -> Iterator[Any]:
                 n_workers=n,
                 threads_per_worker=1,
                 processes=True,
-                dashboard_address=None,
+                dashboard_address=":0",  # None is 8787: two runs at once warned of it
                 silence_logs=logging.CRITICAL,
+                preload=["carto.framework.parallel.worker_setup"],
                 env={
                     **_WORKER_ENV,
                     "GDAL_CACHEMAX": os.environ.get("GDAL_CACHEMAX", str(GDAL_CACHE_MB)),
