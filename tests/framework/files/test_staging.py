@@ -67,6 +67,40 @@ def test_an_earlier_output_is_replaced_as_a_whole(tmp_path: Path) -> None:
     assert siblings(out) == []
 
 
+def test_a_symbolic_link_as_out_keeps_pointing_at_the_new_output(tmp_path: Path) -> None:
+    """--out a link to a folder: the output goes into the folder it points at and the link
+    stays (the link was replaced by a folder, and a staging link left behind for good)."""
+    target = tmp_path / "real"
+    target.mkdir()
+    link = tmp_path / "link"
+    link.symlink_to(target)
+    write_run(link, {"a.txt": "1"})
+    write_run(link, {"a.txt": "2"})
+    assert link.is_symlink()
+    assert (target / "a.txt").read_text() == "2"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["link", "real"]
+
+
+def test_a_second_run_into_the_same_folder_is_refused_while_the_first_runs(
+    tmp_path: Path,
+) -> None:
+    """Two runs into one --out shared its staging and work folders and failed with
+    misleading messages (issue 31): the second is refused at once, naming the first's
+    process; the first completes; nothing is left beside the output."""
+    out = tmp_path / "out"
+    with staged_folder(out, "first") as stage:
+        (stage / "a.txt").write_text("first")
+        with (
+            pytest.raises(UsageError, match=rf"another carto run \(process {os.getpid()}\)"),
+            staged_folder(out, "second"),
+        ):
+            pass
+    assert (out / "a.txt").read_text() == "first"
+    assert siblings(out) == []
+    write_run(out, {"a.txt": "third"})  # the lock went with the first run
+    assert (out / "a.txt").read_text() == "third"
+
+
 @pytest.mark.parametrize("fault", [RuntimeError("boom"), KeyboardInterrupt()])
 def test_a_failed_or_interrupted_run_leaves_the_earlier_output_as_it_was(
     tmp_path: Path, fault: BaseException
@@ -159,7 +193,8 @@ def test_what_a_killed_run_left_is_cleaned_up_by_the_next(tmp_path: Path) -> Non
     )
     subprocess.run([sys.executable, "-c", code], check=False)
     assert (out / "a.txt").read_text() == "old"
-    assert len(siblings(out)) == 1  # the dead run's staging folder
+    # the dead run's staging folder, and its lock file (released by its death)
+    assert [n.split("-")[0] for n in siblings(out)] == [".out.carto", ".out.carto"]
     write_run(out, {"a.txt": "new"})
     assert (out / "a.txt").read_text() == "new"
     assert siblings(out) == []

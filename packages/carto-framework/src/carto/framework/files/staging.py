@@ -126,7 +126,12 @@ def _checked_destination(out: str | os.PathLike[str], inputs: Iterable[Any]) -> 
                 f"--out {out}: holds the input {item}; an output folder is replaced as a "
                 "whole, give another folder"
             )
-    if path.exists() or path.is_symlink():
+    if path.is_symlink():
+        # the output goes where the link points, and the link stays: staged beside its
+        # target and swapped with it (staged beside the link, the link itself was replaced
+        # by a folder and a staging link to the target left behind)
+        path = resolved
+    if path.exists():
         if not path.is_dir():
             raise UsageError(f"--out {out}: exists and is not a folder")
         if (path / MARKER).is_file():
@@ -198,6 +203,55 @@ def _swap_into_place(stage: Path, out: Path) -> None:
     shutil.rmtree(old, ignore_errors=True)
 
 
+_LOCK = ".carto-lock"
+
+
+@contextlib.contextmanager
+def _locked(out: Path, option: str) -> Iterator[None]:
+    """Hold ``out``'s lock (``flock`` on ``.<name>.carto-lock`` beside it) for a run: two
+    runs into one folder shared its staging and work folders and failed with misleading
+    messages (issue 31); the second is refused at once. The lock file goes when the run
+    ends (re-checked after locking, since a run ending meanwhile removes the file it holds)."""
+    import fcntl
+
+    parent = out.parent
+    if not parent.is_dir():  # a new folder in a new place: nobody else can be writing it
+        yield
+        return
+    lock = parent / f".{out.name}{_LOCK}"
+    while True:
+        try:
+            fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o666 & ~current_umask())
+        except OSError as exc:
+            raise UsageError(
+                f"{option} {out}: cannot write in {parent}: {exc.strerror or exc}"
+            ) from None
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.pread(fd, 32, 0).decode(errors="replace").strip() or "?"
+            os.close(fd)
+            raise UsageError(
+                f"{option} {out}: another carto run (process {holder}) is writing it; wait for "
+                "it to end or give another folder"
+            ) from None
+        try:
+            same = os.fstat(fd).st_ino == os.stat(lock).st_ino
+        except FileNotFoundError:
+            same = False
+        if same:
+            break
+        os.close(fd)  # the file was removed by the run that held it: lock the new one
+    try:
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, str(os.getpid()).encode(), 0)
+        yield
+    finally:
+        with contextlib.suppress(OSError):
+            os.unlink(lock)
+        os.close(fd)
+
+
 def _listing(folder: Path) -> list[str]:
     return sorted(
         str(p.relative_to(folder)) for p in folder.rglob("*") if p.is_file() and p.name != MARKER
@@ -225,8 +279,20 @@ def staged_folder(
         UsageError: ``out`` cannot be an output folder or cannot be written (before any work).
     """
     destination = _checked_destination(out, inputs)
-    _repair(destination)
-    stage = _make_stage(destination)
+    with _locked(destination, "--out"):
+        _repair(destination)
+        stage = _make_stage(destination)
+        yield from _staged(stage, destination, out, command, info)
+
+
+def _staged(
+    stage: Path,
+    destination: Path,
+    out: str | os.PathLike[str],
+    command: str,
+    info: Mapping[str, Any] | None,
+) -> Iterator[Path]:
+    """The body of :func:`staged_folder` once ``destination`` is locked."""
     try:
         yield stage
         if _INTERRUPTS:  # interrupted, but the KeyboardInterrupt got lost on its way
