@@ -75,6 +75,23 @@ def test_raster_errors(tmp_path, raster):
         check_image_source(ArrayImage(np.ones((8, 40))), "thin")
 
 
+def test_a_truncated_tiff_names_the_file_and_gdals_cause(tmp_path, raster):
+    """A TIFF cut in half opens (its header is whole) but its tiles fail: rasterio said only
+    "Read failed. See previous exception for details." (issue 31); the file and GDAL's own
+    cause now."""
+    path, _ = raster
+    cut = tmp_path / "cut.tif"
+    cut.write_bytes(path.read_bytes()[: path.stat().st_size // 2])
+    source = RasterImage.open(cut)
+    for read in (lambda: source.overview(64), lambda: source[0:300, 0:517]):
+        with pytest.raises(InputError) as err:
+            read()
+        text = str(err.value)
+        assert str(cut) in text
+        assert "truncated or damaged" in text
+        assert "See previous exception" not in text
+
+
 def test_banded_image(tmp_path):
     data = np.arange(103 * 37, dtype=np.float32).reshape(103, 37)
     image = BandedImage(tmp_path, data.shape, 25)

@@ -24,6 +24,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from carto.framework.errors import InputError
 from carto.framework.raster.images import MIN_IMAGE_PX, check_image
+from carto.framework.raster.read_errors import read_cause
 
 __all__ = [
     "ArrayImage",
@@ -123,8 +124,7 @@ class RasterImage(ImageSource):
                         raise InputError(f"{path}: no band {band} (the file has {ds.count})")
                     shape = (int(ds.height), int(ds.width))
         except rasterio.errors.RasterioError as exc:
-            first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-            raise InputError(f"{path}: cannot read raster: {first}") from None
+            raise InputError(f"{path}: cannot read raster: {read_cause(exc)}") from None
         return cls(Path(path), shape, band)
 
     @property
@@ -150,8 +150,10 @@ class RasterImage(ImageSource):
                 with rasterio.open(self.path) as ds:
                     data = ds.read(self.band, window=window, masked=True)
         except rasterio.errors.RasterioError as exc:
-            first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-            raise InputError(f"{self.path}: cannot read window {window}: {first}") from None
+            raise InputError(
+                f"{self.path}: cannot read window {window} (a truncated or damaged file?): "
+                f"{read_cause(exc)}"
+            ) from None
         return np.ma.filled(data.astype(np.float32), np.nan)
 
     def overview(self, max_side: int) -> NDArray[np.float32]:
@@ -162,10 +164,15 @@ class RasterImage(ImageSource):
         n_r, n_c = self.shape
         factor = max(1, math.ceil(max(n_r, n_c) / max_side))
         out_shape = (max(1, n_r // factor), max(1, n_c // factor))
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            with rasterio.open(self.path) as ds:
-                data = ds.read(self.band, out_shape=out_shape, masked=True)
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                with rasterio.open(self.path) as ds:
+                    data = ds.read(self.band, out_shape=out_shape, masked=True)
+        except rasterio.errors.RasterioError as exc:
+            raise InputError(
+                f"{self.path}: cannot read (a truncated or damaged file?): {read_cause(exc)}"
+            ) from None
         return np.ma.filled(data.astype(np.float32), np.nan)
 
 

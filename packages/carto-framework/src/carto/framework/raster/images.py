@@ -10,6 +10,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from carto.framework.errors import InputError
+from carto.framework.raster.read_errors import read_cause
 
 MIN_IMAGE_PX = 16
 """Smallest usable image side, pixels: an image must hold one correlation window of the
@@ -56,8 +57,7 @@ def read_raster(path: Path) -> NDArray[np.float32]:
             with rasterio.open(path) as ds:
                 data = ds.read(1, masked=True)
     except rasterio.errors.RasterioError as exc:
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise InputError(f"{path}: cannot read raster: {first}") from None
+        raise InputError(f"{path}: cannot read raster: {read_cause(exc)}") from None
     image = np.ma.filled(data.astype(np.float32), np.nan)
     check_image(image, str(path))
     return image
