@@ -136,7 +136,6 @@ class RasterImage(ImageSource):
         return str(self.path)
 
     def read(self, rows: slice, cols: slice) -> NDArray[np.float32]:
-        import rasterio
         from rasterio.windows import Window
 
         rows, cols = _slices((rows, cols), self.shape)
@@ -144,34 +143,28 @@ class RasterImage(ImageSource):
         if height == 0 or width == 0:
             return np.empty((height, width), np.float32)
         window = Window(cols.start, rows.start, width, height)
-        try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                with rasterio.open(self.path) as ds:
-                    data = ds.read(self.band, window=window, masked=True)
-        except rasterio.errors.RasterioError as exc:
-            raise InputError(
-                f"{self.path}: cannot read window {window} (a truncated or damaged file?): "
-                f"{read_cause(exc)}"
-            ) from None
-        return np.ma.filled(data.astype(np.float32), np.nan)
+        return self._read(f"window {window}", window=window)
 
     def overview(self, max_side: int) -> NDArray[np.float32]:
         """The whole image decimated to at most ``max_side`` pixels a side (nearest; GDAL
         uses the file's overviews when it has them)."""
-        import rasterio
-
         n_r, n_c = self.shape
         factor = max(1, math.ceil(max(n_r, n_c) / max_side))
-        out_shape = (max(1, n_r // factor), max(1, n_c // factor))
+        return self._read("it", out_shape=(max(1, n_r // factor), max(1, n_c // factor)))
+
+    def _read(self, what: str, **how: Any) -> NDArray[np.float32]:
+        """The band read as ``how`` says (rasterio ``read`` arguments), voids NaN; a file
+        that fails names itself and GDAL's cause."""
+        import rasterio
+
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 with rasterio.open(self.path) as ds:
-                    data = ds.read(self.band, out_shape=out_shape, masked=True)
+                    data = ds.read(self.band, masked=True, **how)
         except rasterio.errors.RasterioError as exc:
             raise InputError(
-                f"{self.path}: cannot read (a truncated or damaged file?): {read_cause(exc)}"
+                f"{self.path}: cannot read {what} (a truncated or damaged file?): {read_cause(exc)}"
             ) from None
         return np.ma.filled(data.astype(np.float32), np.nan)
 
