@@ -458,6 +458,9 @@ def test_a_full_disk_during_the_dem_write_leaves_the_earlier_output_as_it_was(
     )
     one_line_error(res, 1, "left as it was")
     assert res.stderr.strip().count("\n") == 0, res.stderr  # no GDAL/libtiff lines
+    # the file that could not be written and why, not rasterio's pointer to a chained error
+    assert "cannot write" in res.stderr
+    assert "See previous exception" not in res.stderr
     assert snapshot(out) == before
     # beside it, at most the hidden work folder a --resume would continue from
     assert set(p.name for p in tmp_path.iterdir()) <= {"dem", ".dem.carto-work"}

@@ -101,7 +101,7 @@ def test_usage_error_exit_code(run_carto):
     assert "invalid choice" in result.stderr
 
 
-@pytest.mark.parametrize("delay_s", [0.1, 0.4])
+@pytest.mark.parametrize("delay_s", [0.2, 0.5])
 def test_ctrl_c_during_start_up_exits_130_in_one_line(carto_exe, delay_s) -> None:
     """The command line imports its libraries for a second or more before a command runs;
     Ctrl-C then gave a KeyboardInterrupt traceback (issue 31): one line and exit 130, as

@@ -15,6 +15,8 @@ import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
+from carto.framework.errors import OutputError
+
 
 def current_umask() -> int:
     """The process's file-creation mask (read without changing it)."""
@@ -27,23 +29,33 @@ _FILE_MODE = 0o666 & ~current_umask()
 
 
 @contextlib.contextmanager
-def atomic_output(path: str | os.PathLike[str]) -> Iterator[Path]:
+def atomic_output(path: str | os.PathLike[str], what: str = "") -> Iterator[Path]:
     """Yield a temporary path beside ``path``; rename it to ``path`` when the block succeeds.
 
     The temporary name keeps the destination's suffix (GDAL picks drivers by suffix). Parent
     folders are created. The final file gets the usual permissions (``0o666`` less umask).
+
+    Raises:
+        OutputError: an OSError while writing (a full disk: numpy says only "160000
+            requested and 16352 written"), naming ``what`` (e.g. ``"DEM"``) and ``path``.
     """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, name = tempfile.mkstemp(
-        prefix=f".{path.stem}.", suffix=f".tmp{path.suffix}", dir=path.parent
-    )
+    label = f"{what} {path}" if what else str(path)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, name = tempfile.mkstemp(
+            prefix=f".{path.stem}.", suffix=f".tmp{path.suffix}", dir=path.parent
+        )
+    except OSError as exc:
+        raise OutputError(f"cannot write {label}: {exc.strerror or exc}") from exc
     os.close(fd)
     tmp = Path(name)
     try:
         yield tmp
         os.chmod(tmp, _FILE_MODE)
         os.replace(tmp, path)
+    except OSError as exc:
+        raise OutputError(f"cannot write {label}: {exc.strerror or exc}") from exc
     finally:
         tmp.unlink(missing_ok=True)
         Path(f"{tmp}.aux.xml").unlink(missing_ok=True)

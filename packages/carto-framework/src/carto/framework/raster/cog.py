@@ -20,6 +20,7 @@ from typing import Any
 
 from carto.framework.errors import InputError, OutputError
 from carto.framework.files.atomic import atomic_output
+from carto.framework.raster.gdal_errors import gdal_cause
 
 __all__ = ["COG_BLOCK_PX", "cog_writer"]
 
@@ -77,18 +78,19 @@ def cog_writer(
 
         profile["crs"] = RioCRS.from_wkt(with_vertical(profile["crs"].to_wkt(), vertical).to_wkt())
     try:
-        with _staged_cog(path, profile, overview_resampling) as dst:
+        with _staged_cog(path, profile, overview_resampling, what) as dst:
             yield dst
             if vertical is not None:
                 dst.update_tags(**{VERTICAL_TAG: vertical_tag(vertical)})
                 dst.units = ("metre",) * dst.count
     except (RasterioError, OSError) as exc:
-        text = str(exc).strip().splitlines()
-        raise OutputError(f"cannot write {what} {path}: {text[0] if text else exc}") from exc
+        raise OutputError(f"cannot write {what} {path}: {gdal_cause(exc)}") from exc
 
 
 @contextlib.contextmanager
-def _staged_cog(path: Path, profile: Mapping[str, Any], overview_resampling: str) -> Iterator[Any]:
+def _staged_cog(
+    path: Path, profile: Mapping[str, Any], overview_resampling: str, what: str
+) -> Iterator[Any]:
     import rasterio
     import rasterio.shutil
 
@@ -102,7 +104,7 @@ def _staged_cog(path: Path, profile: Mapping[str, Any], overview_resampling: str
     }
     for key in ("compress", "predictor", "zlevel"):
         staging_profile.pop(key, None)
-    with atomic_output(path) as final:
+    with atomic_output(path, what) as final:
         staging = final.with_name(f"{final.stem}.staging.tif")
         try:
             with rasterio.open(staging, "w", **staging_profile) as dst:

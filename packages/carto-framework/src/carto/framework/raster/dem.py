@@ -45,8 +45,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from carto.framework.arrays import as_float_arrays
 from carto.framework.errors import InputError
+from carto.framework.raster.gdal_errors import gdal_cause
 from carto.framework.raster.grid_sampling import EDGE_TOL_PX, bilinear_sample
-from carto.framework.raster.read_errors import read_cause
 from carto.framework.raster.vertical_reference import (
     EGM96,
     ELLIPSOID,
@@ -243,7 +243,7 @@ class Geoid:
                 grid = ds.read(1, masked=True).astype(np.float64).filled(np.nan)
                 transform = ds.transform
         except RasterioError as exc:
-            raise InputError(f"geoid {path}: not a readable grid ({read_cause(exc)})") from exc
+            raise InputError(f"geoid {path}: not a readable grid ({gdal_cause(exc)})") from exc
         if not np.isfinite(grid).any():
             raise InputError(f"geoid {path}: the grid holds no valid undulation")
         return cls(grid, transform, source=str(path))
@@ -443,7 +443,7 @@ class DEM:
                 grid = grid.astype(np.float64).filled(np.nan)
                 scale, offset = ds.scales[band - 1], ds.offsets[band - 1]
         except RasterioError as exc:
-            raise InputError(f"DEM {path}: not a readable raster ({read_cause(exc)})") from exc
+            raise InputError(f"DEM {path}: not a readable raster ({gdal_cause(exc)})") from exc
         if scale not in (None, 1.0) or offset not in (None, 0.0):
             grid = grid * (1.0 if scale is None else scale) + (offset or 0.0)
         dem = cls(grid, transform, crs, vertical=vref, source=str(path))

@@ -23,8 +23,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from carto.framework.errors import InputError
+from carto.framework.raster.gdal_errors import gdal_cause
 from carto.framework.raster.images import MIN_IMAGE_PX, check_image
-from carto.framework.raster.read_errors import read_cause
 
 __all__ = [
     "ArrayImage",
@@ -124,7 +124,7 @@ class RasterImage(ImageSource):
                         raise InputError(f"{path}: no band {band} (the file has {ds.count})")
                     shape = (int(ds.height), int(ds.width))
         except rasterio.errors.RasterioError as exc:
-            raise InputError(f"{path}: cannot read raster: {read_cause(exc)}") from None
+            raise InputError(f"{path}: cannot read raster: {gdal_cause(exc)}") from None
         return cls(Path(path), shape, band)
 
     @property
@@ -164,7 +164,7 @@ class RasterImage(ImageSource):
                     data = ds.read(self.band, masked=True, **how)
         except rasterio.errors.RasterioError as exc:
             raise InputError(
-                f"{self.path}: cannot read {what} (a truncated or damaged file?): {read_cause(exc)}"
+                f"{self.path}: cannot read {what} (a truncated or damaged file?): {gdal_cause(exc)}"
             ) from None
         return np.ma.filled(data.astype(np.float32), np.nan)
 

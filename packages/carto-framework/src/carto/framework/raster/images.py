@@ -10,7 +10,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from carto.framework.errors import InputError
-from carto.framework.raster.read_errors import read_cause
+from carto.framework.raster.gdal_errors import gdal_cause
 
 MIN_IMAGE_PX = 16
 """Smallest usable image side, pixels: an image must hold one correlation window of the
@@ -57,7 +57,7 @@ def read_raster(path: Path) -> NDArray[np.float32]:
             with rasterio.open(path) as ds:
                 data = ds.read(1, masked=True)
     except rasterio.errors.RasterioError as exc:
-        raise InputError(f"{path}: cannot read raster: {read_cause(exc)}") from None
+        raise InputError(f"{path}: cannot read raster: {gdal_cause(exc)}") from None
     image = np.ma.filled(data.astype(np.float32), np.nan)
     check_image(image, str(path))
     return image

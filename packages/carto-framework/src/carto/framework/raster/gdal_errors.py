@@ -1,4 +1,4 @@
-"""What went wrong when GDAL could not read a file, in one line (:func:`read_cause`)."""
+"""What went wrong when GDAL could not read or write a file, in one line (:func:`gdal_cause`)."""
 
 from __future__ import annotations
 
@@ -6,10 +6,11 @@ _GENERIC = ("see previous exception",)
 """rasterio's own words when it only points at the GDAL errors it chained."""
 
 
-def read_cause(exc: BaseException) -> str:
+def gdal_cause(exc: BaseException) -> str:
     """The most specific line of ``exc`` and the errors chained before it: rasterio's "Read
     failed. See previous exception for details." on a truncated TIFF hides GDAL's "TIFFFillTile:
-    Read error at row 0 ...; got 20120 bytes, expected 49170" (issue 31)."""
+    Read error at row 0 ...; got 20120 bytes, expected 49170", and "Write failed." on a full
+    disk GDAL's "No space left on device" (issue 31)."""
     chain: list[BaseException] = []
     seen: BaseException | None = exc
     while seen is not None and seen not in chain and len(chain) < 20:

@@ -2,8 +2,10 @@
 
 The command line (:mod:`carto.framework.cli`) imports its commands and their libraries
 first, a second or two; Ctrl-C then, before the command has installed its own handling, ended
-in a ``KeyboardInterrupt`` traceback. This module imports nothing heavy itself, so that an
-interrupt at any moment of start-up exits as one during the command does: one line, exit 130.
+in a ``KeyboardInterrupt`` traceback. This module imports nothing itself, and it sits
+outside ``carto.framework`` (whose package imports pluggy and the exception types first), so
+that an interrupt at any moment after the interpreter starts exits as one during the command
+does: one line, exit 130.
 """
 
 from __future__ import annotations
