@@ -76,3 +76,73 @@ def test_a_flat_height_does_not_pull_a_block_without_gcps(run_carto, tmp_path, s
     assert refused.returncode == 2
     assert "height_m (2346 m) is a flat surface" in refused.stderr
     assert not (tmp_path / "adj2").exists()
+
+
+def _pair_config(path, images, extra):
+    path.write_text(json.dumps({"images": images, **extra}))
+    return path
+
+
+def _relative_px(report, names):
+    values = {k: v["value"] for k, v in report["adjustment"]["parameters"].items()}
+    return np.hypot(
+        values[f"{names[1]}.rpc.line.c0"] - values[f"{names[0]}.rpc.line.c0"],
+        values[f"{names[1]}.rpc.sample.c0"] - values[f"{names[0]}.rpc.sample.c0"],
+    )
+
+
+@pytest.mark.realdata
+@pytest.mark.parametrize("pair", ["ventoux", "reunion"])
+def test_what_adjust_writes_goes_back_into_adjust_and_dem(pair, run_carto, tmp_path, shared_data):
+    """The corrected RPCs carto adjust writes, read with the same rasters, go back into carto
+    adjust and carto dem, and carry the relative correction: the across-base parallax carto
+    dem's relative orientation measures on them is near zero (0.7 px on Reunion's own RPCs;
+    the along-base part is free without GCPs, a tie point's height takes it). The Ventoux
+    crops carry their +5000 px offset in their GeoTIFFs: the RPCs were written for the crop,
+    and the crop shifted them again ("the centre of the left image does not locate on the
+    ground"); the adjustment traced rays at 9000 m, beyond a crop RPC's ground domain ("307
+    of 307 points have no intersection"; issue 31)."""
+    if pair == "ventoux":
+        d = shared_data / "pleiades-ventoux-pair"
+        names = ("left_image", "right_image")
+        models = {n: d / f"{n}.geom" for n in names}
+        geoid = shared_data / "geoid" / "egm96_15.gtx"
+        extra = {"dem": str(d / "N44E005.hgt"), "geoid": str(geoid)}
+        start = ["--init-dem", extra["dem"], "--geoid", str(geoid)]
+    else:
+        d = shared_data / REUNION
+        names = ("img_01", "img_02")
+        models = {n: d / f"{n}.tif" for n in names}
+        extra = {"height_m": 2346}
+        start = ["--init-height", "2346", "--posting", "2"]
+    rasters = {n: d / f"{n}.tif" for n in names}
+
+    def adjust(label: str, used: dict) -> dict:
+        config = _pair_config(
+            tmp_path / f"{label}.json",
+            {n: {"model": str(used[n]), "raster": str(rasters[n])} for n in names},
+            extra,
+        )
+        proc = run_carto(["adjust", str(config), "--out", str(tmp_path / label)])
+        assert proc.returncode == 0, proc.stderr
+        return json.loads((tmp_path / label / "report.json").read_text())
+
+    def parallax(used: dict) -> float:
+        out = tmp_path / f"dem-{len(list(tmp_path.iterdir()))}"
+        proc = run_carto(
+            [
+                "dem", "--left", str(rasters[names[0]]), "--right", str(rasters[names[1]]),
+                "--left-model", str(used[names[0]]), "--right-model", str(used[names[1]]),
+                "--sensor", "rpc", *start, "--max-iterations", "1", "--out", str(out), "--quiet",
+            ]
+        )  # fmt: skip
+        assert proc.returncode == 0, proc.stderr
+        report = json.loads((out / "report.json").read_text())
+        return report["relative_orientation"]["before"]["median_across_base_px"]
+
+    assert _relative_px(adjust("a1", models), names) > 0.3  # a correction to write
+    written = {n: tmp_path / "a1" / f"{n}_RPC.TXT" for n in names}
+    adjust("a2", written)  # the written RPCs go back into carto adjust
+    before, after = parallax(models), parallax(written)
+    assert abs(after) < 0.1
+    assert abs(after) < abs(before) / 3

@@ -40,6 +40,10 @@ class DecimatedSensor(Sensor):
         n_l, n_s = self.sensor.image_shape
         return (n_l // self.factor, n_s // self.factor)
 
+    @property
+    def ray_heights_m(self) -> tuple[float, float]:
+        return self.sensor.ray_heights_m
+
     def ground_to_image(
         self, lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike
     ) -> tuple[FloatArray, FloatArray]:

@@ -50,7 +50,7 @@ from carto.framework.geometry.frames import (
     ecef_to_geodetic,
     geodetic_to_ecef,
 )
-from carto.framework.geometry.sensor import Sensor
+from carto.framework.geometry.sensor import RAY_HEIGHTS_M, Sensor
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -290,12 +290,21 @@ def _local_scales(
     return m_per_rad_lon, m_per_rad_lat
 
 
+def common_ray_heights_m(sensors: Sequence[Sensor]) -> tuple[float, float]:
+    """The heights all ``sensors`` trace lines of sight over (the narrowest of their
+    :attr:`~carto.framework.geometry.sensor.Sensor.ray_heights_m`), or the default when they
+    do not overlap."""
+    low = max(s.ray_heights_m[0] for s in sensors)
+    high = min(s.ray_heights_m[1] for s in sensors)
+    return (low, high) if low < high else RAY_HEIGHTS_M
+
+
 def intersect_sensors(
     sensors: Sequence[Sensor],
     lines: ArrayLike,
     samples: ArrayLike,
     *,
-    h_range_m: tuple[float, float] = (-500.0, 9000.0),
+    h_range_m: tuple[float, float] | None = None,
     iterations: int = 10,
     tol_m: float = 1e-4,
     weights: ArrayLike | None = None,
@@ -313,7 +322,9 @@ def intersect_sensors(
         lines, samples: ``(K, N)`` image coordinates of the points in each sensor, pixels
             (``(K,)`` for one point). NaN marks a point not measured in that image.
         h_range_m: the two ellipsoidal heights that define each initial ray, metres; they
-            should bracket the terrain.
+            should bracket the terrain. Default: the heights all the sensors are valid over
+            (:attr:`~carto.framework.geometry.sensor.Sensor.ray_heights_m`; an RPC fitted
+            to a crop locates nothing at 9000 m, kilometres beyond its footprint).
         iterations: maximum Gauss-Newton iterations (0: straight-ray intersection only).
         tol_m: the refinement stops when every point moved less than this, metres.
         weights: ``(K, N)`` or ``(K,)`` weights of the image observations (e.g.
@@ -338,7 +349,7 @@ def intersect_sensors(
         )
     if k < 2:
         raise InputError(f"intersection needs at least 2 sensors, got {k}")
-    h_low, h_high = (float(v) for v in h_range_m)
+    h_low, h_high = (float(v) for v in (h_range_m or common_ray_heights_m(sensors)))
     if not h_low < h_high:
         raise InputError(f"h_range_m {h_range_m} must be (low, high) with low < high")
     n = lines_a.shape[1]

@@ -207,6 +207,10 @@ class LineCorrected(Sensor):
         return self.base.image_shape
 
     @property
+    def ray_heights_m(self) -> tuple[float, float]:
+        return self.base.ray_heights_m
+
+    @property
     def parameters(self) -> tuple[Parameter, ...]:
         return self.base.parameters
 

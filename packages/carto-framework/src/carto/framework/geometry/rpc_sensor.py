@@ -157,6 +157,10 @@ class RPCSensor(Sensor):
             :meth:`~carto.framework.geometry.rpc_model.RPCCoefficients.default_image_shape`.
         parameters: the six parameters (default :func:`default_rpc_parameters`).
         source: where the model came from, for messages.
+        crop_offset: ``(row, column)`` of the image's first pixel in the frame of the product
+            the RPC came with (a crop whose offset is in its geotransform,
+            :meth:`for_raster`); an RPC written for the image goes back into that frame, so
+            that the same crop reads it as it read the product's.
     """
 
     def __init__(
@@ -168,6 +172,7 @@ class RPCSensor(Sensor):
         source: str = "",
         prefix: str = "",
         metadata: Mapping[str, str] | None = None,
+        crop_offset: tuple[float, float] = (0.0, 0.0),
     ) -> None:
         if not isinstance(rpc, RPCCoefficients):
             raise InputError(f"RPCSensor needs RPCCoefficients, got {type(rpc).__name__}")
@@ -198,6 +203,7 @@ class RPCSensor(Sensor):
         self._offset = np.array([v[0], v[3]])
         self._identity = not any(v)
         self.source = source
+        self.crop_offset = (float(crop_offset[0]), float(crop_offset[1]))
 
     def __repr__(self) -> str:
         src = f" {self.source}" if self.source else ""
@@ -212,6 +218,15 @@ class RPCSensor(Sensor):
     def image_shape(self) -> tuple[int, int]:
         """Image size ``(n_lines, n_samples)``."""
         return self._shape
+
+    @property
+    def ray_heights_m(self) -> tuple[float, float]:
+        """The heights the RPC was fitted over, ``HEIGHT_OFF +- HEIGHT_SCALE``: its ground
+        domain holds the footprint at those heights only (an RPC of a 500 px crop spans a
+        few hundred metres, and a line of sight at 9000 m is kilometres beyond it: an
+        adjustment of the RPCs carto adjust wrote located no point, issue 31)."""
+        h0, hs = self._rpc.height_off, abs(self._rpc.height_scale)
+        return (h0 - hs, h0 + hs)
 
     @property
     def image_shape_known(self) -> bool:
@@ -247,6 +262,7 @@ class RPCSensor(Sensor):
             source=self.source,
             prefix=self.prefix,
             metadata=self.metadata,
+            crop_offset=self.crop_offset,
         )
 
     def with_prefix(self, prefix: str) -> RPCSensor:
@@ -261,6 +277,7 @@ class RPCSensor(Sensor):
             source=self.source,
             prefix=prefix,
             metadata=self.metadata,
+            crop_offset=self.crop_offset,
         )
 
     def for_raster(self, raster: Path) -> RPCSensor:
@@ -291,6 +308,7 @@ class RPCSensor(Sensor):
             source=f"{self.source} (crop at row {row_off:g}, column {col_off:g})",
             prefix=self.prefix,
             metadata=self.metadata,
+            crop_offset=(self.crop_offset[0] + row_off, self.crop_offset[1] + col_off),
         )
 
     def _correct(self, line: FloatArray, samp: FloatArray) -> tuple[FloatArray, FloatArray]:
@@ -464,6 +482,9 @@ def save_corrected_rpc(sensor: Sensor, out_dir: Path, name: str) -> dict[str, An
         raise InputError(f"image {name}: not an RPC sensor ({type(sensor).__name__})")
     h0, hs = sensor.rpc.height_off, abs(sensor.rpc.height_scale)
     rpc, _ = fit_rpc(sensor, h_range=(h0 - hs, h0 + hs))
+    row_off, col_off = sensor.crop_offset
+    if row_off or col_off:  # back into the product's frame: the crop's raster shifts it again
+        rpc = attrs.evolve(rpc, line_off=rpc.line_off + row_off, samp_off=rpc.samp_off + col_off)
     return {"rpc": {"file": write_rpc_txt(rpc, out_dir / f"{name}_RPC.TXT").name}}
 
 

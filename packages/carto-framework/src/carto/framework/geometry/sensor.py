@@ -86,12 +86,23 @@ def replace_parameters(
     return tuple(out)
 
 
+RAY_HEIGHTS_M = (-500.0, 9000.0)
+"""The default heights of a line of sight's two points (they bracket every terrain)."""
+
+
 class Sensor(abc.ABC):
     """The geometric model of one image: ground <-> image.
 
     Implementations: the rigorous line scanner and the RPC model in the framework, and any sensor
     a plugin adds.
     """
+
+    @property
+    def ray_heights_m(self) -> tuple[float, float]:
+        """Two ellipsoidal heights between which this model traces lines of sight (a forward
+        intersection's straight rays), metres: :data:`RAY_HEIGHTS_M` unless the model is
+        valid over fewer heights (an RPC fitted to a crop)."""
+        return RAY_HEIGHTS_M
 
     @property
     @abc.abstractmethod
