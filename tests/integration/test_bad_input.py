@@ -534,3 +534,31 @@ def test_a_loop_of_symbolic_links_is_a_one_line_error(
     ):
         one_line_error(carto_main(args), code, "loop of symbolic links" if code == 2 else loop)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a", "b"]
+
+
+@pytest.mark.realdata
+def test_a_geoid_grid_is_no_starting_dem(
+    carto_main, tmp_path: Path, cartosat1_scene: Path, shared_data: Path
+) -> None:
+    """egm96_15.gtx (15 arc-minutes, +-100 m) taken as the starting DEM gave a DEM 575 m off
+    with exit 0 (issue 31): refused by its posting, in carto dem and in a configuration."""
+    gtx = shared_data / "geoid" / "egm96_15.gtx"
+    res = carto_main(
+        ["dem", str(cartosat1_scene), "--init-dem", str(gtx), "--out", str(tmp_path / "d")]
+    )
+    one_line_error(res, 1, "egm96_15.gtx", "27.8 km apart", "at most 1000 m")
+    config = tmp_path / "pair.json"
+    config.write_text(
+        json.dumps(
+            {
+                "images": {
+                    n: {"model": str(cartosat1_scene / "truth" / f"{n}.model.json")}
+                    for n in ("fore", "aft")
+                },
+                "dem": str(gtx),
+            }
+        )
+    )
+    res = carto_main(["adjust", str(config), "--out", str(tmp_path / "a")])
+    one_line_error(res, 1, "pair.json: dem", "27.8 km apart")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["pair.json"]

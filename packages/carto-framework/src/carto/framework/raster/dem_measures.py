@@ -9,6 +9,7 @@ import attrs
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from carto.framework.errors import InputError
 from carto.framework.raster.dem import DEM, Bounds
 
 FloatArray = NDArray[np.float64]
@@ -46,6 +47,26 @@ def dem_pixel_size_m(dem: DEM) -> tuple[FloatArray, FloatArray]:
     dx = np.hypot(t.a * east_per_deg, t.d * north_per_deg)
     dy = np.hypot(t.b * east_per_deg, t.e * north_per_deg)
     return dx, dy
+
+
+MAX_TERRAIN_POSTING_M = 1000.0
+"""The coarsest DEM of the terrain a run starts from, metres between posts: 30 arc-seconds
+(GTOPO30, GMTED: about 900 m) still is one; a geoid grid (``egm96_15.gtx``: 15 arc-minutes,
+28 km, +-100 m) is not, and taken as the starting DEM it gave a DEM 575 m off with NMAD
+162 m and exit 0 (issue 31)."""
+
+
+def check_terrain_posting(dem: DEM, what: str) -> None:
+    """Refuse ``dem`` (named ``what``) as a DEM of the terrain when its posts are more than
+    :data:`MAX_TERRAIN_POSTING_M` apart."""
+    dx, dy = (float(np.median(v)) for v in dem_pixel_size_m(dem))
+    posting = max(dx, dy)
+    if posting > MAX_TERRAIN_POSTING_M:
+        raise InputError(
+            f"{what}: posts {posting / 1000.0:.1f} km apart; a DEM of the terrain needs at "
+            f"most {MAX_TERRAIN_POSTING_M:g} m (SRTM: 30-90 m; a geoid or climate grid is not "
+            "one)"
+        )
 
 
 def height_gradient(

@@ -569,6 +569,7 @@ def read_configuration(
     for a flat DEM instead of ``"dem"``; paths relative to the file. ``sensor_type`` and
     ``trajectory`` (the command line's) override the file's."""
     from carto.framework.raster.dem import DEM, Geoid
+    from carto.framework.raster.dem_measures import check_terrain_posting
 
     doc = read_json(path, "configuration")
     if not isinstance(doc, dict):
@@ -623,6 +624,7 @@ def read_configuration(
     if doc.get("dem"):
         geoid = Geoid.open(base / doc["geoid"]) if doc.get("geoid") else None
         dem = DEM.open(base / doc["dem"], geoid=geoid, require_ellipsoidal=True)
+        check_terrain_posting(dem, f"{path}: dem {base / doc['dem']}")
     elif doc.get("height_m") is not None:
         h = doc["height_m"]
         if isinstance(h, bool) or not isinstance(h, int | float) or not math.isfinite(h):

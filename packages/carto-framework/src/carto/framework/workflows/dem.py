@@ -227,9 +227,13 @@ def initial_dem(
     if init_dem is not None and init_height_m is not None:
         raise InputError("dem: give --init-dem or --init-height, not both")
     if init_dem is not None:
-        return DEM.open(
+        start = DEM.open(
             init_dem, geoid=Geoid.open(geoid) if geoid else None, require_ellipsoidal=True
         )
+        from carto.framework.raster.dem_measures import check_terrain_posting
+
+        check_terrain_posting(start, f"initial DEM {init_dem}")
+        return start
     if init_height_m is not None:
         if not (np.isfinite(init_height_m) and -1000.0 <= init_height_m <= 10000.0):
             raise UsageError(
