@@ -562,3 +562,29 @@ def test_a_geoid_grid_is_no_starting_dem(
     res = carto_main(["adjust", str(config), "--out", str(tmp_path / "a")])
     one_line_error(res, 1, "pair.json: dem", "27.8 km apart")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["pair.json"]
+
+
+def test_gcp_heights_far_off_the_dem_are_refused_unless_allowed(
+    carto_main, tmp_path: Path, cartosat1_scene: Path
+) -> None:
+    """GCP heights in feet put the checkpoints 1.2 km off with no warning (issue 31): a GCP
+    hundreds of metres off the scene's DEM stops the adjustment before it runs; with
+    --allow-poor it runs and the report says why it is poor."""
+    scene = tmp_path / "scene"
+    shutil.copytree(cartosat1_scene, scene)
+    table = (scene / "gcps.csv").read_text().splitlines()
+    header = table[0].split(",")
+    k = header.index("h_m")
+    rows = [r.split(",") for r in table[1:]]
+    for r in rows:
+        r[k] = f"{float(r[k]) * 3.28084:.3f}"  # metres written as feet
+    (scene / "gcps.csv").write_text("\n".join([table[0], *(",".join(r) for r in rows)]) + "\n")
+    res = carto_main(["adjust", str(scene), "--ties", "none", "--out", str(tmp_path / "a")])
+    one_line_error(res, 1, "GCPs are more than 100 m off the DEM", "heights in feet?")
+    assert not (tmp_path / "a").exists()
+    res = carto_main(
+        ["adjust", str(scene), "--ties", "none", "--allow-poor", "--out", str(tmp_path / "a")]
+    )
+    assert res.returncode == 0, res.stderr
+    report = json.loads((tmp_path / "a" / "report.json").read_text())
+    assert any("off the DEM" in w for w in report["warnings"])

@@ -234,6 +234,9 @@ def _adjust_into(
     chosen_matcher = get_registry().get("matcher", matcher)
     gcps = select_gcps(gcps, n_gcps) if gcps is not None else None
     n_used = len(set(gcps["id"].tolist())) if gcps is not None else 0
+    early = gcps_off_the_dem(gcps, dem) if gcps is not None and flat_height_m is None else []
+    if early and not allow_poor:
+        raise InputError(f"{src}: {'; '.join(early)} (--allow-poor adjusts anyway)")
     images: dict[str, Any] = {}
 
     def prepared() -> dict[str, Any]:
@@ -336,7 +339,7 @@ def _adjust_into(
                 first_outliers = sorted(rejected)
                 obs = obs.without_points(first_outliers)
             result = component.adjust(sensors, obs, dem=dem, **options)
-    warnings = _poor_adjustment(result.sigma0, ties, n_ties, len(sensors))
+    warnings = early + _poor_adjustment(result.sigma0, ties, n_ties, len(sensors))
     if warnings and not allow_poor:
         raise AdjustmentError(f"{src}: {'; '.join(warnings)} (--allow-poor writes it anyway)")
     for warning in warnings:
@@ -450,6 +453,34 @@ POOR_SIGMA0 = 5.0
 """An adjustment whose sigma0 exceeds this fails (``--allow-poor`` writes it): its residuals
 are several times the measurement sigmas, a corrupt input or a model that does not fit. Real
 blocks with unmodelled jitter reach 1.5-3."""
+
+
+GCP_DEM_LIMIT_M = 100.0
+"""A GCP whose height is more than this off the DEM at its place is refused: SRTM-like
+DEMs are off by metres, tens near cliffs, never hundreds; heights in feet (x 3.28: 1289 for
+393 m), another datum or another place's point are. Left unchecked, GCP heights in feet put
+the checkpoints 1.2 km off with no warning (issue 31)."""
+
+
+def gcps_off_the_dem(gcps: Mapping[str, NDArray], dem: Any) -> list[str]:
+    """Why the GCPs' heights are not this terrain's (empty when they are, or when there is no
+    DEM of the terrain to tell): every GCP more than :data:`GCP_DEM_LIMIT_M` off the DEM."""
+    if dem is None or not np.nanstd(dem.heights) > 0:  # none, or a flat height
+        return []
+    ids = np.array([str(v).strip() for v in gcps["id"]])
+    _, first = np.unique(ids, return_index=True)
+    lon, lat, h = (np.asarray(gcps[c], np.float64)[first] for c in ("lon_deg", "lat_deg", "h_m"))
+    terrain = dem.height(lon, lat)
+    off = np.abs(h - terrain)
+    bad = np.flatnonzero(np.nan_to_num(off, nan=0.0) > GCP_DEM_LIMIT_M)
+    if bad.size == 0:
+        return []
+    worst = bad[np.argmax(off[bad])]
+    return [
+        f"{bad.size} of {first.size} GCPs are more than {GCP_DEM_LIMIT_M:g} m off the DEM in "
+        f"height (GCP {str(ids[first][worst])!r}: {h[worst]:.1f} m where the DEM says "
+        f"{terrain[worst]:.1f} m; heights in feet? another vertical datum? another place?)"
+    ]
 
 
 def _poor_adjustment(sigma0: float, ties: str, n_ties: int, n_images: int) -> list[str]:
