@@ -340,6 +340,9 @@ def _adjust_into(
                 obs = obs.without_points(first_outliers)
             result = component.adjust(sensors, obs, dem=dem, **options)
     warnings = early + _poor_adjustment(result.sigma0, ties, n_ties, len(sensors))
+    if gcps is not None:
+        rejected = {*first_outliers, *result.outliers}
+        warnings += _gcps_rejected(sorted({str(v).strip() for v in gcps["id"]}), rejected)
     if warnings and not allow_poor:
         raise AdjustmentError(f"{src}: {'; '.join(warnings)} (--allow-poor writes it anyway)")
     for warning in warnings:
@@ -481,6 +484,24 @@ def gcps_off_the_dem(gcps: Mapping[str, NDArray], dem: Any) -> list[str]:
         f"height (GCP {str(ids[first][worst])!r}: {h[worst]:.1f} m where the DEM says "
         f"{terrain[worst]:.1f} m; heights in feet? another vertical datum? another place?)"
     ]
+
+
+MAX_REJECTED_GCP_SHARE = 0.5
+"""An adjustment that rejects this share (or more) of three or more GCPs fails: a wrong GCP
+among several is an outlier, half of them wrong is a wrong table (heights in feet flagged 2
+of 4 GCPs, and the adjustment went ahead with sigma0 2.6, issue 31)."""
+
+
+def _gcps_rejected(ids: list[str], rejected: set[str]) -> list[str]:
+    """Why the GCP table is not this block's (empty when few of its GCPs were rejected)."""
+    out = [i for i in ids if i in rejected]
+    if len(ids) >= 3 and len(out) >= MAX_REJECTED_GCP_SHARE * len(ids):
+        return [
+            f"{len(out)} of {len(ids)} GCPs were rejected as outliers ({', '.join(out[:5])}"
+            f"{', ...' if len(out) > 5 else ''}): the table does not fit the images (another "
+            "scene, units, datum?)"
+        ]
+    return []
 
 
 def _poor_adjustment(sigma0: float, ties: str, n_ties: int, n_images: int) -> list[str]:
