@@ -27,6 +27,7 @@ from carto.framework.geometry.sensor import Sensor, SensorType
 from carto.framework.plugins.registry import get_registry
 from carto.framework.raster.dem import DEM, Geoid
 from carto.framework.raster.vertical_reference import vertical_tag
+from carto.framework.workflows.dem_checks import departs_from_start, poor_dem
 from carto.framework.workflows.dem_datum import (
     auto_coregisters,
     coregistered,
@@ -200,54 +201,6 @@ def _radiometry(path: str | os.PathLike[str]) -> Any:
         return np.dtype(ds.dtypes[0])
 
 
-def _poor_dem(product: Any) -> list[str]:
-    """Why a DEM is too poor to deliver (empty when it is not)."""
-    matched = product.matched_fraction
-    share = product.measured_fraction if matched is None else matched
-    if not np.isfinite(share):
-        share = 0.0
-    if share < MIN_MATCHED_FRACTION:
-        what = "matched" if matched is not None else "measured"
-        return [
-            f"only {100 * share:.1f} % of the DEM nodes were {what} (< "
-            f"{100 * MIN_MATCHED_FRACTION:g} %): the images did not match (no texture, "
-            "clouds, no overlap or wrong models?)"
-        ]
-    return []
-
-
-DEPARTURE_NMAD_M = 30.0
-"""A DEM whose difference to its starting DEM has an NMAD beyond this fails (``--allow-poor``
-writes it): an SRTM-like start is 3-4 m NMAD off the terrain (the simulated scenes) and the
-DEMs of the benchmarks agree with it to about that; a pair of two different scenes gave a
-DEM of NMAD 74 m against its truth, matched at 31-45 % of the nodes (issue 31)."""
-DEPARTURE_MEDIAN_M = 50.0
-"""... or whose median difference is beyond this (a start's bias: up to 11 m on the
-simulated scenes, 4 m on Ventoux; a geoid grid taken as the start: 575 m)."""
-
-
-def departs_from_start(dem: DEM, start: DEM) -> list[str]:
-    """Why a DEM is not the terrain its starting DEM says it is (empty when it is, or when
-    the start is a constant height, which says nothing of the relief)."""
-    from carto.framework.evaluation.dem_accuracy import dem_accuracy
-
-    if not np.nanstd(start.heights) > 0 or not np.isfinite(dem.heights).any():
-        return []
-    try:
-        diff = dem_accuracy(dem, start)
-    except InputError:  # no common valid node: the coverage checks say so
-        return []
-    nmad, median = float(diff["nmad_m"]), float(diff["median_m"])
-    if nmad > DEPARTURE_NMAD_M or abs(median) > DEPARTURE_MEDIAN_M:
-        return [
-            f"the DEM departs from its starting DEM far beyond both DEMs' accuracy (NMAD "
-            f"{nmad:.1f} m, median {median:+.1f} m; at most {DEPARTURE_NMAD_M:g} m and "
-            f"{DEPARTURE_MEDIAN_M:g} m): images of two places, a wrong model or a wrong "
-            "starting DEM?"
-        ]
-    return []
-
-
 def initial_dem(
     init_dem: str | os.PathLike[str] | None,
     geoid: str | os.PathLike[str] | None,
@@ -394,9 +347,10 @@ def dem_product(
     the generator's :class:`~carto.framework.dem_generation.base.DEMProduct` alone. With
     ``reference`` (a DEM file), the report gets its accuracy
     (:func:`carto.framework.evaluation.dem_accuracy.dem_accuracy`) and a difference map is drawn.
-    A run that matched less than :data:`MIN_MATCHED_FRACTION` of the nodes fails unless
-    ``allow_poor``. The outputs are written into a staging folder that replaces ``out_dir``
-    only when all are complete (:func:`carto.framework.files.staging.staged_folder`).
+    A run whose DEM fails the checks of :mod:`~carto.framework.workflows.dem_checks` (too few
+    nodes matched, far off its starting DEM) fails unless ``allow_poor``. The outputs are
+    written into a staging folder that replaces ``out_dir`` only when all are complete
+    (:func:`carto.framework.files.staging.staged_folder`).
     Before the generator runs, the right image is corrected to the left one
     (``relative_orientation``: a mode of
     :data:`~carto.framework.adjustment.relative_orientation.MODES`, see
@@ -493,10 +447,6 @@ def _has_finished_work(work: Path) -> bool:
         next(work.rglob(pattern), None) is not None for pattern in ("*.npz", "*.npy", "state.json")
     )
 
-
-MIN_MATCHED_FRACTION = 0.05
-"""A DEM run that measured less than this share of the nodes fails (``--allow-poor`` writes
-it): the images did not match (no texture, no overlap, clouds, wrong models)."""
 
 _POSITIVE_OPTIONS = ("posting_m", "ortho_res_m")
 
@@ -622,7 +572,7 @@ def _dem_into(
             f"DEM generator {generator!r} returned {len(product.orthos)} ortho-images for "
             f"{len(names)} images"
         )
-    warnings = _poor_dem(product) + departs_from_start(product.dem, start)
+    warnings = poor_dem(product) + departs_from_start(product.dem, start)
     if product.failed_tiles:
         warnings.append(
             f"{len(product.failed_tiles)} tiles failed and have no heights "
