@@ -1,0 +1,144 @@
+"""The DEM error a pair's orientation leaves, without matching (issue 30): prints one JSON
+document.
+
+Perfect correspondences (ground points on the simulator's true DEM, seen through the true
+models of both images) are intersected with other models of the pair; the heights against
+the true DEM are the orientation-limited DEM error. Per scene (made by
+``benchmarks/ior_accuracy.py``, adjusted with 1 GCP into ``<terrain>-<seed>-adj1``):
+
+* ``adjusted``: the adjusted models as delivered;
+* ``relative_orientation``: corrected by ``carto dem``'s relative orientation (tie points on
+  the scene's SRTM-like ``init_dem.tif``), with the default settings and with
+  ``platform_jitter``;
+* ``simulated_jitter_folded``: the adjusted models with the simulator's own attitude jitter
+  folded into both (an oracle: what a perfect jitter estimate would leave).
+
+Each gives median, NMAD, the range of 200-line means (``band_m``) and the NMAD left once
+8-line means of the left image are removed (``within_line_nmad_m``: what no correction of
+the right image's lines can remove). Our simulator with errors in our models' form: a best
+case.
+
+Usage: ``python benchmarks/orientation_limit.py --work /tmp/w/b5 [--scenes hilly-0 ...]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from carto.framework.adjustment.attitude_terms import line_scanner_of, replace_line_scanner
+from carto.framework.adjustment.relative_orientation import (
+    RelativeOrientationSettings,
+    relative_orientation,
+)
+from carto.framework.geometry.intersection import intersect_sensors
+from carto.framework.imaging.preparation import prepare_image
+from carto.framework.parallel.engine import open_engine
+from carto.framework.raster.dem import DEM
+from carto.framework.raster.image_source import RasterImage
+from carto.framework.workflows.dem import StereoInputs, initial_dem, open_pair
+from carto.framework.workflows.dem_datum import datum_gcps
+from carto.framework.workflows.opening import open_sensor
+
+
+def evaluate(left, right, left_true, right_true, truth: DEM) -> dict:
+    """Heights of perfect correspondences intersected with ``left``/``right``, against
+    ``truth``."""
+    n_l, n_s = left_true.image_shape
+    ll, ss = np.meshgrid(np.arange(8.0, n_l - 8, 12.0), np.arange(8.0, n_s - 8, 12.0))
+    ll, ss = ll.ravel(), ss.ravel()
+    lon, lat, h = left_true.locate_on_dem(ll, ss, truth)
+    rl, rs = right_true.ground_to_image(lon, lat, h)
+    ok = np.isfinite(rl) & np.isfinite(lon)
+    res = intersect_sensors([left, right], np.stack([ll[ok], rl[ok]]), np.stack([ss[ok], rs[ok]]))
+    e = res.h_m - truth.height(res.lon_deg, res.lat_deg)
+    good = np.isfinite(e)
+    e, line = e[good], ll[ok][good]
+    med = float(np.median(e))
+
+    def nmad(x: np.ndarray) -> float:
+        return float(1.4826 * np.median(np.abs(x - np.median(x))))
+
+    def bin_means(width: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        k = (line // width).astype(np.int64)
+        count = np.bincount(k)
+        return k, np.bincount(k, weights=e) / np.maximum(count, 1), count
+
+    _, means, count = bin_means(200.0)
+    k8, m8, _ = bin_means(8.0)
+    return {
+        "median_m": round(med, 3),
+        "nmad_m": round(nmad(e), 3),
+        "band_m": round(float(np.ptp(means[count > 20])), 3),
+        "within_line_nmad_m": round(nmad(e - m8[k8]), 3),
+        "points": int(e.size),
+    }
+
+
+def with_simulated_jitter(sensor, scene: Path):
+    """``sensor`` with the simulator's attitude jitter folded into its trajectory."""
+    errors = json.loads((scene / "truth" / "errors.json").read_text())
+    jitter = errors["drawn"]["segments"][0]["attitude_jitter"]
+    amp, hz = np.asarray(jitter["amplitude_rad"]), np.asarray(jitter["frequency_hz"])
+    phase = np.asarray(jitter["phase_rad"])
+    scanner = line_scanner_of(sensor)
+    arg = 2.0 * np.pi * hz[None, :] * scanner.trajectory.t_mid_s + phase
+    coeffs = np.empty((3, 2 * hz.size))
+    coeffs[:, 0::2], coeffs[:, 1::2] = amp * np.cos(arg), amp * np.sin(arg)
+    trajectory = scanner.trajectory.with_attitude_periodic(tuple(hz), coeffs)
+    return replace_line_scanner(sensor, scanner.with_trajectory(trajectory))
+
+
+def scene_record(work: Path, name: str) -> dict:
+    scene, models = work / name, work / f"{name}-adj1"
+    pair = open_pair(StereoInputs(scene, models=models))
+    names = list(pair.sensors)
+    left, right = (pair.sensors[n] for n in names)
+    left_true, right_true = (open_sensor(scene / "truth" / f"{n}.model.json") for n in names)
+    truth = DEM.open(scene / "truth" / "dem.tif")
+    start = initial_dem(None, None, None, pair.init_dem)
+    out = {"adjusted": evaluate(left, right, left_true, right_true, truth)}
+    with tempfile.TemporaryDirectory() as tmp, open_engine(1, quiet=True) as engine:
+        images = {
+            n: prepare_image(
+                RasterImage.open(pair.rasters[n]), pair.sensors[n], start, Path(tmp) / n, engine,
+                desc=n,
+            )
+            for n in names
+        }  # fmt: skip
+        for label, settings in (
+            ("relative_orientation", RelativeOrientationSettings()),
+            ("relative_orientation_platform", RelativeOrientationSettings(platform_jitter=True)),
+        ):
+            ro = relative_orientation(
+                images, pair.sensors, start, settings, gcps=datum_gcps(models, names),
+                engine=engine,
+            )  # fmt: skip
+            out[label] = evaluate(ro.left or left, ro.right, left_true, right_true, truth)
+    out["simulated_jitter_folded"] = evaluate(
+        with_simulated_jitter(left, scene), with_simulated_jitter(right, scene),
+        left_true, right_true, truth,
+    )  # fmt: skip
+    return out
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--work", type=Path, required=True, help="ior_accuracy.py's --work")
+    parser.add_argument("--scenes", nargs="+", default=["hilly-0", "hilly-1", "mountains-0"])
+    args = parser.parse_args()
+    result = {"scenes": {}}
+    for name in args.scenes:
+        result["scenes"][name] = scene_record(args.work, name)
+        print(name, json.dumps(result["scenes"][name]), file=sys.stderr, flush=True)
+    print(json.dumps(result, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
