@@ -70,8 +70,9 @@ class RelativeOrientationSettings:
             (:func:`~carto.framework.adjustment.pair_observations.platform_of`), take their
             jitter as one attitude time series of the platform, seen by each image at its
             own imaging time, instead of sinusoids of the right image's lines. Off by
-            default: on three simulated ``--errors full`` pairs (1 GCP) it gave DEM NMAD
-            0.61 / 1.11 / 1.31 m against 0.645 / 0.75 / 1.29 m (issue 30).
+            default: on three simulated ``--errors full`` pairs (1 GCP) the DEM error the
+            orientation leaves was 0.64 / 1.13 / 1.32 m NMAD with it, 0.68 / 0.79 / 1.30 m
+            without (``benchmarks/results/orientation_limit.json``, issue 30).
     """
 
     mode: str = attrs.field(default="auto", validator=_check_mode)

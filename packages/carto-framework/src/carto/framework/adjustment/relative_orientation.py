@@ -58,12 +58,12 @@ bounded by what the others found across it at that frequency (the DEM rows alone
 starting DEM's errors for pitch jitter). Both models carry the estimate (periodic attitude
 corrections of their trajectories, saved in the model files). It is an option
 (:attr:`RelativeOrientationSettings.platform_jitter`), off by default: on three simulated
-``--errors full`` pairs (1 GCP) it gave DEM NMAD 0.61 / 1.11 / 1.31 m against 0.645 / 0.75 /
-1.29 m with the right image's sinusoids, and 1.05 / 1.12 / 1.42 m without a relative
-orientation; with the true models of the first, 0.30 m against 0.18 m (the true models leave
-a few hundredths of a pixel at the simulated frequencies, and the pitch terms fitted there
-copy the starting DEM's errors). Other sensors always get the right image's sinusoids.
-Jitter frequencies come from
+``--errors full`` pairs (1 GCP) the DEM error the orientation leaves (perfect
+correspondences, ``benchmarks/results/orientation_limit.json``) was 0.64 / 1.13 / 1.32 m
+NMAD with it against 0.68 / 0.79 / 1.30 m with the right image's sinusoids, and 1.03 / 1.16 /
+1.41 m without a relative orientation: its pitch terms take the starting DEM's errors (with
+the true DEM they recover the simulated amplitudes at 4.7-67 Hz). Other sensors always get
+the right image's sinusoids. Jitter frequencies come from
 the Lomb-Scargle periodogram of the across-base residuals binned by line
 (:func:`~carto.framework.adjustment.jitter.detect_jitter_frequencies`; along the base the
 DEM's correlated errors look like peaks to a white-noise test), one at a time with a re-fit
@@ -226,8 +226,9 @@ AXIS_NAMES = ("roll", "pitch", "yaw")
 TIE_TEMPLATE_PX = 15
 """The tie points' matching template, ortho pixels at the images' ground sampling (about a
 line): jitter of a period near it is seen attenuated (:func:`~carto.framework.adjustment.
-pair_correction.window_gain`). On a simulated ``--errors full`` pair, modelling it took the
-orientation-limited DEM NMAD from 0.73 to 0.68 m."""
+pair_correction.window_gain`). On a simulated ``--errors full`` pair (hilly-0), modelling it
+took the DEM error the orientation leaves from 0.73 m NMAD (measured by hand before) to
+0.68 m (``benchmarks/results/orientation_limit.json``)."""
 
 
 def relative_orientation(
