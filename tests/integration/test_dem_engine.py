@@ -27,6 +27,13 @@ def _dem(out: Path) -> np.ndarray:
         return ds.read(1)
 
 
+def _start(carto_exe: str, args: list[str], **popen: object) -> subprocess.Popen:
+    """``carto`` started in the background, with the installed package (no PYTHONPATH)."""
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    options = {"stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL, **popen}
+    return subprocess.Popen([carto_exe, *args], text=True, env=env, **options)  # type: ignore[call-overload]
+
+
 def _wait_for_second_iteration(proc: subprocess.Popen, work: Path) -> None:
     """Until the run in ``proc`` has written the state of its second final iteration (the
     state is written after the iteration's grid: the grid alone, killed before the state,
@@ -103,13 +110,7 @@ def test_killed_then_resumed_gives_the_same_dem(
 ):
     out = tmp_path / "dem"
     work = tmp_path / ".dem.carto-work"
-    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
-    proc = subprocess.Popen(
-        [carto_exe, *inputs, *OPTIONS, "--workers", "1", "--out", str(out)],
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
-        env=env,
-    )
+    proc = _start(carto_exe, [*inputs, *OPTIONS, "--workers", "1", "--out", str(out)])
     try:
         _wait_for_second_iteration(proc, work)
     finally:
@@ -207,13 +208,10 @@ def test_ctrl_c_reaches_the_workers_too_and_prints_one_line(carto_exe, inputs, t
     it; the command stops them and says it was interrupted in one line."""
     out = tmp_path / "dem"
     work = tmp_path / ".dem.carto-work"
-    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
-    proc = subprocess.Popen(
-        [carto_exe, *inputs, *OPTIONS, "--workers", "2", "--out", str(out)],
-        stdout=subprocess.DEVNULL,
+    proc = _start(
+        carto_exe,
+        [*inputs, *OPTIONS, "--workers", "2", "--out", str(out)],
         stderr=subprocess.PIPE,
-        text=True,
-        env=env,
         start_new_session=True,  # its own process group, as a terminal's job
     )
     try:

@@ -238,7 +238,7 @@ def _fit(
     s_p = platform_design(obs, platform_hz)  # (N, 2, n_l)
     n_l = s_p.shape[2]
     n_p = 2 * n_b + 1 + n_l
-    expand = _expansion(basis, _base_direction(obs), n_l)
+    expand = _expansion(basis, u[0].copy(), n_l)
     p_offset = offset_parallax(obs)
 
     def rows(axis: FloatArray, scale: FloatArray) -> tuple[FloatArray, FloatArray]:
@@ -410,9 +410,10 @@ def _refined_hz(obs: Observations, basis: LineBasis, fit: Fit, k: int) -> tuple[
         [np.einsum("ij,ij->i", u, rest) / s_along, np.einsum("ij,ij->i", v, rest) / s_across]
     )
     prior = np.diag(1.0 / _platform_sigmas(obs, 1) ** 2)
+    period = _seconds_per_line(obs)  # once, not per candidate
     best, best_cost = hz[k], np.inf
     for f in hz[k] + np.arange(-REFINE_HALF_WIDTH_HZ, REFINE_HALF_WIDTH_HZ + 1e-9, REFINE_STEP_HZ):
-        d = platform_design(obs, (float(f),))
+        d = platform_design(obs, (float(f),), period)
         a = np.vstack(
             [
                 np.einsum("ij,ijk->ik", u, d) / s_along[:, None],
@@ -449,12 +450,17 @@ def _along_jitter_sigmas(obs: Observations, basis: LineBasis, fit: Fit) -> Float
     n0 = basis.n_spline or 1
     u0 = _base_direction(obs)
     across = np.array([-u0[1], u0[0]]) @ fit.coefficients[:, n0:]  # (2 F,): sin, cos, ...
-    amplitude = np.hypot(across[0::2], across[1::2])
-    sigma = np.where(
-        amplitude >= JITTER_MIN_ACROSS_PX, SHAPE_ACROSS_RATIO * amplitude + JITTER_FLOOR_PX,
+    return np.repeat(_along_bound_px(np.hypot(across[0::2], across[1::2])), 2)
+
+
+def _along_bound_px(across_px: FloatArray) -> FloatArray:
+    """The sigma of an along-base jitter term, px, from the amplitude found across the base
+    at its frequency: :data:`SHAPE_ACROSS_RATIO` times it plus :data:`JITTER_FLOOR_PX`, and
+    the floor alone below :data:`JITTER_MIN_ACROSS_PX`."""
+    return np.where(
+        across_px >= JITTER_MIN_ACROSS_PX, SHAPE_ACROSS_RATIO * across_px + JITTER_FLOOR_PX,
         JITTER_FLOOR_PX,
     )  # fmt: skip
-    return np.repeat(sigma, 2)
 
 
 def _half_means(
@@ -569,17 +575,22 @@ def _next_frequency(
     return None
 
 
-def platform_design(obs: Observations, hz: tuple[float, ...]) -> FloatArray:
+def platform_design(
+    obs: Observations, hz: tuple[float, ...], seconds_per_line: float | None = None
+) -> FloatArray:
     """``(N, 2, 6 F)``: how each platform jitter coefficient (axis-major: roll, pitch, yaw;
     then frequency; then sine and cosine of ``2 pi f t``, radians) moves each row's right
     residual (line, sample), through both images at their own imaging times
     (:attr:`Observations.attitude_px`), as the tie points see it (attenuated by their
-    matching window, :func:`window_gain`)."""
+    matching window, :func:`window_gain`; ``seconds_per_line``: the right image's line
+    period, :func:`_seconds_per_line` when not given)."""
     n = obs.line.size
     if not hz:
         return np.zeros((n, 2, 0))
+    if seconds_per_line is None:
+        seconds_per_line = _seconds_per_line(obs)
     w = 2.0 * math.pi * np.asarray(hz)[None, None, :] * obs.time_s[:, :, None]  # (N, 2, F)
-    gain = window_gain(np.asarray(hz) * _seconds_per_line(obs), obs.window_lines)
+    gain = window_gain(np.asarray(hz) * seconds_per_line, obs.window_lines)
     waves = np.stack([np.sin(w) * gain, np.cos(w) * gain], axis=-1).reshape(n, 2, -1)
     # (N, image, axis_img, axis_att) x (N, image, 2F) -> (N, axis_img, axis_att, 2F)
     out = np.einsum("nika,nif->nkaf", obs.attitude_px, waves)
@@ -611,9 +622,12 @@ def _platform_sigmas(obs: Observations, n_f: int) -> FloatArray:
     through the right image's median motion per radian of each axis."""
     if not n_f:
         return np.zeros(0)
-    px_per_rad = np.median(np.linalg.norm(obs.attitude_px[:, 0], axis=1), axis=0)  # (3,)
-    sigma = JITTER_SIGMA_PX / np.maximum(px_per_rad, 1e-3)
-    return np.repeat(sigma, 2 * n_f)
+    return np.repeat(JITTER_SIGMA_PX / np.maximum(_px_per_rad(obs), 1e-3), 2 * n_f)
+
+
+def _px_per_rad(obs: Observations) -> FloatArray:
+    """``(3,)``: the right image's median motion per radian of roll, pitch and yaw."""
+    return np.median(np.linalg.norm(obs.attitude_px[:, 0], axis=1), axis=0)
 
 
 def _platform_bound(obs: Observations, fit: Fit) -> FloatArray:
@@ -625,16 +639,12 @@ def _platform_bound(obs: Observations, fit: Fit) -> FloatArray:
     urad of pitch jitter from the DEM without it: NMAD 0.19 -> 0.44 m)."""
     sigma = _platform_sigmas(obs, len(fit.platform_hz)).reshape(3, -1)
     rad = np.asarray(fit.platform_rad).reshape(3, -1, 2)
+    px_per_rad = _px_per_rad(obs)
     a_right = obs.attitude_px[:, 0]  # (N, 2, 3)
-    px_per_rad = np.median(np.linalg.norm(a_right, axis=1), axis=0)
     along = np.median(np.abs(np.einsum("j,njk->nk", _base_direction(obs), a_right)), axis=0)
     along_like = along > 0.5 * px_per_rad
     amplitude_px = np.hypot(rad[..., 0], rad[..., 1]) * px_per_rad[:, None]  # (3, F)
-    across = np.sqrt(np.sum(amplitude_px[~along_like] ** 2, axis=0))
-    bound_px = np.where(
-        across >= JITTER_MIN_ACROSS_PX, SHAPE_ACROSS_RATIO * across + JITTER_FLOOR_PX,
-        JITTER_FLOOR_PX,
-    )  # fmt: skip
+    bound_px = _along_bound_px(np.sqrt(np.sum(amplitude_px[~along_like] ** 2, axis=0)))
     for a in np.flatnonzero(along_like):
         sigma[a, 0::2] = sigma[a, 1::2] = bound_px / max(px_per_rad[a], 1e-3)
     return sigma.ravel()

@@ -211,18 +211,17 @@ def with_platform_jitter(
 
 def _platform_record(fit: Any) -> dict[str, Any] | None:
     """The platform jitter for ``report.json``: per frequency, the amplitude per axis (urad)."""
+    from carto.framework.adjustment.attitude_terms import AXES
+
     if fit.platform_rad is None or not fit.platform_rad.size:
         return None
     amplitude = np.hypot(fit.platform_rad[:, 0::2], fit.platform_rad[:, 1::2]) * 1e6
     return {
         "frequencies_hz": [round(f, 3) for f in fit.platform_hz],
-        "amplitude_urad": {
-            axis: np.round(amplitude[k], 4).tolist() for k, axis in enumerate(AXIS_NAMES)
-        },
+        "amplitude_urad": {axis: np.round(amplitude[k], 4).tolist() for k, axis in enumerate(AXES)},
     }
 
 
-AXIS_NAMES = ("roll", "pitch", "yaw")
 TIE_TEMPLATE_PX = 15
 """The tie points' matching template, ortho pixels at the images' ground sampling (about a
 line): jitter of a period near it is seen attenuated (:func:`~carto.framework.adjustment.

@@ -76,7 +76,6 @@ def _coregistration_summary(c: dict[str, Any]) -> str:
 def cmd_evaluate(args: argparse.Namespace) -> int:
     from carto.framework.evaluation.dem_accuracy import dem_accuracy_by_blocks
     from carto.framework.files.atomic import atomic_output
-    from carto.framework.files.paths import resolved
     from carto.framework.files.staging import check_output_file
     from carto.framework.raster.dem import DEM, Geoid
 
@@ -87,10 +86,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         ("--hillshade", args.hillshade),
     ):
         if value is not None:
-            check_output_file(value, option, [args.dem, args.reference, args.geoid])
-            for other, path in written.items():
-                if resolved(path, other, UsageError) == resolved(value, option, UsageError):
-                    raise UsageError(f"{option} {value}: is {other} too; give two file names")
+            check_output_file(value, option, [args.dem, args.reference, args.geoid], written)
             written[option] = value
     dem = DEM.open(args.dem)
     geoid = None if args.geoid is None else Geoid.open(args.geoid)

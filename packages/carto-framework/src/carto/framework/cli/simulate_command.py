@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import time
 from pathlib import Path
 
@@ -49,10 +48,9 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
 
 def _parse_error_size(text: str) -> tuple[str, float]:
-    """``NAME=VALUE`` of a known error source, within its range (a usage error otherwise)."""
-    import attrs
-
-    from carto.framework.simulation.plan import ErrorModel, largest_error_size
+    """``NAME=VALUE`` of a known error source, within its range (a usage error otherwise:
+    :func:`~carto.framework.simulation.plan.check_error_size`)."""
+    from carto.framework.simulation.plan import check_error_size
 
     name, sep, value = text.partition("=")
     try:
@@ -64,15 +62,10 @@ def _parse_error_size(text: str) -> tuple[str, float]:
             f"{text!r}: expected NAME=VALUE, e.g. attitude_bias_deg=0.05"
         ) from None
     name = name.strip()
-    known = sorted(f.name for f in attrs.fields(ErrorModel) if f.name != "jitter_hz")
-    if name not in known:
-        raise argparse.ArgumentTypeError(
-            f"unknown error source {name!r}; known: {', '.join(known)}"
-        )
-    if not (math.isfinite(size) and 0 <= size <= largest_error_size(name)):
-        raise argparse.ArgumentTypeError(
-            f"{name}={value}: must be between 0 and {largest_error_size(name):g}"
-        )
+    try:
+        check_error_size(name, size)
+    except InputError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
     return name, size
 
 

@@ -355,10 +355,12 @@ def check_output_file(
     path: str | os.PathLike[str],
     option: str = "--out",
     inputs: Iterable[Any] = (),
+    outputs: Mapping[str, Any] | None = None,
 ) -> Path:
     """A file destination checked before any work: not empty, not a folder, not one of the
     command's ``inputs`` (an evaluation's ``--out`` given the DEM it evaluates would replace
-    it), in a folder that exists (or can be created) and can be written."""
+    it) nor one of its other ``outputs`` (option -> path), in a folder that exists (or can be
+    created) and can be written."""
     if str(path).strip() == "":
         raise UsageError(f"{option}: empty path; give a file name")
     target = Path(path)
@@ -367,6 +369,9 @@ def check_output_file(
     for item in inputs:
         if item is not None and str(item) != "" and _same_file(target, Path(item), option):
             raise UsageError(f"{option} {path}: is the input {item}; give another file name")
+    for other, item in (outputs or {}).items():
+        if item is not None and _same_file(target, Path(item), option):
+            raise UsageError(f"{option} {path}: is {other} too; give two file names")
     parent = target.parent
     try:
         parent.mkdir(parents=True, exist_ok=True)

@@ -16,6 +16,7 @@ from typing import Any
 
 import attrs
 
+from carto.framework.errors import InputError
 from carto.framework.geometry import orbit
 from carto.framework.products.ancillary import CameraSpec
 from carto.framework.simulation.reference.attitude import AttitudeLaw
@@ -37,6 +38,27 @@ def largest_error_size(name: str) -> float:
         if name.endswith("_" + unit):
             return LARGEST_ERROR_SIZE[unit]
     return math.inf
+
+
+def check_error_size(name: str, value: float) -> None:
+    """Refuse an override of one error size (``--error-size NAME=VALUE``): an unknown
+    source, or a size that is not a number between 0 and :func:`largest_error_size`.
+
+    Raises:
+        InputError: naming the source and the value.
+    """
+    known = sorted(f.name for f in attrs.fields(ErrorModel) if f.name != "jitter_hz")
+    if name not in known:
+        raise InputError(f"unknown error source {name!r}; known: {', '.join(known)}")
+    if not (math.isfinite(value) and value >= 0):
+        raise InputError(f"error size {name}={value}: must be a number >= 0")
+    most = largest_error_size(name)
+    if value > most:
+        raise InputError(
+            f"error size {name}={value:g}: beyond {most:g}, the largest the simulator takes "
+            f"(it must be between 0 and {most:g}: a product so far off no longer sees its "
+            "target)"
+        )
 
 
 @attrs.frozen

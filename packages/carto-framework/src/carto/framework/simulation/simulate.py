@@ -53,7 +53,7 @@ from carto.framework.simulation.plan import (
     ScenePlan,
     SimulationOptions,
     ViewPlan,
-    largest_error_size,
+    check_error_size,
 )
 from carto.framework.simulation.reference.pushbroom import ReferenceImager
 from carto.framework.simulation.truth_products import ERRORS_NOTE, measured_ancillary
@@ -210,20 +210,8 @@ def simulate_scene(
         if value is not None and wrong:
             raise InputError(f"--{name.replace('_', '-')} must be an integer >= 0, got {value!r}")
     if options.error_sizes:
-        known = {f.name for f in attrs.fields(ErrorModel) if f.name != "jitter_hz"}
         for name, value in options.error_sizes:
-            if name not in known:
-                raise InputError(
-                    f"unknown error source {name!r}; known: {', '.join(sorted(known))}"
-                )
-            if not (math.isfinite(value) and value >= 0):
-                raise InputError(f"error size {name}={value}: must be a number >= 0")
-            most = largest_error_size(name)
-            if value > most:
-                raise InputError(
-                    f"error size {name}={value:g}: beyond {most:g}, the largest the simulator "
-                    "takes (a product so far off no longer sees its target)"
-                )
+            check_error_size(name, value)
         errors = attrs.evolve(errors, **dict(options.error_sizes))
     streams = np.random.SeedSequence(int(options.seed)).spawn(8)
     rng_err, rng_jit, rng_terrain, rng_tex, rng_ctl, rng_noise, rng_init, rng_full = (
