@@ -87,9 +87,9 @@ def test_the_default_workers_give_the_models_of_one_process(
 @pytest.mark.parametrize(
     ("option", "message"),
     [
-        (["--workers", "0"], "--workers must be >= 1"),
-        (["--workers", "-2"], "--workers must be >= 1"),
-        (["--workers", "two"], "invalid int value"),
+        (["--workers", "0"], "argument --workers: must be >= 1, got 0"),
+        (["--workers", "-2"], "argument --workers: must be >= 1, got -2"),
+        (["--workers", "two"], "argument --workers: expected an integer, got 'two'"),
     ],
 )
 def test_bad_engine_options_are_usage_errors(run_carto, cartosat1_scene, tmp_path, option, message):

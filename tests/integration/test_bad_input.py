@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import csv
 import json
+import math
 import os
 import shutil
 import signal
@@ -588,3 +589,48 @@ def test_gcp_heights_far_off_the_dem_are_refused_unless_allowed(
     assert res.returncode == 0, res.stderr
     report = json.loads((tmp_path / "a" / "report.json").read_text())
     assert any("off the DEM" in w for w in report["warnings"])
+
+
+def test_gcps_that_move_the_block_beyond_its_stated_accuracy_fail_unless_allowed(
+    carto_main, tmp_path: Path, cartosat1_scene: Path, cartosat1_adjusted: Path
+) -> None:
+    """GCPs of another scene or datum move the images where their products' accuracy cannot
+    put them: every GCP moved 2 km east (well inside the 3 km gross limit with the pointing
+    error) corrects the attitude by about 9 a-priori sigmas (5 is the limit); the true GCPs
+    of the same scene move nothing by 5. With --allow-poor it writes the models and says why."""
+    good = json.loads((cartosat1_adjusted / "report.json").read_text())
+    judged = [
+        p["correction_in_prior_sigmas"]
+        for p in good["adjustment"]["parameters"].values()
+        if "correction_in_prior_sigmas" in p
+    ]
+    assert judged
+    assert max(abs(z) for z in judged) < 5.0
+    scene = tmp_path / "scene"
+    shutil.copytree(cartosat1_scene, scene)
+    with (scene / "gcps.csv").open() as f:
+        rows = list(csv.DictReader(f))
+    for row in rows:
+        lat = float(row["lat_deg"])
+        row["lon_deg"] = repr(
+            float(row["lon_deg"]) + 2000.0 / (111_320.0 * math.cos(math.radians(lat)))
+        )
+    with (scene / "gcps.csv").open("w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    res = carto_main(["adjust", str(scene), "--gcps", "1", "--out", str(tmp_path / "a")])
+    one_line_error(res, 1, "a-priori sigmas", "GCPs of another scene")
+    assert not (tmp_path / "a").exists()
+    res = carto_main(
+        ["adjust", str(scene), "--gcps", "1", "--allow-poor", "--out", str(tmp_path / "a")]
+    )
+    assert res.returncode == 0, res.stderr
+    report = json.loads((tmp_path / "a" / "report.json").read_text())
+    assert any("a-priori sigmas" in w for w in report["warnings"])
+    moved = [
+        abs(p["correction_in_prior_sigmas"])
+        for p in report["adjustment"]["parameters"].values()
+        if "correction_in_prior_sigmas" in p
+    ]
+    assert max(moved) > 5.0

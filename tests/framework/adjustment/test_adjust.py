@@ -23,11 +23,11 @@ def test_observation_validation():
 def test_an_adjustment_that_rejects_most_of_its_gcps_is_poor():
     """One wrong GCP among several is an outlier; most of them rejected is a wrong table
     (issue 31: 2 of 4 flagged and the adjustment went ahead)."""
-    from carto.framework.workflows.adjust import _gcps_rejected
+    from carto.framework.workflows.adjust_checks import gcps_rejected
 
     ids = ["G1", "G2", "G3", "G4"]
-    assert _gcps_rejected(ids, {"G2", "T17"}) == []
-    (reason,) = _gcps_rejected(ids, {"G1", "G4"})  # the issue's feet: 2 of 4
+    assert gcps_rejected(ids, {"G2", "T17"}) == []
+    (reason,) = gcps_rejected(ids, {"G1", "G4"})  # the issue's feet: 2 of 4
     assert reason.startswith("2 of 4 GCPs were rejected as outliers (G1, G4)")
-    assert _gcps_rejected([*ids, "G5"], {"G1", "G4"}) == []
-    assert _gcps_rejected(["G1", "G2"], {"G1", "G2"}) == []  # too few to tell
+    assert gcps_rejected([*ids, "G5"], {"G1", "G4"}) == []
+    assert gcps_rejected(["G1", "G2"], {"G1", "G2"}) == []  # too few to tell

@@ -134,3 +134,23 @@ def test_tiled_layer_reads_and_writes_like_the_array(tmp_path):
         np.testing.assert_array_equal(da.read(1), db.read(2))
     with pytest.raises(InputError, match="outside"):
         TiledLayer.of((100, 100), [TilePiece(tmp_path / "x.npz", "v", 90, 0, (20, 10))])
+
+
+def test_a_raster_averaged_by_gdal_equals_block_means(raster):
+    """``RasterImage.averaged`` (GDAL's average resampling) gives the block means numpy
+    gives over the valid pixels of whole blocks (the partial ones at the edges dropped;
+    rounded, as GDAL averages in the file's integer type), NaN where a block is all
+    nodata."""
+    path, data = raster
+    f = 4
+    got = RasterImage.open(path).averaged(f)
+    assert got.shape == (300 // f, 517 // f)
+    blocks = data[: 75 * f, : 129 * f].astype(np.float64).reshape(75, f, 129, f)
+    valid = blocks != 0
+    with np.errstate(invalid="ignore"):
+        want = np.where(blocks != 0, blocks, 0).sum(axis=(1, 3)) / valid.sum(axis=(1, 3))
+    np.testing.assert_allclose(got, want, atol=0.5)
+    assert np.isnan(got[3:5, 8:10]).all()  # rows 12-19, cols 32-39: all nodata
+    assert np.isfinite(got).sum() == got.size - 4
+    with pytest.raises(InputError, match="smaller than"):
+        RasterImage.open(path).averaged(400)

@@ -60,6 +60,9 @@ class AdjustmentResult:
         parameter_sensors: the sensors as estimated, carrying every parameter of
             ``parameters`` (e.g. jitter terms that ``sensors`` carry as fixed corrections),
             for propagating the covariance; empty: ``sensors`` carry them.
+        prior_values, prior_sigmas: the parameters' a-priori values and sigmas, in
+            ``parameters`` order (``inf``: free; empty: not known), which the corrections
+            ``values - prior_values`` are judged against.
     """
 
     sensors: dict[str, Sensor]
@@ -82,6 +85,8 @@ class AdjustmentResult:
     variance_components: tuple[VarianceComponent, ...] = ()
     covariance_by_group: FloatArray = attrs.field(factory=lambda: np.zeros((0, 0)))
     parameter_sensors: dict[str, Sensor] = attrs.field(factory=dict)
+    prior_values: FloatArray = attrs.field(factory=lambda: np.zeros(0))
+    prior_sigmas: FloatArray = attrs.field(factory=lambda: np.zeros(0))
 
     def summary(self) -> dict[str, Any]:
         """JSON-ready summary (for ``report.json``)."""
@@ -101,9 +106,24 @@ class AdjustmentResult:
             "image_residual_rms_px": rms,
             "variance_components": {c.group: c.summary() for c in self.variance_components},
             "parameters": {
-                n: {"value": float(v), "sigma": float(s)}
-                for n, v, s in zip(self.parameters, self.values, self.sigmas, strict=True)
+                n: {"value": float(v), "sigma": float(s)} | self._prior(k)
+                for k, (n, v, s) in enumerate(
+                    zip(self.parameters, self.values, self.sigmas, strict=True)
+                )
             },
+        }
+
+    def _prior(self, k: int) -> dict[str, float]:
+        """Parameter ``k``'s a-priori value and sigma, and its correction in a-priori
+        sigmas (nothing when they are not known or the parameter is free)."""
+        if len(self.prior_sigmas) != len(self.parameters) or not np.isfinite(self.prior_sigmas[k]):
+            return {}
+        value, sigma = float(self.prior_values[k]), float(self.prior_sigmas[k])
+        moved = float(self.values[k]) - value
+        return {
+            "prior_value": value,
+            "prior_sigma": sigma,
+            "correction_in_prior_sigmas": moved / sigma if sigma > 0 else float("nan"),
         }
 
 

@@ -606,6 +606,8 @@ def _solve(
         parameters=tuple(names),
         values=values,
         sigmas=np.sqrt(np.clip(np.diag(cov), 0, None)),
+        prior_values=prior_value,
+        prior_sigmas=prior_sigma,
         covariance=cov,
         covariance_unit=s_inv,
         covariance_by_group=cov_by_group,

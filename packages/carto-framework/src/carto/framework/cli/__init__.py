@@ -17,6 +17,7 @@ import signal
 import sys
 import textwrap
 from collections.abc import Iterator, Sequence
+from typing import NoReturn
 
 from carto.framework import __version__
 from carto.framework.cli.adjust_command import add_adjust
@@ -33,9 +34,18 @@ from carto.framework.plugins.registry import get_registry
 __all__ = ["build_parser", "main"]
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse's parser whose usage errors are one line, as every other ``carto`` error
+    (``carto: error: argument --workers: must be >= 1, got 0 (see carto dem --help)``),
+    exit 2. Sub-command parsers are made of the same class."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{PROG}: error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The ``carto`` argument parser with every sub-command."""
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog=PROG,
         description=textwrap.dedent(
             """\

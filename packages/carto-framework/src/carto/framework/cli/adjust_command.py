@@ -5,7 +5,13 @@ from __future__ import annotations
 import argparse
 import math
 
-from carto.framework.cli.common import examples, formatter
+from carto.framework.cli.common import (
+    examples,
+    finite_float,
+    formatter,
+    non_negative_int,
+    positive_int,
+)
 from carto.framework.errors import UsageError
 from carto.framework.matching.gcp_transfer import GCP_OFFSET_SIGMA_PX
 from carto.framework.parallel.engine import default_workers
@@ -140,7 +146,9 @@ def add_adjust(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("source", metavar="SCENE_OR_CONFIG", help="scene folder or JSON configuration")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
-    p.add_argument("--gcps", type=int, metavar="N", help="number of GCPs to use (default all)")
+    p.add_argument(
+        "--gcps", type=non_negative_int, metavar="N", help="number of GCPs to use (default all)"
+    )
     p.add_argument("--adjuster", metavar="NAME", help="adjuster (carto plugins --kind adjuster)")
     p.add_argument(
         "--mode",
@@ -162,13 +170,13 @@ def add_adjust(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--attitude-order",
-        type=int,
+        type=non_negative_int,
         metavar="K",
         help="order of the attitude correction polynomials (0 bias, 1 + drift ...)",
     )
     p.add_argument(
         "--image-trends",
-        type=int,
+        type=non_negative_int,
         metavar="K",
         help="order of each image's own attitude trend relative to the reference camera's "
         "image (Legendre 1..K over the image; adjusters that tie images on one trajectory; "
@@ -182,14 +190,14 @@ def add_adjust(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--dem-heights",
-        type=float,
+        type=finite_float,
         metavar="SIGMA_M",
         help="constrain tie-point heights to the DEM with this sigma (0: never; default: "
         "30 m when no GCP is used, else off)",
     )
     p.add_argument(
         "--dem-offset-sigma",
-        type=float,
+        type=finite_float,
         metavar="M",
         help="a-priori sigma of one height offset common to all DEM constraints, estimated "
         "(the DEM's absolute vertical error, e.g. 4 for SRTM)",
@@ -210,7 +218,7 @@ def add_adjust(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--gcp-offset-sigma",
-        type=float,
+        type=finite_float,
         metavar="PX",
         help="a-priori sigma of a matched GCP offset, pixels per coordinate (default "
         f"{GCP_OFFSET_SIGMA_PX})",
@@ -230,7 +238,7 @@ def add_adjust(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--workers",
-        type=int,
+        type=positive_int,
         metavar="N",
         help="tie-point tiles (and the stagger merge, the GCP transfer) processed in parallel "
         f"by a local cluster of N worker processes (default: all cores, {default_workers()}; "

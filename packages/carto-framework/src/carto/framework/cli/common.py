@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from collections.abc import Callable, Sequence
 
@@ -35,6 +36,21 @@ non_negative_int = _integer_at_least(0)
 """An argparse ``type``: an integer >= 0 (seeds, counts)."""
 positive_int = _integer_at_least(1)
 """An argparse ``type``: an integer >= 1 (sizes)."""
+
+
+def finite_float(text: str) -> float:
+    """An argparse ``type``: a finite number (``nan`` and ``inf`` are refused here; each
+    option's range is checked by the settings it feeds)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
+    return value
+
+
+finite_float.__name__ = "number"
 
 
 def examples(*lines: str) -> str:

@@ -8,7 +8,14 @@ import textwrap
 from pathlib import Path
 from typing import Any
 
-from carto.framework.cli.common import examples, formatter, table
+from carto.framework.cli.common import (
+    examples,
+    finite_float,
+    formatter,
+    non_negative_int,
+    positive_int,
+    table,
+)
 from carto.framework.errors import InputError, UsageError
 from carto.framework.parallel.engine import default_workers
 
@@ -168,7 +175,7 @@ def add_evaluate(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--coregister-accuracy",
-        type=float,
+        type=finite_float,
         default=10.0,
         metavar="M",
         help="the reference's stated accuracy (default 10 m); a larger move is flagged",
@@ -186,7 +193,7 @@ def _add_coregister(p: argparse.ArgumentParser, default: str | None, when: str) 
     )
     p.add_argument(
         "--coregister-accuracy",
-        type=float,
+        type=finite_float,
         default=10.0,
         metavar="M",
         help="the reference's stated accuracy (default 10 m, SRTM-like); a co-registration "
@@ -327,35 +334,35 @@ def add_dem(sub: argparse._SubParsersAction) -> None:
         help="heights of dem.tif above the WGS84 ellipsoid (default) or above the geoid of "
         "--geoid; the file's compound CRS says which",
     )
-    p.add_argument("--init-height", type=float, metavar="M", help="constant starting height")
-    p.add_argument("--posting", type=float, metavar="M", help="DEM posting (default 10 m)")
-    p.add_argument("--ortho-res", type=float, metavar="M", help="ortho pixel (default: GSD)")
+    p.add_argument("--init-height", type=finite_float, metavar="M", help="constant starting height")
+    p.add_argument("--posting", type=finite_float, metavar="M", help="DEM posting (default 10 m)")
+    p.add_argument("--ortho-res", type=finite_float, metavar="M", help="ortho pixel (default: GSD)")
     p.add_argument("--crs", metavar="CRS", help="output CRS (default: the UTM zone)")
-    p.add_argument("--max-iterations", type=int, metavar="N", help="most DEM updates (6)")
+    p.add_argument("--max-iterations", type=positive_int, metavar="N", help="most DEM updates (6)")
     p.add_argument(
         "--tile-size",
-        type=int,
+        type=positive_int,
         metavar="PX",
         help="side of a tile task, ortho pixels (default 2048; memory per worker grows with "
         "its square)",
     )
     p.add_argument(
         "--subpixel-steps",
-        type=int,
+        type=non_negative_int,
         metavar="N",
         help="least-squares steps that refine the matcher's offsets along the stereo base "
         "(default 2; 0: the matcher's own sub-pixel offsets)",
     )
     p.add_argument(
         "--coarse-stages",
-        type=int,
+        type=non_negative_int,
         metavar="N",
         help="coarse-to-fine: first iterations on images and ortho-images reduced 2**N, ..., "
         "4, 2 times, then the final resolution (default 2; 0: all at the final resolution)",
     )
     p.add_argument(
         "--workers",
-        type=int,
+        type=positive_int,
         metavar="N",
         help="tiles processed in parallel by a local cluster of N worker processes (default: "
         f"all cores, {default_workers()}; 1: in this process)",

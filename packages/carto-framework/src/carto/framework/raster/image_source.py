@@ -152,6 +152,41 @@ class RasterImage(ImageSource):
         factor = max(1, math.ceil(max(n_r, n_c) / max_side))
         return self._read("it", out_shape=(max(1, n_r // factor), max(1, n_c // factor)))
 
+    def averaged(self, factor: int) -> NDArray[np.float32]:
+        """The whole image reduced ``factor`` times by block means over its valid pixels
+        (the partial blocks at the right and bottom edges dropped, as
+        :class:`DecimatedImage` drops them; NaN where a block has none), read by GDAL
+        (average resampling, in the file's data type: rounded for integer images; the
+        file's overviews when it has them)."""
+        import rasterio
+        from rasterio.enums import Resampling
+        from rasterio.windows import Window
+
+        f = int(factor)
+        n_r, n_c = self.shape[0] // f, self.shape[1] // f
+        if n_r < 1 or n_c < 1:
+            raise InputError(f"{self.path}: {self.shape} is smaller than {f} x {f} pixels")
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                with rasterio.open(self.path) as ds:
+                    nodata = ds.nodatavals[self.band - 1]
+                    data = ds.read(
+                        self.band,
+                        window=Window(0, 0, n_c * f, n_r * f),
+                        out_shape=(n_r, n_c),
+                        resampling=Resampling.average,
+                        out_dtype="float32",
+                    )
+        except rasterio.errors.RasterioError as exc:
+            raise InputError(
+                f"{self.path}: cannot read it reduced {f} times (a truncated or damaged "
+                f"file?): {gdal_cause(exc)}"
+            ) from None
+        if nodata is not None:
+            data[(data == nodata) | ~np.isfinite(data)] = np.nan
+        return data
+
     def _read(self, what: str, **how: Any) -> NDArray[np.float32]:
         """The band read as ``how`` says (rasterio ``read`` arguments), voids NaN; a file
         that fails names itself and GDAL's cause."""

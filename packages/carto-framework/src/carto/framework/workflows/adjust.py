@@ -9,11 +9,12 @@ the sidecar of ``<image>.tif``), a residual plot (``residuals.png``) and ``repor
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
 import time
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -42,6 +43,12 @@ from carto.framework.matching.gcp_transfer import (
     gcp_offsets,
 )
 from carto.framework.plugins.registry import get_registry
+from carto.framework.workflows.adjust_checks import (
+    corrections_beyond_priors,
+    gcps_off_the_dem,
+    gcps_rejected,
+    poor_adjustment,
+)
 from carto.framework.workflows.opening import open_options, open_product, sensor_type_for
 from carto.framework.workflows.reporting import jsonable, progress, write_report
 from carto.framework.workflows.residual_plot import residual_misfit, residual_plot
@@ -339,10 +346,11 @@ def _adjust_into(
                 first_outliers = sorted(rejected)
                 obs = obs.without_points(first_outliers)
             result = component.adjust(sensors, obs, dem=dem, **options)
-    warnings = early + _poor_adjustment(result.sigma0, ties, n_ties, len(sensors))
+    warnings = early + poor_adjustment(result.sigma0, ties, n_ties, len(sensors))
+    warnings += corrections_beyond_priors(result)
     if gcps is not None:
         rejected = {*first_outliers, *result.outliers}
-        warnings += _gcps_rejected(sorted({str(v).strip() for v in gcps["id"]}), rejected)
+        warnings += gcps_rejected(sorted({str(v).strip() for v in gcps["id"]}), rejected)
     if warnings and not allow_poor:
         raise AdjustmentError(f"{src}: {'; '.join(warnings)} (--allow-poor writes it anyway)")
     for warning in warnings:
@@ -452,74 +460,6 @@ def _adjust_into(
     return report
 
 
-POOR_SIGMA0 = 5.0
-"""An adjustment whose sigma0 exceeds this fails (``--allow-poor`` writes it): its residuals
-are several times the measurement sigmas, a corrupt input or a model that does not fit. Real
-blocks with unmodelled jitter reach 1.5-3."""
-
-
-GCP_DEM_LIMIT_M = 100.0
-"""A GCP whose height is more than this off the DEM at its place is refused: SRTM-like
-DEMs are off by metres, tens near cliffs, never hundreds; heights in feet (x 3.28: 1289 for
-393 m), another datum or another place's point are. Left unchecked, GCP heights in feet put
-the checkpoints 1.2 km off with no warning (issue 31)."""
-
-
-def gcps_off_the_dem(gcps: Mapping[str, NDArray], dem: Any) -> list[str]:
-    """Why the GCPs' heights are not this terrain's (empty when they are, or when there is no
-    DEM of the terrain to tell): every GCP more than :data:`GCP_DEM_LIMIT_M` off the DEM."""
-    if dem is None or not np.nanstd(dem.heights) > 0:  # none, or a flat height
-        return []
-    ids = np.array([str(v).strip() for v in gcps["id"]])
-    _, first = np.unique(ids, return_index=True)
-    lon, lat, h = (np.asarray(gcps[c], np.float64)[first] for c in ("lon_deg", "lat_deg", "h_m"))
-    terrain = dem.height(lon, lat)
-    off = np.abs(h - terrain)
-    bad = np.flatnonzero(np.nan_to_num(off, nan=0.0) > GCP_DEM_LIMIT_M)
-    if bad.size == 0:
-        return []
-    worst = bad[np.argmax(off[bad])]
-    return [
-        f"{bad.size} of {first.size} GCPs are more than {GCP_DEM_LIMIT_M:g} m off the DEM in "
-        f"height (GCP {str(ids[first][worst])!r}: {h[worst]:.1f} m where the DEM says "
-        f"{terrain[worst]:.1f} m; heights in feet? another vertical datum? another place?)"
-    ]
-
-
-MAX_REJECTED_GCP_SHARE = 0.5
-"""An adjustment that rejects this share (or more) of three or more GCPs fails: a wrong GCP
-among several is an outlier, half of them wrong is a wrong table (heights in feet flagged 2
-of 4 GCPs, and the adjustment went ahead with sigma0 2.6, issue 31)."""
-
-
-def _gcps_rejected(ids: list[str], rejected: set[str]) -> list[str]:
-    """Why the GCP table is not this block's (empty when few of its GCPs were rejected)."""
-    out = [i for i in ids if i in rejected]
-    if len(ids) >= 3 and len(out) >= MAX_REJECTED_GCP_SHARE * len(ids):
-        return [
-            f"{len(out)} of {len(ids)} GCPs were rejected as outliers ({', '.join(out[:5])}"
-            f"{', ...' if len(out) > 5 else ''}): the table does not fit the images (another "
-            "scene, units, datum?)"
-        ]
-    return []
-
-
-def _poor_adjustment(sigma0: float, ties: str, n_ties: int, n_images: int) -> list[str]:
-    """Why an adjustment is too poor to deliver (empty when it is not)."""
-    reasons = []
-    if ties == "auto" and n_images > 1 and n_ties == 0:
-        reasons.append(
-            "no tie point was found between the images (do they overlap? are the models and "
-            "the DEM right?)"
-        )
-    if math.isfinite(sigma0) and sigma0 > POOR_SIGMA0:
-        reasons.append(
-            f"sigma0 {sigma0:.3g} is far above 1 (> {POOR_SIGMA0:g}): the measurements do "
-            "not fit the models (wrong control, a corrupt model or image?)"
-        )
-    return reasons
-
-
 def _auto_flag(value: Any, name: str) -> str | bool:
     """An ``"auto"``/true/false option, checked (0 and 1 are not booleans here)."""
     if isinstance(value, bool) or value == "auto":
@@ -591,6 +531,17 @@ def _check_keys(doc: Mapping[str, Any], known: tuple[str, ...], path: Path, wher
             raise InputError(f"{path}: unknown field {where}{key!r}{hint}")
 
 
+@contextlib.contextmanager
+def _field(path: Path, field: str) -> Iterator[None]:
+    """Errors of reading what configuration ``path``'s ``field`` names, naming both."""
+    try:
+        yield
+    except InputError as exc:
+        if str(path) in str(exc):
+            raise
+        raise InputError(f"{path}: field {field!r}: {exc}") from None
+
+
 def configuration_files(path: Path) -> list[Path]:
     """The files a configuration names (models, rasters, GCPs, DEM, geoid), read leniently
     (:func:`read_configuration` checks them): the output folder may hold none of them, since
@@ -654,28 +605,33 @@ def read_configuration(
         model = base / spec["model"]
         if not model.exists():
             raise InputError(f"{path}: images.{name}.model: no such file {model}")
-        types[name] = sensor_type_for(model, sensor_type or spec.get("sensor"), "file")
-        sensor = types[name].open(model, **open_options(trajectory))
-        if "raster" in spec:
+        with _field(path, f"images.{name}.model"):
+            types[name] = sensor_type_for(model, sensor_type or spec.get("sensor"), "file")
+            sensor = types[name].open(model, **open_options(trajectory))
+        if spec.get("raster") is not None:
             rasters[name] = base / spec["raster"]
             if not rasters[name].is_file():
                 raise InputError(f"{path}: images.{name}.raster: no such file {rasters[name]}")
-            sensor = sensor.for_raster(rasters[name])
+            with _field(path, f"images.{name}.raster"):
+                sensor = sensor.for_raster(rasters[name])
         sensors[name] = sensor
     gcps = None
     if doc.get("gcps") is not None:
         if not isinstance(doc["gcps"], str) or not doc["gcps"]:
             raise InputError(f"{path}: field 'gcps' must be a CSV file name, got {doc['gcps']!r}")
-        gcps = read_control_table(base / doc["gcps"], "gcps", images=list(sensors))
-        check_control(gcps, sensors, "gcps")
+        with _field(path, "gcps"):
+            gcps = read_control_table(base / doc["gcps"], "gcps", images=list(sensors))
+            check_control(gcps, sensors, "gcps")
     dem = None
     for key in ("dem", "geoid"):
         value = doc.get(key)
         if value is not None and (not isinstance(value, str) or not value):
             raise InputError(f"{path}: field {key!r} must be a file name, got {value!r}")
     if doc.get("dem"):
-        geoid = Geoid.open(base / doc["geoid"]) if doc.get("geoid") else None
-        dem = DEM.open(base / doc["dem"], geoid=geoid, require_ellipsoidal=True)
+        with _field(path, "geoid"):
+            geoid = Geoid.open(base / doc["geoid"]) if doc.get("geoid") else None
+        with _field(path, "dem"):
+            dem = DEM.open(base / doc["dem"], geoid=geoid, require_ellipsoidal=True)
         check_terrain_posting(dem, f"{path}: dem {base / doc['dem']}")
     elif doc.get("height_m") is not None:
         h = doc["height_m"]

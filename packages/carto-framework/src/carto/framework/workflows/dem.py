@@ -35,6 +35,7 @@ from carto.framework.workflows.dem_datum import (
     resolve_coregister,
 )
 from carto.framework.workflows.opening import open_options, open_sensor, sensor_type_for
+from carto.framework.workflows.pair_checks import checked_pair
 from carto.framework.workflows.reporting import jsonable, progress, write_report
 
 __all__ = [
@@ -524,6 +525,9 @@ def _dem_into(
                 desc=f"merge staggered arrays of {n}",
             )
         )
+    checked, warnings = checked_pair(
+        images, [sensors[n] for n in names], start, allow_poor=allow_poor
+    )
     control = datum_gcps(inputs.models, names)
     oriented = relative_orientation(
         dict(zip(names, images, strict=True)),
@@ -572,7 +576,7 @@ def _dem_into(
             f"DEM generator {generator!r} returned {len(product.orthos)} ortho-images for "
             f"{len(names)} images"
         )
-    warnings = poor_dem(product) + departs_from_start(product.dem, start)
+    warnings += poor_dem(product) + departs_from_start(product.dem, start)
     if product.failed_tiles:
         warnings.append(
             f"{len(product.failed_tiles)} tiles failed and have no heights "
@@ -639,6 +643,7 @@ def _dem_into(
         "engine": engine.description,
         "failed_tiles": list(product.failed_tiles),
         "initial_dem": start.name,
+        "pair_check": checked.as_dict(),
         "relative_orientation": oriented.record,
         "coregistration": coregistration,
         "dem_grid": {

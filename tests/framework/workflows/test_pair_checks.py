@@ -1,0 +1,98 @@
+"""The checks of a pair before matching (issue 31, family 1): true pairs pass, a right image
+rotated, mirrored or of another place fails. The true pairs are real Pleiades products (an
+independent truth of what a pair looks like) and simulated scenes; the false ones are made
+from them."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import rasterio
+
+from carto.framework.errors import InputError
+from carto.framework.imaging.preparation import prepared_sources
+from carto.framework.workflows.dem import StereoInputs, initial_dem, open_pair
+from carto.framework.workflows.pair_checks import (
+    MIN_AGREEMENT,
+    MIN_BLOCKS,
+    check_pair,
+    checked_pair,
+)
+
+
+def _pair(inputs: StereoInputs, right: Path | None = None, height_m: float | None = None):
+    """The prepared images, sensors and starting DEM of a pair (right raster replaced)."""
+    pair = open_pair(inputs)
+    dem = initial_dem(None, None, height_m, pair.init_dem)
+    names = list(pair.sensors)
+    rasters = dict(pair.rasters)
+    if right is not None:
+        rasters[names[1]] = right
+    images = prepared_sources(rasters, pair.sensors, dem)
+    return [images[n] for n in names], [pair.sensors[n] for n in names], dem
+
+
+def _rearranged(src: Path, dst: Path, how) -> Path:
+    with rasterio.open(src) as ds:
+        profile, data, rpcs = ds.profile, ds.read(1), ds.rpcs
+    with rasterio.open(dst, "w", **profile) as out:
+        out.write(np.ascontiguousarray(how(data)), 1)
+        if rpcs:
+            out.rpcs = rpcs
+    return dst
+
+
+@pytest.fixture(scope="module")
+def reunion(shared_data: Path) -> StereoInputs:
+    folder = shared_data / "pleiades-reunion-pair"
+    return StereoInputs(left=folder / "img_01.tif", right=folder / "img_02.tif")
+
+
+def test_a_real_pair_passes_and_its_right_image_turned_fails(reunion, tmp_path) -> None:
+    check = check_pair(*_pair(reunion, height_m=2300.0))
+    assert check.overlap > 0.95
+    assert check.blocks >= 20
+    assert check.agreement > 0.9
+    assert not check.warnings()
+    # the right image's RPC says where the ground is: a few metres off for Pleiades
+    assert np.hypot(*check.shift_m) < 30.0
+    for how in (lambda a: a[::-1, ::-1], lambda a: a[:, ::-1], lambda a: a[::-1, :]):
+        turned = _rearranged(reunion.right, tmp_path / "turned.tif", how)
+        bad = check_pair(*_pair(reunion, turned, height_m=2300.0))
+        assert bad.blocks >= MIN_BLOCKS
+        assert bad.agreement < MIN_AGREEMENT / 2
+        assert "do not correlate" in bad.warnings()[0]
+
+
+def test_images_of_two_places_do_not_overlap(shared_data: Path) -> None:
+    ventoux = shared_data / "pleiades-ventoux-pair"
+    inputs = StereoInputs(
+        left=shared_data / "pleiades-reunion-pair" / "img_01.tif",
+        right=ventoux / "right_image.tif",
+        right_model=ventoux / "right_image.geom",
+    )
+    images, sensors, dem = _pair(inputs, height_m=500.0)
+    assert check_pair(images, sensors, dem).overlap == 0.0
+    with pytest.raises(InputError, match="do not overlap on the ground"):
+        checked_pair(images, sensors, dem, allow_poor=True)
+
+
+def test_a_simulated_pair_passes_and_another_scenes_image_fails(cartosat1_scene, tmp_path) -> None:
+    from tests.scenes import simulate
+
+    inputs = StereoInputs(source=cartosat1_scene)
+    check = check_pair(*_pair(inputs))
+    assert check.blocks >= MIN_BLOCKS, check
+    assert check.agreement > 0.8, check
+    other = simulate(
+        "cartosat1-pair", tmp_path / "other", seed=3, size=(400, 400), n_checkpoints=1,
+        terrain="hilly",
+    )  # fmt: skip
+    images, sensors, dem = _pair(inputs, other / "aft.tif")
+    bad = check_pair(images, sensors, dem)
+    assert bad.agreement < MIN_AGREEMENT, bad
+    with pytest.raises(InputError, match="--allow-poor"):
+        checked_pair(images, sensors, dem, allow_poor=False)
+    assert checked_pair(images, sensors, dem, allow_poor=True)[1] == bad.warnings()
