@@ -28,8 +28,6 @@ from carto.framework.cli.geometry_commands import add_project_locate
 from carto.framework.cli.plugins_command import add_plugins
 from carto.framework.cli.simulate_command import add_simulate
 from carto.framework.errors import CartoError, UsageError
-from carto.framework.parallel.engine import bound_gdal_cache
-from carto.framework.plugins.registry import get_registry
 
 __all__ = ["build_parser", "main"]
 
@@ -37,7 +35,21 @@ __all__ = ["build_parser", "main"]
 class _Parser(argparse.ArgumentParser):
     """argparse's parser whose usage errors are one line, as every other ``carto`` error
     (``carto: error: argument --workers: must be >= 1, got 0 (see carto dem --help)``),
-    exit 2. Sub-command parsers are made of the same class."""
+    exit 2, and whose help may be completed only when asked for. Sub-command parsers are
+    made of the same class."""
+
+    def format_help(self) -> str:
+        """The help, with an epilog (``lazy_epilog``: e.g. examples naming the installed
+        presets, which loads plugins) or option help (a callable) built only now when they
+        are costly to build."""
+        lazy = getattr(self, "lazy_epilog", None)
+        if lazy is not None:
+            self.epilog = lazy()
+            self.lazy_epilog = None
+        for action in self._actions:
+            if callable(action.help):  # an option's help that needs a costly import
+                action.help = action.help()
+        return super().format_help()
 
     def error(self, message: str) -> NoReturn:
         self.exit(2, f"{PROG}: error: {message} (see {self.prog} --help)\n")
@@ -182,6 +194,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if handler is None:
         parser.print_help(sys.stderr)
         return 2
+    from carto.framework.parallel.engine import bound_gdal_cache
+
     bound_gdal_cache()
     with _quiet_libraries(args.debug):
         return _run(handler, args)
@@ -190,6 +204,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 def _run(handler: Handler, args: argparse.Namespace) -> int:
     try:
         if getattr(args, "needs_registry", True):
+            from carto.framework.plugins.registry import get_registry
+
             warn_broken(get_registry())
         return handler(args)
     except UsageError as exc:

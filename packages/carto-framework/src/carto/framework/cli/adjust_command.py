@@ -13,7 +13,6 @@ from carto.framework.cli.common import (
     positive_int,
 )
 from carto.framework.errors import UsageError
-from carto.framework.matching.gcp_transfer import GCP_OFFSET_SIGMA_PX
 from carto.framework.parallel.engine import default_workers
 
 
@@ -115,6 +114,17 @@ def _jitter(text: str) -> str | list[float]:
     if not freqs or not all(math.isfinite(f) and f > 0 for f in freqs):
         raise UsageError(f"--jitter frequencies must be > 0 Hz, got {text!r}")
     return freqs
+
+
+def _offset_sigma_help() -> str:
+    """The help of ``--gcp-offset-sigma``, built when help is asked for (its default lives
+    with the GCP transfer, whose module loads the matchers)."""
+    from carto.framework.matching.gcp_transfer import GCP_OFFSET_SIGMA_PX
+
+    return (
+        "a-priori sigma of a matched GCP offset, pixels per coordinate (default "
+        f"{GCP_OFFSET_SIGMA_PX})"
+    )
 
 
 def add_adjust(sub: argparse._SubParsersAction) -> None:
@@ -220,8 +230,7 @@ def add_adjust(sub: argparse._SubParsersAction) -> None:
         "--gcp-offset-sigma",
         type=finite_float,
         metavar="PX",
-        help="a-priori sigma of a matched GCP offset, pixels per coordinate (default "
-        f"{GCP_OFFSET_SIGMA_PX})",
+        help=_offset_sigma_help,
     )
     p.add_argument("--sensor", metavar="TYPE", help="sensor type of the product")
     p.add_argument(

@@ -6,8 +6,10 @@ import argparse
 import math
 import sys
 from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING
 
-from carto.framework.plugins.registry import Registry
+if TYPE_CHECKING:
+    from carto.framework.plugins.registry import Registry
 
 PROG = "carto"
 

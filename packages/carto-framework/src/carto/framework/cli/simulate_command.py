@@ -9,11 +9,11 @@ from pathlib import Path
 
 from carto.framework.cli.common import examples, formatter, non_negative_int, positive_int
 from carto.framework.errors import InputError
-from carto.framework.plugins.registry import get_registry
 
 
 # --------------------------------------------------------------------------- simulate
 def cmd_simulate(args: argparse.Namespace) -> int:
+    from carto.framework.plugins.registry import get_registry
     from carto.framework.simulation.plan import SimulationOptions
 
     preset = get_registry().get("scene-preset", args.preset)
@@ -71,6 +71,8 @@ def _parse_error_size(text: str) -> tuple[str, float]:
 
 def _simulate_examples() -> list[str]:
     """Examples with the installed presets' names (a placeholder when there is none)."""
+    from carto.framework.plugins.registry import get_registry
+
     names = get_registry().names("scene-preset") or ["PRESET"]
     first, last = names[0], names[-1]
     return [
@@ -90,9 +92,9 @@ def add_simulate(sub: argparse._SubParsersAction) -> None:
         description="Render a simulated acquisition of PRESET into a scene folder: raw 10-bit "
         "images (odd/even\narrays staggered), ancillary files with realistic errors, GCPs and "
         "checkpoints,\nan SRTM-like initial DEM and truth/ (true DEM, ortho-image, models).",
-        epilog=examples(*_simulate_examples()),
         formatter_class=formatter,
     )
+    p.lazy_epilog = lambda: examples(*_simulate_examples())  # type: ignore[attr-defined]
     p.add_argument(
         "preset", metavar="PRESET", help="scene preset (carto plugins --kind scene-preset)"
     )

@@ -19,6 +19,7 @@ Typical use::
 from __future__ import annotations
 
 import functools
+import importlib
 import importlib.metadata as metadata
 from collections.abc import Iterable
 from typing import Any
@@ -26,39 +27,56 @@ from typing import Any
 import attrs
 import pluggy
 
-from carto.framework.adjustment.base import Adjuster
 from carto.framework.component import NAME_PATTERN, Component
-from carto.framework.dem_generation.base import DEMGenerator
 from carto.framework.errors import PluginError, UnknownComponentError
-from carto.framework.geometry.sensor import SensorType
-from carto.framework.geometry.trajectory_models import TrajectoryModel
-from carto.framework.matching.base import Matcher
 from carto.framework.plugins import hookspecs
-from carto.framework.simulation.preset import ScenePreset
 
+_FW = "carto.framework"
 ENTRY_POINT_GROUP = "carto"
 """The entry-point group in which plugin distributions declare their plugin module."""
 
 
 @attrs.frozen
 class Kind:
-    """One kind of component: its CLI name, the hook that provides it and its base class."""
+    """One kind of component: its CLI name, the hook that provides it and its base class
+    (``base_path``, ``module:Class``, imported on first use of :attr:`base`: naming the
+    kinds, e.g. to build the command line, loads no component module)."""
 
     name: str
     label: str
     hook: str
-    base: type[Component]
+    base_path: str
+
+    @property
+    def base(self) -> type[Component]:
+        module, _, name = self.base_path.partition(":")
+        return getattr(importlib.import_module(module), name)  # type: ignore[no-any-return]
 
 
 KINDS: dict[str, Kind] = {
     k.name: k
     for k in (
-        Kind("sensor", "sensor type", "carto_sensor_types", SensorType),
-        Kind("trajectory", "trajectory model", "carto_trajectory_models", TrajectoryModel),
-        Kind("adjuster", "adjuster", "carto_adjusters", Adjuster),
-        Kind("matcher", "matcher", "carto_matchers", Matcher),
-        Kind("dem-generator", "DEM generator", "carto_dem_generators", DEMGenerator),
-        Kind("scene-preset", "scene preset", "carto_scene_presets", ScenePreset),
+        Kind("sensor", "sensor type", "carto_sensor_types", f"{_FW}.geometry.sensor:SensorType"),
+        Kind(
+            "trajectory",
+            "trajectory model",
+            "carto_trajectory_models",
+            f"{_FW}.geometry.trajectory_models:TrajectoryModel",
+        ),
+        Kind("adjuster", "adjuster", "carto_adjusters", f"{_FW}.adjustment.base:Adjuster"),
+        Kind("matcher", "matcher", "carto_matchers", f"{_FW}.matching.base:Matcher"),
+        Kind(
+            "dem-generator",
+            "DEM generator",
+            "carto_dem_generators",
+            f"{_FW}.dem_generation.base:DEMGenerator",
+        ),
+        Kind(
+            "scene-preset",
+            "scene preset",
+            "carto_scene_presets",
+            f"{_FW}.simulation.preset:ScenePreset",
+        ),
     )
 }
 """Component kinds by name, in the order ``carto plugins`` lists them."""
