@@ -61,3 +61,6 @@ def test_block_adjustment_with_two_gcps(cartosat2_triplet_scene):
         adjuster.adjust(scene.sensors(), obs, attitude_order=5)
     with pytest.raises(InputError, match="jitter_hz must be 'auto' or a list"):
         adjuster.adjust(scene.sensors(), obs, jitter_hz="1.7")
+    # a user's --mode was dropped unseen (issue 32): the adjuster has none, it says so
+    with pytest.raises(InputError, match="cartosat2-bba has no modes: option mode='separate'"):
+        adjuster.adjust(scene.sensors(), obs, mode="separate")

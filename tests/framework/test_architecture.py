@@ -131,3 +131,73 @@ def test_the_framework_names_no_plugin_component() -> None:
         if pattern.search(text)
     ]
     assert hits == []
+
+
+PLUGIN_SOURCES = [
+    ROOT / "packages" / "carto-cartosat1" / "src",
+    ROOT / "packages" / "carto-cartosat2" / "src",
+    ROOT / "packages" / "carto-ior" / "src",
+    ROOT / "examples",
+    ROOT / "tests" / "plugins",
+]
+
+
+def _framework_module(name: str) -> bool:
+    """A framework module a plugin may not import (anything but the root and the SDK)."""
+    return name.startswith("carto.framework.") and not name.startswith("carto.framework.sdk")
+
+
+def test_plugins_import_the_framework_through_its_sdk_only() -> None:
+    """Our plugins, the example and the test plugins import ``carto.framework`` and
+    ``carto.framework.sdk.*`` only (``.importlinter`` checks the installed plugins; this also
+    covers the test plugins and imports inside functions)."""
+    found = []
+    for root in PLUGIN_SOURCES:
+        for path in sorted(root.rglob("*.py")):
+            for node in ast.walk(ast.parse(path.read_text())):
+                names = (
+                    [node.module or ""]
+                    if isinstance(node, ast.ImportFrom)
+                    else [a.name for a in node.names]
+                    if isinstance(node, ast.Import)
+                    else []
+                )
+                found += [
+                    f"{path.relative_to(ROOT)}:{node.lineno}: {n}"
+                    for n in names
+                    if _framework_module(n)
+                ]
+    assert found == []
+
+
+def test_the_plugin_guide_names_sdk_names_that_exist() -> None:
+    """``docs/writing-a-plugin.md`` names framework code only through the SDK (or the package
+    root), and every SDK name it gives exists: a renamed or moved name fails here."""
+    import re
+
+    text = (ROOT / "docs" / "writing-a-plugin.md").read_text()
+    dotted = re.findall(r"carto\.framework(?:\.[A-Za-z_]\w*)+", text)
+    assert [d for d in dotted if _framework_module(d)] == []
+    imported = re.findall(r"from (carto\.framework(?:\.\w+)*) import ([\w, ]+)", text)
+    paths = [f"{m}.{n.strip()}" for m, names in imported for n in names.split(",") if n.strip()]
+    paths += [d for d in dotted if d.startswith("carto.framework.sdk.")]
+    for path in paths:
+        _resolve(path)
+    assert len(paths) > 20
+
+
+def _resolve(dotted: str) -> object:
+    """The object a dotted path names (the longest importable module, then attributes)."""
+    import importlib
+
+    parts = dotted.split(".")
+    for k in range(len(parts), 0, -1):
+        try:
+            obj = importlib.import_module(".".join(parts[:k]))
+        except ModuleNotFoundError:
+            continue
+        for attr in parts[k:]:
+            assert hasattr(obj, attr), dotted
+            obj = getattr(obj, attr)
+        return obj
+    raise AssertionError(dotted)

@@ -1,8 +1,14 @@
 """Signals at random moments (issue 31): Ctrl-C or SIGTERM at any time of a ``carto adjust``
-run over an earlier output, from the interpreter's start-up to the writing of the outputs.
-Whatever the moment, the run either finishes (exit 0, a complete output) or stops with exit
-130 (or is ended by the signal itself before Python installed its handlers), with no
-traceback, and the earlier output is left byte for byte as it was, with nothing beside it."""
+run over an earlier output, from the command's start-up to the writing of its outputs.
+Whatever the moment, the run either finishes (exit 0, a complete output), or stops with exit
+130 leaving the earlier output byte for byte as it was, or stops with exit 130 after its new
+output was complete and says so (an outside probe found exit 130 with the output replaced and
+no word); or it is ended by the signal itself before Python installed its handlers. Never a
+traceback, never anything left beside the output.
+
+The first quarter second is left out: it is CPython's own start-up (the ``site`` import),
+where Ctrl-C ends the interpreter with "Fatal Python error: init_import_site" before any
+line of ours runs."""
 
 from __future__ import annotations
 
@@ -24,11 +30,11 @@ def _snapshot(folder: Path) -> dict[str, bytes]:
 
 
 @settings(
-    max_examples=6,
+    max_examples=8,
     deadline=None,
     suppress_health_check=[HealthCheck.function_scoped_fixture],
 )
-@given(sig=st.sampled_from([signal.SIGINT, signal.SIGTERM]), delay_s=st.floats(0.0, 4.0))
+@given(sig=st.sampled_from([signal.SIGINT, signal.SIGTERM]), delay_s=st.floats(0.25, 4.5))
 def test_a_signal_at_any_moment_loses_nothing(
     tmp_path: Path,
     cartosat1_adjusted: Path,
@@ -57,6 +63,8 @@ def test_a_signal_at_any_moment_loses_nothing(
     assert "internal error" not in err, err
     if proc.returncode == 0:  # it finished first
         assert (earlier / MARKER).is_file()
-    else:
-        assert _snapshot(earlier) == before
+    elif _snapshot(earlier) != before:  # stopped after its output was in place: it says so
+        assert proc.returncode == 130, err
+        assert f"it came after {earlier} had been completed" in err, err
+        assert (earlier / MARKER).is_file()
     assert sorted(p.name for p in parent.iterdir()) == ["adj"]

@@ -134,6 +134,41 @@ def test_an_interrupt_lost_on_its_way_still_keeps_the_earlier_output(tmp_path: P
     assert (out / "a.txt").read_text() == "new"
 
 
+def test_an_interrupt_while_the_folder_is_put_in_place_waits_for_it(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Ctrl-C that lands while the new output replaces the earlier one (the command's handler
+    only notes it then) is raised once the new output is whole: never half a swap, and the
+    folders this process completed are known (the command line names them)."""
+    from carto.framework.cli import _interrupted, _terminate
+    from carto.framework.files import staging
+
+    out = tmp_path / "out"
+    write_run(out, {"a.txt": "old"})
+    swap = staging._swap_into_place
+
+    def interrupted_swap(stage: Path, destination: Path) -> None:
+        assert staging.committing()
+        _terminate(2, None)  # SIGINT's handler: notes, does not raise now
+        swap(stage, destination)
+
+    monkeypatch.setattr(staging, "_swap_into_place", interrupted_swap)
+    note_interrupt(None)  # what this process completed so far is forgotten, as a command does
+    try:
+        with pytest.raises(KeyboardInterrupt, match="SIGINT") as caught:
+            write_run(out, {"a.txt": "new"})
+        assert staging.committed_outputs() == [out]
+        line = _interrupted(caught.value)
+        assert f"it came after {out} had been completed: it holds this run's output" in line
+    finally:
+        note_interrupt(None)
+    assert (out / "a.txt").read_text() == "new"
+    assert (out / MARKER).is_file()
+    assert siblings(out) == []
+    assert not staging.committing()
+    assert staging.committed_outputs() == []
+
+
 def test_a_failed_first_run_creates_nothing(tmp_path: Path) -> None:
     out = tmp_path / "out"
     with pytest.raises(RuntimeError):

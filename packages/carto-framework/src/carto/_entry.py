@@ -10,6 +10,7 @@ does: one line, exit 130.
 
 from __future__ import annotations
 
+import signal
 import sys
 
 
@@ -18,7 +19,12 @@ def main() -> int:
     try:
         from carto.framework.cli import main as run
 
-        return run()
+        code = run()
     except KeyboardInterrupt:
         print("carto: interrupted", file=sys.stderr)
         return 130
+    # the command has said how it ended: an interrupt while the interpreter shuts down
+    # would end it with exit 130 and no word, whatever the command did
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    return code

@@ -52,8 +52,8 @@ import attrs
 import numpy as np
 from numpy.typing import NDArray
 
-from carto.framework.errors import InputError
-from carto.framework.geometry import frames
+from carto.framework.sdk.common import InputError
+from carto.framework.sdk.sensors import frames
 
 FloatArray = NDArray[np.float64]
 

@@ -14,7 +14,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from carto.framework import hookimpl
-from carto.framework.geometry.sensor import SensorType
+from carto.framework.sdk.sensors import SensorType
 from carto.pleiades.sensor import PleiadesDimapType
 
 

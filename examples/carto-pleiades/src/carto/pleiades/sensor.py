@@ -35,14 +35,19 @@ from typing import Any
 
 import numpy as np
 
-from carto.framework.errors import InputError
-from carto.framework.geometry.camera import Camera
-from carto.framework.geometry.linescan import LineScanner, save_line_scanner
-from carto.framework.geometry.linescan_solver import TABLE_MARGIN_LINES
-from carto.framework.geometry.linescan_timing import LineTiming
-from carto.framework.geometry.rpc_sensor import RPCSensorType
-from carto.framework.geometry.sensor import Sensor, SensorType, refuse_options
-from carto.framework.geometry.trajectory import AttitudeSamples, EphemerisSamples, Trajectory
+from carto.framework.sdk.common import InputError
+from carto.framework.sdk.sensors import (
+    Camera,
+    LineScanner,
+    LineTiming,
+    RPCSensorType,
+    Sensor,
+    SensorType,
+    refuse_options,
+    save_line_scanner,
+    tabulated_lines,
+)
+from carto.framework.sdk.trajectories import AttitudeSamples, EphemerisSamples, Trajectory
 from carto.pleiades.dimap import (
     EPHEMERIS_LAGRANGE_POINTS,
     DimapSensorModel,
@@ -73,11 +78,11 @@ def line_scanner_from_dimap(model: DimapSensorModel, name: str | None = None) ->
     ephemeris = EphemerisSamples(
         model.ephemeris_dt_s, model.position_ecef_m, model.velocity_ecef_m_s, frame="ecef"
     )
-    # sample the attitude polynomials over the range the line scanner tabulates: the image and
-    # half an image (at least TABLE_MARGIN_LINES) on each side, where it extrapolates
-    margin = max(0.5 * n_lines, TABLE_MARGIN_LINES) + 16
-    t_lo = float(timing.time(-margin))
-    t_hi = float(timing.time(n_lines + margin))
+    # sample the attitude polynomials over the lines the line scanner tabulates (the image
+    # and margins on each side, where it extrapolates), and a few more
+    first, last = tabulated_lines(n_lines)
+    t_lo = float(timing.time(first - 16))
+    t_hi = float(timing.time(last + 16))
     count = int(np.ceil((t_hi - t_lo) / ATTITUDE_SAMPLE_SPACING_S)) + 1
     attitude = AttitudeSamples.from_quaternion_polynomials(
         model.quaternion_coeffs_wxyz,

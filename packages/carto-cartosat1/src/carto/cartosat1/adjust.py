@@ -70,19 +70,20 @@ import attrs
 
 from carto.cartosat1 import constants
 from carto.cartosat1.calibration import AlignmentCalibration, load_calibration
-from carto.framework.adjustment.base import Adjuster, AdjustmentResult
-from carto.framework.adjustment.bundle import adjust_bundle
-from carto.framework.adjustment.image_trends import trend_document, with_image_trends
-from carto.framework.adjustment.jitter import adjust_with_jitter
-from carto.framework.adjustment.observations import Observations
-from carto.framework.adjustment.priors import (
+from carto.framework.sdk.adjusters import (
+    Adjuster,
+    AdjustmentResult,
     AncillaryPrior,
+    Observations,
+    adjust_bundle,
+    adjust_with_jitter,
     line_scanner_corrections,
+    trend_document,
+    with_image_trends,
     with_self_calibration,
 )
-from carto.framework.errors import InputError
-from carto.framework.geometry.linescan import LineScanner
-from carto.framework.geometry.sensor import Sensor
+from carto.framework.sdk.common import InputError
+from carto.framework.sdk.sensors import LineScanner, Sensor
 
 MODES = ("combined", "separate", "calibration")
 

@@ -30,11 +30,9 @@ from typing import Any
 import attrs
 import numpy as np
 
-from carto.framework.adjustment.base import AdjustmentResult
-from carto.framework.errors import InputError
-from carto.framework.files.documents import read_json_document, write_json_atomic
-from carto.framework.geometry.linescan import LineScanner
-from carto.framework.geometry.sensor import Sensor
+from carto.framework.sdk.adjusters import AdjustmentResult
+from carto.framework.sdk.common import InputError, read_json_document, write_json_atomic
+from carto.framework.sdk.sensors import LineScanner, Sensor
 
 CALIBRATION_FORMAT = "carto-camera-alignment-calibration"
 CALIBRATION_VERSION = 1

@@ -12,9 +12,9 @@ from carto.cartosat1.adjust import Cartosat1Adjuster
 from carto.cartosat1.presets import Cartosat1PairPreset
 from carto.cartosat1.sensor import Cartosat1SensorType
 from carto.framework import hookimpl
-from carto.framework.adjustment.base import Adjuster
-from carto.framework.geometry.sensor import SensorType
-from carto.framework.simulation.preset import ScenePreset
+from carto.framework.sdk.adjusters import Adjuster
+from carto.framework.sdk.presets import ScenePreset
+from carto.framework.sdk.sensors import SensorType
 
 
 @hookimpl

@@ -8,11 +8,18 @@ yaw-steered with zero roll and pitch; Fore (+26 deg) and Aft (-5 deg) image the 
 from __future__ import annotations
 
 from carto.cartosat1 import constants as c
-from carto.framework.products.ancillary import CameraSpec
-from carto.framework.simulation import acquisition
-from carto.framework.simulation.plan import ScenePlan, SegmentPlan, SimulationOptions, ViewPlan
-from carto.framework.simulation.preset import DemoAdjustment, DemoChain, ScenePreset
-from carto.framework.simulation.reference.attitude import YawSteering
+from carto.framework.sdk.presets import (
+    DemoAdjustment,
+    DemoChain,
+    ScenePlan,
+    ScenePreset,
+    SegmentPlan,
+    SimulationOptions,
+    ViewPlan,
+    YawSteering,
+    acquisition,
+)
+from carto.framework.sdk.sensors import CameraSpec
 
 DEFAULT_TARGET = (77.95, 30.30)
 """Near Dehradun, India: hilly terrain as in the paper's test sites."""

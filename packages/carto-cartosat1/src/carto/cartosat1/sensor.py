@@ -20,12 +20,17 @@ import re
 from pathlib import Path
 from typing import Any
 
-from carto.framework.errors import InputError
-from carto.framework.geometry.linescan import save_line_scanner
-from carto.framework.geometry.rpc_readers import read_rpc_txt
-from carto.framework.geometry.rpc_sensor import RPCSensor, save_corrected_rpc
-from carto.framework.geometry.sensor import Sensor, SensorType, refuse_options
-from carto.framework.products.scene import Scene, find_scene_manifest
+from carto.framework.sdk.common import InputError
+from carto.framework.sdk.presets import Scene, find_scene_manifest
+from carto.framework.sdk.sensors import (
+    RPCSensor,
+    Sensor,
+    SensorType,
+    read_rpc_txt,
+    refuse_options,
+    save_corrected_rpc,
+    save_line_scanner,
+)
 
 _BAND = re.compile(r"(^band[af]|[_-][af])$", re.IGNORECASE)
 PLATFORM_PREFIX = "Cartosat-1"

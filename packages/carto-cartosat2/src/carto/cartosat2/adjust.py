@@ -36,17 +36,17 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 from carto.cartosat2 import constants
-from carto.framework.adjustment.base import Adjuster, AdjustmentResult
-from carto.framework.adjustment.jitter import adjust_with_jitter
-from carto.framework.adjustment.observations import Observations
-from carto.framework.adjustment.priors import (
+from carto.framework.sdk.adjusters import (
+    Adjuster,
+    AdjustmentResult,
     AncillaryPrior,
+    Observations,
+    adjust_with_jitter,
     line_scanner_corrections,
     with_self_calibration,
 )
-from carto.framework.errors import InputError
-from carto.framework.geometry.linescan import LineScanner
-from carto.framework.geometry.sensor import Sensor
+from carto.framework.sdk.common import InputError
+from carto.framework.sdk.sensors import LineScanner, Sensor
 
 PRIOR = AncillaryPrior.from_degrees(
     constants.ATTITUDE_BIAS_SIGMA_DEG,
@@ -113,7 +113,11 @@ class Cartosat2BlockAdjuster(Adjuster):
             prior,
         )
         prepared = with_self_calibration(prepared, options.pop("self_calibration", None), self.name)
-        options.pop("mode", None)
+        if "mode" in options:  # a user's --mode must not be dropped unseen
+            raise InputError(
+                f"adjuster {self.name} has no modes: option mode={options['mode']!r} does not "
+                "apply (every view is adjusted on its own attitude; leave --mode out)"
+            )
         return adjust_with_jitter(prepared, observations, jitter_hz, jitter_amplitude, **options)
 
 

@@ -12,9 +12,9 @@ from carto.cartosat2.adjust import Cartosat2BlockAdjuster
 from carto.cartosat2.presets import PaintbrushPreset, TripletPreset
 from carto.cartosat2.sensor import Cartosat2SensorType
 from carto.framework import hookimpl
-from carto.framework.adjustment.base import Adjuster
-from carto.framework.geometry.sensor import SensorType
-from carto.framework.simulation.preset import ScenePreset
+from carto.framework.sdk.adjusters import Adjuster
+from carto.framework.sdk.presets import ScenePreset
+from carto.framework.sdk.sensors import SensorType
 
 
 @hookimpl

@@ -13,12 +13,16 @@ from __future__ import annotations
 import numpy as np
 
 from carto.cartosat2 import constants as c
-from carto.framework.geometry import frames, orbit
-from carto.framework.products.ancillary import CameraSpec
-from carto.framework.simulation import acquisition
-from carto.framework.simulation.plan import ScenePlan, SegmentPlan, SimulationOptions, ViewPlan
-from carto.framework.simulation.preset import ScenePreset
-from carto.framework.simulation.reference.attitude import Pointing
+from carto.framework.sdk.presets import (
+    Pointing,
+    ScenePlan,
+    ScenePreset,
+    SegmentPlan,
+    SimulationOptions,
+    ViewPlan,
+    acquisition,
+)
+from carto.framework.sdk.sensors import CameraSpec, frames, orbit
 
 DEFAULT_TARGET = (77.95, 30.30)
 DEFAULT_DATE = "2026-03-01"

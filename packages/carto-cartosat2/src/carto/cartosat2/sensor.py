@@ -12,10 +12,9 @@ import json
 from pathlib import Path
 from typing import Any
 
-from carto.framework.errors import InputError
-from carto.framework.geometry.linescan import save_line_scanner
-from carto.framework.geometry.sensor import Sensor, SensorType
-from carto.framework.products.scene import Scene, find_scene_manifest
+from carto.framework.sdk.common import InputError
+from carto.framework.sdk.presets import Scene, find_scene_manifest
+from carto.framework.sdk.sensors import Sensor, SensorType, save_line_scanner
 
 PLATFORM_PREFIX = "Cartosat-2"
 

@@ -13,9 +13,10 @@ registry (and with it the component base classes) is imported on first use of
 ``from carto.framework import hookimpl`` loads neither numba, OpenCV nor the simulator.
 
 The layers of the framework, bottom to top (``.importlinter``, ``docs/architecture.md``):
-``errors``, ``component`` and ``arrays``; ``files``; ``raster``; ``geometry``; ``imaging``;
-``products``; ``evaluation``; ``matching``; ``adjustment``; ``dem_generation``;
-``simulation``; ``plugins``; ``workflows``; ``cli``.
+``errors``, ``component`` and ``arrays``; ``files``; ``parallel``; ``raster``; ``geometry``;
+``imaging``; ``products``; ``evaluation``; ``matching``; ``adjustment``; ``dem_generation``;
+``simulation``; ``plugins``; ``sdk`` (what a plugin may use: :mod:`carto.framework.sdk`);
+``workflows``; ``cli``.
 """
 
 from __future__ import annotations

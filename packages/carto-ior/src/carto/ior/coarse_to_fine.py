@@ -12,11 +12,10 @@ import attrs
 import numpy as np
 from numpy.typing import NDArray
 
-from carto.framework.errors import InputError
-from carto.framework.geometry.sensor import Sensor
-from carto.framework.imaging.ortho_grid import OrthoGrid
-from carto.framework.matching.base import Matcher
-from carto.framework.raster.dem import DEM, ELLIPSOID
+from carto.framework.sdk.common import InputError
+from carto.framework.sdk.dem import DEM, ELLIPSOID, OrthoGrid
+from carto.framework.sdk.matchers import Matcher
+from carto.framework.sdk.sensors import Sensor
 from carto.ior.grids import ior_grids
 from carto.ior.iteration import IterationReport, iterate
 from carto.ior.settings import IORSettings
@@ -52,8 +51,8 @@ def coarse_stages(
     its search bounds along the base (a
     DEM of final ortho pixels: the bound of a node of a stage ``f`` times coarser, times
     ``f``; None when unbounded), or None without a stage."""
-    from carto.framework.geometry.decimated import DecimatedSensor
-    from carto.framework.raster.image_source import DecimatedImage
+    from carto.framework.sdk.dem import DecimatedImage
+    from carto.framework.sdk.sensors import DecimatedSensor
 
     start_dem, guess, ran = init_dem, (0.0, 0.0), False
     search: DEM | None = None  # the last stage's search bounds, final ortho pixels

@@ -9,17 +9,19 @@ import attrs
 import numpy as np
 from numpy.typing import NDArray
 
-from carto.framework.dem_generation.base import (
+from carto.framework.sdk.common import InputError
+from carto.framework.sdk.dem import (
+    DEM,
+    MIN_DEM_POSTS,
     DEMGenerator,
     DEMProduct,
     IterationRecord,
     QualityLayer,
+    as_image_source,
+    check_image_source,
 )
-from carto.framework.errors import InputError
-from carto.framework.geometry.sensor import Sensor
-from carto.framework.matching.base import Matcher
-from carto.framework.raster.dem import DEM, MIN_DEM_POSTS
-from carto.framework.raster.image_source import as_image_source, check_image_source
+from carto.framework.sdk.matchers import Matcher
+from carto.framework.sdk.sensors import Sensor
 from carto.ior.refine import IORResult, IORSettings, refine_dem
 
 _SETTINGS = {f.name for f in attrs.fields(IORSettings)}
@@ -123,7 +125,7 @@ def ior_product(result: IORResult) -> DEMProduct:
 
 def _as_float(layer: Any) -> Any:
     """A 0/1 layer as float32 (tiled layers are converted when they are read)."""
-    from carto.framework.raster.tiled_layer import TiledLayer
+    from carto.framework.sdk.dem import TiledLayer
 
     if isinstance(layer, TiledLayer):
         return attrs.evolve(layer, dtype=np.float32, fill=0.0)

@@ -7,10 +7,9 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from carto.framework.errors import InputError
-from carto.framework.geometry.sensor import Sensor
-from carto.framework.imaging.ortho_grid import OrthoGrid, check_grid_size, footprint_box
-from carto.framework.raster.dem import DEM
+from carto.framework.sdk.common import InputError
+from carto.framework.sdk.dem import DEM, OrthoGrid, check_grid_size, footprint_box
+from carto.framework.sdk.sensors import Sensor
 from carto.ior.settings import IORSettings, option_label
 
 FloatArray = NDArray[np.float64]
@@ -24,8 +23,8 @@ def ior_grids(
     for the common footprint."""
     from affine import Affine
 
-    from carto.framework.imaging.preparation import ground_sampling_m
-    from carto.framework.raster.images import MIN_IMAGE_PX
+    from carto.framework.sdk.dem import MIN_IMAGE_PX
+    from carto.framework.sdk.sensors import ground_sampling_m
 
     h_mid = float(np.nanmedian(init_dem.heights))
     posting = float(settings.posting_m)

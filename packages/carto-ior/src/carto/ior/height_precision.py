@@ -28,7 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage
 
-from carto.framework.matching.base import OffsetField
+from carto.framework.sdk.matchers import OffsetField
 
 __all__ = [
     "matching_efficiency",
@@ -86,7 +86,7 @@ def node_sigma_m(
     tile's matching efficiency (NaN: too few nodes to measure it; the bound is used as it
     is). ``left``, ``right``: the ortho-images; ``field``: the offsets;
     ``base``: the unit base ``(d_row, d_col)``; ``b_over_h``: per node."""
-    from carto.framework.matching.precision import offset_sigma_px, refine_along_base
+    from carto.framework.sdk.matchers import offset_sigma_px, refine_along_base
     from carto.ior.node_heights import block_quantiles
 
     span = window_span_factor(window, k)

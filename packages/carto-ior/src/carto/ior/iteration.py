@@ -15,12 +15,10 @@ import attrs
 import numpy as np
 from numpy.typing import NDArray
 
-from carto.framework.errors import InputError
-from carto.framework.geometry.sensor import Sensor
-from carto.framework.imaging.ortho_grid import OrthoGrid
-from carto.framework.matching.base import Matcher
-from carto.framework.parallel.engine import TaskFailure
-from carto.framework.raster.dem import DEM, ELLIPSOID
+from carto.framework.sdk.common import InputError, TaskFailure
+from carto.framework.sdk.dem import DEM, ELLIPSOID, OrthoGrid
+from carto.framework.sdk.matchers import Matcher
+from carto.framework.sdk.sensors import Sensor
 from carto.ior.filling import node_footprint
 from carto.ior.height_precision import smoothing_variance_factor
 from carto.ior.regularise import regularise
@@ -126,7 +124,7 @@ def base_direction(
     displacement between the two lines of sight per metre of height (``t``: of length
     ``tan theta``), its length and direction. A DEM too high shifts a detail in the right
     ortho-image against the left one along this direction."""
-    from carto.framework.geometry import frames
+    from carto.framework.sdk.sensors import frames
 
     e_n_u = frames.enu_basis(lon, lat)
     t = []
@@ -233,7 +231,7 @@ def iterate(
     ortho-images are that many times coarser than the final ones; ``apply_last``: the last
     iteration's measurement updates the surface too, for a stage whose result is a start,
     not a product: ``surface`` is then one update ahead of ``dem``)."""
-    from carto.framework.raster.tiled_layer import TiledLayer, TilePiece, piece_path
+    from carto.framework.sdk.dem import TiledLayer, TilePiece, piece_path
 
     left, right = sensors
     heights = state.heights

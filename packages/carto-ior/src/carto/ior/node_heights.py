@@ -19,7 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage
 
-from carto.framework.imaging.ortho_grid import OrthoGrid
+from carto.framework.sdk.dem import OrthoGrid
 from carto.ior.rays import RayField, intersect_offsets
 
 __all__ = ["NodeHeights", "block_quantiles", "node_heights"]

@@ -9,7 +9,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from carto.framework import hookimpl
-from carto.framework.dem_generation.base import DEMGenerator
+from carto.framework.sdk.dem import DEMGenerator
 from carto.ior.generator import IORGenerator
 
 

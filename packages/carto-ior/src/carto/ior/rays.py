@@ -30,8 +30,8 @@ import attrs
 import numpy as np
 from numpy.typing import NDArray
 
-from carto.framework.geometry.sensor import Sensor
-from carto.framework.imaging.ortho_grid import OrthoGrid
+from carto.framework.sdk.dem import OrthoGrid
+from carto.framework.sdk.sensors import Sensor
 
 __all__ = ["LATTICE_NODES", "RayField", "intersect_offsets"]
 

@@ -58,10 +58,10 @@ import attrs
 import numpy as np
 from numpy.typing import NDArray
 
-from carto.framework.errors import InputError
-from carto.framework.geometry.sensor import Sensor
-from carto.framework.matching.base import Matcher
-from carto.framework.raster.dem import DEM
+from carto.framework.sdk.common import InputError
+from carto.framework.sdk.dem import DEM
+from carto.framework.sdk.matchers import Matcher
+from carto.framework.sdk.sensors import Sensor
 from carto.ior.coarse_to_fine import coarse_stages, search_on
 from carto.ior.grids import ior_grids as _grids
 from carto.ior.iteration import (
@@ -171,8 +171,8 @@ def refine_dem(
         TileFailure: tiles failed (without ``keep_failed_tiles``); the finished ones stay in
             the work folder.
     """
-    from carto.framework.parallel.engine import TileEngine
-    from carto.framework.raster.image_source import as_image_source
+    from carto.framework.sdk.common import TileEngine
+    from carto.framework.sdk.dem import as_image_source
 
     s = settings or IORSettings()
     images = (as_image_source(left_image), as_image_source(right_image))

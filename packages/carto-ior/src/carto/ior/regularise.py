@@ -10,7 +10,7 @@ from collections.abc import Iterator
 import numpy as np
 from numpy.typing import NDArray
 
-from carto.framework.raster.focal import focal_nanmedian
+from carto.framework.sdk.dem import focal_nanmedian
 from carto.ior.settings import IORSettings
 
 __all__ = ["BAND_ROWS", "regularise"]

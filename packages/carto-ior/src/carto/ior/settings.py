@@ -10,8 +10,8 @@ from typing import Any
 import attrs
 import numpy as np
 
-from carto.framework.errors import UsageError
-from carto.framework.imaging.ortho_grid import MAX_GRID_CELLS
+from carto.framework.sdk.common import UsageError
+from carto.framework.sdk.dem import MAX_GRID_CELLS
 
 _FLAGS = {
     "posting_m": "--posting",

@@ -10,12 +10,9 @@ import attrs
 import numpy as np
 from numpy.typing import NDArray
 
-from carto.framework.errors import InputError
-from carto.framework.geometry.sensor import Sensor
-from carto.framework.imaging.ortho_grid import OrthoGrid
-from carto.framework.raster.dem import DEM
-from carto.framework.raster.dem_measures import dem_pixel_size_m, fill_voids
-from carto.framework.raster.grid_sampling import cubic_sample
+from carto.framework.sdk.common import InputError
+from carto.framework.sdk.dem import DEM, OrthoGrid, cubic_sample, dem_pixel_size_m, fill_voids
+from carto.framework.sdk.sensors import Sensor
 
 __all__ = [
     "InitialCoverage",

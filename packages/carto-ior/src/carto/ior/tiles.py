@@ -14,18 +14,16 @@ import attrs
 import numpy as np
 from numpy.typing import NDArray
 
-from carto.framework.files.atomic import atomic_output
-from carto.framework.geometry.sensor import Sensor
-from carto.framework.imaging.ortho import orthorectify
-from carto.framework.imaging.ortho_grid import OrthoGrid
-from carto.framework.matching.base import DenseSettings, Matcher
-from carto.framework.matching.precision import (
+from carto.framework.sdk.common import atomic_output
+from carto.framework.sdk.dem import DEM, ELLIPSOID, OrthoGrid, orthorectify, piece_path
+from carto.framework.sdk.matchers import (
+    DenseSettings,
+    Matcher,
     levels_for_reach,
     limit_along_base,
     refine_along_base,
 )
-from carto.framework.raster.dem import DEM, ELLIPSOID
-from carto.framework.raster.tiled_layer import piece_path
+from carto.framework.sdk.sensors import Sensor
 from carto.ior.height_precision import node_sigma_m
 from carto.ior.node_heights import node_heights
 from carto.ior.rays import RayField
@@ -107,7 +105,7 @@ class TileResult:
 
 
 def _default_matcher() -> Matcher:
-    from carto.framework.matching.sgm_matcher import SGMMatcher
+    from carto.framework.sdk.matchers import SGMMatcher
 
     return SGMMatcher()
 

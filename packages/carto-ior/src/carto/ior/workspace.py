@@ -26,9 +26,7 @@ import attrs
 import numpy as np
 from numpy.typing import NDArray
 
-from carto.framework.errors import InputError
-from carto.framework.files.atomic import atomic_output
-from carto.framework.files.documents import write_json_atomic
+from carto.framework.sdk.common import InputError, atomic_output, write_json_atomic
 
 __all__ = ["RunState", "Workspace"]
 

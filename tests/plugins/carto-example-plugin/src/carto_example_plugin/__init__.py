@@ -28,11 +28,10 @@ import attrs
 import numpy as np
 
 from carto.framework import InputError, get_registry, hookimpl
-from carto.framework.arrays import as_float_arrays
-from carto.framework.geometry.sensor import Sensor, SensorType, refuse_options
-from carto.framework.geometry.time_series import TimeSeries
-from carto.framework.geometry.trajectory_models import TrajectoryModel
-from carto.framework.matching.base import Matcher, Matches, OffsetField
+from carto.framework.sdk.common import as_float_arrays
+from carto.framework.sdk.matchers import Matcher, Matches, OffsetField
+from carto.framework.sdk.sensors import Sensor, SensorType, TimeSeries, refuse_options
+from carto.framework.sdk.trajectories import TrajectoryModel
 
 BIAS_PX = 0.75
 """The shift ``example-biased`` adds to every match, pixels along lines."""

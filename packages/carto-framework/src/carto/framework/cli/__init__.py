@@ -108,11 +108,27 @@ def _interrupt_in(exc: BaseException) -> KeyboardInterrupt | None:
 
 
 def _terminate(signum: int, frame: object) -> None:
-    from carto.framework.files.staging import note_interrupt
+    from carto.framework.files.staging import committing, note_interrupt
 
     name = signal.Signals(signum).name
     note_interrupt(name)
+    if committing():  # raised once the output folder is in place (never half a swap)
+        return
     raise KeyboardInterrupt(name)
+
+
+def _interrupted(exc: BaseException) -> str:
+    """The one line of an interrupted command: what it left in place, if anything."""
+    from carto.framework.files.staging import committed_outputs
+
+    done = committed_outputs()
+    after = (
+        f"; it came after {', '.join(map(str, done))} had been completed: "
+        f"{'they hold' if len(done) > 1 else 'it holds'} this run's output"
+        if done
+        else ""
+    )
+    return f"{PROG}: interrupted{_notes(exc)}{after}"
 
 
 def _silence_libtiff() -> None:
@@ -215,7 +231,7 @@ def _run(handler: Handler, args: argparse.Namespace) -> int:
         print(f"{PROG}: error: {_one_line(exc)}", file=sys.stderr)
         return 1
     except KeyboardInterrupt as exc:
-        print(f"{PROG}: interrupted{_notes(exc)}", file=sys.stderr)
+        print(_interrupted(exc), file=sys.stderr)
         return 130
     except MemoryError as exc:
         if args.debug:
@@ -233,7 +249,7 @@ def _run(handler: Handler, args: argparse.Namespace) -> int:
         return 1
     except Exception as exc:
         if _interrupt_in(exc) is not None:
-            print(f"{PROG}: interrupted{_notes(exc)}", file=sys.stderr)
+            print(_interrupted(exc), file=sys.stderr)
             return 130
         if args.debug:
             raise

@@ -38,6 +38,8 @@ from carto.framework.files.paths import resolved as _resolved
 __all__ = [
     "MARKER",
     "check_output_file",
+    "committed_outputs",
+    "committing",
     "note_interrupt",
     "require_complete_output",
     "staged_folder",
@@ -52,13 +54,34 @@ after one, even when the KeyboardInterrupt it raised was swallowed on the way (P
 exceptions raised inside a ctypes callback, such as llvmlite's while numba compiles)."""
 
 
+_COMMITTED: list[Path] = []
+"""Output folders this process put in place (:func:`committed_outputs`)."""
+_COMMITTING: list[bool] = []
+"""Non-empty while an output folder is being put in place (:func:`committing`)."""
+
+
 def note_interrupt(what: str | None) -> None:
     """Record that the process was interrupted (a signal handler calls it before raising);
-    ``None`` forgets every interrupt (a command run in-process starts afresh)."""
+    ``None`` forgets every interrupt and every output put in place (a command run in-process
+    starts afresh)."""
     if what is None:
         _INTERRUPTS.clear()
+        _COMMITTED.clear()
     else:
         _INTERRUPTS.append(what)
+
+
+def committing() -> bool:
+    """Whether an output folder is being put in place: a signal handler then only notes the
+    interrupt (:func:`note_interrupt`), which is raised once the folder is in place, so that
+    an interrupt never leaves half a swap."""
+    return bool(_COMMITTING)
+
+
+def committed_outputs() -> list[Path]:
+    """The output folders this process put in place since :func:`note_interrupt` forgot
+    them: an interrupt after that names them (they hold the new outputs)."""
+    return list(_COMMITTED)
 
 
 _STAGING = ".carto-staging-"
@@ -303,14 +326,21 @@ def _staged(
             "files": _listing(stage),
             **dict(info or {}),
         }
-        (stage / MARKER).write_text(json.dumps(marker, indent=2) + "\n")
-        _swap_into_place(stage, destination)
+        _COMMITTING.append(True)
+        try:
+            (stage / MARKER).write_text(json.dumps(marker, indent=2) + "\n")
+            _swap_into_place(stage, destination)
+            _COMMITTED.append(destination)
+        finally:
+            _COMMITTING.clear()
     except BaseException as exc:
         shutil.rmtree(stage, ignore_errors=True)
         state = "left as it was" if destination.exists() else "not created"
         with contextlib.suppress(AttributeError):
             exc.add_note(f"output folder {out}: {state}")
         raise
+    if _INTERRUPTS:  # it came while the folder was put in place: it is, and the run stops
+        raise KeyboardInterrupt(_INTERRUPTS[-1])
 
 
 def require_complete_output(folder: str | os.PathLike[str], command: str) -> Path:

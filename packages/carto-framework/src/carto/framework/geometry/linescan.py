@@ -60,11 +60,11 @@ from carto.framework.geometry.light_path import (
     source_direction,
 )
 from carto.framework.geometry.linescan_solver import (
-    TABLE_MARGIN_LINES,
     FirstGuess,
     LineTable,
     camera_vectors,
     solve_lines,
+    tabulated_lines,
 )
 from carto.framework.geometry.linescan_timing import LineTiming
 from carto.framework.geometry.sensor import Parameter, Sensor, SensorType, refuse_options
@@ -88,9 +88,8 @@ period (a timing node far from the others) needs more."""
 def table_nodes(n_lines: int, timing: LineTiming) -> float:
     """How many camera states :class:`LineTable` tabulates for an image of ``n_lines`` lines
     with ``timing`` (the same arithmetic as :meth:`LineTable.build`, without building it)."""
-    n = max(int(n_lines), 1)
-    margin = max(0.5 * n, TABLE_MARGIN_LINES)
-    span = float(timing.time(n + margin)) - float(timing.time(-margin))
+    first, last = tabulated_lines(n_lines)
+    span = float(timing.time(last)) - float(timing.time(first))
     periods = np.diff(np.asarray(timing.dt_nodes_s)) / np.diff(np.asarray(timing.line_nodes))
     return span / (2.0 * float(periods.min())) + 8.0
 

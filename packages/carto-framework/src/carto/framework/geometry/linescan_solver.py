@@ -33,6 +33,15 @@ TABLE_MARGIN_LINES = 3000
 the orientation errors an adjustment starts from; farther points come back NaN."""
 
 
+def tabulated_lines(n_lines: int) -> tuple[float, float]:
+    """The first and last line of an image of ``n_lines`` lines that ground -> image covers:
+    the image and half an image (at least :data:`TABLE_MARGIN_LINES`) on each side. A
+    sensor built from samples (attitude, ephemeris) must sample at least these lines."""
+    n = max(int(n_lines), 1)
+    margin = max(0.5 * n, TABLE_MARGIN_LINES)
+    return -margin, n + margin
+
+
 class FirstGuess:
     """Cubic polynomial (lon, lat, h) -> line fitted to the model; shared by sensors that differ
     only by small corrections (it is only a starting point)."""
@@ -150,11 +159,10 @@ class LineTable:
         self.tolerance_s: float = 1e-12
 
     def build(self, sensor: LineScanner) -> None:
-        n = max(int(sensor.n_lines), 1)
         timing = sensor.timing
-        margin = max(0.5 * n, TABLE_MARGIN_LINES)
-        t_lo = float(timing.time(-margin))
-        t_hi = float(timing.time(n + margin))
+        first, last = tabulated_lines(sensor.n_lines)
+        t_lo = float(timing.time(first))
+        t_hi = float(timing.time(last))
         periods = np.diff(np.asarray(timing.dt_nodes_s)) / np.diff(np.asarray(timing.line_nodes))
         self.spacing = float(2.0 * periods.min())
         self.tolerance_s = LINE_TOLERANCE * float(periods.min())
