@@ -243,6 +243,8 @@ def test_an_output_that_cannot_be_written_is_refused_before_any_work(
         (["adjust", "{scene}", "--dem-offset-sigma", "nan"], ("--dem-offset-sigma", "nan")),
         (["adjust", "{scene}", "--gcp-offset-sigma", "0"], ("--gcp-offset-sigma",)),
         (["adjust", "{scene}", "--gcps", "-2"], ("--gcps", "-2")),
+        (["dem", "{scene}", "--generator", ""], ("--generator ''", "not installed")),
+        (["dem", "{scene}", "--matcher", "nope"], ("--matcher 'nope'", "not installed")),
     ],
 )
 def test_bad_option_values_are_usage_errors(
@@ -634,3 +636,110 @@ def test_gcps_that_move_the_block_beyond_its_stated_accuracy_fail_unless_allowed
         if "correction_in_prior_sigmas" in p
     ]
     assert max(moved) > 5.0
+
+
+def test_a_dem_off_the_heights_of_its_gcps_fails_unless_allowed(
+    carto_main, tmp_path: Path, cartosat1_scene: Path, cartosat1_adjusted: Path
+) -> None:
+    """A starting DEM 300 m too high was taken up by the relative orientation's along-base
+    correction: the DEM came out 300 m too high with exit 0 (an outside probe, issue 31).
+    The GCPs of the models' adjustment hold the datum: the DEM is checked against them."""
+    import rasterio
+
+    with rasterio.open(cartosat1_scene / "init_dem.tif") as ds:
+        profile, heights = ds.profile, ds.read(1)
+    high = tmp_path / "init_plus300.tif"
+    with rasterio.open(high, "w", **profile) as ds:
+        ds.write(heights + 300.0, 1)
+    args = ["dem", str(cartosat1_scene), "--models", str(cartosat1_adjusted), "--workers", "1"]
+    res = carto_main([*args, "--init-dem", str(high), "--out", str(tmp_path / "d"), "--quiet"])
+    one_line_error(res, 1, "m off the heights of its models'", "GCP", "--allow-poor")
+    assert "+30" in res.stderr  # about +300 m
+    assert not (tmp_path / "d").exists()
+    res = carto_main([*args, "--init-dem", str(high), "--out", str(tmp_path / "d"), "--allow-poor"])
+    assert res.returncode == 0, res.stderr
+    report = json.loads((tmp_path / "d" / "report.json").read_text())
+    assert any("off the heights of its models'" in w for w in report["warnings"])
+
+
+@pytest.mark.realdata
+def test_a_dem_that_leaves_its_images_apart_fails_unless_allowed(
+    carto_main, tmp_path: Path, shared_data: Path
+) -> None:
+    """The Reunion pair (terrain 2270-2376 m) started at 2000 m: the search cannot reach the
+    terrain, the iterations end with the ortho-images 7.8 px apart, 13 % matched, and the DEM
+    was 320 m off with exit 0 (an outside probe, issue 31)."""
+    pair = shared_data / "pleiades-reunion-pair"
+    args = ["dem", "--left", str(pair / "img_01.tif"), "--right", str(pair / "img_02.tif")]
+    args += ["--init-height", "2000", "--posting", "2", "--workers", "1", "--quiet"]
+    res = carto_main([*args, "--out", str(tmp_path / "d")])
+    one_line_error(res, 1, "px apart on the final DEM", "--init-height", "--allow-poor")
+    assert not (tmp_path / "d").exists()
+
+
+@pytest.fixture(scope="module")
+def four_gcp_scene(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A 400 x 400 px Cartosat-1 pair with four GCPs (hilly)."""
+    from tests.scenes import simulate
+
+    return simulate(
+        "cartosat1-pair", tmp_path_factory.mktemp("g4") / "s", seed=2, size=(400, 400),
+        n_gcps=4, n_checkpoints=10, terrain="hilly",
+    )  # fmt: skip
+
+
+def _with_gcps(scene: Path, into: Path, change) -> Path:  # type: ignore[no-untyped-def]
+    shutil.copytree(scene, into)
+    with (into / "gcps.csv").open() as f:
+        rows = list(csv.DictReader(f))
+    for row in rows:
+        change(row)
+    with (into / "gcps.csv").open("w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    return into
+
+
+def test_gcps_of_another_place_or_datum_fail_unless_allowed(
+    carto_main, tmp_path: Path, four_gcp_scene: Path
+) -> None:
+    """An outside probe (issue 31) adjusted with exit 0: GCP heights above the geoid given as
+    ellipsoidal (+38 m: checkpoints 38 m off), and GCPs moved 1 km (none of them matched
+    between the images by the GCP transfer: checkpoints 1000 m off). The true GCPs pass."""
+    good = carto_main(["adjust", str(four_gcp_scene), "--out", str(tmp_path / "ok"), "--quiet"])
+    assert good.returncode == 0, good.stderr
+    assert json.loads((tmp_path / "ok" / "report.json").read_text())["warnings"] == []
+
+    def geoid(row: dict) -> None:
+        row["h_m"] = repr(float(row["h_m"]) + 38.0)
+
+    def east(row: dict) -> None:
+        m_per_deg = 111_320.0 * math.cos(math.radians(float(row["lat_deg"])))
+        row["lon_deg"] = repr(float(row["lon_deg"]) + 1000.0 / m_per_deg)
+
+    for change, words in (
+        (geoid, ("m above the DEM on median", "above the geoid")),
+        (east, ("the GCP transfer kept", "of 4 image offsets")),
+    ):
+        scene = _with_gcps(four_gcp_scene, tmp_path / change.__name__, change)
+        res = carto_main(["adjust", str(scene), "--out", str(tmp_path / "a"), "--quiet"])
+        one_line_error(res, 1, *words, "--allow-poor")
+        assert not (tmp_path / "a").exists()
+
+
+def test_models_of_another_scene_are_refused(
+    carto_main, tmp_path: Path, four_gcp_scene: Path, cartosat1_scene: Path, cartosat1_adjusted
+) -> None:
+    """The adjusted models of one scene given to the DEM of another gave a DEM 11 m off with
+    exit 0 (an outside probe, issue 31): the adjust report names its scene, whose manifest
+    must be this one's. A copy of the scene elsewhere is the same scene."""
+    from carto.framework.workflows.opening import check_models_of_scene
+
+    args = ["dem", str(four_gcp_scene), "--models", str(cartosat1_adjusted), "--quiet"]
+    res = carto_main([*args, "--out", str(tmp_path / "d")])
+    one_line_error(res, 1, "--models", f"adjusted on the scene {cartosat1_scene}")
+    assert not (tmp_path / "d").exists()
+    copy = tmp_path / "copy"
+    shutil.copytree(cartosat1_scene, copy)
+    check_models_of_scene(cartosat1_adjusted, copy)  # no error

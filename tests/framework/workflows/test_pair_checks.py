@@ -96,3 +96,17 @@ def test_a_simulated_pair_passes_and_another_scenes_image_fails(cartosat1_scene,
     with pytest.raises(InputError, match="--allow-poor"):
         checked_pair(images, sensors, dem, allow_poor=False)
     assert checked_pair(images, sensors, dem, allow_poor=True)[1] == bad.warnings()
+
+
+def test_the_same_image_twice_has_no_stereo_base(reunion) -> None:
+    """The same image as left and right failed inside the matcher ("base must be a non-zero
+    direction, got (nan, nan)", naming nothing: an outside probe, issue 31)."""
+    from carto.framework.workflows.pair_checks import base_to_height
+
+    images, sensors, dem = _pair(reunion, height_m=2300.0)
+    assert 0.2 < base_to_height(sensors, dem) < 0.35  # Pleiades along-track stereo
+    same = StereoInputs(left=reunion.left, right=reunion.left)
+    images, sensors, dem = _pair(same, height_m=2300.0)
+    assert base_to_height(sensors, dem) < 1e-6
+    with pytest.raises(InputError, match=r"base-to-height ratio of 0\.000"):
+        checked_pair(images, sensors, dem, allow_poor=True)

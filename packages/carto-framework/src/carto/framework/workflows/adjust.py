@@ -45,6 +45,7 @@ from carto.framework.matching.gcp_transfer import (
 from carto.framework.plugins.registry import get_registry
 from carto.framework.workflows.adjust_checks import (
     corrections_beyond_priors,
+    gcps_not_transferred,
     gcps_off_the_dem,
     gcps_rejected,
     poor_adjustment,
@@ -348,6 +349,8 @@ def _adjust_into(
             result = component.adjust(sensors, obs, dem=dem, **options)
     warnings = early + poor_adjustment(result.sigma0, ties, n_ties, len(sensors))
     warnings += corrections_beyond_priors(result)
+    if offsets is not None:
+        warnings += gcps_not_transferred(int(offsets["id"].size), len(dropped_offsets or ()))
     if gcps is not None:
         rejected = {*first_outliers, *result.outliers}
         warnings += gcps_rejected(sorted({str(v).strip() for v in gcps["id"]}), rejected)
@@ -373,7 +376,7 @@ def _adjust_into(
     for flag in misfit["flags"]:
         progress("adjust", f"model misfit: {flag}", quiet)
     report: dict[str, Any] = {
-        "source": str(src),
+        "source": str(Path(src).absolute()),
         "adjuster": name,
         "matcher": matcher,
         # the trajectory model asked for (None: the one each product names)

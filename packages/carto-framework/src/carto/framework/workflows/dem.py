@@ -27,13 +27,19 @@ from carto.framework.geometry.sensor import Sensor, SensorType
 from carto.framework.plugins.registry import get_registry
 from carto.framework.raster.dem import DEM, Geoid
 from carto.framework.raster.vertical_reference import vertical_tag
-from carto.framework.workflows.dem_checks import departs_from_start, poor_dem
+from carto.framework.workflows.dem_checks import (
+    departs_from_start,
+    mismatched,
+    off_the_gcps,
+    poor_dem,
+)
 from carto.framework.workflows.dem_datum import (
     auto_coregisters,
     coregistered,
     datum_gcps,
     resolve_coregister,
 )
+from carto.framework.workflows.dem_options import check_names, check_options
 from carto.framework.workflows.opening import open_options, open_sensor, sensor_type_for
 from carto.framework.workflows.pair_checks import checked_pair
 from carto.framework.workflows.reporting import jsonable, progress, write_report
@@ -138,9 +144,11 @@ def open_pair(inputs: StereoInputs) -> StereoPair:
     )
     if source is not None:
         from carto.framework.products.scene import Scene
-        from carto.framework.workflows.opening import open_product
+        from carto.framework.workflows.opening import check_models_of_scene, open_product
 
         scene = Scene.open(source)
+        if models_dir is not None:
+            check_models_of_scene(models_dir, scene.root)
         product = open_product(scene.root, sensor_type)
         sensors = product.sensors
         names = list(pair) if pair else list(sensors)[:2]
@@ -363,7 +371,8 @@ def dem_product(
     from carto.framework.parallel.engine import open_engine
 
     settings = dict(options or {})
-    _check_options(settings)
+    check_options(settings)
+    check_names(generator, matcher)
     try:
         ro_settings = RelativeOrientationSettings(mode=relative_orientation)
     except InputError as exc:
@@ -447,28 +456,6 @@ def _has_finished_work(work: Path) -> bool:
     return any(
         next(work.rglob(pattern), None) is not None for pattern in ("*.npz", "*.npy", "state.json")
     )
-
-
-_POSITIVE_OPTIONS = ("posting_m", "ortho_res_m")
-
-
-def _check_options(settings: Mapping[str, Any]) -> None:
-    """The generic options, checked before any work (a generator checks its own too)."""
-    for key in _POSITIVE_OPTIONS:
-        value = settings.get(key)
-        if value is None:
-            continue
-        flag = "--" + key.removesuffix("_m").replace("_", "-")
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            raise UsageError(f"{flag} must be a number of metres, got {value!r}")
-        if not (np.isfinite(value) and value > 0):
-            raise UsageError(f"{flag} must be > 0 m, got {value:g}")
-    for key, flag in (("max_iterations", "--max-iterations"), ("workers", "--workers")):
-        value = settings.get(key)
-        if value is None:
-            continue
-        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-            raise UsageError(f"{flag} must be an integer >= 1, got {value!r}")
 
 
 def _dem_into(
@@ -577,6 +564,7 @@ def _dem_into(
             f"{len(names)} images"
         )
     warnings += poor_dem(product) + departs_from_start(product.dem, start)
+    warnings += mismatched(product) + off_the_gcps(product.dem, control)
     if product.failed_tiles:
         warnings.append(
             f"{len(product.failed_tiles)} tiles failed and have no heights "

@@ -136,3 +136,31 @@ def _safe_identify(sensor_type: SensorType, path: Path) -> bool:
         return bool(sensor_type.identify(path))
     except Exception:  # noqa: BLE001 - a faulty identify must not hide the other types
         return False
+
+
+def check_models_of_scene(models: Path, scene_root: Path) -> None:
+    """Refuse a ``carto adjust`` output whose models were adjusted on another scene than
+    ``scene_root``: its ``report.json`` names the scene it adjusted, and when that scene
+    still exists its manifest must be this one's (a copy of the scene elsewhere passes). An
+    outside probe gave a scene the models of another simulated scene, and of a Cartosat-2
+    triplet: DEMs 11 m off or half matched, with exit 0 (issue 31)."""
+    import json
+
+    try:
+        source = json.loads((models / "report.json").read_text()).get("source")
+    except (OSError, ValueError, AttributeError):
+        return  # an adjust output without a readable report: its marker was checked
+    if not isinstance(source, str) or not Path(source).is_absolute():
+        return  # an older report's path, relative to a folder we do not know
+    adjusted = Path(source)
+    manifest = adjusted / "scene.json" if adjusted.is_dir() else adjusted
+    if manifest.name != "scene.json" or not manifest.is_file():
+        return  # a configuration, or a scene no longer there: nothing to compare
+    here = scene_root / "scene.json"
+    if manifest.resolve() == here.resolve():
+        return
+    if manifest.read_bytes() != here.read_bytes():
+        raise InputError(
+            f"--models {models}: adjusted on the scene {adjusted}, not on {scene_root} (its "
+            "manifest differs): give the carto adjust output of these images"
+        )

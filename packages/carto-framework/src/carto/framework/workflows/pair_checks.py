@@ -68,6 +68,10 @@ Cartosat-2 and generic pairs with ``--errors full``, the real Reunion and Ventou
 pairs); a right image rotated by 180 deg, mirrored or of another scene at 0-13 % (the best
 shift of a block of unrelated images is anywhere in the search area: a few fall near the
 median by chance)."""
+MIN_BASE_TO_HEIGHT = 0.05
+"""A pair whose base-to-height ratio at the centre of the left image is below this is
+refused: its parallax is too small to give heights (the same image twice, identical
+models). Stereo pairs have 0.2-0.8 (Pleiades 0.2-0.3, Cartosat-1 0.62)."""
 MIN_BLOCKS = 4
 """Fewer blocks than this (a small overlap, little texture) is too little to judge by: the
 check then only reports."""
@@ -288,6 +292,13 @@ def checked_pair(
 
     Raises:
         InputError: no overlap, or a failed check without ``allow_poor``."""
+    ratio = base_to_height(sensors, dem)
+    if ratio < MIN_BASE_TO_HEIGHT:  # NaN (the right image does not see there): not judged
+        raise InputError(
+            f"dem: the two images have a base-to-height ratio of {ratio:.3f} (< "
+            f"{MIN_BASE_TO_HEIGHT:g}): no stereo parallax to make heights of (the same image "
+            "twice, or the same model for both?)"
+        )
     check = check_pair(images, sensors, dem)
     if check.overlap == 0.0:
         raise InputError(
@@ -298,3 +309,26 @@ def checked_pair(
     if warnings and not allow_poor:
         raise InputError(f"dem: {'; '.join(warnings)} (--allow-poor matches them anyway)")
     return check, warnings
+
+
+def base_to_height(sensors: Sequence[Sensor], dem: DEM) -> float:
+    """The base-to-height ratio of a pair where the left image's centre meets the ground:
+    ``2 tan(a / 2)``, ``a`` the angle between the two lines of sight there (NaN when the
+    right image does not see that point)."""
+    from carto.framework.geometry import frames
+
+    left, right = sensors
+    n_l, n_s = left.image_shape
+    lon, lat, h = left.locate_on_dem(np.array([n_l / 2]), np.array([n_s / 2]), dem)
+    if not np.isfinite(h).all():
+        h = np.array([float(np.nanmedian(dem.heights))])
+        lon, lat = left.image_to_ground(np.array([n_l / 2]), np.array([n_s / 2]), h)
+    ground = frames.geodetic_to_ecef(lon, lat, h)
+    rays = []
+    for sensor in (left, right):
+        line, sample = sensor.ground_to_image(lon, lat, h)
+        lo2, la2 = sensor.image_to_ground(line, sample, h + 1000.0)
+        ray = frames.geodetic_to_ecef(lo2, la2, h + 1000.0) - ground
+        rays.append(np.ravel(ray) / np.linalg.norm(ray))
+    angle = float(np.arccos(np.clip(np.dot(rays[0], rays[1]), -1.0, 1.0)))
+    return 2.0 * math.tan(angle / 2.0)
