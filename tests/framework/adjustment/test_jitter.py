@@ -137,6 +137,16 @@ def test_unwrap_report_and_refusals(fore, cartosat1_pair):
         with_jitter_terms(cartosat1_pair, (1.7, 1.7), 1e-7)
     with pytest.raises(InputError, match="amplitude must be > 0"):
         with_jitter_terms(cartosat1_pair, (1.7,), 0.0)
+    # the lines sample at about 2.8 kHz (Cartosat-1's 0.336 ms): 1e308 Hz was taken, and the
+    # adjustment failed on its GCPs instead (an outside probe, issue 31)
+    fore = cartosat1_pair["fore"]
+    t0, t1 = fore.timing.time(np.array([0.0, 1000.0]))
+    nyquist = 500.0 / (t1 - t0)
+    with_jitter_terms(cartosat1_pair, (0.9 * nyquist,), 1e-7)
+    with pytest.raises(InputError, match="above half the line rate of image"):
+        with_jitter_terms(cartosat1_pair, (1.1 * nyquist,), 1e-7)
+    with pytest.raises(InputError, match="1e\\+308 Hz is above half"):
+        with_jitter_terms(cartosat1_pair, (1e308,), 1e-7)
     # an RMS amplitude A: sigma A / sqrt(2) on each sine and cosine term (E[s^2 + c^2] = A^2)
     terms = with_jitter_terms(cartosat1_pair, (1.7,), 2e-6)["fore"].jitter
     assert terms

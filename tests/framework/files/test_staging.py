@@ -285,3 +285,16 @@ def test_a_folder_inside_a_complete_output_is_complete(tmp_path: Path) -> None:
     write_run(tmp_path / "scene", {"truth/fore.model.json": "{}"})
     truth = tmp_path / "scene" / "truth"
     assert require_complete_output(truth, "adjust") == truth
+
+
+def test_an_output_inside_another_output_is_refused(tmp_path: Path) -> None:
+    """An output made inside another one was deleted without a word when the outer one was
+    written again (an outside probe, issue 31): it is refused before any work."""
+    outer = tmp_path / "outer"
+    write_run(outer, {"a.txt": "outer"})
+    before = snapshot(outer)
+    with pytest.raises(UsageError, match=f"inside the carto output {outer}"):
+        write_run(outer / "inner", {"b.txt": "inner"})
+    with pytest.raises(UsageError, match="inside the carto output"):
+        write_run(outer / "deeper" / "inner", {"b.txt": "inner"})
+    assert snapshot(outer) == before

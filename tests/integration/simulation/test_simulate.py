@@ -220,24 +220,30 @@ def _corners(dem: DEM):
 
 
 @pytest.mark.parametrize(
-    ("args", "message"),
-    [
-        (["simulate", "no-such-preset", "--out", "X"], "unknown scene preset 'no-such-preset'"),
+    ("args", "code", "message"),
+    [  # a name or option that is wrong is a usage error (2), a file or a size bad data (1)
+        (
+            ["simulate", "no-such-preset", "--out", "X"],
+            2,
+            "unknown scene preset 'no-such-preset'",
+        ),
         (
             ["simulate", "cartosat1-pair", "--out", "X", "--terrain", "moon"],
-            "unknown terrain 'moon'",
+            2,
+            "--terrain 'moon': known terrains: flat-coastal",
         ),
         (
             ["simulate", "cartosat1-pair", "--out", "X", "--size", "20000", "100"],
+            1,
             "must be within the full image",
         ),
-        (["simulate", "cartosat1-pair", "--out", "X", "--dem", "missing.tif"], "no such file"),
+        (["simulate", "cartosat1-pair", "--out", "X", "--dem", "missing.tif"], 1, "no such file"),
     ],
 )
-def test_bad_simulate_arguments_are_one_line_errors(run_carto, tmp_path, args, message):
+def test_bad_simulate_arguments_are_one_line_errors(run_carto, tmp_path, args, code, message):
     args = [a if a != "X" else str(tmp_path / "out") for a in args]
     res = run_carto(args, with_test_plugins=False)
-    assert res.returncode == 1
+    assert res.returncode == code
     assert res.stderr.strip().count("\n") == 0, res.stderr
     assert message in res.stderr
     assert "Traceback" not in res.stderr

@@ -155,6 +155,19 @@ class JitterCorrected(AttitudeTermsCorrected):
         return replace_line_scanner(self.base, scanner.with_trajectory(trajectory))
 
 
+def _check_sampled(name: str, scanner: Any, freqs: tuple[float, ...]) -> None:
+    """Refuse a frequency the image's lines cannot sample (above half its line rate):
+    ``--jitter 1e308`` was taken and the adjustment failed on its GCPs instead."""
+    n = float(max(int(scanner.n_lines), 1))
+    t0, t1 = (float(t) for t in scanner.timing.time(np.array([0.0, n])))
+    nyquist = 0.5 * n / abs(t1 - t0) if t1 != t0 else math.inf
+    if max(freqs) >= nyquist:
+        raise InputError(
+            f"jitter frequency {max(freqs):g} Hz is above half the line rate of image {name} "
+            f"({nyquist:g} Hz): its lines cannot sample it"
+        )
+
+
 def with_jitter_terms(
     sensors: Mapping[str, Sensor],
     frequencies_hz: Sequence[float],
@@ -195,6 +208,7 @@ def with_jitter_terms(
         if scanner is None:
             out[name] = sensor
             continue
+        _check_sampled(name, scanner, freqs)
         prefix = scanner.trajectory.prefix
         params = []
         for pname in jitter_parameter_names(prefix, len(freqs)):

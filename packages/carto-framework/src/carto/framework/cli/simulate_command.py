@@ -13,14 +13,21 @@ from carto.framework.errors import InputError
 
 # --------------------------------------------------------------------------- simulate
 def cmd_simulate(args: argparse.Namespace) -> int:
+    from carto.framework.errors import UnknownComponentError, UsageError
     from carto.framework.plugins.registry import get_registry
     from carto.framework.simulation.plan import SimulationOptions
+    from carto.framework.simulation.terrain import TERRAINS
 
-    preset = get_registry().get("scene-preset", args.preset)
+    try:
+        preset = get_registry().get("scene-preset", args.preset)
+    except UnknownComponentError as exc:  # a name on the command line: a usage error
+        raise UsageError(str(exc)) from None
     if args.terrain and args.dem:
-        raise InputError("give either --terrain or --dem, not both")
+        raise UsageError("give either --terrain or --dem, not both")
+    if args.terrain is not None and args.terrain not in TERRAINS:
+        raise UsageError(f"--terrain {args.terrain!r}: known terrains: {', '.join(TERRAINS)}")
     if args.size is not None and (args.size[0] < 1 or args.size[1] < 1):
-        raise InputError(f"--size must be positive, got {args.size[0]} {args.size[1]}")
+        raise UsageError(f"--size must be positive, got {args.size[0]} {args.size[1]}")
     if args.dem is not None and not Path(args.dem).is_file():
         raise InputError(f"--dem {args.dem}: no such file")
     options = SimulationOptions(

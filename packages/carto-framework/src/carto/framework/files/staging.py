@@ -149,6 +149,12 @@ def _checked_destination(out: str | os.PathLike[str], inputs: Iterable[Any]) -> 
                 f"--out {out}: holds the input {item}; an output folder is replaced as a "
                 "whole, give another folder"
             )
+    enclosing = next((p for p in resolved.parents if (p / MARKER).is_file()), None)
+    if enclosing is not None:
+        raise UsageError(
+            f"--out {out}: inside the carto output {enclosing}, which a run into it replaces "
+            "as a whole, this folder with it; give a folder outside it"
+        )
     if path.is_symlink():
         # the output goes where the link points, and the link stays: staged beside its
         # target and swapped with it (staged beside the link, the link itself was replaced

@@ -204,10 +204,14 @@ def _off_nadir_deg(sensor: Sensor) -> float:
 def _radiometry(path: str | os.PathLike[str]) -> Any:
     """The dtype of an input image's first band: the ortho-image is written in it (an
     integer image: rounded, nodata 0)."""
+    import warnings
+
     import rasterio
 
-    with rasterio.open(path) as ds:
-        return np.dtype(ds.dtypes[0])
+    with warnings.catch_warnings():  # a raw image has no georeferencing: nothing to say
+        warnings.simplefilter("ignore", rasterio.errors.NotGeoreferencedWarning)
+        with rasterio.open(path) as ds:
+            return np.dtype(ds.dtypes[0])
 
 
 def initial_dem(
@@ -219,7 +223,7 @@ def initial_dem(
     """The starting DEM: a file (with a geoid for orthometric heights such as SRTM), a
     constant ellipsoidal height, or the scene's initial DEM."""
     if init_dem is not None and init_height_m is not None:
-        raise InputError("dem: give --init-dem or --init-height, not both")
+        raise UsageError("dem: give --init-dem or --init-height, not both")
     if init_dem is not None:
         start = DEM.open(
             init_dem, geoid=Geoid.open(geoid) if geoid else None, require_ellipsoidal=True
