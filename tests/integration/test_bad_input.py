@@ -608,19 +608,7 @@ def test_gcps_that_move_the_block_beyond_its_stated_accuracy_fail_unless_allowed
     ]
     assert judged
     assert max(abs(z) for z in judged) < 5.0
-    scene = tmp_path / "scene"
-    shutil.copytree(cartosat1_scene, scene)
-    with (scene / "gcps.csv").open() as f:
-        rows = list(csv.DictReader(f))
-    for row in rows:
-        lat = float(row["lat_deg"])
-        row["lon_deg"] = repr(
-            float(row["lon_deg"]) + 2000.0 / (111_320.0 * math.cos(math.radians(lat)))
-        )
-    with (scene / "gcps.csv").open("w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
+    scene = _with_gcps(cartosat1_scene, tmp_path / "scene", _moved_east(2000.0))
     res = carto_main(["adjust", str(scene), "--gcps", "1", "--out", str(tmp_path / "a")])
     one_line_error(res, 1, "a-priori sigmas", "GCPs of another scene")
     assert not (tmp_path / "a").exists()
@@ -688,7 +676,18 @@ def four_gcp_scene(tmp_path_factory: pytest.TempPathFactory) -> Path:
     )  # fmt: skip
 
 
+def _moved_east(metres: float):  # type: ignore[no-untyped-def]
+    """A change of a GCP row: the point moved ``metres`` east."""
+
+    def east(row: dict) -> None:
+        m_per_deg = 111_320.0 * math.cos(math.radians(float(row["lat_deg"])))
+        row["lon_deg"] = repr(float(row["lon_deg"]) + metres / m_per_deg)
+
+    return east
+
+
 def _with_gcps(scene: Path, into: Path, change) -> Path:  # type: ignore[no-untyped-def]
+    """A copy of ``scene`` whose GCP rows ``change`` edits in place."""
     shutil.copytree(scene, into)
     with (into / "gcps.csv").open() as f:
         rows = list(csv.DictReader(f))
@@ -714,10 +713,7 @@ def test_gcps_of_another_place_or_datum_fail_unless_allowed(
     def geoid(row: dict) -> None:
         row["h_m"] = repr(float(row["h_m"]) + 38.0)
 
-    def east(row: dict) -> None:
-        m_per_deg = 111_320.0 * math.cos(math.radians(float(row["lat_deg"])))
-        row["lon_deg"] = repr(float(row["lon_deg"]) + 1000.0 / m_per_deg)
-
+    east = _moved_east(1000.0)
     for change, words in (
         (geoid, ("m above the DEM on median", "above the geoid")),
         (east, ("the GCP transfer kept", "of 4 image offsets")),

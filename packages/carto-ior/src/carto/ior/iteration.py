@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 from carto.framework.sdk.common import InputError, TaskFailure
 from carto.framework.sdk.dem import DEM, ELLIPSOID, OrthoGrid
 from carto.framework.sdk.matchers import Matcher
-from carto.framework.sdk.sensors import Sensor
+from carto.framework.sdk.sensors import Sensor, base_direction
 from carto.ior.filling import node_footprint
 from carto.ior.height_precision import smoothing_variance_factor
 from carto.ior.regularise import regularise
@@ -115,27 +115,6 @@ class IORResult:
     surface: Any = None
     guess: tuple[float, float] = (0.0, 0.0)
     search_px: Any = None
-
-
-def base_direction(
-    left: Sensor, right: Sensor, lon: float, lat: float, h: float
-) -> tuple[float, FloatArray]:
-    """``(B/H, unit (east, north))`` at a ground point: ``t_R - t_L``, the horizontal
-    displacement between the two lines of sight per metre of height (``t``: of length
-    ``tan theta``), its length and direction. A DEM too high shifts a detail in the right
-    ortho-image against the left one along this direction."""
-    from carto.framework.sdk.sensors import frames
-
-    e_n_u = frames.enu_basis(lon, lat)
-    t = []
-    for s in (left, right):
-        line, sample = s.ground_to_image(lon, lat, h)
-        lo, la = s.image_to_ground(line, sample, h + 100.0)
-        d = frames.geodetic_to_ecef(lo, la, h + 100.0) - frames.geodetic_to_ecef(lon, lat, h)
-        t.append((e_n_u @ np.ravel(d))[:2] / 100.0)
-    base = t[1] - t[0]
-    length = float(np.linalg.norm(base))
-    return length, base / length
 
 
 def b_over_h(left: Sensor, right: Sensor, lon: float, lat: float, h: float) -> float:

@@ -104,6 +104,17 @@ def _parse(table: PointTable, column: str, kind: str, required: bool) -> NDArray
     return values
 
 
+def ground_points(
+    table: Mapping[str, NDArray],
+) -> tuple[NDArray, NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """One row per point of a control table (a point measured in several images has a row
+    per image, with the same ground coordinates): ``(ids, lon_deg, lat_deg, h_m)``."""
+    ids = np.array([str(v).strip() for v in table["id"]])
+    _, first = np.unique(ids, return_index=True)
+    lon, lat, h = (np.asarray(table[c], np.float64)[first] for c in ("lon_deg", "lat_deg", "h_m"))
+    return ids[first], lon, lat, h
+
+
 def read_control_table(
     path: str | os.PathLike[str],
     kind: str = "gcps",

@@ -48,6 +48,7 @@ from carto.framework.geometry.frames import (
     WGS84_A_M,
     WGS84_E2,
     ecef_to_geodetic,
+    enu_basis,
     geodetic_to_ecef,
 )
 from carto.framework.geometry.sensor import RAY_HEIGHTS_M, Sensor
@@ -426,3 +427,24 @@ def intersect_sensors(
         rms_px=rms_px,
         iterations=n_iter,
     )
+
+
+def base_direction(
+    left: Sensor, right: Sensor, lon: float, lat: float, h: float
+) -> tuple[float, FloatArray]:
+    """``(B/H, unit (east, north))`` at a ground point: ``t_R - t_L``, the horizontal
+    displacement between the two lines of sight per metre of height (``t``: of length
+    ``tan theta``), its length and direction. A DEM too high shifts a detail in the right
+    ortho-image against the left one along this direction. Two identical lines of sight give
+    ``(0, (nan, nan))``; NaN when an image does not see the point."""
+    e_n_u = enu_basis(lon, lat)
+    t = []
+    for s in (left, right):
+        line, sample = s.ground_to_image(lon, lat, h)
+        lo, la = s.image_to_ground(line, sample, h + 100.0)
+        d = geodetic_to_ecef(lo, la, h + 100.0) - geodetic_to_ecef(lon, lat, h)
+        t.append((e_n_u @ np.ravel(d))[:2] / 100.0)
+    base = t[1] - t[0]
+    length = float(np.linalg.norm(base))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return length, base / length

@@ -158,7 +158,6 @@ class RasterImage(ImageSource):
         :class:`DecimatedImage` drops them; NaN where a block has none), read by GDAL
         (average resampling, in the file's data type: rounded for integer images; the
         file's overviews when it has them)."""
-        import rasterio
         from rasterio.enums import Resampling
         from rasterio.windows import Window
 
@@ -166,42 +165,45 @@ class RasterImage(ImageSource):
         n_r, n_c = self.shape[0] // f, self.shape[1] // f
         if n_r < 1 or n_c < 1:
             raise InputError(f"{self.path}: {self.shape} is smaller than {f} x {f} pixels")
-        try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                with rasterio.open(self.path) as ds:
-                    nodata = ds.nodatavals[self.band - 1]
-                    data = ds.read(
-                        self.band,
-                        window=Window(0, 0, n_c * f, n_r * f),
-                        out_shape=(n_r, n_c),
-                        resampling=Resampling.average,
-                        out_dtype="float32",
-                    )
-        except rasterio.errors.RasterioError as exc:
-            raise InputError(
-                f"{self.path}: cannot read it reduced {f} times (a truncated or damaged "
-                f"file?): {gdal_cause(exc)}"
-            ) from None
-        if nodata is not None:
-            data[(data == nodata) | ~np.isfinite(data)] = np.nan
-        return data
+
+        def reduced(ds: Any) -> NDArray[np.float32]:
+            data = ds.read(
+                self.band,
+                window=Window(0, 0, n_c * f, n_r * f),
+                out_shape=(n_r, n_c),
+                resampling=Resampling.average,
+                out_dtype="float32",
+            )
+            nodata = ds.nodatavals[self.band - 1]
+            if nodata is not None:
+                data[(data == nodata) | ~np.isfinite(data)] = np.nan
+            return data
+
+        return self._reading(f"it reduced {f} times", reduced)
 
     def _read(self, what: str, **how: Any) -> NDArray[np.float32]:
-        """The band read as ``how`` says (rasterio ``read`` arguments), voids NaN; a file
-        that fails names itself and GDAL's cause."""
+        """The band read as ``how`` says (rasterio ``read`` arguments), voids NaN."""
+        return self._reading(
+            what,
+            lambda ds: np.ma.filled(
+                ds.read(self.band, masked=True, **how).astype(np.float32), np.nan
+            ),
+        )
+
+    def _reading(self, what: str, read: Any) -> NDArray[np.float32]:
+        """``read(dataset)`` on the open file; a file that fails names itself and GDAL's
+        cause."""
         import rasterio
 
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 with rasterio.open(self.path) as ds:
-                    data = ds.read(self.band, masked=True, **how)
+                    return read(ds)  # type: ignore[no-any-return]
         except rasterio.errors.RasterioError as exc:
             raise InputError(
                 f"{self.path}: cannot read {what} (a truncated or damaged file?): {gdal_cause(exc)}"
             ) from None
-        return np.ma.filled(data.astype(np.float32), np.nan)
 
 
 @attrs.frozen

@@ -5,6 +5,7 @@ parts (camera, line timing, time series), RPC models, reduced sensors, frames an
 from carto.framework.geometry import frames, orbit
 from carto.framework.geometry.camera import Camera
 from carto.framework.geometry.decimated import DecimatedSensor
+from carto.framework.geometry.intersection import base_direction
 from carto.framework.geometry.linescan import LineScanner, save_line_scanner
 from carto.framework.geometry.linescan_solver import tabulated_lines
 from carto.framework.geometry.linescan_timing import LineTiming
@@ -27,6 +28,7 @@ __all__ = [
     "Sensor",
     "SensorType",
     "TimeSeries",
+    "base_direction",
     "frames",
     "ground_sampling_m",
     "orbit",

@@ -15,6 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from carto.framework.adjustment.base import AdjustmentResult
+from carto.framework.files.control_table import ground_points
 
 POOR_SIGMA0 = 5.0
 """An adjustment whose sigma0 exceeds this fails (``--allow-poor`` writes it): its residuals
@@ -34,9 +35,7 @@ def gcps_off_the_dem(gcps: Mapping[str, NDArray], dem: Any) -> list[str]:
     DEM of the terrain to tell): every GCP more than :data:`GCP_DEM_LIMIT_M` off the DEM."""
     if dem is None or not np.nanstd(dem.heights) > 0:  # none, or a flat height
         return []
-    ids = np.array([str(v).strip() for v in gcps["id"]])
-    _, first = np.unique(ids, return_index=True)
-    lon, lat, h = (np.asarray(gcps[c], np.float64)[first] for c in ("lon_deg", "lat_deg", "h_m"))
+    ids, lon, lat, h = ground_points(gcps)
     terrain = dem.height(lon, lat)
     signed = h - terrain
     off = np.abs(signed)
@@ -45,8 +44,8 @@ def gcps_off_the_dem(gcps: Mapping[str, NDArray], dem: Any) -> list[str]:
         return _gcps_shifted_from_the_dem(signed)
     worst = bad[np.argmax(off[bad])]
     return [
-        f"{bad.size} of {first.size} GCPs are more than {GCP_DEM_LIMIT_M:g} m off the DEM in "
-        f"height (GCP {str(ids[first][worst])!r}: {h[worst]:.1f} m where the DEM says "
+        f"{bad.size} of {ids.size} GCPs are more than {GCP_DEM_LIMIT_M:g} m off the DEM in "
+        f"height (GCP {str(ids[worst])!r}: {h[worst]:.1f} m where the DEM says "
         f"{terrain[worst]:.1f} m; heights in feet? another vertical datum? another place?)"
     ]
 

@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from carto.framework.errors import InputError
+from carto.framework.files.control_table import ground_points
 from carto.framework.raster.dem import DEM
 
 MIN_MATCHED_FRACTION = 0.05
@@ -81,9 +82,7 @@ def off_the_gcps(dem: DEM, gcps: Any) -> list[str]:
     it is, or when there is no GCP, or none on the DEM)."""
     if gcps is None or not len(gcps["id"]):
         return []
-    ids = np.array([str(v).strip() for v in gcps["id"]])
-    _, first = np.unique(ids, return_index=True)
-    lon, lat, h = (np.asarray(gcps[c], np.float64)[first] for c in ("lon_deg", "lat_deg", "h_m"))
+    _ids, lon, lat, h = ground_points(gcps)
     off = dem.height(lon, lat) - h
     off = off[np.isfinite(off)]
     if not off.size or abs(float(np.median(off))) <= GCP_DATUM_LIMIT_M:
