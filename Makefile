@@ -15,13 +15,17 @@ TEST_PLUGINS_STAMP := $(TEST_PLUGINS)/.carto-installed
 PIP := $(BIN)/python -m pip --disable-pip-version-check
 DEMO_OUT ?= demo-out
 
-.PHONY: demo test lint format lock clean
+.PHONY: demo test fuzz lint format lock clean
 
 demo: $(STAMP)
 	$(BIN)/carto demo --out $(DEMO_OUT)
 
 test: lint $(TEST_PLUGINS_STAMP)
 	$(BIN)/python -m pytest -n 2
+
+# the fuzz tests with fresh random draws (make test draws the same fixed set every time)
+fuzz: $(STAMP) $(TEST_PLUGINS_STAMP)
+	HYPOTHESIS_PROFILE=explore $(BIN)/python -m pytest -n 2 -m fuzz
 
 # ruff, and the architecture contracts of .importlinter (layers, no cycles, no plugin names)
 lint: $(STAMP)

@@ -10,10 +10,25 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import pytest
+from hypothesis import is_hypothesis_test, settings
+
+# The fuzz tests (@given) draw the same examples on every run of `make test`, so that CI's
+# verdict does not depend on luck; `make fuzz` (HYPOTHESIS_PROFILE=explore) draws new ones,
+# to look for what the fixed draw misses.
+settings.register_profile("ci", derandomize=True, print_blob=True)
+settings.register_profile("explore", print_blob=True)
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 TEST_PLUGINS_DIR = REPO_ROOT / "build" / "test-plugins"
 SHARED_DATA = REPO_ROOT.parent / "shared" / "data"
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Mark every hypothesis test ``fuzz`` (``make fuzz`` runs them with fresh draws)."""
+    for item in items:
+        if is_hypothesis_test(getattr(item, "function", None)):
+            item.add_marker(pytest.mark.fuzz)
 
 
 @pytest.fixture(scope="session")

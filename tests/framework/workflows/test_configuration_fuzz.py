@@ -106,3 +106,18 @@ def test_any_value_of_a_known_field_reads_or_is_refused(
     else:
         holder[key] = value
     _read(doc, tmp_path)  # anything but InputError fails the test
+
+
+@pytest.mark.parametrize("field", ["trajectory_model", "matcher"])
+@pytest.mark.parametrize("name", ["", "nonesuch"])
+def test_a_component_nobody_registered_is_refused_naming_the_field(
+    valid, tmp_path, field, name
+) -> None:
+    """Found by the fuzzing above: ``"trajectory_model": ""`` reached the registry and raised
+    an UnknownComponentError that named neither the configuration nor its field."""
+    outcome = _read({**valid, field: name}, tmp_path)
+    assert isinstance(outcome, InputError)
+    assert f"field {field!r}" in str(outcome)
+    assert f"unknown {'matcher' if field == 'matcher' else 'trajectory model'} {name!r}" in str(
+        outcome
+    )

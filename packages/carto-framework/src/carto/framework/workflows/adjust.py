@@ -31,7 +31,7 @@ from carto.framework.adjustment.dem_heights import (
 )
 from carto.framework.adjustment.image_trends import fold_image_trends
 from carto.framework.adjustment.observations import Observations
-from carto.framework.errors import AdjustmentError, InputError
+from carto.framework.errors import AdjustmentError, InputError, UnknownComponentError
 from carto.framework.files.control_table import read_control_table, read_tie_table
 from carto.framework.files.documents import read_json, write_json_atomic
 from carto.framework.files.point_table import write_point_table
@@ -534,6 +534,15 @@ def _check_keys(doc: Mapping[str, Any], known: tuple[str, ...], path: Path, wher
             raise InputError(f"{path}: unknown field {where}{key!r}{hint}")
 
 
+def _check_component(path: Path, field: str, name: str) -> None:
+    """Refuse a configuration ``field`` naming a component nobody registered, naming both."""
+    kind = "matcher" if field == "matcher" else "trajectory"
+    try:
+        get_registry().info(kind, name)
+    except UnknownComponentError as exc:
+        raise InputError(f"{path}: field {field!r}: {exc}") from None
+
+
 @contextlib.contextmanager
 def _field(path: Path, field: str) -> Iterator[None]:
     """Errors of reading what configuration ``path``'s ``field`` names, naming both."""
@@ -590,6 +599,8 @@ def read_configuration(
         value = doc.get(key)
         if value is not None and not isinstance(value, str):
             raise InputError(f"{path}: field {key!r} must be a component name, got {value!r}")
+        if value is not None:
+            _check_component(path, key, value)
         names[key] = value
     trajectory = trajectory or names["trajectory_model"]
     sensors: dict[str, Sensor] = {}
