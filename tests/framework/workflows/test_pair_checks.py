@@ -5,6 +5,7 @@ from them."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -13,6 +14,7 @@ import rasterio
 
 from carto.framework.errors import InputError
 from carto.framework.imaging.preparation import prepared_sources
+from carto.framework.workflows.adjust import read_configuration
 from carto.framework.workflows.dem import StereoInputs, initial_dem, open_pair
 from carto.framework.workflows.pair_checks import (
     MIN_AGREEMENT,
@@ -110,3 +112,37 @@ def test_the_same_image_twice_has_no_stereo_base(reunion) -> None:
     assert base_to_height(sensors, dem) < 1e-6
     with pytest.raises(InputError, match=r"base-to-height ratio of 0\.000"):
         checked_pair(images, sensors, dem, allow_poor=True)
+
+
+def test_each_image_given_the_others_model_is_refused(reunion, shared_data, tmp_path) -> None:
+    """An outside probe swapped the Reunion RPCs (--left-model img_02.tif for img_01.tif):
+    the views still overlap and correlate, and the DEM came out with its relief upside down
+    (NMAD 113 m against the reference) with exit 0."""
+    swapped = StereoInputs(
+        left=reunion.left, right=reunion.right, left_model=reunion.right, right_model=reunion.left
+    )
+    with pytest.raises(InputError, match=r"img_02.tif: not a model of .*img_01.tif: .* 15.0 deg"):
+        open_pair(swapped)
+    config = tmp_path / "swapped.json"
+    images = {
+        "a": {"model": str(reunion.right), "raster": str(reunion.left)},
+        "b": {"model": str(reunion.left), "raster": str(reunion.right)},
+    }
+    config.write_text(json.dumps({"images": images, "height_m": 2300}))
+    with pytest.raises(InputError, match=r"field 'images.a.raster': .*not a model of"):
+        read_configuration(config)
+
+
+def test_an_adjusted_model_of_the_image_is_its_own(shared_data: Path) -> None:
+    """Ventoux's right image with an RPC biased by 60 lines (the lines of sight turn by
+    arc-seconds) and with its own RPC file are both the right image's models."""
+    folder = shared_data / "pleiades-ventoux-pair"
+    for model in ("right_image_bias.geom", "right_image.geom"):
+        pair = open_pair(
+            StereoInputs(
+                left=folder / "left_image.tif",
+                right=folder / "right_image.tif",
+                right_model=folder / model,
+            )
+        )
+        assert len(pair.sensors) == 2

@@ -50,7 +50,12 @@ from carto.framework.workflows.adjust_checks import (
     gcps_rejected,
     poor_adjustment,
 )
-from carto.framework.workflows.opening import open_options, open_product, sensor_type_for
+from carto.framework.workflows.opening import (
+    check_model_of_image,
+    open_options,
+    open_product,
+    sensor_type_for,
+)
 from carto.framework.workflows.reporting import jsonable, progress, write_report
 from carto.framework.workflows.residual_plot import residual_misfit, residual_plot
 
@@ -628,6 +633,7 @@ def read_configuration(
                 raise InputError(f"{path}: images.{name}.raster: no such file {rasters[name]}")
             with _field(path, f"images.{name}.raster"):
                 sensor = sensor.for_raster(rasters[name])
+                check_model_of_image(rasters[name], model, sensor)
         sensors[name] = sensor
     gcps = None
     if doc.get("gcps") is not None:

@@ -40,7 +40,12 @@ from carto.framework.workflows.dem_datum import (
     resolve_coregister,
 )
 from carto.framework.workflows.dem_options import check_names, check_options
-from carto.framework.workflows.opening import open_options, open_sensor, sensor_type_for
+from carto.framework.workflows.opening import (
+    check_model_of_image,
+    open_options,
+    open_sensor,
+    sensor_type_for,
+)
 from carto.framework.workflows.pair_checks import checked_pair
 from carto.framework.workflows.reporting import jsonable, progress, write_report
 
@@ -182,8 +187,9 @@ def open_pair(inputs: StereoInputs) -> StereoPair:
             raise InputError(f"{path}: no such image")
         model_path = Path(model) if model else _model_beside(path)
         chosen_type = sensor_type_for(model_path, sensor_type, "file")
-        sensor = chosen_type.open(model_path, **open_options())
-        sensors[key] = _adjusted(models_dir, key, sensor.for_raster(path))
+        sensor = chosen_type.open(model_path, **open_options()).for_raster(path)
+        check_model_of_image(path, model_path, sensor)
+        sensors[key] = _adjusted(models_dir, key, sensor)
         rasters[key] = path
         types.append(chosen_type)
     return StereoPair(rasters, sensors, tuple(types), None)

@@ -164,3 +164,48 @@ def check_models_of_scene(models: Path, scene_root: Path) -> None:
             f"--models {models}: adjusted on the scene {adjusted}, not on {scene_root} (its "
             "manifest differs): give the carto adjust output of these images"
         )
+
+
+MAX_VIEW_ANGLE_DEG = 2.0
+"""The most a model given for an image may turn the line of sight at the image's centre away
+from the model the image carries itself (RPC tags): an adjustment turns it by arc-seconds, a
+model fitted to another crop of the same image by at most the instrument's field of view
+(1-2.5 degrees at the edges); the other image of a stereo pair (base-to-height ratio at
+least 0.05, ``pair_checks.MIN_BASE_TO_HEIGHT``) by 2.9 degrees or more."""
+
+
+def check_model_of_image(image: Path, model: Path, sensor: Sensor) -> None:
+    """Refuse a model (``sensor``, read from ``model``) that is not of ``image``, when the
+    image carries a model of its own (RPC tags): their lines of sight at the image's centre
+    differ by more than :data:`MAX_VIEW_ANGLE_DEG`. An outside probe gave each image of the
+    Reunion pair the other's RPCs: a DEM of the relief upside down (NMAD 113 m) with exit 0
+    (issue 31), since the two views still overlap and correlate."""
+    if model.resolve() == image.resolve():
+        return
+    try:
+        own = sensor_type_for(image, None, "image").open(image, **open_options())
+    except InputError:
+        return  # the image carries no model: nothing to compare with
+    angle = _view_angle_deg(own.for_raster(image), sensor)
+    if angle > MAX_VIEW_ANGLE_DEG:
+        raise InputError(
+            f"{model}: not a model of {image}: its line of sight at the image's centre is "
+            f"{angle:.1f} degrees from the image's own model (> {MAX_VIEW_ANGLE_DEG:g}): the "
+            "model of another image (the two images' models swapped?)"
+        )
+
+
+def _view_angle_deg(a: Sensor, b: Sensor) -> float:
+    """Angle between two models' lines of sight at ``a``'s image centre, degrees."""
+    import numpy as np
+
+    from carto.framework.geometry import frames
+
+    n_l, n_s = a.image_shape
+    rays = []
+    for sensor in (a, b):
+        low = frames.geodetic_to_ecef(*sensor.image_to_ground(n_l / 2, n_s / 2, 0.0), 0.0)
+        high = frames.geodetic_to_ecef(*sensor.image_to_ground(n_l / 2, n_s / 2, 1000.0), 1000.0)
+        ray = np.ravel(high - low)
+        rays.append(ray / np.linalg.norm(ray))
+    return float(np.degrees(np.arccos(np.clip(np.dot(rays[0], rays[1]), -1.0, 1.0))))
