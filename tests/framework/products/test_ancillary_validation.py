@@ -308,6 +308,14 @@ def _scene_copy(scene: Path, tmp_path: Path) -> tuple[Path, dict[str, Any]]:
         (lambda m: m.pop("gcps"), "missing field 'gcps'"),
         (lambda m: m.__setitem__("checkpoints", 5), "checkpoints: expected a file name"),
         (lambda m: m["images"]["nadir"].__setitem__("truth_model", 1), "truth_model: expected"),
+        (
+            lambda m: m.__setitem__("init_dme", m.pop("init_dem")),
+            "unknown field 'init_dme' (did you mean 'init_dem'?)",
+        ),
+        (
+            lambda m: m["images"]["fore"].__setitem__("rastr", "fore.tif"),
+            "unknown field images.fore.'rastr' (did you mean 'raster'?)",
+        ),
     ],
 )
 def test_scene_manifest_fields_are_checked(scene, tmp_path, mutate, expected):

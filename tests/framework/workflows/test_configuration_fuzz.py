@@ -121,3 +121,14 @@ def test_a_component_nobody_registered_is_refused_naming_the_field(
     assert f"unknown {'matcher' if field == 'matcher' else 'trajectory model'} {name!r}" in str(
         outcome
     )
+
+
+def test_a_gcp_file_with_a_header_only_is_refused(valid, tmp_path) -> None:
+    """A GCP file named but empty (an export that wrote its header only) would adjust
+    without GCPs, where the configuration says there are some."""
+    header = Path(valid["gcps"]).read_text().splitlines()[0]
+    empty = tmp_path / "empty.csv"
+    empty.write_text(header + "\n")
+    outcome = _read({**valid, "gcps": str(empty)}, tmp_path)
+    assert isinstance(outcome, InputError)
+    assert f"{empty}: holds no GCP" in str(outcome)

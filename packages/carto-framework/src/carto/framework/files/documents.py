@@ -65,6 +65,25 @@ def check_document(doc: Any, fmt: str, version: int, what: str, source: str) -> 
         )
 
 
+def check_fields(
+    doc: Mapping[str, Any], known: tuple[str, ...], path: str | os.PathLike[str], where: str = ""
+) -> None:
+    """Refuse a field of ``doc`` (read from ``path``; ``where`` prefixes the field's name,
+    e.g. ``"images.fore."``) that is not one of ``known``, suggesting the closest known one: a
+    misspelt field (``"gcp"``) would otherwise be ignored and the run go ahead without what it
+    named.
+
+    Raises:
+        InputError: naming the file and the field."""
+    import difflib
+
+    for key in doc:
+        if key not in known:
+            close = difflib.get_close_matches(str(key), known, n=1)
+            hint = f" (did you mean {close[0]!r}?)" if close else f"; known: {', '.join(known)}"
+            raise InputError(f"{path}: unknown field {where}{key!r}{hint}")
+
+
 def write_json_atomic(path: str | os.PathLike[str], document: Any) -> Path:
     """Write ``document`` as indented JSON to ``path`` through a temporary file and a rename."""
     path = Path(path)

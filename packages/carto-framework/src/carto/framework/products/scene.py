@@ -16,11 +16,19 @@ from typing import Any
 import attrs
 
 from carto.framework.errors import InputError
-from carto.framework.files.documents import read_json_document
+from carto.framework.files.documents import check_fields, read_json_document
 from carto.framework.geometry.linescan import LineScanner
 
 SCENE_FORMAT = "carto-scene"
 SCENE_VERSION = 1
+SCENE_FIELDS = (
+    "format", "version", "preset", "platform", "seed", "platform_seed", "terrain", "size",
+    "errors", "error_model", "epoch_utc", "target", "images", "gcps", "checkpoints", "init_dem",
+    "truth", "vertical_reference", "pixel_convention", "counts", "epoch_j2000_s",
+)  # fmt: skip
+"""The fields of ``scene.json`` (``docs/formats.md``); any other is refused (a misspelt
+``"init_dem"`` would start the DEM from a constant height without a word)."""
+IMAGE_FIELDS = ("raster", "ancillary", "camera", "array", "truth_model")
 
 
 @attrs.frozen(eq=False)
@@ -129,6 +137,7 @@ def check_manifest(doc: Mapping[str, Any], manifest_path: Path) -> None:
             raise fail(field, f"expected a file name (a string), got {_short(value)}")
         return value
 
+    check_fields(doc, SCENE_FIELDS, manifest_path)
     for key in ("images", "gcps", "checkpoints"):
         if key not in doc:
             raise InputError(f"{manifest_path}: missing field {key!r}")
@@ -142,6 +151,7 @@ def check_manifest(doc: Mapping[str, Any], manifest_path: Path) -> None:
         where = f"images.{name}"
         if not isinstance(image, Mapping):
             raise fail(where, f"expected an object (raster, ancillary ...), got {_short(image)}")
+        check_fields(image, IMAGE_FIELDS, manifest_path, f"{where}.")
         for key in ("raster", "ancillary"):
             if key not in image:
                 raise InputError(f"{manifest_path}: missing field '{where}.{key}'")

@@ -33,7 +33,7 @@ from carto.framework.adjustment.image_trends import fold_image_trends
 from carto.framework.adjustment.observations import Observations
 from carto.framework.errors import AdjustmentError, InputError, UnknownComponentError
 from carto.framework.files.control_table import read_control_table, read_tie_table
-from carto.framework.files.documents import read_json, write_json_atomic
+from carto.framework.files.documents import check_fields, read_json, write_json_atomic
 from carto.framework.files.point_table import write_point_table
 from carto.framework.files.staging import staged_folder
 from carto.framework.geometry.sensor import Sensor, SensorType
@@ -527,18 +527,6 @@ IMAGE_KEYS = ("model", "raster", "sensor")
 """The fields of one image in it."""
 
 
-def _check_keys(doc: Mapping[str, Any], known: tuple[str, ...], path: Path, where: str) -> None:
-    """Refuse a field ``doc`` does not know: a misspelt one (``"gcp"``) would otherwise be
-    ignored and the run go ahead without what it named."""
-    import difflib
-
-    for key in doc:
-        if key not in known:
-            close = difflib.get_close_matches(str(key), known, n=1)
-            hint = f" (did you mean {close[0]!r}?)" if close else f"; known: {', '.join(known)}"
-            raise InputError(f"{path}: unknown field {where}{key!r}{hint}")
-
-
 def _check_component(path: Path, field: str, name: str) -> None:
     """Refuse a configuration ``field`` naming a component nobody registered, naming both."""
     kind = "matcher" if field == "matcher" else "trajectory"
@@ -594,7 +582,7 @@ def read_configuration(
     doc = read_json(path, "configuration")
     if not isinstance(doc, dict):
         raise InputError(f"{path}: a configuration is a JSON object, got {type(doc).__name__}")
-    _check_keys(doc, CONFIGURATION_KEYS, path, "")
+    check_fields(doc, CONFIGURATION_KEYS, path, "")
     base = path.parent
     images = doc.get("images")
     if not isinstance(images, dict) or len(images) < 1:
@@ -616,7 +604,7 @@ def read_configuration(
             raise InputError(
                 f"{path}: images.{name} must be an object with 'model' and 'raster', got {spec!r}"
             )
-        _check_keys(spec, IMAGE_KEYS, path, f"images.{name}.")
+        check_fields(spec, IMAGE_KEYS, path, f"images.{name}.")
         for key in ("model", "raster", "sensor"):
             value = spec.get(key)
             if (key == "model" or value is not None) and (not isinstance(value, str) or not value):
@@ -641,6 +629,11 @@ def read_configuration(
             raise InputError(f"{path}: field 'gcps' must be a CSV file name, got {doc['gcps']!r}")
         with _field(path, "gcps"):
             gcps = read_control_table(base / doc["gcps"], "gcps", images=list(sensors))
+            if not len(gcps["id"]):
+                raise InputError(
+                    f"{base / doc['gcps']}: holds no GCP (a header only); to adjust without "
+                    "GCPs, leave the field out"
+                )
             check_control(gcps, sensors, "gcps")
     dem = None
     for key in ("dem", "geoid"):
