@@ -65,6 +65,37 @@ def test_a_1_x_1_dem_is_refused(tmp_path: Path):
     _refused(lambda: DEM.open(row), str(row), "30 x 1 pixels")
 
 
+@pytest.mark.parametrize(
+    ("unit", "tags", "fragments"),
+    [
+        ("ft", {}, ("band 1 is in 'ft', not metres",)),
+        ("US survey foot", {}, ("'US survey foot', not metres",)),
+        (None, {"CARTO_PRODUCT": "ortho"}, ("a carto ortho raster", "give dem.tif")),
+        (None, {"CARTO_PRODUCT": "quality"}, ("a carto quality raster",)),
+    ],
+)
+def test_a_raster_that_says_it_is_not_heights_in_metres_is_refused(
+    tmp_path: Path, unit, tags, fragments
+):
+    """An outside probe evaluated ortho-images and quality layers as DEMs (issue 31): the
+    file's own unit or carto tag says what it holds (GDAL writes both)."""
+    path = _tif(tmp_path / "x.tif", _plane((20, 20)))
+    with rasterio.open(path, "r+") as ds:
+        if unit:
+            ds.units = (unit,)
+        ds.update_tags(**tags)
+    _refused(lambda: DEM.open(path), str(path), *fragments)
+
+
+@pytest.mark.parametrize("unit", ["m", "metre", "Meters"])
+def test_heights_in_metres_read(tmp_path: Path, unit: str):
+    path = _tif(tmp_path / "x.tif", _plane((20, 20)))
+    with rasterio.open(path, "r+") as ds:
+        ds.units = (unit,)
+        ds.update_tags(CARTO_PRODUCT="dem")
+    assert np.allclose(DEM.open(path).heights, _plane((20, 20)))
+
+
 @pytest.mark.parametrize("fill", [1e30, -1e30, np.inf, 20000.0, -5000.0])
 def test_a_dem_of_implausible_heights_only_is_refused(tmp_path: Path, fill: float):
     path = _tif(tmp_path / "huge.tif", np.full((5, 6), fill), nodata=None)

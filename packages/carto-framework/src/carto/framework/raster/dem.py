@@ -405,6 +405,7 @@ class DEM:
                     raise InputError(f"DEM {path}: no georeferencing (field transform)")
                 if not 1 <= band <= ds.count:
                     raise InputError(f"DEM {path}: band {band} does not exist ({ds.count} bands)")
+                _check_heights_band(ds, band, path)
                 if min(ds.width, ds.height) < MIN_DEM_POSTS:
                     raise InputError(
                         f"DEM {path}: {ds.width} x {ds.height} pixels; a DEM needs at least "
@@ -674,3 +675,25 @@ class DEM:
         r1 = min(math.ceil(r_max - tol) + 1, n_rows)
         c1 = min(math.ceil(c_max - tol) + 1, n_cols)
         return (r0, max(r1, r0 + 1)), (c0, max(c1, c0 + 1))
+
+
+HEIGHT_UNITS = ("m", "metre", "meter", "metres", "meters")
+"""Band units (GDAL's ``units``) of heights in metres; a band with another stated unit (feet,
+or a carto product's correlation scores) is not a DEM of Carto's."""
+
+
+def _check_heights_band(ds: Any, band: int, path: Path) -> None:
+    """Refuse a raster that says it is not a DEM in metres: a carto ortho-image or quality
+    layer (tag ``CARTO_PRODUCT``), or a band whose stated unit is not metres. An outside
+    probe evaluated ortho-images and quality layers as DEMs (issue 31)."""
+    product = ds.tags().get("CARTO_PRODUCT")
+    if product not in (None, "dem"):
+        raise InputError(
+            f"DEM {path}: a carto {product} raster (tag CARTO_PRODUCT), not a DEM; give dem.tif"
+        )
+    unit = (ds.units[band - 1] or "").strip()
+    if unit and unit.lower() not in HEIGHT_UNITS:
+        raise InputError(
+            f"DEM {path}: band {band} is in {unit!r}, not metres (field units); convert the "
+            "heights to metres (e.g. gdal_calc.py), or clear the unit if it is wrong"
+        )

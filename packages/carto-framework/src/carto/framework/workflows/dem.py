@@ -614,6 +614,7 @@ def _dem_into(
             ortho,
             product.ortho_grid,
             out_dtype=_radiometry(rasters[name]),
+            tags={"CARTO_PRODUCT": "ortho", "CARTO_IMAGE": name},
         ).name
     for key, on, grid in (
         ("quality", "dem", product.dem_grid),
@@ -625,7 +626,10 @@ def _dem_into(
                 out / f"{key}.tif",
                 [layer.values for layer in layers],
                 grid,
-                tags={f"BAND_{k}": layer.description for k, layer in enumerate(layers, 1)},
+                tags={
+                    "CARTO_PRODUCT": key,
+                    **{f"BAND_{k}": layer.description for k, layer in enumerate(layers, 1)},
+                },
                 band_descriptions=[layer.name for layer in layers],
                 overview_resampling="nearest",
             ).name
