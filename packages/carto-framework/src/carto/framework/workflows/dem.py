@@ -20,8 +20,7 @@ import attrs
 import numpy as np
 
 from carto.framework.adjustment.relative_orientation import RelativeOrientationSettings
-from carto.framework.errors import InputError, OutputError, UsageError
-from carto.framework.files.paths import resolved
+from carto.framework.errors import InputError, UsageError
 from carto.framework.files.staging import require_complete_output, staged_folder
 from carto.framework.geometry.sensor import Sensor, SensorType
 from carto.framework.plugins.registry import get_registry
@@ -47,7 +46,8 @@ from carto.framework.workflows.opening import (
     sensor_type_for,
 )
 from carto.framework.workflows.pair_checks import checked_pair
-from carto.framework.workflows.reporting import jsonable, progress, write_report
+from carto.framework.workflows.reporting import progress, write_report
+from carto.framework.workflows.resumable import fingerprint, open_work, settle_work
 
 __all__ = [
     "StereoInputs",
@@ -270,66 +270,6 @@ def choose_dem_generator(requested: str | None, types: Sequence[SensorType]) -> 
     )
 
 
-def work_folder(out_dir: str | os.PathLike[str]) -> Path:
-    """The work folder of a ``carto dem`` run into ``out_dir``: hidden, beside it
-    (``.NAME.carto-work``); kept when a run fails or is interrupted (``--resume`` continues
-    from it), removed when a run succeeds."""
-    out = Path(out_dir)
-    return out.parent / f".{out.name}.carto-work"
-
-
-_RUN_FILE = "run.json"
-
-
-def _fingerprint(sources: Sequence[Any], facts: Mapping[str, Any]) -> dict[str, Any]:
-    """What a resumed run must share with the interrupted one: its inputs (path, size,
-    modification time) and settings."""
-    files = {}
-    for item in sources:
-        if item is None:
-            continue
-        path = resolved(item, "input")
-        entries = [path] if path.is_file() else sorted(p for p in path.rglob("*") if p.is_file())
-        for entry in entries:
-            st = entry.stat()
-            files[str(entry)] = [st.st_size, st.st_mtime_ns]
-    return jsonable({"inputs": files, **facts})
-
-
-def _open_work(
-    out_dir: str | os.PathLike[str], fingerprint: Mapping[str, Any], resume: bool, quiet: bool
-) -> Path:
-    """The run's work folder: the interrupted run's with ``resume`` (it must be of the same
-    inputs and settings), else a new one."""
-    import json
-
-    work = work_folder(out_dir)
-    run_file = work / _RUN_FILE
-    if resume and run_file.is_file():
-        try:
-            earlier = json.loads(run_file.read_text())
-        except (OSError, ValueError):
-            earlier = None
-        if earlier != fingerprint:
-            changed = (
-                sorted(k for k in fingerprint if earlier.get(k) != fingerprint[k])
-                if isinstance(earlier, dict)
-                else ["unreadable run.json"]
-            )
-            raise UsageError(
-                f"--resume: the interrupted run in {work} had other inputs or settings "
-                f"({', '.join(changed)}); run without --resume to start afresh"
-            )
-        progress("dem", f"resuming the interrupted run from {work}", quiet)
-        return work
-    if resume:
-        progress("dem", f"--resume: no interrupted run in {work}; starting afresh", quiet)
-    shutil.rmtree(work, ignore_errors=True)
-    work.mkdir(parents=True)
-    write_report(run_file, fingerprint)
-    return work
-
-
 def dem_product(
     out_dir: str | os.PathLike[str],
     inputs: StereoInputs,
@@ -361,8 +301,9 @@ def dem_product(
     (``posting_m``, ``ortho_res_m``, ``crs``, ``max_iterations`` ...). Tiles run on a
     :func:`~carto.framework.parallel.engine.open_engine` engine: ``workers`` processes of a
     local cluster (default: every core; 1: this process) or the ``dask.distributed``
-    cluster at ``scheduler``. Intermediate files go to :func:`work_folder`, kept when the
-    run fails or is interrupted; ``resume`` continues from it. The outputs are written from
+    cluster at ``scheduler``. Intermediate files go to a work folder
+    (:mod:`~carto.framework.workflows.resumable`), kept when the run fails or is
+    interrupted; ``resume`` continues from it. The outputs are written from
     the generator's :class:`~carto.framework.dem_generation.base.DEMProduct` alone. With
     ``reference`` (a DEM file), the report gets its accuracy
     (:func:`carto.framework.evaluation.dem_accuracy.dem_accuracy`) and a difference map is drawn.
@@ -424,7 +365,7 @@ def dem_product(
     work: Path | None = None
     try:
         with staged_folder(out_dir, "dem", inputs=sources) as stage:
-            work = _open_work(out_dir, _fingerprint(sources, facts), resume, quiet)
+            work = open_work(out_dir, fingerprint(sources, facts), resume, quiet)
             with open_engine(workers, scheduler, quiet=quiet) as engine:
                 report = _dem_into(
                     stage,
@@ -446,26 +387,11 @@ def dem_product(
                     coregister_accuracy_m=coregister_accuracy_m,
                 )
     except BaseException as exc:
-        if work is not None and work.is_dir():
-            # bad data or arguments: a rerun needs other inputs, whose fingerprint no
-            # finished work matches (and --resume would refuse); an interruption or a fault
-            # (disk, workers) keeps it
-            bad_input = isinstance(exc, InputError) and not isinstance(exc, OutputError)
-            if _has_finished_work(work) and not bad_input:
-                exc.add_note(f"finished tiles kept in {work}: rerun with --resume to continue")
-            else:
-                shutil.rmtree(work, ignore_errors=True)
+        if work is not None:
+            settle_work(work, exc)
         raise
     shutil.rmtree(work, ignore_errors=True)
     return report
-
-
-def _has_finished_work(work: Path) -> bool:
-    """Whether a failed run's work folder holds work a resumed run would reuse (prepared
-    bands, an iteration's grid or tiles)."""
-    return any(
-        next(work.rglob(pattern), None) is not None for pattern in ("*.npz", "*.npy", "state.json")
-    )
 
 
 def _dem_into(
