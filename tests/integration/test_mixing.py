@@ -8,6 +8,9 @@ second image move by that much, and the DEM by the height that parallax means
 ``example-spline`` is a cubic-spline trajectory model: ``carto adjust --trajectory`` fits the
 scene with it, the adjusted model files name it, ``carto dem --models`` reads them back
 through the plugin, and an ancillary file that names it is opened with it.
+``example-start`` is a DEM generator that delivers the starting DEM on the grid asked for:
+``carto dem --generator`` writes it, and its heights are the scene's ``init_dem.tif``
+interpolated bilinearly at the nodes (rasterio, pyproj and SciPy here).
 """
 
 from __future__ import annotations
@@ -191,3 +194,34 @@ def test_an_ancillary_file_that_names_a_trajectory_model_is_opened_with_it(scene
         a = np.array(plain[name].image_to_ground(n_l / 2, n_s / 2, 500.0))
         b = np.array(spline[name].image_to_ground(n_l / 2, n_s / 2, 500.0))
         assert 0.0 < np.max(np.abs(a - b)) < 1e-4  # degrees: < 10 m
+
+
+def test_a_plugin_dem_generator_is_used_end_to_end(run_carto, scene, tmp_path):
+    import pyproj
+    from scipy.ndimage import map_coordinates
+
+    out = tmp_path / "dem"
+    proc = run_carto(
+        [
+            "dem", str(scene), "--generator", "example-start", "--matcher", "ncc",
+            "--posting", "20", "--workers", "1", "--quiet", "--out", str(out),
+        ]
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    report = json.loads((out / "report.json").read_text())
+    assert report["generator"] == "example-start"
+    assert report["iterations"][0]["matched_percent"] > 20
+    with rasterio.open(out / "quality.tif") as ds:
+        assert ds.descriptions == ("start",)
+    with rasterio.open(out / "dem.tif") as ds:
+        dem, crs, transform = ds.read(1, masked=True).filled(np.nan), ds.crs, ds.transform
+    with rasterio.open(scene / "init_dem.tif") as ds:
+        start, start_crs, inverse = ds.read(1).astype(float), ds.crs, ~ds.transform
+    rows, cols = np.indices(dem.shape)
+    x, y = transform @ (cols + 0.5, rows + 0.5)
+    x, y = pyproj.Transformer.from_crs(crs, start_crs, always_xy=True).transform(x, y)
+    col, row = inverse @ (x, y)
+    expected = map_coordinates(start, [row - 0.5, col - 0.5], order=1, cval=np.nan)
+    inside = np.isfinite(expected) & np.isfinite(dem)
+    assert inside.mean() > 0.9
+    np.testing.assert_allclose(dem[inside], expected[inside], atol=1e-3)

@@ -73,7 +73,7 @@ def test_plugins_table_shows_broken_plugins_with_their_cause(run_carto):
 def test_component_details(run_carto):
     result = run_carto(["plugins", "example-affine", "--json"], with_test_plugins=True)
     details = json.loads(result.stdout)
-    assert details[0]["class"] == "carto_example_plugin.AffineSensorType"
+    assert details[0]["class"] == "carto_example_plugin.sensors.AffineSensorType"
     assert details[0]["distribution"] == "carto-example-plugin"
 
 

@@ -215,3 +215,16 @@ def test_plugin_error_is_a_carto_error():
 
     assert issubclass(PluginError, CartoError)
     assert issubclass(UnknownComponentError, CartoError)
+
+
+def test_every_registered_component_pickles(registry):
+    """Tile tasks carry components to other processes (dask): each registered component,
+    ours and the test plugins', comes back from pickle as the same kind and name."""
+    import pickle
+
+    components = registry.components()
+    assert len({c.kind for c in components}) >= 5
+    for info in components:
+        copy = pickle.loads(pickle.dumps(info.component))
+        assert type(copy) is type(info.component), info.name
+        assert copy.name == info.name
