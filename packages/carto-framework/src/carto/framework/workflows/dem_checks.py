@@ -46,12 +46,23 @@ DEPARTURE_MEDIAN_M = 50.0
 simulated scenes, 4 m on Ventoux; a geoid grid taken as the start: 575 m)."""
 
 
+FLAT_START_M = 1.0
+"""A starting DEM whose heights span less than this (1st to 99th percentile) is a constant
+height, above the ellipsoid or the geoid (whose undulation varies by centimetres over a
+scene): it says nothing of the relief, and a DEM is not compared with it. A real DEM of
+the flattest plain spans more in its noise alone."""
+
+
 def departs_from_start(dem: DEM, start: DEM) -> list[str]:
     """Why a DEM is not the terrain its starting DEM says it is (empty when it is, or when
     the start is a constant height, which says nothing of the relief)."""
     from carto.framework.evaluation.dem_accuracy import dem_accuracy
 
-    if not np.nanstd(start.heights) > 0 or not np.isfinite(dem.heights).any():
+    heights = start.heights[np.isfinite(start.heights)]
+    if not heights.size or not np.isfinite(dem.heights).any():
+        return []
+    low, high = np.percentile(heights, [1, 99])
+    if high - low < FLAT_START_M:
         return []
     try:
         diff = dem_accuracy(dem, start)

@@ -1,0 +1,39 @@
+"""What a DEM passes before it is delivered (issue 31): the comparison with its starting DEM.
+Synthetic DEMs on one UTM grid; the figures follow from their construction."""
+
+from __future__ import annotations
+
+import numpy as np
+from rasterio.transform import Affine
+
+from carto.framework.raster.dem import DEM
+from carto.framework.workflows.dem_checks import departs_from_start
+
+GRID = Affine(10.0, 0.0, 500000.0, 0.0, -10.0, 4900000.0)
+
+
+def _dem(heights: np.ndarray) -> DEM:
+    return DEM.from_array(heights, GRID, "EPSG:32631")
+
+
+def _relief(amplitude_m: float) -> np.ndarray:
+    rows, cols = np.indices((60, 60))
+    return 500.0 + amplitude_m * np.sin(rows / 7.0) * np.cos(cols / 9.0)
+
+
+def test_a_constant_start_above_the_geoid_is_not_compared() -> None:
+    """dem_vs_cars.py starts from a constant height above EGM96: in ellipsoidal heights it
+    varies by centimetres (the undulation), and a volcano's DEM departs from it by far more
+    than 30 m NMAD. That start says nothing of the relief: no warning (a run failed here)."""
+    rows, cols = np.indices((60, 60))
+    start = _dem(2344.0 + 0.002 * rows + 0.001 * cols)
+    assert departs_from_start(_dem(_relief(400.0)), start) == []
+
+
+def test_a_dem_of_another_terrain_than_its_relief_start_is_flagged() -> None:
+    start = _dem(_relief(5.0))  # a plain: 10 m of relief
+    assert departs_from_start(_dem(_relief(5.0) + 2.0), start) == []
+    warning = departs_from_start(_dem(_relief(5.0) + 80.0), start)
+    assert len(warning) == 1
+    assert "median +80.0 m" in warning[0]
+    assert len(departs_from_start(_dem(_relief(300.0)), start)) == 1
