@@ -502,6 +502,16 @@ def test_an_output_that_is_an_input_is_refused_and_the_input_kept(
             }
         )
     )
+    # a scene whose manifest names a file inside the earlier output (an outside probe: the
+    # file was deleted with exit 0), and a calibration kept there
+    shutil.copy(cartosat1_scene / "gcps.csv", earlier / "my_gcps.csv")
+    calibration = earlier / "calibration.json"
+    calibration.write_text("{}")
+    moved = tmp_path / "scene"
+    shutil.copytree(cartosat1_scene, moved)
+    manifest = json.loads((moved / "scene.json").read_text())
+    manifest["gcps"] = "../adj/my_gcps.csv"
+    (moved / "scene.json").write_text(json.dumps(manifest))
     kept = {p: _digest(p) for p in (dem, ref, model, ground, *earlier.iterdir())}
     png = tmp_path / "r.png"
     cases = [
@@ -514,6 +524,19 @@ def test_an_output_that_is_an_input_is_refused_and_the_input_kept(
         (["project", str(model), "--ground", str(ground), "--out", str(model)], "is the input"),
         (["project", str(model), "--ground", str(ground), "--out", str(ground)], "is the input"),
         (["adjust", str(config), "--ties", "none", "--out", str(earlier)], "holds the input"),
+        (["adjust", str(moved), "--ties", "none", "--out", str(earlier)], "my_gcps.csv"),
+        (["dem", str(moved), "--out", str(earlier)], "my_gcps.csv"),
+        (
+            [
+                "adjust",
+                str(cartosat1_scene),
+                "--out",
+                str(earlier),
+                "--calibration",
+                str(calibration),
+            ],
+            "calibration.json",
+        ),
     ]
     for args, words in cases:
         one_line_error(carto_main(args), 2, words)

@@ -167,6 +167,31 @@ def check_manifest(doc: Mapping[str, Any], manifest_path: Path) -> None:
         name_of_file(doc[key], key)
 
 
+def scene_files(path: str | os.PathLike[str]) -> list[Path]:
+    """Every file a scene folder's ``scene.json`` names (images, ancillary files, control
+    tables, the starting DEM, the truth), read leniently (opening the scene checks them):
+    an output folder may hold none of them, since it is replaced as a whole, and a manifest
+    may name files outside its folder. Nothing for a path that is not a readable scene."""
+    path = Path(path)
+    manifest = path / "scene.json" if path.is_dir() else path
+    try:
+        doc = json.loads(manifest.read_text())
+    except (OSError, UnicodeDecodeError, ValueError):
+        return []
+    if not isinstance(doc, Mapping):
+        return []
+    names: list[Any] = [doc.get(k) for k in ("gcps", "checkpoints", "init_dem")]
+    truth = doc.get("truth")
+    if isinstance(truth, Mapping):
+        names += list(truth.values())
+    images = doc.get("images")
+    if isinstance(images, Mapping):
+        for image in images.values():
+            if isinstance(image, Mapping):
+                names += [image.get(k) for k in ("raster", "ancillary", "truth_model")]
+    return [manifest.parent / n for n in names if isinstance(n, str) and n]
+
+
 def find_scene_manifest(path: str | os.PathLike[str], platform_prefix: str) -> Path | None:
     """The ``scene.json`` of a scene of a platform (``"Cartosat-1"`` ...) that ``path`` is
     (the folder or its manifest), or is an image raster of; ``None`` otherwise.

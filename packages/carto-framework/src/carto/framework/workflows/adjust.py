@@ -155,11 +155,13 @@ def adjust_product(
     import shutil
 
     from carto.framework.parallel.engine import open_engine
+    from carto.framework.products.scene import scene_files
 
     src = Path(source)
-    inputs = [src, *configuration_files(src)]
+    inputs = [src, *configuration_files(src), *scene_files(src)]
     if ties not in ("auto", "none"):
         inputs.append(Path(ties))
+    inputs += [Path(c) for c in (options or {}).get("calibration") or []]
     with (
         staged_folder(out_dir, "adjust", inputs=inputs) as stage,
         open_engine(workers, scheduler, quiet=quiet) as engine,

@@ -24,6 +24,7 @@ from carto.framework.errors import InputError, UsageError
 from carto.framework.files.staging import require_complete_output, staged_folder
 from carto.framework.geometry.sensor import Sensor, SensorType
 from carto.framework.plugins.registry import get_registry
+from carto.framework.products.scene import scene_files
 from carto.framework.raster.dem import DEM, Geoid
 from carto.framework.raster.vertical_reference import vertical_tag
 from carto.framework.workflows.dem_checks import (
@@ -348,6 +349,7 @@ def dem_product(
         geoid,
         reference,
         None if str(coregister) in ("auto", "none") else coregister,
+        *(scene_files(inputs.source) if inputs.source is not None else []),
     ]
     facts = {
         "generator": generator,
