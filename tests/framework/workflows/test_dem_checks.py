@@ -7,7 +7,7 @@ import numpy as np
 from rasterio.transform import Affine
 
 from carto.framework.raster.dem import DEM
-from carto.framework.workflows.dem_checks import departs_from_start
+from carto.framework.workflows.dem_checks import departs_from_start, off_the_gcps
 
 GRID = Affine(10.0, 0.0, 500000.0, 0.0, -10.0, 4900000.0)
 
@@ -38,3 +38,22 @@ def test_a_dem_of_another_terrain_than_its_relief_start_is_flagged() -> None:
     assert len(warning) == 1
     assert "median +80.0 m" in warning[0]
     assert len(departs_from_start(_dem(_relief(300.0)), start)) == 1
+
+
+def test_a_gcp_on_a_void_is_compared_with_the_heights_around_it() -> None:
+    """An outside probe: --init-height 0 under terrain at 300-570 m gave a DEM 205 m low with
+    exit 0, its one GCP on a void of the DEM. The posts around the GCP now judge it."""
+    import pyproj
+
+    heights = _relief(5.0)
+    lon, lat = pyproj.Transformer.from_crs("EPSG:32631", "EPSG:4326", always_xy=True).transform(
+        500000.0 + 10.0 * 30.5, 4900000.0 - 10.0 * 30.5
+    )  # the centre of post (30, 30)
+    gcps = {"id": np.array(["G1"]), "lon_deg": [lon], "lat_deg": [lat], "h_m": [heights[30, 30]]}
+    low = heights - 205.0
+    low[28:33, 28:33] = np.nan
+    assert off_the_gcps(_dem(heights), gcps) == []
+    warning = off_the_gcps(_dem(low), gcps)
+    assert len(warning) == 1
+    assert "off the heights of its models' 1 GCP(s)" in warning[0]
+    assert "-20" in warning[0]  # -205 m and the relief of the posts around

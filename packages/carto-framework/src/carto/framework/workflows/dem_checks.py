@@ -107,7 +107,7 @@ def off_the_gcps(dem: DEM, gcps: Any) -> list[str]:
     if gcps is None or not len(gcps["id"]):
         return []
     _ids, lon, lat, h = ground_points(gcps)
-    off = dem.height(lon, lat) - h
+    off = _height_near(dem, lon, lat) - h
     off = off[np.isfinite(off)]
     if not off.size or abs(float(np.median(off))) <= GCP_DATUM_LIMIT_M:
         return []
@@ -117,6 +117,28 @@ def off_the_gcps(dem: DEM, gcps: Any) -> list[str]:
         "DEM or --init-height (the relative orientation follows its heights), or models "
         "that are not these images'?"
     ]
+
+
+GCP_REACH_POSTS = 5
+"""A GCP on a void of the DEM is compared with the median of the DEM's heights within this
+many posts (a single GCP on a void left a DEM 205 m off unjudged; relief within a few posts
+is far below :data:`GCP_DATUM_LIMIT_M`)."""
+
+
+def _height_near(dem: DEM, lon: np.ndarray, lat: np.ndarray) -> np.ndarray:
+    """The DEM's height at each point, else the median of its heights within
+    :data:`GCP_REACH_POSTS` posts (NaN when there is none)."""
+    heights = dem.height(lon, lat)
+    rows, cols = dem.lonlat_to_pixel(np.asarray(lon, float), np.asarray(lat, float))
+    n_rows, n_cols = dem.shape
+    for k in np.flatnonzero(~np.isfinite(heights)):
+        r, c = round(float(rows[k])), round(float(cols[k]))
+        r0, r1 = max(0, r - GCP_REACH_POSTS), min(n_rows, r + GCP_REACH_POSTS + 1)
+        c0, c1 = max(0, c - GCP_REACH_POSTS), min(n_cols, c + GCP_REACH_POSTS + 1)
+        near = dem.heights[r0:r1, c0:c1] if r0 < r1 and c0 < c1 else np.empty(0)
+        if np.isfinite(near).any():
+            heights[k] = float(np.nanmedian(near))
+    return heights
 
 
 MAX_FINAL_MISMATCH_PX = 0.5
