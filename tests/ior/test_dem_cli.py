@@ -277,3 +277,28 @@ def test_images_of_two_places_do_not_give_a_dem(run_carto, scene, tmp_path):
     assert report["pair_check"]["agreement"] < 0.5
     assert any("do not correlate" in w for w in report["warnings"])
     assert any("departs from its starting DEM" in w for w in report["warnings"])
+
+
+def test_a_starting_dem_that_does_not_say_its_vertical_reference_is_warned_of(
+    run_carto, scene, tmp_path
+):
+    """An outside probe saved SRTM's geoid heights as a plain EPSG:4326 GeoTIFF: read as
+    ellipsoidal (the convention), the DEM came out 31 m low with no word. The scene's own
+    starting DEM, tagged, gives no such warning (the test above)."""
+    plain = tmp_path / "plain.tif"
+    with rasterio.open(scene / "init_dem.tif") as src:
+        profile, heights = src.profile, src.read(1)
+    profile["crs"] = "EPSG:4326"  # the same heights, without a vertical CRS or tag
+    with rasterio.open(plain, "w", **profile) as dst:
+        dst.write(heights, 1)
+    out = tmp_path / "dem"
+    proc = run_carto(
+        [
+            *("dem", str(scene), "--models", str(scene / "truth"), "--init-dem", str(plain)),
+            *("--posting", "20", "--max-iterations", "2", "--out", str(out)),
+        ]
+    )
+    assert proc.returncode == 0, proc.stderr
+    report = json.loads((out / "report.json").read_text())
+    assert any("does not say what its heights are above" in w for w in report["warnings"])
+    assert "does not say what its heights are above" in proc.stderr

@@ -87,6 +87,19 @@ def test_a_raster_that_says_it_is_not_heights_in_metres_is_refused(
     _refused(lambda: DEM.open(path), str(path), *fragments)
 
 
+def test_a_raster_of_several_bands_is_refused_unless_one_is_named(tmp_path: Path):
+    """carto evaluate read quality.tif's first band (confidence) as heights (issue 31)."""
+    path = tmp_path / "two.tif"
+    with rasterio.open(
+        path, "w", driver="GTiff", height=20, width=20, count=2, dtype="float32",
+        crs="EPSG:4326", transform=GEO,
+    ) as ds:  # fmt: skip
+        ds.write(np.stack([_plane((20, 20)), _plane((20, 20)) + 1.0]).astype("float32"))
+        ds.set_band_description(1, "confidence")
+    _refused(lambda: DEM.open(path), str(path), "2 bands (confidence, band 2)", "one band")
+    assert np.allclose(DEM.open(path, band=2).heights, _plane((20, 20)) + 1.0)
+
+
 @pytest.mark.parametrize("unit", ["m", "metre", "Meters"])
 def test_heights_in_metres_read(tmp_path: Path, unit: str):
     path = _tif(tmp_path / "x.tif", _plane((20, 20)))

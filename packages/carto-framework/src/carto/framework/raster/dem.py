@@ -358,7 +358,7 @@ class DEM:
         geoid: Geoid | str | os.PathLike[str] | None = None,
         bounds: Bounds | None = None,
         vertical: str | None = None,
-        band: int = 1,
+        band: int | None = None,
         require_ellipsoidal: bool = False,
         rows: tuple[int, int] | None = None,
     ) -> DEM:
@@ -375,7 +375,8 @@ class DEM:
             vertical: override the vertical reference of the file. Otherwise it is the
                 ``VERTICAL_REFERENCE`` tag, ``"geoid:EGM96"`` for SRTM ``.hgt`` tiles, the
                 vertical part of a compound CRS, else ``"ellipsoid"`` (the Carto convention).
-            band: the band holding the heights.
+            band: the band holding the heights (default: the only band; a raster of several
+                bands is refused unless one is named).
             require_ellipsoidal: refuse geoid heights that no ``geoid`` converts, with the
                 advice to give ``--geoid GTX`` (:meth:`check_ellipsoidal`).
             rows: read only the rows ``start..stop`` (clipped to the file): a band of a
@@ -403,6 +404,12 @@ class DEM:
                     raise InputError(f"DEM {path}: no CRS (field crs)")
                 if ds.transform.is_identity:
                     raise InputError(f"DEM {path}: no georeferencing (field transform)")
+                if band is None and ds.count > 1:
+                    names = ", ".join(d or f"band {k}" for k, d in enumerate(ds.descriptions, 1))
+                    raise InputError(
+                        f"DEM {path}: {ds.count} bands ({names}); a DEM is one band of heights"
+                    )
+                band = 1 if band is None else band
                 if not 1 <= band <= ds.count:
                     raise InputError(f"DEM {path}: band {band} does not exist ({ds.count} bands)")
                 _check_heights_band(ds, band, path)
@@ -697,3 +704,16 @@ def _check_heights_band(ds: Any, band: int, path: Path) -> None:
             f"DEM {path}: band {band} is in {unit!r}, not metres (field units); convert the "
             "heights to metres (e.g. gdal_calc.py), or clear the unit if it is wrong"
         )
+
+
+def states_vertical(path: str | os.PathLike[str]) -> bool:
+    """Whether a raster says what its heights are above (a ``VERTICAL_REFERENCE`` tag, the
+    vertical part of a compound CRS, or an SRTM tile, whose heights are EGM96's): one that
+    does not is read as ellipsoidal (the Carto convention), which a geoid-height DEM saved
+    as a plain GeoTIFF is not (tens of metres off)."""
+    import rasterio
+
+    with rasterio.open(path) as ds:
+        if ds.tags().get(VERTICAL_TAG) or ds.driver == "SRTMHGT":
+            return True
+        return ds.crs is not None and split_vertical(_to_crs(ds.crs))[1] is not None

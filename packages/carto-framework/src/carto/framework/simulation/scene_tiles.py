@@ -311,8 +311,9 @@ def write_true_ortho(
     strips = range(0, ny, ORTHO_STRIP_ROWS)
     wkt = crs.to_wkt()
     tags = {
+        "CARTO_PRODUCT": "ortho",
         "CARTO_CONTENT": "true ground reflectance (no terrain shading "
-        "beyond the texture's), ortho on truth"
+        "beyond the texture's), ortho on truth",
     }
     with (
         raster_writer(

@@ -25,7 +25,7 @@ from carto.framework.files.staging import require_complete_output, staged_folder
 from carto.framework.geometry.sensor import Sensor, SensorType
 from carto.framework.plugins.registry import get_registry
 from carto.framework.products.scene import scene_files
-from carto.framework.raster.dem import DEM, Geoid
+from carto.framework.raster.dem import DEM, Geoid, states_vertical
 from carto.framework.raster.vertical_reference import vertical_tag
 from carto.framework.workflows.dem_checks import (
     departs_from_start,
@@ -524,6 +524,14 @@ def _dem_into(
     )
     if coregistration and coregistration.get("warning"):
         warnings.append(coregistration["warning"])
+    if init_dem is not None and not states_vertical(init_dem):
+        warnings.append(
+            f"the starting DEM {init_dem} does not say what its heights are above (no "
+            "vertical CRS or VERTICAL_REFERENCE tag): read as heights above the WGS84 "
+            "ellipsoid; if they are above the geoid (SRTM, Copernicus), tag it (gdal_edit.py "
+            "-mo VERTICAL_REFERENCE=geoid:EGM96) and give --geoid"
+        )
+        progress("dem", f"warning: {warnings[-1]}", quiet)
     written = dem.to_geoid(geoid_grid) if vertical == "geoid" else dem
     vertical_reference = vertical_tag(written.vertical)
     files = {
