@@ -103,13 +103,19 @@ def evaluate(out: Path, truth_path: Path) -> dict[str, Any]:
 
 
 def one_run(
-    scene: Path, work: Path, posting: float, matcher: str, label: str, workers: int | None
+    scene: Path,
+    work: Path,
+    posting: float,
+    matcher: str,
+    label: str,
+    workers: int | None,
+    extra: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     out = work / label
     report = dem_product(
         out,
         StereoInputs(scene, models=scene / "truth"),
-        options={"posting_m": posting},
+        options={"posting_m": posting, **(extra or {})},
         matcher=matcher,
         quiet=True,
         workers=workers,
@@ -161,6 +167,14 @@ def summary(runs: list[dict[str, Any]]) -> dict[str, Any]:
     return out
 
 
+def _option(text: str) -> tuple[str, Any]:
+    key, _, value = text.partition("=")
+    try:
+        return key, json.loads(value)
+    except ValueError:
+        return key, value
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4])
@@ -171,7 +185,15 @@ def main() -> int:
     parser.add_argument("--work", type=Path, default=None)
     parser.add_argument("--out", type=Path, default=RESULT)
     parser.add_argument("--workers", type=int, default=None, help="default: every core")
+    parser.add_argument(
+        "--option",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="a generator option for every run (e.g. window=9; a number or text)",
+    )
     args = parser.parse_args()
+    extra = dict(_option(o) for o in args.option)
     work = args.work or Path(tempfile.mkdtemp(prefix="carto-dem-sim-"))
     runs = []
     for terrain in args.terrains:
@@ -186,7 +208,7 @@ def main() -> int:
             for posting in args.postings:
                 for matcher in args.matchers:
                     label = f"{terrain}-{seed}-{posting:g}m-{matcher}"
-                    doc = one_run(scene, work, posting, matcher, label, args.workers)
+                    doc = one_run(scene, work, posting, matcher, label, args.workers, extra)
                     runs.append(
                         {
                             "terrain": terrain,
@@ -202,6 +224,7 @@ def main() -> int:
         "runs": runs,
         "size_px": list(args.size),
         "models": "true (truth/): the DEM generator alone",
+        "generator_options": extra,
         "caveat": "simulated scenes rendered through the models under test: a best case (#18)",
         "updated": datetime.date.today().isoformat(),
     }

@@ -10,7 +10,7 @@ import pytest
 from carto.cartosat1.adjust import prepare_sensors
 from carto.framework import get_registry
 from carto.framework.adjustment.observations import Observations
-from carto.framework.errors import InputError
+from carto.framework.errors import InputError, UsageError
 from carto.framework.evaluation.checkpoints import (
     checkpoint_accuracy,
     predicted_checkpoint_sigma,
@@ -101,10 +101,20 @@ def test_bad_options(setup, adjuster):
     scene, obs, _ = setup
     with pytest.raises(InputError, match="mode must be one of"):
         adjuster.adjust(scene.sensors(), obs, mode="magic")
-    with pytest.raises(InputError, match=r"attitude_order must be 0\.\.3"):
+    with pytest.raises(
+        UsageError, match=r"option attitude_order must be a whole number within 0\.\.3"
+    ):
         adjuster.adjust(scene.sensors(), obs, attitude_order=7)
-    with pytest.raises(InputError, match=r"unknown adjuster option\(s\): atitude_order"):
+    with pytest.raises(
+        UsageError, match=r"unknown option\(s\) atitude_order \(known: .*attitude_order"
+    ):
         adjuster.adjust(scene.sensors(), obs, atitude_order=2)
+    # the settings alone, as carto adjust checks them before any work
+    with pytest.raises(UsageError, match=r"option self_calibration: unknown name 'foo'"):
+        adjuster.settings({"self_calibration": "scale,foo"})
+    with pytest.raises(UsageError, match=r"option self_calibration names nothing"):
+        adjuster.settings({"self_calibration": ""})
+    assert adjuster.settings({"mode": "separate"}).trend_order == 0
 
 
 def _ideal_ties(scene_dir, n: int, sigma_px: float, seed: int = 0) -> dict:

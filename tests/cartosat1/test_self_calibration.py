@@ -111,5 +111,5 @@ def test_unknown_self_calibration_is_refused(pair):
     models, rows, ground = pair
     obs = _observations(rows, ground, ["P000"])
     adjuster = get_registry().get("adjuster", "cartosat1-combined")
-    with pytest.raises(InputError, match="unknown self-calibration 'zoom'"):
+    with pytest.raises(InputError, match="option self_calibration: unknown name 'zoom'"):
         adjuster.adjust(models, obs, self_calibration=["zoom"])

@@ -57,7 +57,7 @@ def test_block_adjustment_with_two_gcps(cartosat2_triplet_scene):
     assert before["rmse_planimetric_m"] > 50.0
     assert after["rmse_planimetric_m"] < 2.0
     assert after["rmse_height_m"] < 3.0
-    with pytest.raises(InputError, match=r"attitude_order must be 0\.\.3"):
+    with pytest.raises(InputError, match=r"attitude_order must be a whole number within 0\.\.3"):
         adjuster.adjust(scene.sensors(), obs, attitude_order=5)
     with pytest.raises(InputError, match="jitter_hz must be 'auto' or a list"):
         adjuster.adjust(scene.sensors(), obs, jitter_hz="1.7")

@@ -245,6 +245,16 @@ def test_an_output_that_cannot_be_written_is_refused_before_any_work(
         (["adjust", "{scene}", "--gcps", "-2"], ("--gcps", "-2")),
         (["dem", "{scene}", "--generator", ""], ("--generator ''", "not installed")),
         (["dem", "{scene}", "--matcher", "nope"], ("--matcher 'nope'", "not installed")),
+        # found by an outside probe: exit 1, after the tie points had been matched
+        (["adjust", "{scene}", "--mode", "affine"], ("cartosat1-combined: option mode", "affine")),
+        (["adjust", "{scene}", "--trajectory", "foo"], ("--trajectory 'foo'", "not installed")),
+        (["adjust", "{scene}", "--adjuster", "foo"], ("--adjuster 'foo'", "not installed")),
+        (
+            ["adjust", "{scene}", "--self-calibration", "scale,foo"],
+            ("option self_calibration: unknown name 'foo'", "known: scale"),
+        ),
+        (["adjust", "{scene}", "--self-calibration", ""], ("self_calibration names nothing",)),
+        (["adjust", "{scene}", "--attitude-order", "5"], ("attitude_order", "within 0..3")),
     ],
 )
 def test_bad_option_values_are_usage_errors(

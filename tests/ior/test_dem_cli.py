@@ -302,3 +302,15 @@ def test_a_starting_dem_that_does_not_say_its_vertical_reference_is_warned_of(
     report = json.loads((out / "report.json").read_text())
     assert any("does not say what its heights are above" in w for w in report["warnings"])
     assert "does not say what its heights are above" in proc.stderr
+
+
+def test_a_generator_option_it_refuses_is_a_usage_error_before_any_work(run_carto, scene, tmp_path):
+    """``--crs EPSG:4326`` was refused by ior after the images had been prepared (issue 34,
+    item 6): the generator's settings are now checked before, with exit 2 and no work left."""
+    out = tmp_path / "x"
+    proc = run_carto(["dem", str(scene), "--crs", "EPSG:4326", "--out", str(out)])
+    assert proc.returncode == 2, proc.stderr
+    assert "ior: option crs (--crs): 'EPSG:4326' is geographic" in proc.stderr
+    assert "merge staggered" not in proc.stderr  # no image was prepared
+    assert "--resume" not in proc.stderr
+    assert list(tmp_path.iterdir()) == []

@@ -71,9 +71,11 @@ import attrs
 from carto.cartosat1 import constants
 from carto.cartosat1.calibration import AlignmentCalibration, load_calibration
 from carto.framework.sdk.adjusters import (
+    SELF_CALIBRATION_SIGMAS,
     Adjuster,
     AdjustmentResult,
     AncillaryPrior,
+    BundleSettings,
     Observations,
     adjust_bundle,
     adjust_with_jitter,
@@ -82,7 +84,16 @@ from carto.framework.sdk.adjusters import (
     with_image_trends,
     with_self_calibration,
 )
-from carto.framework.sdk.common import InputError
+from carto.framework.sdk.common import (
+    InputError,
+    UsageError,
+    choice,
+    flag,
+    integer,
+    names,
+    number,
+    optional,
+)
 from carto.framework.sdk.sensors import LineScanner, Sensor
 
 MODES = ("combined", "separate", "calibration")
@@ -179,70 +190,136 @@ JITTER_AMPLITUDE_DEG = 6e-5
 a pixel on the ground)."""
 
 
+def _self_calibration(name: str) -> Any:
+    """A list of :data:`SELF_CALIBRATION_SIGMAS` names (or text separated by commas), or a
+    mapping name -> a-priori sigma; None: the default."""
+    as_names = optional(names(name, tuple(SELF_CALIBRATION_SIGMAS)))
+
+    def convert(value: Any) -> Any:
+        if isinstance(value, Mapping):
+            sigma = number(f"{name} sigma", 0.0, low_open=True)
+            return {str(k): sigma(v) for k, v in value.items()}
+        return as_names(value)
+
+    return convert
+
+
+@attrs.frozen
+class Cartosat1Settings(BundleSettings):
+    """The options of ``cartosat1-combined`` (see the module docstring) and the bundle's;
+    ``None``: the mode's default."""
+
+    mode: str = attrs.field(default="combined", converter=choice("mode", MODES))
+    calibration: Any = attrs.field(default=None)
+    self_calibration: Any = attrs.field(
+        default=None, converter=_self_calibration("self_calibration")
+    )
+    relative_calibration: Any = attrs.field(
+        default=None, converter=_self_calibration("relative_calibration")
+    )
+    image_trend_order: int | None = attrs.field(
+        default=None, converter=optional(integer("image_trend_order", 0, 2))
+    )
+    image_trend_sigma_deg: float = attrs.field(
+        default=constants.IMAGE_TREND_SIGMA_DEG,
+        converter=number("image_trend_sigma_deg", 0.0, low_open=True),
+    )
+    attitude_order: int = attrs.field(default=1, converter=integer("attitude_order", 0, 3))
+    estimate_position: bool = attrs.field(default=True, converter=flag("estimate_position"))
+    bias_sigma_deg: float = attrs.field(
+        default=constants.ATTITUDE_BIAS_SIGMA_DEG,
+        converter=number("bias_sigma_deg", 0.0, low_open=True),
+    )
+    drift_sigma_deg_s: float = attrs.field(
+        default=constants.ATTITUDE_DRIFT_SIGMA_DEG_S,
+        converter=number("drift_sigma_deg_s", 0.0, low_open=True),
+    )
+    alignment_sigma_deg: float = attrs.field(
+        default=constants.RESIDUAL_ALIGNMENT_SIGMA_DEG,
+        converter=number("alignment_sigma_deg", 0.0, low_open=True),
+    )
+    ephemeris_sigma_m: float = attrs.field(
+        default=constants.EPHEMERIS_BIAS_SIGMA_M,
+        converter=number("ephemeris_sigma_m", 0.0, low_open=True),
+    )
+    jitter_hz: Any = attrs.field(default=None)
+    jitter_amplitude_deg: float = attrs.field(
+        default=JITTER_AMPLITUDE_DEG, converter=number("jitter_amplitude_deg", 0.0, low_open=True)
+    )
+
+    def __attrs_post_init__(self) -> None:
+        if self.image_trend_order and self.mode != "combined":
+            raise UsageError(
+                "option image_trend_order: image trends are relative to the reference camera's "
+                f"image in a tied adjustment (mode combined); mode {self.mode} takes 0"
+            )
+
+    @property
+    def trend_order(self) -> int:
+        """The image trends' order: the option, else 2 in combined mode, 0 otherwise."""
+        if self.image_trend_order is not None:
+            return self.image_trend_order
+        return 2 if self.mode == "combined" else 0
+
+    @property
+    def relative(self) -> Any:
+        """The relative calibration: the option, else the scale in combined mode."""
+        if self.relative_calibration is not None:
+            return self.relative_calibration
+        return ["scale"] if self.mode == "combined" else []
+
+
 class Cartosat1Adjuster(Adjuster):
     """Tied Fore/Aft adjustment: one set of body corrections (attitude bias + drift, position
     bias) for both cameras."""
 
     name = "cartosat1-combined"
     description = "Cartosat-1 tied-camera adjustment: one body correction for Fore+Aft"
+    Settings = Cartosat1Settings
 
     def adjust(
         self, sensors: Mapping[str, Sensor], observations: Observations, **options: Any
     ) -> AdjustmentResult:
-        mode = options.pop("mode", "combined")
-        calibration = options.pop("calibration", None)
-        self_calibration = options.pop("self_calibration", None)
-        trend_order = int(options.pop("image_trend_order", 2 if mode == "combined" else 0))
-        trend_sigma = math.radians(
-            float(options.pop("image_trend_sigma_deg", constants.IMAGE_TREND_SIGMA_DEG))
-        )
-        if trend_order and mode != "combined":
-            raise InputError(
-                "cartosat1-combined: image trends are relative to the reference camera's image "
-                f"in a tied adjustment (mode combined); mode {mode} takes image_trend_order 0"
-            )
-        if calibration is not None:
-            calibration = load_calibration(calibration)
+        s = self.settings(options)
+        calibration = load_calibration(s.calibration) if s.calibration is not None else None
         prepared = prepare_sensors(
             sensors,
-            mode,
-            int(options.pop("attitude_order", 1)),
-            bool(options.pop("estimate_position", True)),
-            float(options.pop("bias_sigma_deg", constants.ATTITUDE_BIAS_SIGMA_DEG)),
-            float(options.pop("drift_sigma_deg_s", constants.ATTITUDE_DRIFT_SIGMA_DEG_S)),
-            float(options.pop("alignment_sigma_deg", constants.RESIDUAL_ALIGNMENT_SIGMA_DEG)),
-            float(options.pop("ephemeris_sigma_m", constants.EPHEMERIS_BIAS_SIGMA_M)),
+            s.mode,
+            s.attitude_order,
+            s.estimate_position,
+            s.bias_sigma_deg,
+            s.drift_sigma_deg_s,
+            s.alignment_sigma_deg,
+            s.ephemeris_sigma_m,
             calibration,
         )
-        prepared = with_self_calibration(prepared, self_calibration, self.name)
+        prepared = with_self_calibration(prepared, s.self_calibration, self.name)
         reference = reference_camera(prepared, calibration)
         others = [
             n
-            for n, s in prepared.items()
-            if isinstance(s, LineScanner) and s.camera.name != reference
+            for n, sensor in prepared.items()
+            if isinstance(sensor, LineScanner) and sensor.camera.name != reference
         ]
-        relative = options.pop("relative_calibration", ["scale"] if mode == "combined" else [])
-        if relative:
-            prepared |= with_self_calibration({n: prepared[n] for n in others}, relative, self.name)
-        prepared = with_image_trends(prepared, trend_order, trend_sigma, images=others)
-        jitter_hz = options.pop("jitter_hz", None)
-        if jitter_hz:
+        if s.relative:
+            prepared |= with_self_calibration(
+                {n: prepared[n] for n in others}, s.relative, self.name
+            )
+        trend_sigma = math.radians(s.image_trend_sigma_deg)
+        prepared = with_image_trends(prepared, s.trend_order, trend_sigma, images=others)
+        if s.jitter_hz:
+            amplitude = math.radians(s.jitter_amplitude_deg)
             result = adjust_with_jitter(
-                prepared,
-                observations,
-                jitter_hz,
-                math.radians(float(options.pop("jitter_amplitude_deg", JITTER_AMPLITUDE_DEG))),
-                **options,
+                prepared, observations, s.jitter_hz, amplitude, **s.bundle_options()
             )
         else:
-            result = adjust_bundle(prepared, observations, **options)
+            result = adjust_bundle(prepared, observations, **s.bundle_options())
         trends = trend_document(result.sensors, list(result.parameters), result.sigmas)
         if trends is not None:
             result = attrs.evolve(result, products={**result.products, "image_trends": trends})
-        if mode == "calibration":
+        if s.mode == "calibration":
             calibrated = {
-                n: attrs.evolve(s, camera=s.camera.with_calibrated_alignment())
-                for n, s in result.sensors.items()
+                n: attrs.evolve(sensor, camera=sensor.camera.with_calibrated_alignment())
+                for n, sensor in result.sensors.items()
             }
             result = attrs.evolve(result, sensors=calibrated)
             cal = AlignmentCalibration.from_result(result, platform="Cartosat-1")

@@ -35,17 +35,28 @@ import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+import attrs
+
 from carto.cartosat2 import constants
 from carto.framework.sdk.adjusters import (
+    SELF_CALIBRATION_SIGMAS,
     Adjuster,
     AdjustmentResult,
     AncillaryPrior,
+    BundleSettings,
     Observations,
     adjust_with_jitter,
     line_scanner_corrections,
     with_self_calibration,
 )
-from carto.framework.sdk.common import InputError
+from carto.framework.sdk.common import (
+    UsageError,
+    flag,
+    integer,
+    names,
+    number,
+    optional,
+)
 from carto.framework.sdk.sensors import LineScanner, Sensor
 
 PRIOR = AncillaryPrior.from_degrees(
@@ -80,45 +91,74 @@ def prepare_sensors(
     }
 
 
+def _positive(name: str) -> Any:
+    return number(name, 0.0, low_open=True)
+
+
+@attrs.frozen
+class Cartosat2Settings(BundleSettings):
+    """The options of ``cartosat2-bba`` (see :meth:`Cartosat2BlockAdjuster.adjust`) and the
+    bundle's."""
+
+    attitude_order: int = attrs.field(
+        default=DEFAULT_ATTITUDE_ORDER, converter=integer("attitude_order", 0, 3)
+    )
+    estimate_position: bool = attrs.field(default=False, converter=flag("estimate_position"))
+    bias_sigma_deg: float = attrs.field(
+        default=constants.ATTITUDE_BIAS_SIGMA_DEG, converter=_positive("bias_sigma_deg")
+    )
+    drift_sigma_deg_s: float = attrs.field(
+        default=constants.ATTITUDE_DRIFT_SIGMA_DEG_S, converter=_positive("drift_sigma_deg_s")
+    )
+    smooth_sigma_deg: float = attrs.field(
+        default=constants.ATTITUDE_SMOOTH_SIGMA_DEG, converter=_positive("smooth_sigma_deg")
+    )
+    jitter_hz: Any = attrs.field(default="auto", converter=lambda v: _frequencies(v))
+    jitter_amplitude_deg: float = attrs.field(
+        default=constants.ATTITUDE_JITTER_AMPLITUDE_DEG,
+        converter=_positive("jitter_amplitude_deg"),
+    )
+    self_calibration: tuple[str, ...] | None = attrs.field(
+        default=None, converter=optional(names("self_calibration", tuple(SELF_CALIBRATION_SIGMAS)))
+    )
+
+
 class Cartosat2BlockAdjuster(Adjuster):
     """Bundle block adjustment of agile views: per-image attitude polynomials, tie points."""
 
     name = "cartosat2-bba"
     description = "Cartosat-2 bundle block adjustment: per-image attitude polynomials, ties"
+    Settings = Cartosat2Settings
+
+    def settings(self, options: Mapping[str, Any]) -> Cartosat2Settings:
+        if "mode" in options:  # a user's --mode must not be dropped unseen
+            raise UsageError(
+                f"adjuster {self.name} has no modes: option mode={options['mode']!r} does not "
+                "apply (every view is adjusted on its own attitude; leave --mode out)"
+            )
+        return super().settings(options)
 
     def adjust(
         self, sensors: Mapping[str, Sensor], observations: Observations, **options: Any
     ) -> AdjustmentResult:
-        """Options: ``attitude_order`` (0-3, default 3), ``estimate_position``, the a-priori
-        sigmas ``bias_sigma_deg``, ``drift_sigma_deg_s``, ``smooth_sigma_deg``, the jitter
-        frequencies ``jitter_hz`` (``"auto"``, the default: found in the residuals; a list
-        when the platform's are known; empty: no jitter terms) and their a-priori RMS
-        amplitude ``jitter_amplitude_deg`` (default
-        :data:`constants.ATTITUDE_JITTER_AMPLITUDE_DEG`),
-        ``self_calibration`` (as the Cartosat-1 adjuster's, off by default), and those of
+        """Options (:class:`Cartosat2Settings`): ``attitude_order`` (0-3, default 3),
+        ``estimate_position``, the a-priori sigmas ``bias_sigma_deg``, ``drift_sigma_deg_s``,
+        ``smooth_sigma_deg``, the jitter frequencies ``jitter_hz`` (``"auto"``, the default:
+        found in the residuals; a list when the platform's are known; empty: no jitter
+        terms) and their a-priori RMS amplitude ``jitter_amplitude_deg`` (default
+        :data:`constants.ATTITUDE_JITTER_AMPLITUDE_DEG`), ``self_calibration`` (as the
+        Cartosat-1 adjuster's, off by default), and those of
         :func:`~carto.framework.adjustment.bundle.adjust_bundle`."""
+        s = self.settings(options)
         prior = AncillaryPrior.from_degrees(
-            float(options.pop("bias_sigma_deg", constants.ATTITUDE_BIAS_SIGMA_DEG)),
-            float(options.pop("drift_sigma_deg_s", constants.ATTITUDE_DRIFT_SIGMA_DEG_S)),
-            float(options.pop("smooth_sigma_deg", constants.ATTITUDE_SMOOTH_SIGMA_DEG)),
+            s.bias_sigma_deg, s.drift_sigma_deg_s, s.smooth_sigma_deg
         )
-        jitter_hz = _frequencies(options.pop("jitter_hz", "auto"))
-        jitter_amplitude = math.radians(
-            float(options.pop("jitter_amplitude_deg", constants.ATTITUDE_JITTER_AMPLITUDE_DEG))
+        prepared = prepare_sensors(sensors, s.attitude_order, s.estimate_position, prior)
+        prepared = with_self_calibration(prepared, s.self_calibration, self.name)
+        amplitude = math.radians(s.jitter_amplitude_deg)
+        return adjust_with_jitter(
+            prepared, observations, s.jitter_hz, amplitude, **s.bundle_options()
         )
-        prepared = prepare_sensors(
-            sensors,
-            int(options.pop("attitude_order", DEFAULT_ATTITUDE_ORDER)),
-            bool(options.pop("estimate_position", False)),
-            prior,
-        )
-        prepared = with_self_calibration(prepared, options.pop("self_calibration", None), self.name)
-        if "mode" in options:  # a user's --mode must not be dropped unseen
-            raise InputError(
-                f"adjuster {self.name} has no modes: option mode={options['mode']!r} does not "
-                "apply (every view is adjusted on its own attitude; leave --mode out)"
-            )
-        return adjust_with_jitter(prepared, observations, jitter_hz, jitter_amplitude, **options)
 
 
 def _frequencies(value: Any) -> tuple[float, ...] | str:
@@ -131,7 +171,5 @@ def _frequencies(value: Any) -> tuple[float, ...] | str:
     if isinstance(value, int | float):
         return (float(value),)
     if isinstance(value, str) or not isinstance(value, Sequence):
-        raise InputError(
-            f"cartosat2-bba: jitter_hz must be 'auto' or a list of frequencies, got {value!r}"
-        )
-    return tuple(float(v) for v in value)
+        raise UsageError(f"option jitter_hz must be 'auto' or a list of frequencies, got {value!r}")
+    return tuple(number("jitter_hz", 0.0, low_open=True)(v) for v in value)

@@ -28,6 +28,10 @@ class Component:
 
     name: ClassVar[str] = ""
     description: ClassVar[str] = ""
+    Settings: ClassVar[type | None] = None
+    """The component's options as a frozen attrs class (:mod:`carto.framework.settings`), or
+    None for a component that checks none this way; the kinds that take options (adjusters,
+    DEM generators) build it with their ``settings(options)``."""
 
     def __repr__(self) -> str:
         return f"<{type(self).__name__} {self.name!r}>"

@@ -24,8 +24,6 @@ from carto.framework.sdk.matchers import Matcher
 from carto.framework.sdk.sensors import Sensor
 from carto.ior.refine import IORResult, IORSettings, refine_dem
 
-_SETTINGS = {f.name for f in attrs.fields(IORSettings)}
-
 
 def ior_product(result: IORResult) -> DEMProduct:
     """The framework's :class:`DEMProduct` of an IOR result: the DEM, both ortho-images, the
@@ -137,6 +135,8 @@ class IORGenerator(DEMGenerator):
 
     name = "ior"
     description = "DEM + ortho-images by iterative ortho-image refinement (Radhadevi et al. 2010)"
+    priority = 10  # the generator of images whose sensor types name none (RPCs)
+    Settings = IORSettings
 
     def generate(
         self, images: Sequence[NDArray], sensors: Sequence[Sensor], **options: Any
@@ -176,11 +176,7 @@ class IORGenerator(DEMGenerator):
         scheduler = options.pop("scheduler", None)
         work_dir = options.pop("work_dir", None)
         keep_failed = bool(options.pop("keep_failed_tiles", False))
-        unknown = sorted(set(options) - _SETTINGS)
-        if unknown:
-            known = ", ".join(sorted(_SETTINGS))
-            raise InputError(f"ior: unknown option(s) {', '.join(unknown)} (known: {known})")
-        settings = IORSettings(**{k: v for k, v in options.items() if v is not None})
+        settings = self.settings({k: v for k, v in options.items() if v is not None})
         left, right = (as_image_source(i) for i in images)
         for side, image, sensor in (("left", left, sensors[0]), ("right", right, sensors[1])):
             name = f"ior: {side} image ({getattr(sensor, 'name', None) or side})"

@@ -8,9 +8,8 @@ import math
 from typing import Any
 
 import attrs
-import numpy as np
 
-from carto.framework.sdk.common import UsageError
+from carto.framework.sdk.common import UsageError, integer, number, optional
 from carto.framework.sdk.dem import MAX_GRID_CELLS
 
 _FLAGS = {
@@ -32,46 +31,17 @@ def option_label(name: str) -> str:
 
 
 def _number(name: str, low: float, high: float = math.inf, *, low_open: bool = False) -> Any:
-    """A converter to float that refuses (one-line InputError) what is not a finite number in
-    ``low..high`` (``low`` excluded with ``low_open``)."""
-
-    def convert(value: Any) -> float:
-        bad = isinstance(value, bool) or not isinstance(
-            value, int | float | np.integer | np.floating
-        )
-        number = math.nan if bad else float(value)
-        ok = math.isfinite(number) and number <= high
-        ok = ok and (number > low if low_open else number >= low)
-        if not ok:
-            bound = f"> {low:g}" if low_open else f">= {low:g}"
-            if math.isfinite(high):
-                bound += f" and <= {high:g}"
-            raise UsageError(f"{option_label(name)} must be a finite number {bound}, got {value!r}")
-        return number
-
-    return convert
+    """A converter to float that refuses what is not a finite number in ``low..high``."""
+    return number(name, low, high, low_open=low_open, label=option_label(name))
 
 
 def _optional_number(name: str, low: float) -> Any:
-    inner = _number(name, low, low_open=True)
-    return lambda value: None if value is None else inner(value)
+    return optional(_number(name, low, low_open=True))
 
 
 def _integer(name: str, low: int, high: int) -> Any:
     """A converter to int that refuses what is not a whole number in ``low..high``."""
-
-    def convert(value: Any) -> int:
-        ok = not isinstance(value, bool) and isinstance(
-            value, int | float | np.integer | np.floating
-        )
-        ok = ok and math.isfinite(float(value)) and float(value).is_integer()
-        if not (ok and low <= int(value) <= high):
-            raise UsageError(
-                f"{option_label(name)} must be a whole number within {low}..{high}, got {value!r}"
-            )
-        return int(value)
-
-    return convert
+    return integer(name, low, high, label=option_label(name))
 
 
 def _map_crs(value: Any) -> Any:

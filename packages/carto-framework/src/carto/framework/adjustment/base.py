@@ -19,6 +19,7 @@ from carto.framework.adjustment.observations import Observations
 from carto.framework.adjustment.variance_components import VarianceComponent
 from carto.framework.component import Component
 from carto.framework.geometry.sensor import Sensor
+from carto.framework.settings import Configurable
 
 FloatArray = NDArray[np.float64]
 
@@ -127,7 +128,7 @@ class AdjustmentResult:
         }
 
 
-class Adjuster(Component):
+class Adjuster(Component, Configurable):
     """Estimates corrections to sensor parameters from ground control and tie points."""
 
     @abc.abstractmethod

@@ -5,11 +5,24 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
+import attrs
+
+from carto.framework.adjustment.adjuster_settings import BundleSettings
 from carto.framework.adjustment.base import Adjuster, AdjustmentResult
 from carto.framework.adjustment.bundle import adjust_bundle
 from carto.framework.adjustment.observations import Observations
 from carto.framework.errors import InputError
 from carto.framework.geometry.sensor import Sensor
+from carto.framework.settings import choice, names
+
+
+@attrs.frozen
+class RPCBiasSettings(BundleSettings):
+    """``mode``: ``"shift"`` (offsets only) or ``"affine"`` (six terms per image); ``fixed``:
+    images whose RPC stays as it is; and the bundle's options."""
+
+    mode: str = attrs.field(default="shift", converter=choice("mode", ("shift", "affine")))
+    fixed: tuple[str, ...] = attrs.field(default=(), converter=names("fixed"))
 
 
 class RPCBiasAdjuster(Adjuster):
@@ -25,16 +38,15 @@ class RPCBiasAdjuster(Adjuster):
 
     name = "rpc-bias"
     description = "RPC bias compensation in image space (shift or affine per image)"
+    Settings = RPCBiasSettings
 
     def adjust(
         self, sensors: Mapping[str, Sensor], observations: Observations, **options: Any
     ) -> AdjustmentResult:
         from carto.framework.geometry.rpc_sensor import RPCSensor
 
-        mode = options.pop("mode", "shift")
-        fixed = set(options.pop("fixed", ()))
-        if mode not in ("shift", "affine"):
-            raise InputError(f"rpc-bias: mode must be 'shift' or 'affine', got {mode!r}")
+        settings = self.settings(options)
+        mode, fixed = settings.mode, set(settings.fixed)
         prepared: dict[str, Sensor] = {}
         for name, sensor in sensors.items():
             if not isinstance(sensor, RPCSensor):
@@ -47,4 +59,4 @@ class RPCBiasAdjuster(Adjuster):
                 for p in s.parameters
             }
             prepared[name] = s.with_parameters(free=free)
-        return adjust_bundle(prepared, observations, **options)
+        return adjust_bundle(prepared, observations, **settings.bundle_options())

@@ -36,8 +36,8 @@ def cmd_adjust(args: argparse.Namespace) -> int:
         options["height_offset_sigma_m"] = args.dem_offset_sigma
     if args.calibration:
         options["calibration"] = list(args.calibration)
-    if args.self_calibration:
-        options["self_calibration"] = [k.strip() for k in args.self_calibration.split(",")]
+    if args.self_calibration is not None:  # "" is refused by the adjuster, not dropped
+        options["self_calibration"] = args.self_calibration
     if args.jitter is not None:
         options["jitter_hz"] = _jitter(args.jitter)
     for option, value in (

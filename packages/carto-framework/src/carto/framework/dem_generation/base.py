@@ -44,7 +44,7 @@ from __future__ import annotations
 
 import abc
 from collections.abc import Mapping, Sequence
-from typing import Any
+from typing import Any, ClassVar
 
 import attrs
 import numpy as np
@@ -55,6 +55,7 @@ from carto.framework.errors import InputError
 from carto.framework.geometry.sensor import Sensor
 from carto.framework.imaging.ortho_grid import OrthoGrid
 from carto.framework.raster.dem import DEM
+from carto.framework.settings import Configurable
 
 
 def _layer_values(value: Any) -> Any:
@@ -194,8 +195,16 @@ class DEMProduct:
         return [r.as_dict() for r in self.iterations]
 
 
-class DEMGenerator(Component):
-    """Derives a digital elevation model from overlapping images with known orientation."""
+class DEMGenerator(Component, Configurable):
+    """Derives a digital elevation model from overlapping images with known orientation.
+
+    Attributes:
+        priority: which generator ``carto dem`` takes for images whose sensor types name
+            none installed: the one of the highest priority, when no other has it (0: never
+            chosen so while another is installed).
+    """
+
+    priority: ClassVar[int] = 0
 
     @abc.abstractmethod
     def generate(

@@ -50,6 +50,7 @@ from carto.framework.workflows.adjust_checks import (
     gcps_rejected,
     poor_adjustment,
 )
+from carto.framework.workflows.dem_options import check_installed
 from carto.framework.workflows.opening import (
     check_model_of_image,
     open_options,
@@ -157,6 +158,11 @@ def adjust_product(
     from carto.framework.parallel.engine import open_engine
     from carto.framework.products.scene import scene_files
 
+    check_installed(
+        ("adjuster", "--adjuster", adjuster),
+        ("trajectory", "--trajectory", trajectory),
+        ("matcher", "--matcher", matcher),
+    )
     src = Path(source)
     inputs = [src, *configuration_files(src), *scene_files(src)]
     if ties not in ("auto", "none"):
@@ -218,6 +224,9 @@ def _adjust_into(
     offset_sigma_px = float(options.pop("gcp_offset_sigma_px", GCP_OFFSET_SIGMA_PX))
     if not (math.isfinite(offset_sigma_px) and offset_sigma_px > 0):
         raise InputError(f"gcp_offset_sigma_px must be > 0, got {offset_sigma_px}")
+    tie_heights_flag = _auto_flag(options.pop("tie_heights", "auto"), "tie_heights")
+    height_sigma_m = float(options.pop("height_sigma_m", 30.0))
+    height_offset_sigma_m = float(options.pop("height_offset_sigma_m", 0.0))
     checkpoints = None
     dem = None
     flat_height_m = None
@@ -247,6 +256,9 @@ def _adjust_into(
         raise InputError(f"{src}: expected a scene folder or a JSON configuration file")
     matcher = matcher or "ncc"
     chosen_matcher = get_registry().get("matcher", matcher)
+    name = choose_adjuster(adjuster, types)
+    component = get_registry().get("adjuster", name)
+    component.settings({**options, "dem": None})  # the adjuster's options, before any work
     gcps = select_gcps(gcps, n_gcps) if gcps is not None else None
     n_used = len(set(gcps["id"].tolist())) if gcps is not None else 0
     early = gcps_off_the_dem(gcps, dem) if gcps is not None and flat_height_m is None else []
@@ -291,11 +303,7 @@ def _adjust_into(
     # points, it would only pull the block towards the coarse DEM's errors. So by default
     # ("auto"): every tie point without GCPs, else only those seen in an image without GCP
     # or whose rays meet at less than WEAK_INTERSECTION_DEG; True: every one; False: none.
-    tie_heights = flat_heights(
-        _auto_flag(options.pop("tie_heights", "auto"), "tie_heights"), flat_height_m, n_used
-    )
-    height_sigma_m = float(options.pop("height_sigma_m", 30.0))
-    height_offset_sigma_m = float(options.pop("height_offset_sigma_m", 0.0))
+    tie_heights = flat_heights(tie_heights_flag, flat_height_m, n_used)
     if dem is not None and tie_table is not None and tie_heights is not False:
         weak = WEAK_INTERSECTION_DEG if (tie_heights == "auto" and n_used > 0) else None
         obs = with_dem_heights(
@@ -312,8 +320,6 @@ def _adjust_into(
         transfer["why_not"] = "it needs every image's raster and a DEM"
         if gcp_transfer is True:
             raise InputError(f"gcp_transfer: {transfer['why_not']}")
-    name = choose_adjuster(adjuster, types)
-    component = get_registry().get("adjuster", name)
     progress(
         "adjust",
         f"adjusting {len(sensors)} images with {name} ({n_used} GCPs, {n_ties} tie points)",

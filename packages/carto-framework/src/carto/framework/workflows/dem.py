@@ -253,7 +253,9 @@ def initial_dem(
 
 def choose_dem_generator(requested: str | None, types: Sequence[SensorType]) -> str:
     """The DEM generator of a run: the one named, else the first default of the images'
-    sensor types that is installed, else the only one installed."""
+    sensor types that is installed, else the only one installed, else the one of the
+    highest :attr:`~carto.framework.dem_generation.base.DEMGenerator.priority` if no other
+    has it (a test plugin's generator beside ``ior`` left RPC pairs without a default)."""
     registry = get_registry()
     installed = registry.names("dem-generator")
     if requested is not None:
@@ -265,6 +267,11 @@ def choose_dem_generator(requested: str | None, types: Sequence[SensorType]) -> 
             return default
     if len(installed) == 1:
         return installed[0]
+    ranked = sorted(installed, key=lambda n: -registry.get("dem-generator", n).priority)
+    if ranked:
+        top = registry.get("dem-generator", ranked[0]).priority
+        if top > 0 and sum(registry.get("dem-generator", n).priority == top for n in ranked) == 1:
+            return ranked[0]
     raise InputError(
         "dem: no default DEM generator for these images "
         f"(installed: {', '.join(installed) or 'none'}); name one with --generator"
@@ -427,6 +434,9 @@ def _dem_into(
     t0 = time.perf_counter()
     pair = open_pair(inputs)
     rasters, sensors, scene_dem = pair.rasters, pair.sensors, pair.init_dem
+    generator = choose_dem_generator(generator, pair.types)
+    component = get_registry().get("dem-generator", generator)
+    component.settings({k: v for k, v in settings.items() if v is not None})  # before any work
     if inputs.source is not None and inputs.models is None:
         progress(
             "dem",
@@ -465,10 +475,7 @@ def _dem_into(
         progress=None if quiet else (lambda line: progress("dem", line, False)),
     )
     sensors = {**sensors, names[0]: oriented.left or sensors[names[0]], names[1]: oriented.right}
-    generator = choose_dem_generator(generator, pair.types)
-    registry = get_registry()
-    component = registry.get("dem-generator", generator)
-    chosen_matcher = registry.get("matcher", matcher)
+    chosen_matcher = get_registry().get("matcher", matcher)
     posting = settings.get("posting_m")
     progress(
         "dem",
