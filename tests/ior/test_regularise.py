@@ -56,10 +56,10 @@ def test_bands_give_the_whole_grid_update(grids, band_rows):
 
 
 def test_default_smoothing_follows_the_matching_window_in_ortho_pixels():
-    """A third of the window (11 px), in nodes of k ortho pixels, never under one node; a
+    """A third of the window (9 px), in nodes of k ortho pixels, never under one node; a
     given value is kept whatever k."""
-    assert IORSettings().smoothing_for(1) == pytest.approx(11 / 3)
-    assert IORSettings().smoothing_for(2) == pytest.approx(11 / 6)
+    assert IORSettings().smoothing_for(1) == pytest.approx(9 / 3)
+    assert IORSettings().smoothing_for(2) == pytest.approx(9 / 6)
     assert IORSettings().smoothing_for(4) == 1.0
     assert IORSettings(window=21).smoothing_for(4) == pytest.approx(21 / 12)
     assert IORSettings(smoothing_nodes=1.5).smoothing_for(1) == 1.5

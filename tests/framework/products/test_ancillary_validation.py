@@ -309,6 +309,10 @@ def _scene_copy(scene: Path, tmp_path: Path) -> tuple[Path, dict[str, Any]]:
         (lambda m: m.__setitem__("checkpoints", 5), "checkpoints: expected a file name"),
         (lambda m: m["images"]["nadir"].__setitem__("truth_model", 1), "truth_model: expected"),
         (
+            lambda m: m.__setitem__("vertical_reference", "geoid EGM96"),
+            "vertical_reference: 'geoid EGM96'; a scene's heights",
+        ),
+        (
             lambda m: m.__setitem__("init_dme", m.pop("init_dem")),
             "unknown field 'init_dme' (did you mean 'init_dem'?)",
         ),

@@ -100,6 +100,17 @@ def test_a_raster_of_several_bands_is_refused_unless_one_is_named(tmp_path: Path
     assert np.allclose(DEM.open(path, band=2).heights, _plane((20, 20)) + 1.0)
 
 
+def test_a_folder_or_a_loop_given_as_a_dem_is_named_so(tmp_path: Path):
+    """An outside probe: both were reported as 'no such file' (issue 31, family 5)."""
+    (tmp_path / "dem.tif").mkdir()
+    _refused(lambda: DEM.open(tmp_path / "dem.tif"), "is a folder, not a file")
+    (tmp_path / "a").symlink_to(tmp_path / "b")
+    (tmp_path / "b").symlink_to(tmp_path / "a")
+    _refused(lambda: DEM.open(tmp_path / "a"), "a loop of symbolic links")
+    _refused(lambda: Geoid.open(tmp_path / "dem.tif"), "geoid", "is a folder")
+    _refused(lambda: DEM.open(tmp_path / "none.tif"), "none.tif: no such file")
+
+
 @pytest.mark.parametrize("unit", ["m", "metre", "Meters"])
 def test_heights_in_metres_read(tmp_path: Path, unit: str):
     path = _tif(tmp_path / "x.tif", _plane((20, 20)))

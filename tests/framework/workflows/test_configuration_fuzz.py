@@ -132,3 +132,12 @@ def test_a_gcp_file_with_a_header_only_is_refused(valid, tmp_path) -> None:
     outcome = _read({**valid, "gcps": str(empty)}, tmp_path)
     assert isinstance(outcome, InputError)
     assert f"{empty}: holds no GCP" in str(outcome)
+
+
+@pytest.mark.parametrize("key", ["model", "raster"])
+def test_two_images_of_one_file_are_refused(valid, tmp_path, key) -> None:
+    doc = json.loads(json.dumps(valid))
+    doc["images"]["aft"][key] = doc["images"]["fore"][key]
+    outcome = _read(doc, tmp_path)
+    assert isinstance(outcome, InputError)
+    assert f"images.fore.{key} and images.aft.{key} name the same file" in str(outcome)

@@ -83,7 +83,10 @@ class IORSettings:
             DEM is below this, ortho pixels ...
         min_improvement: ... or when it improved by less than this fraction over the previous
             iteration (what is left is matching noise).
-        window, levels, min_score: dense matching (:func:`dense_offsets`); ``levels`` in the
+        window, levels, min_score: dense matching (:func:`dense_offsets`; ``window``, 9 px,
+            also sizes the least-squares sub-pixel steps and the regularisation: 9 rather
+            than 11 px lowered the NMAD on Reunion from 0.386 to 0.367 m and on simulated
+            urban scenes by 18 %, ``benchmarks/results/dem_window.json``); ``levels`` in the
             first iteration (the starting DEM may be tens of metres off), ``refine_levels``
             once the median mismatch is under 2 px, searched around the previous
             iteration's offset across the base (what the relative orientation leaves; what
@@ -127,7 +130,7 @@ class IORSettings:
     min_improvement: float = attrs.field(
         default=0.05, converter=_number("min_improvement", 0.0, 1.0)
     )
-    window: int = attrs.field(default=11, converter=_integer("window", 3, 101))
+    window: int = attrs.field(default=9, converter=_integer("window", 3, 101))
     levels: int = attrs.field(default=5, converter=_integer("levels", 1, 12))
     refine_levels: int = attrs.field(default=3, converter=_integer("refine_levels", 1, 12))
     min_score: float = attrs.field(default=0.5, converter=_number("min_score", -1.0, 1.0))

@@ -17,3 +17,16 @@ def resolved(path: str | os.PathLike[str], what: str, error: type[InputError] = 
         return Path(path).resolve()
     except (RuntimeError, OSError) as exc:
         raise error(f"{what} {path}: a loop of symbolic links ({exc})") from None
+
+
+def existing_file(path: str | os.PathLike[str], what: str) -> Path:
+    """``path`` as a :class:`Path` when it is a file; else an :class:`InputError` naming
+    ``what`` (``"DEM"``, ``"geoid"`` ...) and saying why: a folder, a loop of symbolic links
+    or no such file (an outside probe found folders and loops reported as "no such file")."""
+    path = Path(path)
+    if path.is_file():
+        return path
+    resolved(path, what)  # a loop of symbolic links: says so
+    if path.is_dir():
+        raise InputError(f"{what} {path}: is a folder, not a file")
+    raise InputError(f"{what} {path}: no such file")

@@ -29,6 +29,9 @@ SCENE_FIELDS = (
 """The fields of ``scene.json`` (``docs/formats.md``); any other is refused (a misspelt
 ``"init_dem"`` would start the DEM from a constant height without a word)."""
 IMAGE_FIELDS = ("raster", "ancillary", "camera", "array", "truth_model")
+SCENE_VERTICAL = "ellipsoid WGS84"
+"""What a scene's heights are above (``vertical_reference``; any other value is refused: the
+readers take every height as ellipsoidal)."""
 
 
 @attrs.frozen(eq=False)
@@ -165,6 +168,13 @@ def check_manifest(doc: Mapping[str, Any], manifest_path: Path) -> None:
                 )
     for key in ("gcps", "checkpoints"):
         name_of_file(doc[key], key)
+    vertical = doc.get("vertical_reference", SCENE_VERTICAL)
+    if vertical != SCENE_VERTICAL:
+        raise fail(
+            "vertical_reference",
+            f"{_short(vertical)}; a scene's heights (GCPs, checkpoints, DEMs) are above the "
+            f"{SCENE_VERTICAL.split()[0]} ({SCENE_VERTICAL!r})",
+        )
 
 
 def scene_files(path: str | os.PathLike[str]) -> list[Path]:

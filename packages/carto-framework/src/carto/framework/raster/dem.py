@@ -45,6 +45,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from carto.framework.arrays import as_float_arrays
 from carto.framework.errors import InputError
+from carto.framework.files.paths import existing_file
 from carto.framework.raster.gdal_errors import gdal_cause
 from carto.framework.raster.grid_sampling import EDGE_TOL_PX, bilinear_sample
 from carto.framework.raster.vertical_reference import (
@@ -231,9 +232,7 @@ class Geoid:
         import rasterio
         from rasterio.errors import RasterioError
 
-        path = Path(path)
-        if not path.is_file():
-            raise InputError(f"geoid {path}: no such file")
+        path = existing_file(path, "geoid")
         try:
             with rasterio.open(path) as ds:
                 if ds.crs is None or not ds.crs.is_geographic:
@@ -395,9 +394,7 @@ class DEM:
         from rasterio.transform import Affine
         from rasterio.windows import Window
 
-        path = Path(path)
-        if not path.is_file():
-            raise InputError(f"DEM {path}: no such file")
+        path = existing_file(path, "DEM")
         try:
             with rasterio.open(path) as ds:
                 if ds.crs is None:

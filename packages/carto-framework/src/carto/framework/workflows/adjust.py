@@ -34,6 +34,7 @@ from carto.framework.adjustment.observations import Observations
 from carto.framework.errors import AdjustmentError, InputError, UnknownComponentError
 from carto.framework.files.control_table import read_control_table, read_tie_table
 from carto.framework.files.documents import check_fields, read_json, write_json_atomic
+from carto.framework.files.paths import resolved
 from carto.framework.files.point_table import write_point_table
 from carto.framework.files.staging import staged_folder
 from carto.framework.geometry.sensor import Sensor, SensorType
@@ -535,6 +536,25 @@ IMAGE_KEYS = ("model", "raster", "sensor")
 """The fields of one image in it."""
 
 
+def _check_distinct(path: Path, images: Mapping[str, Any], base: Path) -> None:
+    """Refuse two images of a configuration that name one model or one raster: the same
+    view twice has no stereo (an outside probe got '300 of 300 points have no
+    intersection', naming neither the file nor the cause)."""
+    for key in ("model", "raster"):
+        seen: dict[Path, str] = {}
+        for name, spec in images.items():
+            value = spec.get(key) if isinstance(spec, dict) else None
+            if not isinstance(value, str) or not value:
+                continue  # checked with the image
+            file = resolved(base / value, f"images.{name}.{key}")
+            if file in seen:
+                raise InputError(
+                    f"{path}: images.{seen[file]}.{key} and images.{name}.{key} name the same "
+                    f"file {file}: each image needs its own"
+                )
+            seen[file] = name
+
+
 def _check_component(path: Path, field: str, name: str) -> None:
     """Refuse a configuration ``field`` naming a component nobody registered, naming both."""
     kind = "matcher" if field == "matcher" else "trajectory"
@@ -607,6 +627,7 @@ def read_configuration(
     sensors: dict[str, Sensor] = {}
     types: dict[str, SensorType] = {}
     rasters: dict[str, Path] = {}
+    _check_distinct(path, images, base)
     for name, spec in images.items():
         if not isinstance(spec, dict):
             raise InputError(
