@@ -307,7 +307,7 @@ def _check_generation(doc: _Document) -> None:
         )
 
 
-def read_dimap(path: str | Path) -> DimapSensorModel:
+def read_dimap(path: str | Path) -> DimapSensorModel:  # noqa: C901, PLR0915 (issue 32: to split)
     """Read and validate the physical model of a Pleiades DIMAP v1.4 SENSOR product.
 
     Raises:

@@ -190,7 +190,7 @@ def _stage_label(factor: int) -> str:
     return f"1/{factor} resolution, " if factor > 1 else ""
 
 
-def iterate(
+def iterate(  # noqa: PLR0915 (issue 32: to split)
     images: tuple[Any, Any],
     sensors: tuple[Sensor, Sensor],
     dem_grid: OrthoGrid,

@@ -322,7 +322,7 @@ def adjust_bundle(
     return attrs.evolve(result, outliers=tuple(outliers))
 
 
-def _solve(
+def _solve(  # noqa: C901, PLR0915 (issue 32: to split)
     sensors: dict[str, Sensor],
     obs: Observations,
     names: list[str],

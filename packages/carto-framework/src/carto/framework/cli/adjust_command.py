@@ -17,7 +17,7 @@ from carto.framework.parallel.engine import default_workers
 
 
 # --------------------------------------------------------------------------- adjust
-def cmd_adjust(args: argparse.Namespace) -> int:
+def cmd_adjust(args: argparse.Namespace) -> int:  # noqa: C901 (issue 32: to split)
     from carto.framework.workflows.adjust import adjust_product
 
     options: dict[str, object] = {}

@@ -396,7 +396,7 @@ def _covering(dem: DEM, part: DEM) -> DEM:
     )
 
 
-def dem_accuracy_by_blocks(
+def dem_accuracy_by_blocks(  # noqa: PLR0915 (issue 32: to split)
     dem: DEMSource,
     reference: str | os.PathLike[str],
     *,

@@ -165,7 +165,7 @@ def _kind(kind: str) -> str:
     return KINDS[kind]
 
 
-def check_control_table(
+def check_control_table(  # noqa: C901 (issue 32: to split)
     table: Mapping[str, NDArray],
     kind: str = "gcps",
     *,

@@ -300,7 +300,7 @@ def common_ray_heights_m(sensors: Sequence[Sensor]) -> tuple[float, float]:
     return (low, high) if low < high else RAY_HEIGHTS_M
 
 
-def intersect_sensors(
+def intersect_sensors(  # noqa: PLR0915 (issue 32: to split)
     sensors: Sequence[Sensor],
     lines: ArrayLike,
     samples: ArrayLike,

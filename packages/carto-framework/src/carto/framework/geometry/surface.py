@@ -23,7 +23,7 @@ if TYPE_CHECKING:  # any sensor: used through its methods only
 FloatArray = NDArray[np.float64]
 
 
-def dem_surface_locate(
+def dem_surface_locate(  # noqa: PLR0915 (issue 32: to split)
     sensor: Sensor,
     line: ArrayLike,
     sample: ArrayLike,

@@ -230,7 +230,7 @@ def spread_order(
     return keep[np.lexsort((-w[keep], rank[keep]))]
 
 
-def forstner_points(
+def forstner_points(  # noqa: C901 (issue 32: to split)
     image: ArrayLike,
     *,
     window: int = 5,

@@ -40,7 +40,7 @@ GCP_OFFSET_COLUMNS = ("id", "image_a", "image_b", "d_line", "d_sample", "score",
 """Columns of :func:`gcp_offsets`' table: position in ``image_b`` minus in ``image_a``."""
 
 
-def gcp_offsets(
+def gcp_offsets(  # noqa: C901, PLR0915 (issue 32: to split)
     gcps: Mapping[str, NDArray],
     rasters: Mapping[str, Path | NDArray],
     sensors: Mapping[str, Sensor],

@@ -198,7 +198,7 @@ def _keys_kernel(f: float, out: np.ndarray, deriv: np.ndarray) -> None:  # pragm
 
 
 @numba.njit(parallel=True, cache=True, nogil=True)
-def _lsm_affine_kernel(
+def _lsm_affine_kernel(  # noqa: C901, PLR0915 (issue 32: to split)
     left, right, t0, offset, points, t, iterations, result, good
 ):  # pragma: no cover
     """The Gauss-Newton iterations of :func:`lsm_affine_refine`, one point per thread:

@@ -202,7 +202,7 @@ def ortho_parallax(
     return parallax
 
 
-def match_views(
+def match_views(  # noqa: PLR0915 (issue 32: to split)
     orthos: Mapping[str, NDArray],
     reference: str,
     points: ArrayLike,

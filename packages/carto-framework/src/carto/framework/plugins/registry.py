@@ -248,7 +248,7 @@ def _validate_component(obj: Any, kind: Kind) -> str | None:
     return None
 
 
-def load_registry(entry_points: Iterable[metadata.EntryPoint] | None = None) -> Registry:
+def load_registry(entry_points: Iterable[metadata.EntryPoint] | None = None) -> Registry:  # noqa: C901 (issue 32: to split)
     """Discover plugins and build a :class:`Registry`.
 
     Args:

@@ -119,7 +119,7 @@ def _short(value: Any) -> str:
     return text if len(text) <= 60 else text[:57] + "..."
 
 
-def check_manifest(doc: Mapping[str, Any], manifest_path: Path) -> None:
+def check_manifest(doc: Mapping[str, Any], manifest_path: Path) -> None:  # noqa: C901 (issue 32: to split)
     """Check the fields of a scene manifest that opening the scene relies on.
 
     ``images`` must be a non-empty object of image entries, each an object with ``raster`` and

@@ -350,7 +350,7 @@ class DEM:
         return cls(np.full((2, 2), float(h_m)), transform, "EPSG:4326", vertical=vertical)
 
     @classmethod
-    def open(
+    def open(  # noqa: C901, PLR0915 (issue 32: to split)
         cls,
         path: str | os.PathLike[str],
         *,

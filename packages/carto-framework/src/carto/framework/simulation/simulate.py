@@ -179,7 +179,7 @@ def _radiometry(
     return np.clip(np.rint(dn), 0, DN_MAX).astype(np.uint16)
 
 
-def simulate_scene(
+def simulate_scene(  # noqa: C901, PLR0915 (issue 32: to split)
     plan: ScenePlan,
     out_dir: str | os.PathLike[str],
     options: SimulationOptions = SimulationOptions(),  # noqa: B008 (frozen, immutable)

@@ -194,7 +194,7 @@ def adjust_product(
             shutil.rmtree(work, ignore_errors=True)
 
 
-def _adjust_into(
+def _adjust_into(  # noqa: C901, PLR0915 (issue 32: to split)
     out: Path,
     src: Path,
     *,
@@ -596,7 +596,7 @@ def configuration_files(path: Path) -> list[Path]:
     return [path.parent / n for n in names if isinstance(n, str) and n]
 
 
-def read_configuration(
+def read_configuration(  # noqa: C901, PLR0915 (issue 32: to split)
     path: Path, sensor_type: str | None = None, trajectory: str | None = None
 ) -> Configuration:
     """A JSON configuration: ``{"images": {name: {"model": file, "raster": file,

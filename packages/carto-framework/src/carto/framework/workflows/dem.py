@@ -403,7 +403,7 @@ def dem_product(
     return report
 
 
-def _dem_into(
+def _dem_into(  # noqa: C901, PLR0915 (issue 32: to split)
     out: Path,
     inputs: StereoInputs,
     *,
