@@ -212,7 +212,6 @@ LONG_FUNCTIONS = {
     "packages/carto-framework/src/carto/framework/adjustment/bundle.py::adjust_bundle",
     "packages/carto-framework/src/carto/framework/adjustment/bundle.py::_solve",
     "packages/carto-framework/src/carto/framework/adjustment/relative_orientation.py::relative_orientation",
-    "packages/carto-framework/src/carto/framework/cli/adjust_command.py::cmd_adjust",
     "packages/carto-framework/src/carto/framework/cli/adjust_command.py::add_adjust",
     "packages/carto-framework/src/carto/framework/cli/dem_commands.py::add_dem",
     "packages/carto-framework/src/carto/framework/evaluation/dem_accuracy.py::dem_accuracy_by_blocks",

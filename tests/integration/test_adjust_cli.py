@@ -79,8 +79,8 @@ def test_adjust_errors_are_one_line(run_carto, tmp_path, cartosat1_scene):
         ],
         with_test_plugins=False,
     )
-    assert res.returncode == 1
-    assert "unknown adjuster 'nope'" in res.stderr
+    assert res.returncode == 2  # a usage error, before any work
+    assert "--adjuster 'nope': not installed" in res.stderr
     assert "Traceback" not in res.stderr
     res = run_carto(
         ["adjust", str(cartosat1_scene), "--gcp-offset-sigma", "0", "--out", str(tmp_path / "z")],
@@ -101,7 +101,7 @@ def test_adjust_errors_are_one_line(run_carto, tmp_path, cartosat1_scene):
     )
     assert res.returncode == 2
     assert "--image-trends must be 0..2, got 3" in res.stderr
-    # image trends belong to the tied mode: a separate adjustment refuses them (bad data, 1)
+    # image trends belong to the tied mode: a separate adjustment refuses them
     res = run_carto(
         [
             *("adjust", str(cartosat1_scene), "--ties", "none", "--mode", "separate"),
@@ -109,8 +109,8 @@ def test_adjust_errors_are_one_line(run_carto, tmp_path, cartosat1_scene):
         ],
         with_test_plugins=False,
     )
-    assert res.returncode == 1
-    assert "mode separate takes image_trend_order 0" in res.stderr
+    assert res.returncode == 2  # a usage error, found before any work
+    assert "mode separate takes 0" in res.stderr
     assert "Traceback" not in res.stderr
     assert not (tmp_path / "z").exists()
 

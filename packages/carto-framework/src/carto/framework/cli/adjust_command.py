@@ -17,29 +17,31 @@ from carto.framework.parallel.engine import default_workers
 
 
 # --------------------------------------------------------------------------- adjust
-def cmd_adjust(args: argparse.Namespace) -> int:  # noqa: C901 (issue 32: to split)
+def cmd_adjust(args: argparse.Namespace) -> int:
     from carto.framework.workflows.adjust import adjust_product
 
-    options: dict[str, object] = {}
-    if args.mode:
-        options["mode"] = args.mode
-    if args.attitude_order is not None:
-        options["attitude_order"] = args.attitude_order
-    if args.image_trends is not None:
-        options["image_trend_order"] = args.image_trends
-    if args.no_robust:
-        options["robust"] = False
-    if args.dem_heights is not None:
-        options["tie_heights"] = args.dem_heights > 0
-        options["height_sigma_m"] = args.dem_heights
-    if args.dem_offset_sigma is not None:
-        options["height_offset_sigma_m"] = args.dem_offset_sigma
-    if args.calibration:
-        options["calibration"] = list(args.calibration)
-    if args.self_calibration is not None:  # "" is refused by the adjuster, not dropped
-        options["self_calibration"] = args.self_calibration
-    if args.jitter is not None:
-        options["jitter_hz"] = _jitter(args.jitter)
+    _check_adjust_args(args)
+    report = adjust_product(
+        args.source,
+        args.out,
+        n_gcps=args.gcps,
+        adjuster=args.adjuster,
+        ties=args.ties,
+        options=_adjust_options(args),
+        sensor_type=args.sensor,
+        matcher=args.matcher,
+        trajectory=args.trajectory,
+        quiet=args.quiet,
+        allow_poor=args.allow_poor,
+        workers=args.workers,
+        scheduler=args.scheduler,
+    )
+    _print_adjust_summary(report, args.out)
+    return 0
+
+
+def _check_adjust_args(args: argparse.Namespace) -> None:
+    """The command line's own bounds (the adjuster checks its options' as well)."""
     for option, value in (
         ("--dem-heights", args.dem_heights),
         ("--dem-offset-sigma", args.dem_offset_sigma),
@@ -49,33 +51,37 @@ def cmd_adjust(args: argparse.Namespace) -> int:  # noqa: C901 (issue 32: to spl
             raise UsageError(f"{option} must be a number >= 0, got {value}")
     if args.gcp_offset_sigma is not None and args.gcp_offset_sigma == 0:
         raise UsageError("--gcp-offset-sigma must be > 0, got 0")
-    if args.workers is not None and args.workers < 1:
-        raise UsageError(f"--workers must be >= 1, got {args.workers}")
-    if args.gcps is not None and args.gcps < 0:
-        raise UsageError(f"--gcps must be >= 0, got {args.gcps}")
-    if args.attitude_order is not None and not 0 <= args.attitude_order <= 10:
-        raise UsageError(f"--attitude-order must be 0..10, got {args.attitude_order}")
-    if args.image_trends is not None and not 0 <= args.image_trends <= 2:
-        raise UsageError(f"--image-trends must be 0..2, got {args.image_trends}")
-    if args.no_gcp_transfer:
-        options["gcp_transfer"] = False
-    if args.gcp_offset_sigma is not None:
-        options["gcp_offset_sigma_px"] = args.gcp_offset_sigma
-    report = adjust_product(
-        args.source,
-        args.out,
-        n_gcps=args.gcps,
-        adjuster=args.adjuster,
-        ties=args.ties,
-        options=options,
-        sensor_type=args.sensor,
-        matcher=args.matcher,
-        trajectory=args.trajectory,
-        quiet=args.quiet,
-        allow_poor=args.allow_poor,
-        workers=args.workers,
-        scheduler=args.scheduler,
-    )
+    for option, value, low, high in (
+        ("--workers", args.workers, 1, math.inf),
+        ("--gcps", args.gcps, 0, math.inf),
+        ("--attitude-order", args.attitude_order, 0, 10),
+        ("--image-trends", args.image_trends, 0, 2),
+    ):
+        if value is not None and not low <= value <= high:
+            bound = f">= {low}" if math.isinf(high) else f"{low}..{high}"
+            raise UsageError(f"{option} must be {bound}, got {value}")
+
+
+def _adjust_options(args: argparse.Namespace) -> dict[str, object]:
+    """The options of the workflow and the adjuster that the command line gave."""
+    given = {
+        "mode": args.mode or None,
+        "attitude_order": args.attitude_order,
+        "image_trend_order": args.image_trends,
+        "robust": False if args.no_robust else None,
+        "tie_heights": None if args.dem_heights is None else args.dem_heights > 0,
+        "height_sigma_m": args.dem_heights,
+        "height_offset_sigma_m": args.dem_offset_sigma,
+        "calibration": list(args.calibration) if args.calibration else None,
+        "self_calibration": args.self_calibration,  # "" is refused by the adjuster
+        "jitter_hz": None if args.jitter is None else _jitter(args.jitter),
+        "gcp_transfer": False if args.no_gcp_transfer else None,
+        "gcp_offset_sigma_px": args.gcp_offset_sigma,
+    }
+    return {k: v for k, v in given.items() if v is not None}
+
+
+def _print_adjust_summary(report: dict, out: str) -> None:
     print(
         f"{report['adjuster']}: {report['gcps_used']} GCPs, {report['tie_points']} tie points, "
         f"sigma0 {report['sigma0']:.3f}, outliers: {', '.join(report['outliers']) or 'none'}"
@@ -96,8 +102,7 @@ def cmd_adjust(args: argparse.Namespace) -> int:  # noqa: C901 (issue 32: to spl
             f"{before['rmse_height_m']:.1f} m"
         )
     extra = "".join(f", {f}" for k, f in report["files"].items() if k == "calibration")
-    print(f"outputs in {args.out}: report.json, residuals.png, adjusted models and RPCs{extra}")
-    return 0
+    print(f"outputs in {out}: report.json, residuals.png, adjusted models and RPCs{extra}")
 
 
 def _jitter(text: str) -> str | list[float]:
