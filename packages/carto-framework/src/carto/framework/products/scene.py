@@ -119,7 +119,7 @@ def _short(value: Any) -> str:
     return text if len(text) <= 60 else text[:57] + "..."
 
 
-def check_manifest(doc: Mapping[str, Any], manifest_path: Path) -> None:  # noqa: C901 (issue 32: to split)
+def check_manifest(doc: Mapping[str, Any], manifest_path: Path) -> None:
     """Check the fields of a scene manifest that opening the scene relies on.
 
     ``images`` must be a non-empty object of image entries, each an object with ``raster`` and
@@ -130,51 +130,63 @@ def check_manifest(doc: Mapping[str, Any], manifest_path: Path) -> None:  # noqa
     Raises:
         InputError: one line naming the manifest, the field and the value.
     """
-    root = manifest_path.parent
-
-    def fail(field: str, problem: str) -> InputError:
-        return InputError(f"{manifest_path}: {field}: {problem}")
-
-    def name_of_file(value: Any, field: str) -> str:
-        if not isinstance(value, str) or not value.strip():
-            raise fail(field, f"expected a file name (a string), got {_short(value)}")
-        return value
-
+    fields = _ManifestFields(manifest_path)
     check_fields(doc, SCENE_FIELDS, manifest_path)
     for key in ("images", "gcps", "checkpoints"):
         if key not in doc:
             raise InputError(f"{manifest_path}: missing field {key!r}")
     platform = doc.get("platform", "")
     if not isinstance(platform, str):
-        raise fail("platform", f"expected a string, got {_short(platform)}")
+        raise fields.fail("platform", f"expected a string, got {_short(platform)}")
     images = doc["images"]
     if not isinstance(images, Mapping) or not images:
-        raise fail("images", f"expected an object of images by name, got {_short(images)}")
+        raise fields.fail("images", f"expected an object of images by name, got {_short(images)}")
     for name, image in images.items():
-        where = f"images.{name}"
-        if not isinstance(image, Mapping):
-            raise fail(where, f"expected an object (raster, ancillary ...), got {_short(image)}")
-        check_fields(image, IMAGE_FIELDS, manifest_path, f"{where}.")
-        for key in ("raster", "ancillary"):
-            if key not in image:
-                raise InputError(f"{manifest_path}: missing field '{where}.{key}'")
-            file = root / name_of_file(image[key], f"{where}.{key}")
-            if not file.is_file():
-                raise fail(f"{where}.{key}", f"file {file} does not exist")
-        for key in ("truth_model", "camera", "array"):
-            if key in image and not (isinstance(image[key], str) and image[key].strip()):
-                raise fail(
-                    f"{where}.{key}", f"expected a non-empty string, got {_short(image[key])}"
-                )
+        fields.check_image(f"images.{name}", image)
     for key in ("gcps", "checkpoints"):
-        name_of_file(doc[key], key)
+        fields.file_name(doc[key], key)
     vertical = doc.get("vertical_reference", SCENE_VERTICAL)
     if vertical != SCENE_VERTICAL:
-        raise fail(
+        raise fields.fail(
             "vertical_reference",
             f"{_short(vertical)}; a scene's heights (GCPs, checkpoints, DEMs) are above the "
             f"{SCENE_VERTICAL.split()[0]} ({SCENE_VERTICAL!r})",
         )
+
+
+@attrs.frozen
+class _ManifestFields:
+    """The checks of one manifest's fields, whose errors name it."""
+
+    path: Path
+
+    def fail(self, field: str, problem: str) -> InputError:
+        return InputError(f"{self.path}: {field}: {problem}")
+
+    def file_name(self, value: Any, field: str) -> str:
+        if not isinstance(value, str) or not value.strip():
+            raise self.fail(field, f"expected a file name (a string), got {_short(value)}")
+        return value
+
+    def check_image(self, where: str, image: Any) -> None:
+        """One entry of ``images``: an object of existing ``raster`` and ``ancillary`` files
+        and optional non-empty strings."""
+        if not isinstance(image, Mapping):
+            raise self.fail(
+                where, f"expected an object (raster, ancillary ...), got {_short(image)}"
+            )
+        check_fields(image, IMAGE_FIELDS, self.path, f"{where}.")
+        for key in ("raster", "ancillary"):
+            if key not in image:
+                raise InputError(f"{self.path}: missing field '{where}.{key}'")
+            file = self.path.parent / self.file_name(image[key], f"{where}.{key}")
+            if not file.is_file():
+                raise self.fail(f"{where}.{key}", f"file {file} does not exist")
+        for key in ("truth_model", "camera", "array"):
+            if key in image and not (isinstance(image[key], str) and image[key].strip()):
+                raise self.fail(
+                    f"{where}.{key}", f"expected a non-empty string, got {_short(image[key])}"
+                )
 
 
 def scene_files(path: str | os.PathLike[str]) -> list[Path]:

@@ -46,14 +46,20 @@ from numpy.typing import ArrayLike, NDArray
 from carto.framework.arrays import as_float_arrays
 from carto.framework.errors import InputError
 from carto.framework.files.paths import existing_file
+from carto.framework.raster.dem_file import MIN_DEM_POSTS as MIN_DEM_POSTS
+from carto.framework.raster.dem_file import check_dem_file, vertical_of
 from carto.framework.raster.gdal_errors import gdal_cause
 from carto.framework.raster.grid_sampling import EDGE_TOL_PX, bilinear_sample
 from carto.framework.raster.vertical_reference import (
-    EGM96,
+    EGM96 as EGM96,
+)
+from carto.framework.raster.vertical_reference import (
     ELLIPSOID,
-    VERTICAL_TAG,
     normalise_vertical,
     split_vertical,
+)
+from carto.framework.raster.vertical_reference import (
+    VERTICAL_TAG as VERTICAL_TAG,
 )
 
 if TYPE_CHECKING:  # rasterio and pyproj are imported when a DEM is used, not at plugin discovery
@@ -72,8 +78,6 @@ is at -430 m, Everest at 8849 m and geoid undulations stay within -107..+86 m. A
 outside is nodata: undeclared voids (-9999, -32768), fill values (1e30), overflowed sums."""
 MAX_UNDULATION_M = 150.0
 """Largest plausible |geoid undulation|, metres (EGM96 and EGM2008 stay within -107..+86 m)."""
-MIN_DEM_POSTS = 2
-"""A DEM needs at least 2 x 2 posts: bilinear sampling and gradients need two per axis."""
 # what to do about geoid heights (SRTM .hgt) where ellipsoidal heights are needed
 GEOID_ADVICE = 'give the geoid grid with --geoid GTX (configuration key "geoid"), e.g. egm96_15.gtx'
 
@@ -350,7 +354,7 @@ class DEM:
         return cls(np.full((2, 2), float(h_m)), transform, "EPSG:4326", vertical=vertical)
 
     @classmethod
-    def open(  # noqa: C901, PLR0915 (issue 32: to split)
+    def open(
         cls,
         path: str | os.PathLike[str],
         *,
@@ -397,37 +401,9 @@ class DEM:
         path = existing_file(path, "DEM")
         try:
             with rasterio.open(path) as ds:
-                if ds.crs is None:
-                    raise InputError(f"DEM {path}: no CRS (field crs)")
-                if ds.transform.is_identity:
-                    raise InputError(f"DEM {path}: no georeferencing (field transform)")
-                if band is None and ds.count > 1:
-                    names = ", ".join(d or f"band {k}" for k, d in enumerate(ds.descriptions, 1))
-                    raise InputError(
-                        f"DEM {path}: {ds.count} bands ({names}); a DEM is one band of heights"
-                    )
-                band = 1 if band is None else band
-                if not 1 <= band <= ds.count:
-                    raise InputError(f"DEM {path}: band {band} does not exist ({ds.count} bands)")
-                _check_heights_band(ds, band, path)
-                if min(ds.width, ds.height) < MIN_DEM_POSTS:
-                    raise InputError(
-                        f"DEM {path}: {ds.width} x {ds.height} pixels; a DEM needs at least "
-                        f"{MIN_DEM_POSTS} x {MIN_DEM_POSTS} posts"
-                    )
+                band = check_dem_file(ds, band, path)
                 crs, file_vertical = split_vertical(_to_crs(ds.crs))
-                tag = ds.tags().get(VERTICAL_TAG)
-                if vertical is not None:
-                    vref = normalise_vertical(vertical)
-                elif tag:
-                    try:
-                        vref = normalise_vertical(tag)
-                    except InputError as exc:
-                        raise InputError(f"DEM {path}: tag {VERTICAL_TAG}: {exc}") from exc
-                elif ds.driver == "SRTMHGT":
-                    vref = EGM96
-                else:
-                    vref = file_vertical or ELLIPSOID
+                vref = vertical_of(ds, vertical, file_vertical, path)
                 window = None
                 transform = ds.transform
                 if rows is not None:
@@ -679,38 +655,3 @@ class DEM:
         r1 = min(math.ceil(r_max - tol) + 1, n_rows)
         c1 = min(math.ceil(c_max - tol) + 1, n_cols)
         return (r0, max(r1, r0 + 1)), (c0, max(c1, c0 + 1))
-
-
-HEIGHT_UNITS = ("m", "metre", "meter", "metres", "meters")
-"""Band units (GDAL's ``units``) of heights in metres; a band with another stated unit (feet,
-or a carto product's correlation scores) is not a DEM of Carto's."""
-
-
-def _check_heights_band(ds: Any, band: int, path: Path) -> None:
-    """Refuse a raster that says it is not a DEM in metres: a carto ortho-image or quality
-    layer (tag ``CARTO_PRODUCT``), or a band whose stated unit is not metres. An outside
-    probe evaluated ortho-images and quality layers as DEMs (issue 31)."""
-    product = ds.tags().get("CARTO_PRODUCT")
-    if product not in (None, "dem"):
-        raise InputError(
-            f"DEM {path}: a carto {product} raster (tag CARTO_PRODUCT), not a DEM; give dem.tif"
-        )
-    unit = (ds.units[band - 1] or "").strip()
-    if unit and unit.lower() not in HEIGHT_UNITS:
-        raise InputError(
-            f"DEM {path}: band {band} is in {unit!r}, not metres (field units); convert the "
-            "heights to metres (e.g. gdal_calc.py), or clear the unit if it is wrong"
-        )
-
-
-def states_vertical(path: str | os.PathLike[str]) -> bool:
-    """Whether a raster says what its heights are above (a ``VERTICAL_REFERENCE`` tag, the
-    vertical part of a compound CRS, or an SRTM tile, whose heights are EGM96's): one that
-    does not is read as ellipsoidal (the Carto convention), which a geoid-height DEM saved
-    as a plain GeoTIFF is not (tens of metres off)."""
-    import rasterio
-
-    with rasterio.open(path) as ds:
-        if ds.tags().get(VERTICAL_TAG) or ds.driver == "SRTMHGT":
-            return True
-        return ds.crs is not None and split_vertical(_to_crs(ds.crs))[1] is not None

@@ -25,7 +25,8 @@ from carto.framework.files.staging import require_complete_output, staged_folder
 from carto.framework.geometry.sensor import Sensor, SensorType
 from carto.framework.plugins.registry import get_registry
 from carto.framework.products.scene import scene_files
-from carto.framework.raster.dem import DEM, Geoid, states_vertical
+from carto.framework.raster.dem import DEM, Geoid
+from carto.framework.raster.dem_file import states_vertical
 from carto.framework.raster.vertical_reference import vertical_tag
 from carto.framework.workflows.dem_checks import (
     departs_from_start,
