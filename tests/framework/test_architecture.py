@@ -233,7 +233,6 @@ LONG_FUNCTIONS = {
     "packages/carto-framework/src/carto/framework/matching/tiepoints.py::automatic_tie_points",
     "packages/carto-framework/src/carto/framework/matching/tiled_ties.py::tie_points_on_orthos",
     "packages/carto-framework/src/carto/framework/matching/tiled_ties.py::tiled_tie_points",
-    "packages/carto-framework/src/carto/framework/plugins/registry.py::load_registry",
     "packages/carto-framework/src/carto/framework/raster/dem.py::DEM.open",
     "packages/carto-framework/src/carto/framework/simulation/control.py::control_points",
     "packages/carto-framework/src/carto/framework/simulation/simulate.py::simulate_scene",

@@ -21,7 +21,7 @@ from __future__ import annotations
 import functools
 import importlib
 import importlib.metadata as metadata
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from typing import Any
 
 import attrs
@@ -248,7 +248,7 @@ def _validate_component(obj: Any, kind: Kind) -> str | None:
     return None
 
 
-def load_registry(entry_points: Iterable[metadata.EntryPoint] | None = None) -> Registry:  # noqa: C901 (issue 32: to split)
+def load_registry(entry_points: Iterable[metadata.EntryPoint] | None = None) -> Registry:
     """Discover plugins and build a :class:`Registry`.
 
     Args:
@@ -262,68 +262,65 @@ def load_registry(entry_points: Iterable[metadata.EntryPoint] | None = None) -> 
     unique: dict[tuple[str, str], metadata.EntryPoint] = {}
     for ep in entry_points:
         unique.setdefault((ep.name, ep.value), ep)
-
     pm = pluggy.PluginManager(hookspecs.PROJECT_NAME)
     pm.add_hookspecs(hookspecs)
-    plugins: list[PluginInfo] = []
     broken: list[BrokenPlugin] = []
     sources: dict[str, PluginInfo] = {}
-
     for (name, _value), ep in sorted(unique.items()):
-        dist, version = _distribution_of(ep)
-
-        def record(stage: str, error: str, ep: metadata.EntryPoint = ep) -> None:
+        why = _register(pm, name, ep, sources)
+        if why is None:
+            sources[name] = PluginInfo(name, _entry_point_text(ep), *_distribution_of(ep))
+        else:
+            stage, error = why
             broken.append(
                 BrokenPlugin(ep.name, _entry_point_text(ep), *_distribution_of(ep), stage, error)
             )
+    components = _components(pm, sources, broken)
+    return Registry(components, list(sources.values()), broken)
 
-        if name in sources:
-            record(
-                "register",
-                f"PluginError: entry-point name {name!r} is already used by "
-                f"{sources[name].distribution}",
-            )
-            continue
-        try:
-            plugin = ep.load()
-        except Exception as exc:  # noqa: BLE001 - any failure of a plugin import is recorded
-            record("import", _describe_error(exc))
-            continue
-        try:
-            pm.register(plugin, name=name)
-            unknown = [
-                caller.name
-                for caller in (pm.get_hookcallers(plugin) or [])
-                if not caller.has_spec()
-            ]
-            if unknown:
-                pm.unregister(plugin)
-                raise PluginError(f"implements unknown hook(s): {', '.join(sorted(unknown))}")
-        except Exception as exc:  # noqa: BLE001 - pluggy validation errors and ours
-            record("register", _describe_error(exc))
-            continue
-        info = PluginInfo(name, _entry_point_text(ep), dist, version)
-        sources[name] = info
-        plugins.append(info)
 
+def _register(
+    pm: pluggy.PluginManager,
+    name: str,
+    ep: metadata.EntryPoint,
+    sources: Mapping[str, PluginInfo],
+) -> tuple[str, str] | None:
+    """Import an entry point's module and register its hooks; ``(stage, error)`` when that
+    fails (the name taken, the import, a hook the specifications do not have)."""
+    if name in sources:
+        return (
+            "register",
+            f"PluginError: entry-point name {name!r} is already used by "
+            f"{sources[name].distribution}",
+        )
+    try:
+        plugin = ep.load()
+    except Exception as exc:  # noqa: BLE001 - any failure of a plugin import is recorded
+        return "import", _describe_error(exc)
+    try:
+        pm.register(plugin, name=name)
+        unknown = [
+            caller.name for caller in (pm.get_hookcallers(plugin) or []) if not caller.has_spec()
+        ]
+        if unknown:
+            pm.unregister(plugin)
+            raise PluginError(f"implements unknown hook(s): {', '.join(sorted(unknown))}")
+    except Exception as exc:  # noqa: BLE001 - pluggy validation errors and ours
+        return "register", _describe_error(exc)
+    return None
+
+
+def _components(
+    pm: pluggy.PluginManager, sources: Mapping[str, PluginInfo], broken: list[BrokenPlugin]
+) -> list[ComponentInfo]:
+    """Every hook's components, each kind and name once; what fails goes to ``broken``."""
     components: list[ComponentInfo] = []
     seen: dict[tuple[str, str], ComponentInfo] = {}
-    failed: set[str] = set()
     for kind in KINDS.values():
         for impl in getattr(pm.hook, kind.hook).get_hookimpls():
             info = sources[impl.plugin_name]
-            try:
-                result = impl.function()
-                if result is None:
-                    result = []
-                if isinstance(result, (str, bytes)) or not isinstance(result, Iterable):
-                    raise PluginError(f"returned {type(result).__name__}, expected a sequence")
-                result = list(result)
-                for obj in result:
-                    problem = _validate_component(obj, kind)
-                    if problem:
-                        raise PluginError(problem)
-            except Exception as exc:  # noqa: BLE001 - a faulty hook must not stop discovery
+
+            def record(error: str, info: PluginInfo = info, kind: Kind = kind) -> None:
                 broken.append(
                     BrokenPlugin(
                         info.name,
@@ -331,39 +328,52 @@ def load_registry(entry_points: Iterable[metadata.EntryPoint] | None = None) -> 
                         info.distribution,
                         info.version,
                         f"hook {kind.hook}",
-                        _describe_error(exc),
+                        error,
                     )
                 )
-                failed.add(info.name)
+
+            try:
+                result = _hook_components(impl, kind)
+            except Exception as exc:  # noqa: BLE001 - a faulty hook must not stop discovery
+                record(_describe_error(exc))
                 continue
             for obj in result:
                 key = (kind.name, obj.name)
                 if key in seen:
                     other = seen[key]
-                    broken.append(
-                        BrokenPlugin(
-                            info.name,
-                            info.entry_point,
-                            info.distribution,
-                            info.version,
-                            f"hook {kind.hook}",
-                            f"PluginError: {kind.label} {obj.name!r} is already registered by "
-                            f"{other.distribution} (plugin {other.plugin})",
-                        )
+                    record(
+                        f"PluginError: {kind.label} {obj.name!r} is already registered by "
+                        f"{other.distribution} (plugin {other.plugin})"
                     )
                     continue
-                component = ComponentInfo(
+                description = " ".join(obj.description.split())
+                seen[key] = ComponentInfo(
                     kind.name,
                     obj.name,
-                    " ".join(obj.description.split()),
+                    description,
                     info.name,
                     info.distribution,
                     info.version,
                     obj,
                 )
-                seen[key] = component
-                components.append(component)
-    return Registry(components, plugins, broken)
+                components.append(seen[key])
+    return components
+
+
+def _hook_components(impl: Any, kind: Kind) -> list[Any]:
+    """What one hook implementation returns, checked: a sequence of components of ``kind``
+    (None: none); a :class:`PluginError` otherwise."""
+    result = impl.function()
+    if result is None:
+        return []
+    if isinstance(result, str | bytes) or not isinstance(result, Iterable):
+        raise PluginError(f"returned {type(result).__name__}, expected a sequence")
+    result = list(result)
+    for obj in result:
+        problem = _validate_component(obj, kind)
+        if problem:
+            raise PluginError(problem)
+    return result
 
 
 @functools.cache
