@@ -404,7 +404,7 @@ def dem_product(
     return report
 
 
-def _dem_into(  # noqa: C901, PLR0915 (issue 32: to split)
+def _dem_into(
     out: Path,
     inputs: StereoInputs,
     *,
@@ -427,10 +427,6 @@ def _dem_into(  # noqa: C901, PLR0915 (issue 32: to split)
     """:func:`dem_product` writing into ``out`` (its staging folder), tiles on ``engine``,
     intermediate files in ``work``."""
     from carto.framework.adjustment.relative_orientation import relative_orientation
-    from carto.framework.dem_generation.base import DEMProduct
-    from carto.framework.imaging.ortho import write_ortho
-    from carto.framework.imaging.preparation import prepare_image
-    from carto.framework.raster.image_source import RasterImage, check_image_source
 
     t0 = time.perf_counter()
     pair = open_pair(inputs)
@@ -447,20 +443,7 @@ def _dem_into(  # noqa: C901, PLR0915 (issue 32: to split)
         )
     start = initial_dem(init_dem, geoid, init_height_m, scene_dem)
     names = list(sensors)
-    images = []
-    for n in names:
-        source = RasterImage.open(rasters[n])
-        check_image_source(source, str(rasters[n]))
-        images.append(
-            prepare_image(
-                source,
-                sensors[n],
-                start,
-                work / "prepared" / n,
-                engine,
-                desc=f"merge staggered arrays of {n}",
-            )
-        )
+    images = _prepared_images(rasters, sensors, start, work, engine)
     checked, warnings = checked_pair(
         images, [sensors[n] for n in names], start, allow_poor=allow_poor
     )
@@ -500,15 +483,7 @@ def _dem_into(  # noqa: C901, PLR0915 (issue 32: to split)
     release = getattr(engine, "release", None)
     if release is not None:  # the workers' memory back before the outputs are written
         release()
-    if not isinstance(product, DEMProduct):
-        raise InputError(
-            f"DEM generator {generator!r} returned {type(product).__name__}, not a DEMProduct"
-        )
-    if len(product.orthos) != len(names):
-        raise InputError(
-            f"DEM generator {generator!r} returned {len(product.orthos)} ortho-images for "
-            f"{len(names)} images"
-        )
+    _check_product(product, generator, len(names))
     warnings += poor_dem(product) + departs_from_start(product.dem, start)
     warnings += mismatched(product) + off_the_gcps(product.dem, control)
     if product.failed_tiles:
@@ -542,41 +517,8 @@ def _dem_into(  # noqa: C901, PLR0915 (issue 32: to split)
         progress("dem", f"warning: {warnings[-1]}", quiet)
     written = dem.to_geoid(geoid_grid) if vertical == "geoid" else dem
     vertical_reference = vertical_tag(written.vertical)
-    files = {
-        "dem": write_ortho(
-            out / "dem.tif",
-            written.heights.astype(np.float32),
-            product.dem_grid,
-            vertical=written.vertical,
-            tags={"CARTO_PRODUCT": "dem", "CARTO_GENERATOR": generator},
-        ).name
-    }
+    files = _write_rasters(out, written, product, {n: rasters[n] for n in names}, generator)
     del written
-    for side, name, ortho in zip(("left", "right"), names, product.orthos, strict=True):
-        files[f"ortho_{side}"] = write_ortho(
-            out / f"ortho_{side}.tif",
-            ortho,
-            product.ortho_grid,
-            out_dtype=_radiometry(rasters[name]),
-            tags={"CARTO_PRODUCT": "ortho", "CARTO_IMAGE": name},
-        ).name
-    for key, on, grid in (
-        ("quality", "dem", product.dem_grid),
-        ("matching", "ortho", product.ortho_grid),
-    ):
-        layers = [layer for layer in product.quality if layer.grid == on]
-        if layers:
-            files[key] = write_ortho(
-                out / f"{key}.tif",
-                [layer.values for layer in layers],
-                grid,
-                tags={
-                    "CARTO_PRODUCT": key,
-                    **{f"BAND_{k}": layer.description for k, layer in enumerate(layers, 1)},
-                },
-                band_descriptions=[layer.name for layer in layers],
-                overview_resampling="nearest",
-            ).name
     from carto.framework.raster.quicklook import difference_png, hillshade_png
 
     files["hillshade"] = hillshade_png(out / "dem.tif", out / "dem_hillshade.png", "DEM").name
@@ -627,3 +569,92 @@ def _dem_into(  # noqa: C901, PLR0915 (issue 32: to split)
     report["seconds"] = time.perf_counter() - t0
     write_report(out / "report.json", report)
     return report
+
+
+def _prepared_images(
+    rasters: Mapping[str, Path],
+    sensors: Mapping[str, Sensor],
+    start: DEM,
+    work: Path,
+    engine: Any,
+) -> list[Any]:
+    """Each image read by windows, checked and prepared (staggered arrays merged) in
+    ``work``, in the order of ``sensors``."""
+    from carto.framework.imaging.preparation import prepare_image
+    from carto.framework.raster.image_source import RasterImage, check_image_source
+
+    images = []
+    for n, sensor in sensors.items():
+        source = RasterImage.open(rasters[n])
+        check_image_source(source, str(rasters[n]))
+        images.append(
+            prepare_image(
+                source,
+                sensor,
+                start,
+                work / "prepared" / n,
+                engine,
+                desc=f"merge staggered arrays of {n}",
+            )
+        )
+    return images
+
+
+def _check_product(product: Any, generator: str, n_images: int) -> None:
+    """Refuse what a generator returned unless it is a DEMProduct of one ortho per image."""
+    from carto.framework.dem_generation.base import DEMProduct
+
+    if not isinstance(product, DEMProduct):
+        raise InputError(
+            f"DEM generator {generator!r} returned {type(product).__name__}, not a DEMProduct"
+        )
+    if len(product.orthos) != n_images:
+        raise InputError(
+            f"DEM generator {generator!r} returned {len(product.orthos)} ortho-images for "
+            f"{n_images} images"
+        )
+
+
+def _write_rasters(
+    out: Path, dem: DEM, product: Any, rasters: Mapping[str, Path], generator: str
+) -> dict[str, str]:
+    """dem.tif (``dem``'s heights), one ortho-image per image (left, right: the order of
+    ``rasters``) in its image's radiometry, quality.tif and matching.tif (the product's
+    layers on the DEM and ortho grids) as COGs in ``out``; their file names by key."""
+    from carto.framework.imaging.ortho import write_ortho
+
+    files = {
+        "dem": write_ortho(
+            out / "dem.tif",
+            dem.heights.astype(np.float32),
+            product.dem_grid,
+            vertical=dem.vertical,
+            tags={"CARTO_PRODUCT": "dem", "CARTO_GENERATOR": generator},
+        ).name
+    }
+    for side, name, ortho in zip(("left", "right"), rasters, product.orthos, strict=True):
+        files[f"ortho_{side}"] = write_ortho(
+            out / f"ortho_{side}.tif",
+            ortho,
+            product.ortho_grid,
+            out_dtype=_radiometry(rasters[name]),
+            tags={"CARTO_PRODUCT": "ortho", "CARTO_IMAGE": name},
+        ).name
+    for key, on, grid in (
+        ("quality", "dem", product.dem_grid),
+        ("matching", "ortho", product.ortho_grid),
+    ):
+        layers = [layer for layer in product.quality if layer.grid == on]
+        if layers:
+            files[key] = write_ortho(
+                out / f"{key}.tif",
+                [layer.values for layer in layers],
+                grid,
+                tags={
+                    "CARTO_PRODUCT": key,
+                    **{f"BAND_{k}": layer.description for k, layer in enumerate(layers, 1)},
+                },
+                band_descriptions=[layer.name for layer in layers],
+                overview_resampling="nearest",
+            ).name
+    return files
