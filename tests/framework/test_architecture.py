@@ -238,7 +238,6 @@ LONG_FUNCTIONS = {
     "packages/carto-framework/src/carto/framework/simulation/simulate.py::simulate_scene",
     "packages/carto-framework/src/carto/framework/workflows/adjust.py::adjust_product",
     "packages/carto-framework/src/carto/framework/workflows/adjust.py::_adjust_into",
-    "packages/carto-framework/src/carto/framework/workflows/adjust.py::read_configuration",
     "packages/carto-framework/src/carto/framework/workflows/dem.py::dem_product",
     "packages/carto-framework/src/carto/framework/workflows/dem.py::_dem_into",
     "packages/carto-framework/src/carto/framework/workflows/residual_plot.py::residual_plot",

@@ -15,7 +15,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from carto.framework.errors import InputError
-from carto.framework.workflows.adjust import (
+from carto.framework.workflows.configuration import (
     CONFIGURATION_KEYS,
     IMAGE_KEYS,
     read_configuration,

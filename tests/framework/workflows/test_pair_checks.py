@@ -14,7 +14,7 @@ import rasterio
 
 from carto.framework.errors import InputError
 from carto.framework.imaging.preparation import prepared_sources
-from carto.framework.workflows.adjust import read_configuration
+from carto.framework.workflows.configuration import read_configuration
 from carto.framework.workflows.dem import StereoInputs, initial_dem, open_pair
 from carto.framework.workflows.pair_checks import (
     MIN_AGREEMENT,

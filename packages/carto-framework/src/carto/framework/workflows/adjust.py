@@ -9,16 +9,13 @@ the sidecar of ``<image>.tif``), a residual plot (``residuals.png``) and ``repor
 
 from __future__ import annotations
 
-import contextlib
-import json
 import math
 import os
 import time
-from collections.abc import Iterator, Mapping
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-import attrs
 import numpy as np
 from numpy.typing import NDArray
 
@@ -31,13 +28,12 @@ from carto.framework.adjustment.dem_heights import (
 )
 from carto.framework.adjustment.image_trends import fold_image_trends
 from carto.framework.adjustment.observations import Observations
-from carto.framework.errors import AdjustmentError, InputError, UnknownComponentError
-from carto.framework.files.control_table import read_control_table, read_tie_table
-from carto.framework.files.documents import check_fields, read_json, write_json_atomic
-from carto.framework.files.paths import resolved
+from carto.framework.errors import AdjustmentError, InputError
+from carto.framework.files.control_table import read_tie_table
+from carto.framework.files.documents import write_json_atomic
 from carto.framework.files.point_table import write_point_table
 from carto.framework.files.staging import staged_folder
-from carto.framework.geometry.sensor import Sensor, SensorType
+from carto.framework.geometry.sensor import SensorType
 from carto.framework.matching.gcp_transfer import (
     GCP_OFFSET_COLUMNS,
     GCP_OFFSET_SIGMA_PX,
@@ -51,12 +47,10 @@ from carto.framework.workflows.adjust_checks import (
     gcps_rejected,
     poor_adjustment,
 )
+from carto.framework.workflows.configuration import configuration_files, read_configuration
 from carto.framework.workflows.dem_options import check_installed
 from carto.framework.workflows.opening import (
-    check_model_of_image,
-    open_options,
     open_product,
-    sensor_type_for,
 )
 from carto.framework.workflows.reporting import jsonable, progress, write_report
 from carto.framework.workflows.residual_plot import residual_misfit, residual_plot
@@ -511,183 +505,3 @@ def _height_range(result: AdjustmentResult) -> tuple[float, float]:
     lo, hi = float(np.nanmin(h)), float(np.nanmax(h))
     pad = max(200.0, 0.5 * (hi - lo))
     return lo - pad, hi + pad
-
-
-@attrs.frozen(eq=False)
-class Configuration:
-    """A JSON configuration of ``carto adjust`` (see :func:`read_configuration`)."""
-
-    sensors: dict[str, Sensor]
-    types: dict[str, SensorType]
-    rasters: dict[str, Path]
-    gcps: Table | None
-    dem: Any
-    platform: str
-    matcher: str | None
-    trajectory_model: str | None
-    flat_height_m: float | None = None
-
-
-CONFIGURATION_KEYS = (
-    "images", "gcps", "dem", "geoid", "height_m", "platform", "matcher", "trajectory_model",
-)  # fmt: skip
-"""The fields of an adjustment configuration (:func:`read_configuration`)."""
-IMAGE_KEYS = ("model", "raster", "sensor")
-"""The fields of one image in it."""
-
-
-def _check_distinct(path: Path, images: Mapping[str, Any], base: Path) -> None:
-    """Refuse two images of a configuration that name one model or one raster: the same
-    view twice has no stereo (an outside probe got '300 of 300 points have no
-    intersection', naming neither the file nor the cause)."""
-    for key in ("model", "raster"):
-        seen: dict[Path, str] = {}
-        for name, spec in images.items():
-            value = spec.get(key) if isinstance(spec, dict) else None
-            if not isinstance(value, str) or not value:
-                continue  # checked with the image
-            file = resolved(base / value, f"images.{name}.{key}")
-            if file in seen:
-                raise InputError(
-                    f"{path}: images.{seen[file]}.{key} and images.{name}.{key} name the same "
-                    f"file {file}: each image needs its own"
-                )
-            seen[file] = name
-
-
-def _check_component(path: Path, field: str, name: str) -> None:
-    """Refuse a configuration ``field`` naming a component nobody registered, naming both."""
-    kind = "matcher" if field == "matcher" else "trajectory"
-    try:
-        get_registry().info(kind, name)
-    except UnknownComponentError as exc:
-        raise InputError(f"{path}: field {field!r}: {exc}") from None
-
-
-@contextlib.contextmanager
-def _field(path: Path, field: str) -> Iterator[None]:
-    """Errors of reading what configuration ``path``'s ``field`` names, naming both."""
-    try:
-        yield
-    except InputError as exc:
-        if str(path) in str(exc):
-            raise
-        raise InputError(f"{path}: field {field!r}: {exc}") from None
-
-
-def configuration_files(path: Path) -> list[Path]:
-    """The files a configuration names (models, rasters, GCPs, DEM, geoid), read leniently
-    (:func:`read_configuration` checks them): the output folder may hold none of them, since
-    it is replaced as a whole. Nothing for a scene folder or an unreadable file."""
-    if not path.is_file():
-        return []
-    try:
-        doc = json.loads(path.read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
-        return []
-    if not isinstance(doc, dict):
-        return []
-    names = [doc.get(key) for key in ("gcps", "dem", "geoid")]
-    images = doc.get("images")
-    if isinstance(images, dict):
-        for spec in images.values():
-            if isinstance(spec, dict):
-                names += [spec.get("model"), spec.get("raster")]
-    return [path.parent / n for n in names if isinstance(n, str) and n]
-
-
-def read_configuration(  # noqa: C901, PLR0915 (issue 32: to split)
-    path: Path, sensor_type: str | None = None, trajectory: str | None = None
-) -> Configuration:
-    """A JSON configuration: ``{"images": {name: {"model": file, "raster": file,
-    "sensor": type}}, "gcps": csv, "dem": file, "geoid": gtx, "platform": text,
-    "matcher": name, "trajectory_model": name}``, or ``"height_m": number`` (ellipsoidal)
-    for a flat DEM instead of ``"dem"``; paths relative to the file. ``sensor_type`` and
-    ``trajectory`` (the command line's) override the file's."""
-    from carto.framework.raster.dem import DEM, Geoid
-    from carto.framework.raster.dem_measures import check_terrain_posting
-
-    doc = read_json(path, "configuration")
-    if not isinstance(doc, dict):
-        raise InputError(f"{path}: a configuration is a JSON object, got {type(doc).__name__}")
-    check_fields(doc, CONFIGURATION_KEYS, path, "")
-    base = path.parent
-    images = doc.get("images")
-    if not isinstance(images, dict) or len(images) < 1:
-        raise InputError(f"{path}: field 'images' must map image names to models")
-    names = {}
-    for key in ("matcher", "trajectory_model"):
-        value = doc.get(key)
-        if value is not None and not isinstance(value, str):
-            raise InputError(f"{path}: field {key!r} must be a component name, got {value!r}")
-        if value is not None:
-            _check_component(path, key, value)
-        names[key] = value
-    trajectory = trajectory or names["trajectory_model"]
-    sensors: dict[str, Sensor] = {}
-    types: dict[str, SensorType] = {}
-    rasters: dict[str, Path] = {}
-    _check_distinct(path, images, base)
-    for name, spec in images.items():
-        if not isinstance(spec, dict):
-            raise InputError(
-                f"{path}: images.{name} must be an object with 'model' and 'raster', got {spec!r}"
-            )
-        check_fields(spec, IMAGE_KEYS, path, f"images.{name}.")
-        for key in ("model", "raster", "sensor"):
-            value = spec.get(key)
-            if (key == "model" or value is not None) and (not isinstance(value, str) or not value):
-                raise InputError(f"{path}: images.{name}.{key} must be a file name, got {value!r}")
-        model = base / spec["model"]
-        if not model.exists():
-            raise InputError(f"{path}: images.{name}.model: no such file {model}")
-        with _field(path, f"images.{name}.model"):
-            types[name] = sensor_type_for(model, sensor_type or spec.get("sensor"), "file")
-            sensor = types[name].open(model, **open_options(trajectory))
-        if spec.get("raster") is not None:
-            rasters[name] = base / spec["raster"]
-            if not rasters[name].is_file():
-                raise InputError(f"{path}: images.{name}.raster: no such file {rasters[name]}")
-            with _field(path, f"images.{name}.raster"):
-                sensor = sensor.for_raster(rasters[name])
-                check_model_of_image(rasters[name], model, sensor)
-        sensors[name] = sensor
-    gcps = None
-    if doc.get("gcps") is not None:
-        if not isinstance(doc["gcps"], str) or not doc["gcps"]:
-            raise InputError(f"{path}: field 'gcps' must be a CSV file name, got {doc['gcps']!r}")
-        with _field(path, "gcps"):
-            gcps = read_control_table(base / doc["gcps"], "gcps", images=list(sensors))
-            if not len(gcps["id"]):
-                raise InputError(
-                    f"{base / doc['gcps']}: holds no GCP (a header only); to adjust without "
-                    "GCPs, leave the field out"
-                )
-            check_control(gcps, sensors, "gcps")
-    dem = None
-    for key in ("dem", "geoid"):
-        value = doc.get(key)
-        if value is not None and (not isinstance(value, str) or not value):
-            raise InputError(f"{path}: field {key!r} must be a file name, got {value!r}")
-    if doc.get("dem"):
-        with _field(path, "geoid"):
-            geoid = Geoid.open(base / doc["geoid"]) if doc.get("geoid") else None
-        with _field(path, "dem"):
-            dem = DEM.open(base / doc["dem"], geoid=geoid, require_ellipsoidal=True)
-        check_terrain_posting(dem, f"{path}: dem {base / doc['dem']}")
-    elif doc.get("height_m") is not None:
-        h = doc["height_m"]
-        if isinstance(h, bool) or not isinstance(h, int | float) or not math.isfinite(h):
-            raise InputError(f"{path}: field 'height_m' must be a number, got {h!r}")
-        dem = DEM.constant(float(h))
-    return Configuration(
-        sensors,
-        types,
-        rasters,
-        gcps,
-        dem,
-        str(doc.get("platform", "")),
-        names["matcher"],
-        names["trajectory_model"],
-        float(doc["height_m"]) if doc.get("height_m") is not None and not doc.get("dem") else None,
-    )
