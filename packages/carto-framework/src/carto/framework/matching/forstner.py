@@ -230,7 +230,7 @@ def spread_order(
     return keep[np.lexsort((-w[keep], rank[keep]))]
 
 
-def forstner_points(  # noqa: C901 (issue 32: to split)
+def forstner_points(
     image: ArrayLike,
     *,
     window: int = 5,
@@ -308,15 +308,7 @@ def forstner_points(  # noqa: C901 (issue 32: to split)
         max_points = check_int(max_points, "max_points", 0)
     if subpixel not in FORSTNER_SUBPIXEL:
         raise InputError(f"subpixel {subpixel!r} is not one of {', '.join(FORSTNER_SUBPIXEL)}")
-    cells = None
-    if grid_cells is not None:
-        cells = tuple(check_int(v, "grid_cells", 1) for v in grid_cells)
-        if len(cells) != 2:
-            raise InputError(f"grid_cells must be (rows, cols), got {grid_cells!r}")
-        if per_cell is None:
-            n_cells = cells[0] * cells[1]
-            per_cell = -(-max_points // n_cells) if max_points else 1
-        per_cell = check_int(per_cell, "per_cell", 1)
+    cells, per_cell = _cells(grid_cells, per_cell, max_points)
     t = _structure_tensor(img, window)
     w, q = _weight_roundness(t)
     empty = np.empty((0, 2))
@@ -348,3 +340,19 @@ def forstner_points(  # noqa: C901 (issue 32: to split)
     if max_points is not None:
         order = order[:max_points]
     return points[order]
+
+
+def _cells(
+    grid_cells: Any, per_cell: int | None, max_points: int | None
+) -> tuple[tuple[int, ...] | None, int | None]:
+    """``grid_cells`` checked as ``(rows, cols)`` and the points kept per cell (default
+    ``ceil(max_points / cells)``, else 1); ``(None, per_cell)`` without cells."""
+    if grid_cells is None:
+        return None, per_cell
+    cells = tuple(check_int(v, "grid_cells", 1) for v in grid_cells)
+    if len(cells) != 2:
+        raise InputError(f"grid_cells must be (rows, cols), got {grid_cells!r}")
+    if per_cell is None:
+        n_cells = cells[0] * cells[1]
+        per_cell = -(-max_points // n_cells) if max_points else 1
+    return cells, check_int(per_cell, "per_cell", 1)
