@@ -427,3 +427,13 @@ def test_an_epoch_outside_the_earth_orientation_span_is_refused(tmp_path, ancill
         doc["epoch_utc"] = "12"
 
     assert "epoch_utc: '12' is outside 1960-2100" in _refused(tmp_path, ancillary_doc, year_12)
+
+
+def test_a_control_table_cut_to_its_header_is_refused(scene, tmp_path):
+    """An outside probe cut a scene's gcps.csv to its header: the adjustment went ahead
+    without GCPs (checkpoints 100 m off) with exit 0. The manifest counts them."""
+    manifest, _doc = _scene_copy(scene, tmp_path)
+    gcps = manifest.parent / "gcps.csv"
+    gcps.write_text(gcps.read_text().splitlines()[0] + "\n")
+    with pytest.raises(InputError, match=r"gcps.csv: holds no point, where scene.json counts"):
+        Scene.open(manifest.parent).control("gcps")

@@ -111,7 +111,16 @@ class Scene:
 
         if which not in ("gcps", "checkpoints"):
             raise InputError(f"scene control tables are gcps and checkpoints, not {which!r}")
-        return read_control_table(self.path(self.manifest[which]), which, images=self.image_names)
+        path = self.path(self.manifest[which])
+        table = read_control_table(path, which, images=self.image_names)
+        counted = (self.manifest.get("counts") or {}).get(which)
+        if not len(table["id"]) and isinstance(counted, int) and counted > 0:
+            hint = " (--gcps 0 adjusts without GCPs)" if which == "gcps" else ""
+            raise InputError(
+                f"{path}: holds no point, where scene.json counts {counted}: a file cut short?"
+                + hint
+            )
+        return table
 
 
 def _short(value: Any) -> str:
