@@ -29,7 +29,8 @@ from __future__ import annotations
 
 import math
 import os
-from collections.abc import Collection, Mapping
+from collections.abc import Collection, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -165,7 +166,7 @@ def _kind(kind: str) -> str:
     return KINDS[kind]
 
 
-def check_control_table(  # noqa: C901 (issue 32: to split)
+def check_control_table(
     table: Mapping[str, NDArray],
     kind: str = "gcps",
     *,
@@ -203,34 +204,8 @@ def check_control_table(  # noqa: C901 (issue 32: to split)
                 f"number (every {noun} needs {needs})"
             )
     if ground:
-        for column, limit in (("lat_deg", 90.0), ("lon_deg", 360.0)):
-            bad = np.flatnonzero(np.abs(numeric[column]) > limit)
-            if bad.size:
-                i = int(bad[0])
-                raise InputError(
-                    f"{src}: row {rows[i]}, column {column}: {_fmt(numeric[column][i])} is "
-                    f"outside -{limit:g}..{limit:g} degrees (are lon_deg and lat_deg swapped?)"
-                )
-        lo, hi = H_RANGE_M
-        h = numeric["h_m"]
-        bad = np.flatnonzero((h < lo) | (h > hi))
-        if bad.size:
-            i = int(bad[0])
-            raise InputError(
-                f"{src}: row {rows[i]}, column h_m: {_fmt(h[i])} m is outside {lo:g}..{hi:g} m "
-                "(heights above the WGS84 ellipsoid, in metres)"
-            )
-    for column in ("sigma_px",) if kind == "ties" else SIGMA_COLUMNS:
-        if column not in table:
-            continue
-        values = np.asarray(table[column], dtype=np.float64)
-        bad = np.flatnonzero(np.isinf(values) | (values < 0))
-        if bad.size:
-            i = int(bad[0])
-            raise InputError(
-                f"{src}: row {rows[i]}, column {column}: {_fmt(values[i])} is not a standard "
-                "deviation (> 0; empty or 0: not stated, the default is used)"
-            )
+        _check_ground_ranges(numeric, rows, src)
+    _check_sigmas(table, ("sigma_px",) if kind == "ties" else SIGMA_COLUMNS, rows, src)
     first: dict[tuple[str, str], int] = {}
     for i, key in enumerate(zip(ids, names, strict=True)):
         if key in first:
@@ -324,3 +299,42 @@ def check_in_images(
                     f"{name!r} ({n_lines} lines x {n_samples} samples: 0 <= {column} <= "
                     f"{size} {unit})"
                 )
+
+
+def _check_ground_ranges(numeric: Mapping[str, NDArray], rows: Any, src: str) -> None:
+    """Latitudes within 90 degrees, longitudes within 360 and heights within
+    :data:`H_RANGE_M` (an InputError names the first row that is not)."""
+    for column, limit in (("lat_deg", 90.0), ("lon_deg", 360.0)):
+        bad = np.flatnonzero(np.abs(numeric[column]) > limit)
+        if bad.size:
+            i = int(bad[0])
+            raise InputError(
+                f"{src}: row {rows[i]}, column {column}: {_fmt(numeric[column][i])} is "
+                f"outside -{limit:g}..{limit:g} degrees (are lon_deg and lat_deg swapped?)"
+            )
+    lo, hi = H_RANGE_M
+    h = numeric["h_m"]
+    bad = np.flatnonzero((h < lo) | (h > hi))
+    if bad.size:
+        i = int(bad[0])
+        raise InputError(
+            f"{src}: row {rows[i]}, column h_m: {_fmt(h[i])} m is outside {lo:g}..{hi:g} m "
+            "(heights above the WGS84 ellipsoid, in metres)"
+        )
+
+
+def _check_sigmas(
+    table: Mapping[str, NDArray], columns: Sequence[str], rows: Any, src: str
+) -> None:
+    """Each sigma column present holds standard deviations (>= 0, finite or NaN)."""
+    for column in columns:
+        if column not in table:
+            continue
+        values = np.asarray(table[column], dtype=np.float64)
+        bad = np.flatnonzero(np.isinf(values) | (values < 0))
+        if bad.size:
+            i = int(bad[0])
+            raise InputError(
+                f"{src}: row {rows[i]}, column {column}: {_fmt(values[i])} is not a standard "
+                "deviation (> 0; empty or 0: not stated, the default is used)"
+            )
