@@ -126,9 +126,14 @@ def test_dem_from_a_scene_writes_every_product(run_carto, scene, tmp_path):
     [
         ([], "give a scene folder, or both --left and --right"),
         (["--left", "nope.tif", "--right", "nope2.tif"], "no such image"),
+        # a carto adjust configuration given as the scene (an outside probe: "field 'format'
+        # is None")
+        (["{tmp}/pair.json"], "pair.json: not a scene folder; carto dem takes a scene"),
     ],
 )
 def test_dem_errors_are_one_line(run_carto, tmp_path, args, message):
+    (tmp_path / "pair.json").write_text('{"images": {}}')
+    args = [a.format(tmp=tmp_path) for a in args]
     proc = run_carto(["dem", *args, "--out", str(tmp_path / "x")], with_test_plugins=False)
     assert proc.returncode == 1
     assert message in proc.stderr

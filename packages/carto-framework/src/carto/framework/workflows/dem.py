@@ -153,6 +153,12 @@ def open_pair(inputs: StereoInputs) -> StereoPair:
         from carto.framework.products.scene import Scene
         from carto.framework.workflows.opening import check_models_of_scene, open_product
 
+        if Path(source).is_file() and Path(source).name != "scene.json":
+            raise InputError(
+                f"{source}: not a scene folder; carto dem takes a scene (carto simulate) or "
+                "two images with --left/--right (their models beside them or with "
+                "--left-model/--right-model, e.g. the _RPC.TXT a carto adjust wrote)"
+            )
         scene = Scene.open(source)
         if models_dir is not None:
             check_models_of_scene(models_dir, scene.root)
