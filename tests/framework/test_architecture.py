@@ -214,7 +214,6 @@ LONG_FUNCTIONS = {
     "packages/carto-framework/src/carto/framework/adjustment/relative_orientation.py::relative_orientation",
     "packages/carto-framework/src/carto/framework/cli/adjust_command.py::add_adjust",
     "packages/carto-framework/src/carto/framework/cli/dem_commands.py::add_dem",
-    "packages/carto-framework/src/carto/framework/evaluation/dem_accuracy.py::dem_accuracy_by_blocks",
     "packages/carto-framework/src/carto/framework/geometry/intersection.py::intersect_sensors",
     "packages/carto-framework/src/carto/framework/geometry/linescan.py::LineScanner.linearize",
     "packages/carto-framework/src/carto/framework/geometry/linescan_raycast.py::ray_dem",

@@ -396,7 +396,7 @@ def _covering(dem: DEM, part: DEM) -> DEM:
     )
 
 
-def dem_accuracy_by_blocks(  # noqa: PLR0915 (issue 32: to split)
+def dem_accuracy_by_blocks(
     dem: DEMSource,
     reference: str | os.PathLike[str],
     *,
@@ -447,26 +447,11 @@ def dem_accuracy_by_blocks(  # noqa: PLR0915 (issue 32: to split)
     overlap = False
     for r0 in range(0, n_rows, block):
         r1 = min(n_rows, r0 + block)
-        a, b = max(0, r0 - 1), min(n_rows, r1 + 1)
-        part = DEM.open(path, rows=(a, b))
-        inner = slice(r0 - a, r0 - a + (r1 - r0))
-        if np.isfinite(part.heights).any():
-            evaluated, part = reconcile_vertical(_covering(dem, part), part, geoid)
-            name, vertical = part.name, part.vertical
-            if _same_grid(evaluated, part):
-                resampled = np.array(evaluated.heights, np.float64)
-            else:
-                resampled = warp_heights(evaluated.heights, evaluated, part, "bilinear")
-            overlap = overlap or bool(np.isfinite(resampled).any())
-            if not overlap:
-                footprint = warp_heights(np.ones(evaluated.shape), evaluated, part, "nearest")
-                overlap = bool(np.isfinite(footprint).any())
-            diff = (resampled - part.heights)[inner]
-            slope = slope_deg(part)[inner]
-            ref_valid = np.isfinite(part.heights[inner])
-        else:
-            diff = slope = np.full((r1 - r0, n_cols), np.nan)
-            ref_valid = np.zeros(diff.shape, bool)
+        band = _band(dem, path, (r0, r1), n_rows, n_cols, geoid)
+        diff, slope, ref_valid = band.diff, band.slope, band.ref_valid
+        if band.name is not None:
+            name, vertical = band.name, band.vertical
+        overlap = overlap or band.overlap
         reference_count += int(np.count_nonzero(ref_valid))
         valid = np.isfinite(diff)
         values = diff[valid]
@@ -478,15 +463,7 @@ def dem_accuracy_by_blocks(  # noqa: PLR0915 (issue 32: to split)
     if name is None:
         raise InputError(f"reference DEM {path}: no valid height (all nodata)")
     if not overlap:
-        with rasterio.open(path) as ds:
-            west, south, east, north = rasterio.warp.transform_bounds(
-                ds.crs, "EPSG:4326", *ds.bounds
-            )
-        raise InputError(
-            f"DEM {dem.name} and reference {path} do not overlap: the DEM covers "
-            f"{_fmt_lonlat(dem)}, the reference lon {west:.4f}..{east:.4f}, "
-            f"lat {south:.4f}..{north:.4f}"
-        )
+        raise _no_overlap(dem, path)
     report = every.statistics()
     report["completeness"] = report["count"] / reference_count if reference_count else None
     report["reference_count"] = reference_count
@@ -496,3 +473,67 @@ def dem_accuracy_by_blocks(  # noqa: PLR0915 (issue 32: to split)
     ]
     report = {"dem": dem.name, "reference": name, "vertical": vertical, **report}
     return BlockComparison(report, np.concatenate(preview, axis=0), step)
+
+
+@attrs.frozen(eq=False)
+class _Band:
+    """One band of a comparison by blocks: the differences DEM - reference, the reference's
+    slope and valid pixels over the band's rows; the reference's name and vertical reference
+    (None for a band without valid height) and whether the DEM covers any of it."""
+
+    diff: FloatArray
+    slope: FloatArray
+    ref_valid: NDArray[np.bool_]
+    name: str | None = None
+    vertical: str | None = None
+    overlap: bool = False
+
+
+def _band(
+    dem: DEM,
+    path: str,
+    rows: tuple[int, int],
+    n_rows: int,
+    n_cols: int,
+    geoid: Geoid | None,
+) -> _Band:
+    """The reference's rows ``r0..r1`` (read with one row more on each side, for the slope)
+    compared with the part of ``dem`` that covers them."""
+    r0, r1 = rows
+    a, b = max(0, r0 - 1), min(n_rows, r1 + 1)
+    part = DEM.open(path, rows=(a, b))
+    inner = slice(r0 - a, r0 - a + (r1 - r0))
+    if not np.isfinite(part.heights).any():
+        empty = np.full((r1 - r0, n_cols), np.nan)
+        return _Band(empty, empty, np.zeros(empty.shape, bool))
+    evaluated, part = reconcile_vertical(_covering(dem, part), part, geoid)
+    if _same_grid(evaluated, part):
+        resampled = np.array(evaluated.heights, np.float64)
+    else:
+        resampled = warp_heights(evaluated.heights, evaluated, part, "bilinear")
+    overlap = bool(np.isfinite(resampled).any())
+    if not overlap:
+        footprint = warp_heights(np.ones(evaluated.shape), evaluated, part, "nearest")
+        overlap = bool(np.isfinite(footprint).any())
+    return _Band(
+        (resampled - part.heights)[inner],
+        slope_deg(part)[inner],
+        np.isfinite(part.heights[inner]),
+        part.name,
+        part.vertical,
+        overlap,
+    )
+
+
+def _no_overlap(dem: DEM, path: str) -> InputError:
+    """The error of a DEM and a reference that do not overlap, with both footprints."""
+    import rasterio
+    import rasterio.warp
+
+    with rasterio.open(path) as ds:
+        west, south, east, north = rasterio.warp.transform_bounds(ds.crs, "EPSG:4326", *ds.bounds)
+    return InputError(
+        f"DEM {dem.name} and reference {path} do not overlap: the DEM covers "
+        f"{_fmt_lonlat(dem)}, the reference lon {west:.4f}..{east:.4f}, "
+        f"lat {south:.4f}..{north:.4f}"
+    )
