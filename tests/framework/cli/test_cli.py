@@ -121,3 +121,21 @@ def test_ctrl_c_during_start_up_exits_130_in_one_line(carto_exe, delay_s) -> Non
     assert proc.returncode == 130, err
     assert err.strip().splitlines()[-1] == "carto: interrupted"
     assert "Traceback" not in err
+
+
+def test_a_reader_that_stops_reading_ends_the_output_quietly(carto_exe) -> None:
+    """``carto plugins --json | head -c 100`` said 'carto: error: Broken pipe' and exited 1
+    (issue 34, item 7): the command now stops quietly, exit 0, as a filter's reader expects."""
+    import subprocess
+
+    shell = subprocess.run(
+        f"'{carto_exe}' plugins --json | head -c 100 > /dev/null; echo $" + "{PIPESTATUS[0]}",
+        shell=True,
+        executable="/bin/bash",
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert shell.stdout.strip() == "0", shell.stderr
+    assert "Broken pipe" not in shell.stderr
+    assert "error" not in shell.stderr.replace("plugin skipped", "")

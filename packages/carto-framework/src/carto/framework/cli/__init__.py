@@ -223,7 +223,13 @@ def _run(handler: Handler, args: argparse.Namespace) -> int:
             from carto.framework.plugins.registry import get_registry
 
             warn_broken(get_registry())
-        return handler(args)
+        code = handler(args)
+        sys.stdout.flush()  # a reader gone away shows here, not at the interpreter's exit
+        return code
+    except BrokenPipeError:
+        # the reader of the output stopped reading (carto plugins --json | head): stop quietly
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
     except UsageError as exc:
         print(f"{PROG}: error: {_one_line(exc)}", file=sys.stderr)
         return 2
