@@ -42,7 +42,7 @@ import numpy as np
 from carto.framework import get_registry
 from carto.framework.adjustment.observations import Observations
 from carto.framework.evaluation.checkpoints import checkpoint_accuracy
-from carto.framework.geometry.linescan_raycast import locate_pixels
+from carto.framework.geometry.linescan.raycast import locate_pixels
 from carto.framework.products.scene import Scene
 from carto.framework.raster.dem import DEM
 from carto.framework.simulation.plan import SimulationOptions

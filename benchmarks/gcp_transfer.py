@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from carto.framework import get_registry
-from carto.framework.geometry.linescan import LineScanner
+from carto.framework.geometry.linescan.scanner import LineScanner
 from carto.framework.matching.gcp_transfer import gcp_offsets
 from carto.framework.products.scene import Scene
 from carto.framework.raster.dem import DEM

@@ -33,12 +33,12 @@ from rasterio.transform import RPCTransformer
 from carto.cartosat1 import constants as c1
 from carto.cartosat2 import constants as c2
 from carto.framework.geometry.camera import Camera
-from carto.framework.geometry.linescan import LineScanner
-from carto.framework.geometry.linescan_timing import LineTiming
-from carto.framework.geometry.rpc_fitting import fit_rpc
-from carto.framework.geometry.rpc_readers import read_rpc
-from carto.framework.geometry.rpc_sensor import RPCSensor
-from carto.framework.geometry.rpc_writers import write_geotiff_rpc
+from carto.framework.geometry.linescan.scanner import LineScanner
+from carto.framework.geometry.linescan.timing import LineTiming
+from carto.framework.geometry.rpc.fitting import fit_rpc
+from carto.framework.geometry.rpc.readers import read_rpc
+from carto.framework.geometry.rpc.sensor import RPCSensor
+from carto.framework.geometry.rpc.writers import write_geotiff_rpc
 from carto.framework.geometry.trajectory import Trajectory
 from carto.framework.simulation import acquisition
 

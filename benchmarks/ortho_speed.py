@@ -122,8 +122,8 @@ def fore_sensor(size: int):
     """Cartosat-1 Fore (single array), a ``size x size`` window centred on the target."""
     from carto.cartosat1 import constants as c1
     from carto.framework.geometry.camera import Camera
-    from carto.framework.geometry.linescan import LineScanner
-    from carto.framework.geometry.linescan_timing import LineTiming
+    from carto.framework.geometry.linescan.scanner import LineScanner
+    from carto.framework.geometry.linescan.timing import LineTiming
     from carto.framework.geometry.trajectory import Trajectory
     from carto.framework.simulation import acquisition
 
@@ -304,7 +304,7 @@ def gdal_case_inputs(name: str, folder: Path):
     import rasterio
     from rasterio.errors import NotGeoreferencedWarning
 
-    from carto.framework.geometry.rpc_writers import write_geotiff_rpc
+    from carto.framework.geometry.rpc.writers import write_geotiff_rpc
     from carto.framework.workflows.opening import open_sensor
 
     scale, _res = GDAL_CASES[name]

@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 import rasterio
 
-from carto.framework.geometry.rpc_sensor import RPCSensorType
+from carto.framework.geometry.rpc.sensor import RPCSensorType
 from carto.framework.workflows.opening import open_sensor
 
 FOLDER = "pleiades-dimap-algeria"

@@ -1,7 +1,7 @@
 """Speed of the RPC projection: ours against GDAL's RPC transformer (through rasterio).
 
 Projects the same 1e6 ground points (uniform in the RPC's normalisation domain) of the Pleiades
-Reunion img_01 RPC with :meth:`carto.framework.geometry.rpc_sensor.RPCSensor.ground_to_image` and
+Reunion img_01 RPC with :meth:`carto.framework.geometry.rpc.sensor.RPCSensor.ground_to_image` and
 with ``rasterio.transform.RPCTransformer.rowcol(..., op=np.positive)`` (an identity ufunc: GDAL's
 continuous coordinates, no rounding; a Python ``op=lambda x: x`` costs rasterio another second
 per million points), and prints one JSON object: points per second of both, their ratio
@@ -23,7 +23,7 @@ import numpy as np
 import rasterio
 from rasterio.transform import RPCTransformer
 
-from carto.framework.geometry.rpc_sensor import RPCSensorType
+from carto.framework.geometry.rpc.sensor import RPCSensorType
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 IMAGE = DATA / "pleiades-reunion-pair" / "img_01.tif"

@@ -7,7 +7,8 @@ fore), on simulated hilly terrain:
   largest sample deviation (px) over the image;
 * ``error_rms_lines``: RMS geometric error of the even-array columns against an ideal
   unstaggered rendering of the same ground (``render_reflectance(..., stagger=False)``),
-  window-by-window 1-D registration (:func:`carto.framework.geometry.stagger.measure_line_shifts`),
+  window-by-window 1-D registration
+  (:func:`carto.framework.geometry.linescan.stagger.measure_line_shifts`),
   for the merge (cubic convolution and Lanczos-4), the naive constant 5-line shift and the raw
   image; the geometry uses the true model and the true DEM (this isolates the resampling);
 * ``coarse_dem_max_change_lines``: largest change of the offsets when the scene's SRTM-like
@@ -33,15 +34,15 @@ import numba
 import numpy as np
 
 from carto.framework import get_registry
-from carto.framework.geometry.linescan import LineScanner
-from carto.framework.geometry.linescan_timing import LineTiming
-from carto.framework.geometry.stagger import (
+from carto.framework.geometry.linescan.scanner import LineScanner
+from carto.framework.geometry.linescan.stagger import (
     even_columns,
     measure_line_shifts,
     merge_naive,
     merge_staggered,
     stagger_offsets,
 )
+from carto.framework.geometry.linescan.timing import LineTiming
 from carto.framework.raster.dem import DEM
 from carto.framework.simulation.plan import SimulationOptions
 from carto.framework.simulation.render import render_reflectance

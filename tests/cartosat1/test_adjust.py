@@ -119,7 +119,7 @@ def test_bad_options(setup, adjuster):
 
 def _ideal_ties(scene_dir, n: int, sigma_px: float, seed: int = 0) -> dict:
     """``n`` tie points projected with the true models over the true DEM, with image noise."""
-    from carto.framework.geometry.linescan import LineScanner
+    from carto.framework.geometry.linescan.scanner import LineScanner
     from carto.framework.raster.dem import DEM
 
     truth = {n_: LineScanner.load(scene_dir / f"truth/{n_}.model.json") for n_ in ("fore", "aft")}
@@ -204,7 +204,7 @@ def test_the_aft_images_own_attitude_trend_stays_out_of_the_body(tmp_path, adjus
     weights aligned with the others: an IndexError before)."""
     from carto.framework.adjustment.image_trends import with_image_trends
     from carto.framework.adjustment.priors import line_scanner_corrections
-    from carto.framework.geometry.linescan import LineScanner
+    from carto.framework.geometry.linescan.scanner import LineScanner
     from carto.framework.raster.dem import DEM
 
     scene_dir = _exact_gcp_scene(tmp_path, seed=4, lines=300)

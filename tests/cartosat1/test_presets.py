@@ -9,7 +9,7 @@ import pytest
 
 from carto.cartosat1 import constants as c
 from carto.framework.geometry import frames
-from carto.framework.geometry.linescan import LineScanner
+from carto.framework.geometry.linescan.scanner import LineScanner
 
 
 @pytest.fixture(scope="module")

@@ -42,7 +42,7 @@ def pair():
         im = tg.window(full, 5600, 0, 800, 12000)
         imagers[view.name] = im
         t = im.timing
-        from carto.framework.geometry.linescan_timing import LineTiming
+        from carto.framework.geometry.linescan.timing import LineTiming
 
         timing = LineTiming.constant(float(t.time(0.5)), t.period_s)
         specs.append(ImageSpec(view.name, view.camera.name, "x.tif", 800, 12000, 5600, 0, timing))

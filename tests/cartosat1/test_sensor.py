@@ -7,10 +7,10 @@ import pytest
 
 from carto.framework import get_registry
 from carto.framework.errors import InputError
-from carto.framework.geometry.linescan import LineScanner
-from carto.framework.geometry.rpc_readers import read_rpc
-from carto.framework.geometry.rpc_sensor import RPCSensor
-from carto.framework.geometry.rpc_writers import write_geotiff_rpc, write_rpc_txt
+from carto.framework.geometry.linescan.scanner import LineScanner
+from carto.framework.geometry.rpc.readers import read_rpc
+from carto.framework.geometry.rpc.sensor import RPCSensor
+from carto.framework.geometry.rpc.writers import write_geotiff_rpc, write_rpc_txt
 from carto.framework.workflows.opening import open_sensor
 
 

@@ -9,7 +9,7 @@ from carto.framework import get_registry
 from carto.framework.adjustment.observations import Observations
 from carto.framework.errors import InputError
 from carto.framework.evaluation.checkpoints import checkpoint_accuracy
-from carto.framework.geometry.linescan import LineScanner
+from carto.framework.geometry.linescan.scanner import LineScanner
 from carto.framework.products.scene import Scene
 from carto.framework.workflows.adjust import select_gcps
 from carto.framework.workflows.opening import open_sensor, open_sensors

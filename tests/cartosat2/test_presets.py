@@ -12,7 +12,7 @@ import pytest
 from carto.cartosat2 import constants as c
 from carto.cartosat2.presets import LINE_PERIOD_S
 from carto.framework.geometry import frames
-from carto.framework.geometry.linescan import LineScanner
+from carto.framework.geometry.linescan.scanner import LineScanner
 
 from ..scenes import simulate
 

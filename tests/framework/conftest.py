@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from carto.framework.geometry.camera import Camera
-from carto.framework.geometry.linescan import LineScanner
-from carto.framework.geometry.linescan_timing import LineTiming
+from carto.framework.geometry.linescan.scanner import LineScanner
+from carto.framework.geometry.linescan.timing import LineTiming
 
 from .builders import cartosat1_camera, make_trajectory
 

@@ -7,8 +7,8 @@ import json
 import numpy as np
 from rasterio.transform import RPCTransformer
 
-from carto.framework.geometry.linescan import LineScanner
-from carto.framework.geometry.rpc_readers import read_rpc
+from carto.framework.geometry.linescan.scanner import LineScanner
+from carto.framework.geometry.rpc.readers import read_rpc
 
 
 def test_adjust_a_scene_with_one_gcp_and_automatic_tie_points(run_carto, tmp_path, cartosat1_scene):

@@ -202,7 +202,7 @@ RPC_TEXT_CASES = {
 
 @pytest.fixture(scope="module")
 def reunion_rpc_text(shared_data: Path) -> str:
-    from carto.framework.geometry.rpc_readers import read_rpc
+    from carto.framework.geometry.rpc.readers import read_rpc
 
     return _ikonos_layout(read_rpc(shared_data / REUNION / "img_01.tif"))
 
@@ -297,7 +297,7 @@ def test_rpc_projection_far_outside_the_image_is_nan(
     carto: Run, tmp_path: Path, shared_data: Path
 ) -> None:
     """10 E 10 N on the 1024 x 1024 Reunion product: nan, counted; the inside point is not."""
-    from carto.framework.geometry.rpc_readers import read_rpc
+    from carto.framework.geometry.rpc.readers import read_rpc
 
     image = shared_data / REUNION / "img_01.tif"
     rpc = read_rpc(image)

@@ -12,7 +12,7 @@ import rasterio
 from pyproj import Geod
 from rasterio.transform import RPCTransformer
 
-from carto.framework.geometry.rpc_sensor import (
+from carto.framework.geometry.rpc.sensor import (
     DEFAULT_BIAS_M,
     RPCSensorType,
     apriori_offset_sigma_px,

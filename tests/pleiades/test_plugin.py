@@ -10,8 +10,8 @@ import pytest
 
 import carto.pleiades
 from carto.framework import get_registry
-from carto.framework.geometry.linescan import LineScanner
-from carto.framework.geometry.rpc_sensor import RPCSensor
+from carto.framework.geometry.linescan.scanner import LineScanner
+from carto.framework.geometry.rpc.sensor import RPCSensor
 from carto.framework.workflows.opening import open_sensor
 from carto.pleiades.sensor import PleiadesDimapType
 

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from carto.framework.geometry import frames
-from carto.framework.geometry.linescan import LineScanner
-from carto.framework.geometry.rpc_sensor import RPCSensorType
+from carto.framework.geometry.linescan.scanner import LineScanner
+from carto.framework.geometry.rpc.sensor import RPCSensorType
 from carto.pleiades.dimap import read_dimap
 
 pytestmark = pytest.mark.realdata

@@ -17,7 +17,7 @@ from carto.framework.adjustment.image_trends import (
 )
 from carto.framework.adjustment.jitter import with_jitter_terms, without_jitter_terms
 from carto.framework.errors import InputError
-from carto.framework.geometry.linescan import LineScanner
+from carto.framework.geometry.linescan.scanner import LineScanner
 
 VALUES = {
     "aft.trend.roll.p1": 3e-6,

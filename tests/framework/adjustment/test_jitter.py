@@ -186,7 +186,7 @@ def test_folded_jitter_is_carried_by_the_delivered_model(fore, tmp_path):
     the point), which the first-order wrapper's image points (the jitter at the time of the
     line without it) match within 1e-3 px for jitter of a few tenths of a pixel, also after
     the model file's round trip; and the delivered model has no jitter parameters left."""
-    from carto.framework.geometry.linescan import LineScanner
+    from carto.framework.geometry.linescan.scanner import LineScanner
 
     rng = np.random.default_rng(3)
     values = {p.name: float(v) for p, v in zip(fore.jitter, rng.normal(0, 3e-7, 12), strict=True)}
@@ -206,7 +206,7 @@ def test_folded_jitter_is_carried_by_the_delivered_model(fore, tmp_path):
         np.testing.assert_allclose(m_line, line, atol=1e-3)
         np.testing.assert_allclose(m_sample, sample, atol=1e-3)
     # its RPC is fitted to the smooth motion and says how far the jitter moves the image
-    from carto.framework.geometry.linescan import save_line_scanner
+    from carto.framework.geometry.linescan.scanner import save_line_scanner
 
     written = save_line_scanner(folded, tmp_path, "rpc", (0.0, 1000.0))
     assert written["rpc"]["periodic_attitude_left_out_max_px"] > 0.2

@@ -9,7 +9,7 @@ import pytest
 
 from carto.framework.errors import InputError
 from carto.framework.geometry.decimated import DecimatedSensor
-from carto.framework.geometry.rpc_sensor import RPCSensor
+from carto.framework.geometry.rpc.sensor import RPCSensor
 from carto.framework.raster.image_source import ArrayImage, DecimatedImage
 from tests.framework.geometry.test_rpc import synthetic_rpc
 

@@ -10,8 +10,8 @@ import pytest
 from carto.framework.errors import InputError
 from carto.framework.geometry import frames
 from carto.framework.geometry.camera import Camera
-from carto.framework.geometry.linescan import LineScanner, LineScannerModelType
-from carto.framework.geometry.linescan_timing import LineTiming
+from carto.framework.geometry.linescan.scanner import LineScanner, LineScannerModelType
+from carto.framework.geometry.linescan.timing import LineTiming
 
 HEIGHTS = (-100.0, 9000.0)
 

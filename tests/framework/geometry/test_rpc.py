@@ -1,4 +1,4 @@
-"""The RPC sensor (:mod:`carto.framework.geometry.rpc_model`, ``rpc_readers``, ``rpc_writers``,
+"""The RPC sensor (:mod:`carto.framework.geometry.rpc.model`, ``rpc_readers``, ``rpc_writers``,
 ``rpc_sensor``): evaluation, readers, writers, sensor, GDAL parity.
 
 GDAL is the reference: rasterio's ``RPCTransformer.rowcol(lon, lat, h, op=np.positive)`` (an
@@ -23,9 +23,9 @@ import rasterio
 from rasterio.transform import RPCTransformer
 
 from carto.framework.errors import InputError
-from carto.framework.geometry import rpc_model as rpc_mod
-from carto.framework.geometry.rpc_model import RPC00B_TERMS, RPCCoefficients
-from carto.framework.geometry.rpc_readers import (
+from carto.framework.geometry.rpc import model as rpc_mod
+from carto.framework.geometry.rpc.model import RPC00B_TERMS, RPCCoefficients
+from carto.framework.geometry.rpc.readers import (
     read_dimap_rpc,
     read_ossim_geom,
     read_rpb,
@@ -34,8 +34,8 @@ from carto.framework.geometry.rpc_readers import (
     read_rpc_txt,
     read_worldview_xml,
 )
-from carto.framework.geometry.rpc_sensor import RPCSensor, RPCSensorType
-from carto.framework.geometry.rpc_writers import write_geotiff_rpc, write_rpc_txt
+from carto.framework.geometry.rpc.sensor import RPCSensor, RPCSensorType
+from carto.framework.geometry.rpc.writers import write_geotiff_rpc, write_rpc_txt
 from carto.framework.geometry.sensor import Sensor
 
 RPC_FILES = "rpc-files"

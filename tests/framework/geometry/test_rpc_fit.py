@@ -1,4 +1,4 @@
-"""RPC fitting (:func:`carto.framework.geometry.rpc_fitting.fit_rpc`): to RPC sensors and to a
+"""RPC fitting (:func:`carto.framework.geometry.rpc.fitting.fit_rpc`): to RPC sensors and to a
 non-RPC sensor."""
 
 from __future__ import annotations
@@ -13,10 +13,10 @@ from numpy.typing import ArrayLike
 
 from carto.framework.errors import InputError
 from carto.framework.geometry import frames
-from carto.framework.geometry.rpc_fitting import FitReport, fit_rpc, footprint
-from carto.framework.geometry.rpc_readers import read_rpc
-from carto.framework.geometry.rpc_sensor import RPCSensor, RPCSensorType
-from carto.framework.geometry.rpc_writers import write_rpc_txt
+from carto.framework.geometry.rpc.fitting import FitReport, fit_rpc, footprint
+from carto.framework.geometry.rpc.readers import read_rpc
+from carto.framework.geometry.rpc.sensor import RPCSensor, RPCSensorType
+from carto.framework.geometry.rpc.writers import write_rpc_txt
 from carto.framework.geometry.sensor import Sensor
 
 

@@ -43,9 +43,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from carto.framework.errors import InputError
-from carto.framework.geometry import rpc_model as rpc_mod
-from carto.framework.geometry.rpc_model import RPCCoefficients
-from carto.framework.geometry.rpc_readers import (
+from carto.framework.geometry.rpc import model as rpc_mod
+from carto.framework.geometry.rpc.model import RPCCoefficients
+from carto.framework.geometry.rpc.readers import (
     read_dimap_rpc,
     read_ossim_geom,
     read_rpb,
@@ -54,7 +54,7 @@ from carto.framework.geometry.rpc_readers import (
     read_rpc_txt,
     read_worldview_xml,
 )
-from carto.framework.geometry.rpc_writers import write_geotiff_rpc
+from carto.framework.geometry.rpc.writers import write_geotiff_rpc
 
 from .test_rpc import _geom_text, _rpb_text, synthetic_rpc
 

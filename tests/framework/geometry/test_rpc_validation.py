@@ -2,10 +2,10 @@
 :class:`~carto.framework.errors.InputError` naming the file and the field, and the RPC sensor
 returns NaN outside the model's validity domain.
 
-The rules (thresholds and why) are documented in :mod:`carto.framework.geometry.rpc_model`
+The rules (thresholds and why) are documented in :mod:`carto.framework.geometry.rpc.model`
 (``validate_fields``, ``validate_model``, ``DOMAIN_MARGIN``...), in
-:func:`carto.framework.geometry.rpc_readers._key_values` (truncated text files) and in
-:mod:`carto.framework.geometry.rpc_sensor` (validity domain).
+:func:`carto.framework.geometry.rpc.readers._key_values` (truncated text files) and in
+:mod:`carto.framework.geometry.rpc.sensor` (validity domain).
 """
 
 from __future__ import annotations
@@ -19,11 +19,11 @@ import pytest
 import rasterio
 
 from carto.framework.errors import InputError
-from carto.framework.geometry import rpc_model as rpc_mod
-from carto.framework.geometry.rpc_model import RPCCoefficients
-from carto.framework.geometry.rpc_readers import read_rpc, read_rpc_and_shape
-from carto.framework.geometry.rpc_sensor import RPCSensor, RPCSensorType
-from carto.framework.geometry.rpc_writers import write_geotiff_rpc, write_rpc_txt
+from carto.framework.geometry.rpc import model as rpc_mod
+from carto.framework.geometry.rpc.model import RPCCoefficients
+from carto.framework.geometry.rpc.readers import read_rpc, read_rpc_and_shape
+from carto.framework.geometry.rpc.sensor import RPCSensor, RPCSensorType
+from carto.framework.geometry.rpc.writers import write_geotiff_rpc, write_rpc_txt
 from carto.framework.workflows.opening import open_sensor, sensor_type_for
 
 from .test_rpc import _geom_text, _rpb_text, synthetic_rpc
@@ -207,7 +207,7 @@ def test_negative_ground_scales_are_legal(shared_data: Path) -> None:
 
 def _mirrored_lat(rpc: RPCCoefficients) -> np.ndarray:
     """``rpc``'s coefficients with the normalised latitude P negated (P's odd powers)."""
-    from carto.framework.geometry.rpc_terms import RPC00B_TERMS
+    from carto.framework.geometry.rpc.terms import RPC00B_TERMS
 
     sign = np.array([(-1.0) ** term.count("P") for term in RPC00B_TERMS])
     return rpc.coefficients * sign[None, :]

@@ -11,8 +11,8 @@ from numpy.polynomial import polynomial as npoly
 from carto.framework.errors import InputError
 from carto.framework.geometry import frames
 from carto.framework.geometry.camera import Camera
-from carto.framework.geometry.linescan import LineScanner
-from carto.framework.geometry.linescan_timing import LineTiming
+from carto.framework.geometry.linescan.scanner import LineScanner
+from carto.framework.geometry.linescan.timing import LineTiming
 from carto.framework.geometry.trajectory import AttitudeSamples, EphemerisSamples, Trajectory
 
 from ..builders import EPOCH, circular_orbit

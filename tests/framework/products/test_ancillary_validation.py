@@ -18,8 +18,8 @@ import numpy as np
 import pytest
 
 from carto.framework.errors import InputError
-from carto.framework.geometry.linescan import LineScanner
-from carto.framework.geometry.linescan_timing import LineTiming
+from carto.framework.geometry.linescan.scanner import LineScanner
+from carto.framework.geometry.linescan.timing import LineTiming
 from carto.framework.products.ancillary import read_ancillary
 from carto.framework.products.scene import Scene
 

@@ -44,7 +44,7 @@ from hypothesis import strategies as st
 
 from carto.framework.errors import InputError
 from carto.framework.geometry import trajectory_samples as traj_limits
-from carto.framework.geometry.linescan import LineScanner
+from carto.framework.geometry.linescan.scanner import LineScanner
 from carto.framework.products import ancillary as anc_limits
 from carto.framework.products.ancillary import read_ancillary
 from carto.framework.products.scene import Scene, find_scene_manifest

@@ -8,7 +8,7 @@ import pytest
 from carto.framework.errors import GeometryError, InputError
 from carto.framework.geometry import frames
 from carto.framework.geometry.camera import Camera
-from carto.framework.geometry.linescan import LineScanner
+from carto.framework.geometry.linescan.scanner import LineScanner
 from carto.framework.geometry.trajectory import Trajectory
 from carto.framework.simulation import acquisition
 

@@ -11,7 +11,7 @@ import pytest
 
 from carto.cartosat1.adjust import prepare_sensors
 from carto.framework.errors import InputError
-from carto.framework.geometry.linescan import LineScanner
+from carto.framework.geometry.linescan.scanner import LineScanner
 
 
 def test_a_tied_adjustment_of_adjusted_models_is_refused(cartosat1_adjusted: Path) -> None:

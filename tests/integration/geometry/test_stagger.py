@@ -1,4 +1,4 @@
-"""Stagger correction (carto.framework.geometry.stagger) against independent truth.
+"""Stagger correction (carto.framework.geometry.linescan.stagger) against independent truth.
 
 The truth is the renderer: the same true model, true DEM and ground texture rendered as the
 detectors record it (``stagger=True``: the even array sees the ground earlier) and as an ideal
@@ -20,9 +20,8 @@ import pytest
 
 from carto.framework.errors import InputError
 from carto.framework.geometry.camera import Camera
-from carto.framework.geometry.linescan import LineScanner
-from carto.framework.geometry.linescan_timing import LineTiming
-from carto.framework.geometry.stagger import (
+from carto.framework.geometry.linescan.scanner import LineScanner
+from carto.framework.geometry.linescan.stagger import (
     MergedImage,
     StaggerField,
     even_columns,
@@ -33,6 +32,7 @@ from carto.framework.geometry.stagger import (
     stagger_offsets,
     stagger_sign,
 )
+from carto.framework.geometry.linescan.timing import LineTiming
 from carto.framework.raster.dem import DEM
 from carto.framework.simulation.render import render_reflectance
 from carto.framework.simulation.texture import make_texture

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from carto.framework.errors import InputError
-from carto.framework.geometry.linescan import LineScanner
-from carto.framework.geometry.stagger import merge_staggered, merge_staggered_rows
+from carto.framework.geometry.linescan.scanner import LineScanner
+from carto.framework.geometry.linescan.stagger import merge_staggered, merge_staggered_rows
 from carto.framework.products.scene import Scene
 from carto.framework.raster.dem import DEM
 from carto.framework.raster.image_source import RasterImage

@@ -13,7 +13,7 @@ import rasterio
 
 from carto.framework.errors import InputError
 from carto.framework.files.point_table import read_point_table
-from carto.framework.geometry.linescan import LineScanner
+from carto.framework.geometry.linescan.scanner import LineScanner
 from carto.framework.products.ancillary import read_ancillary
 from carto.framework.raster.dem import DEM
 

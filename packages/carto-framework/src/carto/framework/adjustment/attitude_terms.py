@@ -24,7 +24,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from carto.framework.arrays import as_float_arrays
 from carto.framework.errors import InputError
-from carto.framework.geometry.linescan import LineScanner
+from carto.framework.geometry.linescan.scanner import LineScanner
 from carto.framework.geometry.sensor import Parameter, Sensor, replace_parameters
 
 FloatArray = NDArray[np.float64]

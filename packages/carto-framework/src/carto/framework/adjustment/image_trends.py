@@ -49,7 +49,7 @@ from carto.framework.adjustment.attitude_terms import (
     replace_line_scanner,
 )
 from carto.framework.errors import InputError
-from carto.framework.geometry.linescan import LineScanner
+from carto.framework.geometry.linescan.scanner import LineScanner
 from carto.framework.geometry.sensor import Parameter, Sensor
 
 MAX_TREND_ORDER = 2

@@ -11,7 +11,7 @@ from typing import Any
 import attrs
 
 from carto.framework.errors import InputError
-from carto.framework.geometry.linescan import LineScanner
+from carto.framework.geometry.linescan.scanner import LineScanner
 from carto.framework.geometry.sensor import Sensor
 
 
@@ -76,7 +76,7 @@ def line_scanner_corrections(
     and of a free camera alignment (``alignment_sigma_rad`` overrides the latter); without it
     the trajectory's and camera's defaults stay. Other sensors raise :class:`InputError` naming
     ``adjuster``."""
-    from carto.framework.geometry.linescan import LineScanner
+    from carto.framework.geometry.linescan.scanner import LineScanner
 
     if not 0 <= attitude_order <= 3:
         raise InputError(f"{adjuster}: attitude_order must be 0..3, got {attitude_order}")

@@ -43,7 +43,7 @@ class RPCBiasAdjuster(Adjuster):
     def adjust(
         self, sensors: Mapping[str, Sensor], observations: Observations, **options: Any
     ) -> AdjustmentResult:
-        from carto.framework.geometry.rpc_sensor import RPCSensor
+        from carto.framework.geometry.rpc.sensor import RPCSensor
 
         settings = self.settings(options)
         mode, fixed = settings.mode, set(settings.fixed)

@@ -7,7 +7,7 @@ up to some hundred metres) and by the DEM's errors (stereo parallax). So (design
 Radhadevi et al. 2010):
 
 1. merge the staggered odd/even arrays of raw Cartosat images
-   (:mod:`~carto.framework.geometry.stagger`) so that every column follows the image model;
+   (:mod:`~carto.framework.geometry.linescan.stagger`) so that every column follows the image model;
 2. orthorectify every image on one map grid over the DEM with its system-level model
    (:func:`~carto.framework.imaging.preparation.system_orthos`); a grid larger than
    ``tile_px`` is processed by tiles, tasks of a tile engine that orthorectify only their

@@ -10,8 +10,8 @@ from collections.abc import Sequence
 
 from carto.framework.adjustment.base import Adjuster
 from carto.framework.adjustment.rpc_bias import RPCBiasAdjuster
-from carto.framework.geometry.linescan import LineScannerModelType
-from carto.framework.geometry.rpc_sensor import RPCSensorType
+from carto.framework.geometry.linescan.scanner import LineScannerModelType
+from carto.framework.geometry.rpc.sensor import RPCSensorType
 from carto.framework.geometry.sensor import SensorType
 from carto.framework.geometry.trajectory_models import (
     LagrangeTrajectoryModel,

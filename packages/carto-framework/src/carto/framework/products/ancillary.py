@@ -4,7 +4,7 @@ acquisition, as a versioned JSON document (specified in ``docs/formats.md``).
 One ancillary file describes one platform trajectory segment and the images acquired during it:
 a Cartosat-1 stereo pair (Fore and Aft on one body) is one file with two images; each view of an
 agile Cartosat-2 acquisition is a file of its own. :func:`read_ancillary` turns it into
-:class:`~carto.framework.geometry.linescan.LineScanner` sensors that share one fitted
+:class:`~carto.framework.geometry.linescan.scanner.LineScanner` sensors that share one fitted
 :class:`~carto.framework.geometry.trajectory.Trajectory`.
 """
 
@@ -29,8 +29,8 @@ from carto.framework.files.documents import (
 from carto.framework.geometry import frames
 from carto.framework.geometry.camera import Camera
 from carto.framework.geometry.light_path import LightPath
-from carto.framework.geometry.linescan import LineScanner
-from carto.framework.geometry.linescan_timing import LineTiming
+from carto.framework.geometry.linescan.scanner import LineScanner
+from carto.framework.geometry.linescan.timing import LineTiming
 from carto.framework.geometry.time_series import BUILTIN_KINDS, Interpolation
 from carto.framework.geometry.trajectory import AttitudeSamples, EphemerisSamples, Trajectory
 from carto.framework.geometry.trajectory_models import TrajectoryModel

@@ -17,7 +17,7 @@ import attrs
 
 from carto.framework.errors import InputError
 from carto.framework.files.documents import check_fields, read_json_document
-from carto.framework.geometry.linescan import LineScanner
+from carto.framework.geometry.linescan.scanner import LineScanner
 
 SCENE_FORMAT = "carto-scene"
 SCENE_VERSION = 1

@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from carto.framework.errors import InputError
-from carto.framework.geometry.linescan import save_line_scanner
+from carto.framework.geometry.linescan.scanner import save_line_scanner
 from carto.framework.geometry.sensor import Sensor, SensorType
 from carto.framework.products.scene import Scene, find_scene_manifest
 

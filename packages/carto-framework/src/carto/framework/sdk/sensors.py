@@ -6,11 +6,11 @@ from carto.framework.geometry import frames, orbit
 from carto.framework.geometry.camera import Camera
 from carto.framework.geometry.decimated import DecimatedSensor
 from carto.framework.geometry.intersection import base_direction
-from carto.framework.geometry.linescan import LineScanner, save_line_scanner
-from carto.framework.geometry.linescan_solver import tabulated_lines
-from carto.framework.geometry.linescan_timing import LineTiming
-from carto.framework.geometry.rpc_readers import read_rpc_txt
-from carto.framework.geometry.rpc_sensor import RPCSensor, RPCSensorType, save_corrected_rpc
+from carto.framework.geometry.linescan.scanner import LineScanner, save_line_scanner
+from carto.framework.geometry.linescan.solver import tabulated_lines
+from carto.framework.geometry.linescan.timing import LineTiming
+from carto.framework.geometry.rpc.readers import read_rpc_txt
+from carto.framework.geometry.rpc.sensor import RPCSensor, RPCSensorType, save_corrected_rpc
 from carto.framework.geometry.sensor import Parameter, Sensor, SensorType, refuse_options
 from carto.framework.geometry.time_series import TimeSeries
 from carto.framework.imaging.preparation import ground_sampling_m

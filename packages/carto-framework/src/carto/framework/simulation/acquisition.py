@@ -16,7 +16,7 @@ from numpy.typing import ArrayLike, NDArray
 from carto.framework.errors import GeometryError, InputError
 from carto.framework.geometry import frames, orbit
 from carto.framework.geometry.camera import Camera
-from carto.framework.geometry.linescan_timing import LineTiming
+from carto.framework.geometry.linescan.timing import LineTiming
 from carto.framework.geometry.trajectory import AttitudeSamples, EphemerisSamples, Trajectory
 
 FloatArray = NDArray[np.float64]

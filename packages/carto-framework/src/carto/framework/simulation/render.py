@@ -10,7 +10,8 @@ jumps over a ridge, and it converges like Newton's method on gentle terrain. Ite
 when the ray is within ``1e-4`` m of the terrain height.
 
 The camera state comes from the sensor's exact interpolation table (see
-:mod:`carto.framework.geometry.linescan`); with ``stagger=True`` detectors with odd 0-based index
+:mod:`carto.framework.geometry.linescan.scanner`); with ``stagger=True`` detectors with odd
+0-based index
 (the even array) look along track by the camera's ``stagger_tan`` more than the others, as the raw
 Cartosat images are recorded.
 
@@ -27,8 +28,7 @@ from numpy.typing import NDArray
 
 from carto.framework.errors import InputError
 from carto.framework.geometry import frames
-from carto.framework.geometry.linescan import LineScanner
-from carto.framework.geometry.linescan_raycast import (
+from carto.framework.geometry.linescan.raycast import (
     camera_ray,
     geographic_grid,
     grid_bilinear,
@@ -37,6 +37,7 @@ from carto.framework.geometry.linescan_raycast import (
     ray_dem,
     sensor_arrays,
 )
+from carto.framework.geometry.linescan.scanner import LineScanner
 
 FloatArray = NDArray[np.float64]
 

@@ -29,7 +29,7 @@ from numpy.typing import NDArray
 
 from carto.framework.files.atomic import atomic_output
 from carto.framework.geometry import frames
-from carto.framework.geometry.linescan import LineScanner
+from carto.framework.geometry.linescan.scanner import LineScanner
 from carto.framework.parallel.progress import stage_bar
 from carto.framework.raster.crs import utm_crs
 
@@ -106,7 +106,7 @@ def _sub_transform(transform: Any, r0: int, c0: int) -> Any:
 def write_truth_dem(path: Path, terrain: Any, *, quiet: bool = False) -> tuple[float, float, float]:
     """Write the terrain's grid as the truth DEM (float32, as :meth:`DEM.write`) by strips;
     return its ``(h_min, h_max, max_slope)``, the slope as
-    :func:`~carto.framework.geometry.linescan_raycast.max_terrain_slope` of the whole grid."""
+    :func:`~carto.framework.geometry.linescan.raycast.max_terrain_slope` of the whole grid."""
     from rasterio.crs import CRS
 
     n_rows, n_cols = terrain.shape

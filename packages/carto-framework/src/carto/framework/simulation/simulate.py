@@ -43,7 +43,7 @@ from carto.framework.errors import InputError
 from carto.framework.files.documents import write_json_atomic
 from carto.framework.files.point_table import write_point_table
 from carto.framework.geometry import frames
-from carto.framework.geometry.linescan_timing import LineTiming
+from carto.framework.geometry.linescan.timing import LineTiming
 from carto.framework.products.ancillary import ImageSpec
 from carto.framework.products.scene import SCENE_FORMAT, SCENE_VERSION
 from carto.framework.simulation import truth_geometry as tg

@@ -17,8 +17,8 @@ import numpy as np
 from carto.framework.geometry import frames
 from carto.framework.geometry.camera import Camera
 from carto.framework.geometry.light_path import LightPath
-from carto.framework.geometry.linescan import LineScanner
-from carto.framework.geometry.linescan_timing import LineTiming
+from carto.framework.geometry.linescan.scanner import LineScanner
+from carto.framework.geometry.linescan.timing import LineTiming
 from carto.framework.geometry.trajectory import AttitudeSamples, EphemerisSamples, Trajectory
 from carto.framework.products.ancillary import CameraSpec
 from carto.framework.simulation.plan import ScenePlan, SegmentPlan, ViewPlan

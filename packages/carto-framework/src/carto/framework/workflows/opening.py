@@ -126,7 +126,7 @@ def _why_unrecognised(path: Path) -> str | None:
             fh.read(1)
     except OSError as err:
         return f"cannot read it: {err.strerror or err}"
-    from carto.framework.geometry.rpc_sensor import why_not_rpc
+    from carto.framework.geometry.rpc.sensor import why_not_rpc
 
     return why_not_rpc(path)
 

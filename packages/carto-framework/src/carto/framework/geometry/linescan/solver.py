@@ -1,13 +1,13 @@
-"""The ground -> image machinery of :class:`~carto.framework.geometry.linescan.LineScanner`.
+"""The ground -> image machinery of :class:`~carto.framework.geometry.linescan.scanner.LineScanner`.
 
-:meth:`~carto.framework.geometry.linescan.LineScanner.project` starts every point at the line
-that :class:`FirstGuess` gives (a cubic polynomial (lon, lat, h) -> line fitted to the model),
-then solves the focal-plane condition by the secant method on the imaging time
+:meth:`~carto.framework.geometry.linescan.scanner.LineScanner.project` starts every point at
+the line that :class:`FirstGuess` gives (a cubic polynomial (lon, lat, h) -> line fitted to
+the model), then solves the focal-plane condition by the secant method on the imaging time
 (:func:`solve_lines`), with the camera state interpolated in a :class:`LineTable` of exact
 positions and rotations at regularly spaced times. The kernels are compiled with numba and run
 in parallel over the points from :data:`PARALLEL_MIN_POINTS` points on; :func:`camera_vectors`
 gives camera-frame vectors from the same table (for the partials of
-:meth:`~carto.framework.geometry.linescan.LineScanner.linearize`).
+:meth:`~carto.framework.geometry.linescan.scanner.LineScanner.linearize`).
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ from numpy.typing import NDArray
 from carto.framework.errors import InputError
 
 if TYPE_CHECKING:  # the sensor the guess and the table are built for
-    from carto.framework.geometry.linescan import LineScanner
+    from carto.framework.geometry.linescan.scanner import LineScanner
 
 FloatArray = NDArray[np.float64]
 

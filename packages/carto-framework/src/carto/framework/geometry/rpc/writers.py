@@ -1,6 +1,6 @@
 """Writers of RPC00B models: ``_RPC.TXT`` text (:func:`write_rpc_txt`) and the GeoTIFF RPC tag
 (:func:`write_geotiff_rpc`), both in the native RPC00B pixel convention of
-:mod:`~carto.framework.geometry.rpc_model` and written atomically.
+:mod:`~carto.framework.geometry.rpc.model` and written atomically.
 """
 
 from __future__ import annotations
@@ -14,8 +14,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from carto.framework.files.atomic import atomic_output
-from carto.framework.geometry.rpc_model import COEFF_FIELDS, SCALAR_FIELDS, RPCCoefficients
-from carto.framework.geometry.rpc_readers import file_error
+from carto.framework.geometry.rpc.model import COEFF_FIELDS, SCALAR_FIELDS, RPCCoefficients
+from carto.framework.geometry.rpc.readers import file_error
 
 __all__ = [
     "write_geotiff_rpc",

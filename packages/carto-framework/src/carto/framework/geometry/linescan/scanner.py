@@ -16,16 +16,16 @@ Ground -> image (:meth:`LineScanner.ground_to_image`)
     ``v = R_camera_to_ecef(t)^T (X - P(t))``, from a first guess given by a cubic polynomial
     in (lon, lat, h) fitted to the model over the image and heights -500..9000 m. Iterations stop
     when the line changes by less than
-    :data:`~carto.framework.geometry.linescan_solver.LINE_TOLERANCE` (1e-8 line); the sample is
+    :data:`~carto.framework.geometry.linescan.solver.LINE_TOLERANCE` (1e-8 line); the sample is
     then ``s = tan_psi_y^-1(v_y / v_z)``. Points that do not converge in ``MAX_ITERATIONS``, or
     that are behind the camera, come back as NaN; points outside the image come back as NaN from
     :meth:`~LineScanner.ground_to_image` and with their (extrapolated) coordinates and a False
     mask from :meth:`~LineScanner.project`. The first guess, the camera-state table and the
-    compiled solver are in :mod:`~carto.framework.geometry.linescan_solver`.
+    compiled solver are in :mod:`~carto.framework.geometry.linescan.solver`.
 
 Image coordinates follow the project convention (first pixel centre at ``(0.5, 0.5)``); line
 ``l`` is imaged at ``t(l)`` given by a
-:class:`~carto.framework.geometry.linescan_timing.LineTiming` (``t0 + (l - 0.5) * period`` for a
+:class:`~carto.framework.geometry.linescan.timing.LineTiming` (``t0 + (l - 0.5) * period`` for a
 constant period, piecewise linear for asynchronous imaging).
 """
 
@@ -59,14 +59,14 @@ from carto.framework.geometry.light_path import (
     received_ground_point,
     source_direction,
 )
-from carto.framework.geometry.linescan_solver import (
+from carto.framework.geometry.linescan.solver import (
     FirstGuess,
     LineTable,
     camera_vectors,
     solve_lines,
     tabulated_lines,
 )
-from carto.framework.geometry.linescan_timing import LineTiming
+from carto.framework.geometry.linescan.timing import LineTiming
 from carto.framework.geometry.sensor import Parameter, Sensor, SensorType, refuse_options
 from carto.framework.geometry.trajectory import Trajectory
 
@@ -80,7 +80,7 @@ EDGE_TOLERANCE_PX = 1e-6
 """Points this close outside the image border still count as inside (rounding of round trips)."""
 MAX_TABLE_NODES = 4e6
 """Most camera states the ground -> image table may hold (~400 MB): the image and its margins
-(:data:`~carto.framework.geometry.linescan_solver.TABLE_MARGIN_LINES`) at two of the shortest
+(:data:`~carto.framework.geometry.linescan.solver.TABLE_MARGIN_LINES`) at two of the shortest
 line periods per node. A 38 000-line Pleiades image needs 38 000; only a wrong line time or
 period (a timing node far from the others) needs more."""
 
@@ -101,7 +101,7 @@ class LineScanner(Sensor):
     Attributes:
         name: image identifier (``"fore"``, ``"IMG_02"`` ...).
         n_lines: number of image lines.
-        timing: :class:`~carto.framework.geometry.linescan_timing.LineTiming` of the lines.
+        timing: :class:`~carto.framework.geometry.linescan.timing.LineTiming` of the lines.
         camera: :class:`~carto.framework.geometry.camera.Camera` of the whole detector line.
         trajectory: :class:`~carto.framework.geometry.trajectory.Trajectory` of the platform body.
         first_sample: detector index of the image's first column: an image that is a window
@@ -508,11 +508,11 @@ class LineScanner(Sensor):
 
     def prepare_raw(self, raw: ArrayLike, dem: Any) -> NDArray[np.float32]:
         """The raw image with its staggered arrays merged onto this model's geometry
-        (:func:`~carto.framework.geometry.stagger.merge_staggered`, stagger field every 8
+        (:func:`~carto.framework.geometry.linescan.stagger.merge_staggered`, stagger field every 8
         lines) when the camera is staggered and this model describes its odd array (raw
         Cartosat data); the image as it is otherwise."""
         if self.camera.stagger_tan and self.camera.array == "odd":
-            from carto.framework.geometry.stagger import merge_staggered
+            from carto.framework.geometry.linescan.stagger import merge_staggered
 
             return merge_staggered(raw, self, dem, step=8).image
         return np.array(raw, dtype=np.float32)
@@ -524,10 +524,10 @@ class LineScanner(Sensor):
 
     def prepare_rows(self, raw: Any, dem: Any, rows: slice) -> NDArray[np.float32]:
         """Lines ``rows`` of :meth:`prepare_raw`
-        (:func:`~carto.framework.geometry.stagger.merge_staggered_rows`: the same values,
+        (:func:`~carto.framework.geometry.linescan.stagger.merge_staggered_rows`: the same values,
         reading only the raw lines the window needs)."""
         if self.raw_needs_preparation:
-            from carto.framework.geometry.stagger import merge_staggered_rows
+            from carto.framework.geometry.linescan.stagger import merge_staggered_rows
 
             return merge_staggered_rows(raw, self, dem, rows, step=8)
         return super().prepare_rows(raw, dem, rows)
@@ -626,8 +626,8 @@ def save_line_scanner(
     attitude corrections (jitter, which it cannot follow and which can make the fit's
     denominator vanish), and the entry says how far the jitter moves the image
     (``periodic_attitude_left_out_max_px``): the model file is the rigorous product."""
-    from carto.framework.geometry.rpc_fitting import fit_rpc
-    from carto.framework.geometry.rpc_writers import write_rpc_txt
+    from carto.framework.geometry.rpc.fitting import fit_rpc
+    from carto.framework.geometry.rpc.writers import write_rpc_txt
 
     if not isinstance(sensor, LineScanner):
         raise InputError(f"image {name}: not a line scanner ({type(sensor).__name__})")

@@ -1,5 +1,5 @@
 """Readers of RPC00B models from every common RPC container, into
-:class:`~carto.framework.geometry.rpc_model.RPCCoefficients`.
+:class:`~carto.framework.geometry.rpc.model.RPCCoefficients`.
 
 :func:`read_rpc` detects the format from the file's content (:func:`sniff_rpc_format`); one
 reader per format: :func:`read_rpc_gdal` (rasters with RPC metadata that GDAL opens: GeoTIFF RPC
@@ -7,7 +7,7 @@ tag or sidecars, NITF RPC00B, VRT), :func:`read_rpc_txt` (``_RPC.TXT`` and other
 text), :func:`read_rpb` (``.RPB``), :func:`read_ossim_geom` (OSSIM ``.geom``),
 :func:`read_dimap_rpc` (DIMAP v1/v2/v3 RPC XML) and :func:`read_worldview_xml` (DigitalGlobe/Maxar
 ``<isd>`` XML). Pixel offsets are converted to the native RPC00B convention of
-:mod:`~carto.framework.geometry.rpc_model`. Every failure is an
+:mod:`~carto.framework.geometry.rpc.model`. Every failure is an
 :class:`~carto.framework.errors.InputError` naming the file (:func:`file_error`).
 """
 
@@ -23,7 +23,7 @@ from collections.abc import Collection, Mapping, Sequence
 from pathlib import Path
 
 from carto.framework.errors import InputError
-from carto.framework.geometry.rpc_model import (
+from carto.framework.geometry.rpc.model import (
     COEFF_FIELDS,
     MAX_IMAGE_PX,
     RPC00A_TO_B,
@@ -87,7 +87,7 @@ def _to_floats(values: Sequence[str], path: Path | str, field: str) -> list[floa
 
 def _to_shape(path: Path | str, fields: Sequence[tuple[str, str]]) -> tuple[int, int]:
     """``(n_lines, n_samples)`` from the image size fields ``(name, text)``: whole numbers from
-    1 to :data:`~carto.framework.geometry.rpc_model.MAX_IMAGE_PX`."""
+    1 to :data:`~carto.framework.geometry.rpc.model.MAX_IMAGE_PX`."""
     out = []
     for name, text in fields:
         value = _to_float(text, path, name)
@@ -577,7 +577,7 @@ def read_rpc_and_shape(
 
 def _load(kind: str, path: Path) -> tuple[RPCCoefficients, tuple[int, int] | None]:
     """The loader of ``kind``, then the scales against the image size the file gives and the
-    shape of a ground pixel (:func:`~carto.framework.geometry.rpc_model.check_pixel_aspect`)."""
+    shape of a ground pixel (:func:`~carto.framework.geometry.rpc.model.check_pixel_aspect`)."""
     rpc, shape = _LOADERS[kind](path)
     try:
         if shape is not None:

@@ -9,8 +9,8 @@ it depends on the view angle, the attitude (rate), the terrain and, for the agil
 on the attitude changing continuously during the image.
 
 Conventions
-    * An image model (:class:`~carto.framework.geometry.linescan.LineScanner`) describes the **odd**
-      array (``camera.array == "odd"``); column ``j`` of an image is detector
+    * An image model (:class:`~carto.framework.geometry.linescan.scanner.LineScanner`)
+      describes the **odd** array (``camera.array == "odd"``); column ``j`` of an image is detector
       ``first_sample + j``; the even-array columns are those with ``(first_sample + j) % 2 ==
       1`` (:func:`even_columns`).
     * Image coordinates follow the project convention: the centre of pixel ``(l, j)`` is
@@ -25,7 +25,7 @@ Conventions
 
 Method (:func:`stagger_offsets`)
     Every even-array pixel centre is located on the DEM with the odd-array model
-    (:func:`carto.framework.geometry.linescan_raycast.locate_pixels`, compiled ray/DEM
+    (:func:`carto.framework.geometry.linescan.raycast.locate_pixels`, compiled ray/DEM
     intersection), and the ground point is projected with the even-array model
     (``sensor.with_camera( sensor.camera.with_array("even"))``, the rigorous ground -> image
     solution to 1e-8 line). Its line gives the offset; its sample should equal the pixel's (the
@@ -87,7 +87,7 @@ from carto.framework.errors import InputError
 from carto.framework.geometry import frames
 
 if TYPE_CHECKING:  # the model of the odd array; used through its methods
-    from carto.framework.geometry.linescan import LineScanner
+    from carto.framework.geometry.linescan.scanner import LineScanner
 
 FloatArray = NDArray[np.float64]
 Float32Array = NDArray[np.float32]
@@ -252,7 +252,7 @@ def _locate(
     sensor: LineScanner, line: FloatArray, sample: FloatArray, dem: object
 ) -> tuple[FloatArray, FloatArray, FloatArray, int]:
     """Ground points of image points on the DEM; points off the DEM at its median height."""
-    from carto.framework.geometry.linescan_raycast import is_lonlat_grid, locate_pixels
+    from carto.framework.geometry.linescan.raycast import is_lonlat_grid, locate_pixels
     from carto.framework.raster.dem import DEM
 
     if isinstance(dem, DEM):

@@ -1,9 +1,9 @@
 """Compiled ray casting of line-scanner pixels onto a geographic DEM: the fast location the
-stagger merge uses (:mod:`carto.framework.geometry.stagger`), and the kernels the simulator's
-renderer (:mod:`carto.framework.simulation.render`) builds on.
+stagger merge uses (:mod:`carto.framework.geometry.linescan.stagger`), and the kernels the
+simulator's renderer (:mod:`carto.framework.simulation.render`) builds on.
 
 Each pixel's line of sight comes from the model's exact camera-state table (see
-:mod:`carto.framework.geometry.linescan_solver`) and is intersected with the terrain by *safe
+:mod:`carto.framework.geometry.linescan.solver`) and is intersected with the terrain by *safe
 stepping*: at a height ``dh`` above the terrain, a ray that descends ``c`` metres per metre and
 moves ``s`` metres horizontally cannot meet terrain of slope at most ``S`` before it has
 travelled ``dh / (c + s S)``; stepping by that much never jumps over a ridge and converges like
@@ -30,7 +30,7 @@ from carto.framework.geometry import frames
 from carto.framework.geometry.light_path import SOURCE_DIRECTION_STEPS
 
 if TYPE_CHECKING:  # the model whose table the kernels read
-    from carto.framework.geometry.linescan import LineScanner
+    from carto.framework.geometry.linescan.scanner import LineScanner
 
 FloatArray = NDArray[np.float64]
 

@@ -34,7 +34,7 @@ of the
   360 degrees, as GDAL does (a scene across the antimeridian).
 * Values outside the RPC's normalisation domain (``|L|, |P|, |H| > 1``) are extrapolated as GDAL
   does by :meth:`RPCCoefficients.project`; the sensor
-  :class:`~carto.framework.geometry.rpc_sensor.RPCSensor` returns NaN outside the validity
+  :class:`~carto.framework.geometry.rpc.sensor.RPCSensor` returns NaN outside the validity
   domain (:meth:`RPCCoefficients.in_domain`) and far outside its image.
 * **Validation.** Every :class:`RPCCoefficients` is checked when built (so by every reader):
   :func:`validate_fields` (each field within its domain: RPC00B's ranges, widened) and
@@ -46,15 +46,15 @@ of the
 Contents: :class:`RPCCoefficients` (projection with analytic partials, Newton location,
 rasterio conversions) and its checks. The rest of the RPC support is in sibling modules:
 
-* :mod:`~carto.framework.geometry.rpc_terms`: the RPC00B and RPC00A term orders and the
+* :mod:`~carto.framework.geometry.rpc.terms`: the RPC00B and RPC00A term orders and the
   monomial evaluation shared with the fitting;
 
-* :mod:`~carto.framework.geometry.rpc_sensor`: the sensor
-  :class:`~carto.framework.geometry.rpc_sensor.RPCSensor` (with Grodecki & Dial's image-space
+* :mod:`~carto.framework.geometry.rpc.sensor`: the sensor
+  :class:`~carto.framework.geometry.rpc.sensor.RPCSensor` (with Grodecki & Dial's image-space
   bias/affine correction as adjustable parameters) and its sensor type ``"rpc"``;
-* :mod:`~carto.framework.geometry.rpc_readers`: readers for every common RPC container;
-* :mod:`~carto.framework.geometry.rpc_writers`: ``_RPC.TXT`` and GeoTIFF RPC tag writers;
-* :mod:`~carto.framework.geometry.rpc_fitting`: terrain-independent RPC fitting to any sensor
+* :mod:`~carto.framework.geometry.rpc.readers`: readers for every common RPC container;
+* :mod:`~carto.framework.geometry.rpc.writers`: ``_RPC.TXT`` and GeoTIFF RPC tag writers;
+* :mod:`~carto.framework.geometry.rpc.fitting`: terrain-independent RPC fitting to any sensor
   (Tao & Hu 2001).
 """
 
@@ -70,7 +70,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from carto.framework.arrays import as_float_arrays
 from carto.framework.errors import InputError
-from carto.framework.geometry.rpc_terms import (
+from carto.framework.geometry.rpc.terms import (
     CHUNK,
     DERIVATIVE_MATRICES,
     RPC00A_TERMS,
@@ -407,7 +407,7 @@ class RPCCoefficients:
         self, lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike, *, guard_poles: bool = False
     ) -> tuple[FloatArray, FloatArray]:
         """Project ground points into the image (extrapolating as GDAL does; the sensor
-        :class:`~carto.framework.geometry.rpc_sensor.RPCSensor` limits it to the validity
+        :class:`~carto.framework.geometry.rpc.sensor.RPCSensor` limits it to the validity
         domain).
 
         Args:

@@ -1,10 +1,10 @@
 """The RPC sensor: an RPC00B model as a :class:`~carto.framework.geometry.sensor.Sensor`.
 
-:class:`RPCSensor` wraps :class:`~carto.framework.geometry.rpc_model.RPCCoefficients` with
+:class:`RPCSensor` wraps :class:`~carto.framework.geometry.rpc.model.RPCCoefficients` with
 Grodecki & Dial's (2003) image-space bias/affine correction as adjustable parameters
 (:func:`default_rpc_parameters`); :class:`RPCSensorType` (name ``"rpc"``) opens every RPC
-container that :mod:`~carto.framework.geometry.rpc_readers` reads as an :class:`RPCSensor`.
-The pixel and ground conventions are those of :mod:`~carto.framework.geometry.rpc_model`.
+container that :mod:`~carto.framework.geometry.rpc.readers` reads as an :class:`RPCSensor`.
+The pixel and ground conventions are those of :mod:`~carto.framework.geometry.rpc.model`.
 
 Validity domain
 ---------------
@@ -13,9 +13,9 @@ freely (a 1024 x 1024 Pleiades crop gave line 5.4e6 for 10 E 10 N). :class:`RPCS
 NaN (README: "points outside the image come back as nan") for:
 
 * ground points outside the RPC's validity domain
-  (:meth:`~carto.framework.geometry.rpc_model.RPCCoefficients.in_domain`: ``|L|, |P| <= 2``,
+  (:meth:`~carto.framework.geometry.rpc.model.RPCCoefficients.in_domain`: ``|L|, |P| <= 2``,
   and heights ``HEIGHT_OFF +- 1.5 |HEIGHT_SCALE|`` widened to at least -1000 to 9000 m; see
-  :data:`~carto.framework.geometry.rpc_model.DOMAIN_MARGIN` for why 2 and not 1.1) or near a
+  :data:`~carto.framework.geometry.rpc.model.DOMAIN_MARGIN` for why 2 and not 1.1) or near a
   pole of the model (a denominator below 2 % of its constant term), in
   :meth:`RPCSensor.ground_to_image`, :meth:`RPCSensor.project` and as results of
   :meth:`RPCSensor.image_to_ground`;
@@ -44,8 +44,8 @@ from numpy.typing import ArrayLike, NDArray
 from carto.framework.arrays import as_float_arrays
 from carto.framework.errors import InputError
 from carto.framework.geometry.frames import WGS84_A_M, WGS84_E2
-from carto.framework.geometry.rpc_model import RPCCoefficients
-from carto.framework.geometry.rpc_readers import read_rpc_and_shape, sniff_rpc_format
+from carto.framework.geometry.rpc.model import RPCCoefficients
+from carto.framework.geometry.rpc.readers import read_rpc_and_shape, sniff_rpc_format
 from carto.framework.geometry.sensor import (
     Parameter,
     Sensor,
@@ -154,7 +154,7 @@ class RPCSensor(Sensor):
     Args:
         rpc: the RPC model.
         image_shape: ``(n_lines, n_samples)``; default
-            :meth:`~carto.framework.geometry.rpc_model.RPCCoefficients.default_image_shape`.
+            :meth:`~carto.framework.geometry.rpc.model.RPCCoefficients.default_image_shape`.
         parameters: the six parameters (default :func:`default_rpc_parameters`).
         source: where the model came from, for messages.
         crop_offset: ``(row, column)`` of the image's first pixel in the frame of the product
@@ -364,7 +364,7 @@ class RPCSensor(Sensor):
         """Locate image points (pixels) at ellipsoidal heights ``h_m`` (metres).
 
         Undoes the image-space correction exactly, then inverts the RPC by Newton iteration
-        (:meth:`~carto.framework.geometry.rpc_model.RPCCoefficients.locate`).
+        (:meth:`~carto.framework.geometry.rpc.model.RPCCoefficients.locate`).
 
         Returns:
             ``(lon_deg, lat_deg)``; NaN where the iteration does not converge to
@@ -436,7 +436,7 @@ class RPCSensor(Sensor):
 
 class RPCSensorType(SensorType):
     """Opens any supported RPC container (see
-    :func:`~carto.framework.geometry.rpc_readers.read_rpc`) as an :class:`RPCSensor`."""
+    :func:`~carto.framework.geometry.rpc.readers.read_rpc`) as an :class:`RPCSensor`."""
 
     name = "rpc"
     description = (
@@ -475,8 +475,8 @@ class RPCSensorType(SensorType):
 def save_corrected_rpc(sensor: Sensor, out_dir: Path, name: str) -> dict[str, Any]:
     """Write an adjusted :class:`RPCSensor` as ``<name>_RPC.TXT`` (its correction baked into
     the coefficients by a refit on a 3-D grid over the RPC's height range)."""
-    from carto.framework.geometry.rpc_fitting import fit_rpc
-    from carto.framework.geometry.rpc_writers import write_rpc_txt
+    from carto.framework.geometry.rpc.fitting import fit_rpc
+    from carto.framework.geometry.rpc.writers import write_rpc_txt
 
     if not isinstance(sensor, RPCSensor):
         raise InputError(f"image {name}: not an RPC sensor ({type(sensor).__name__})")

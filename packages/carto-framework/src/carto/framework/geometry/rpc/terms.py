@@ -1,6 +1,6 @@
 """The RPC00B and RPC00A term orders and the evaluation of the 20 cubic monomials, shared by
-the RPC model (:mod:`~carto.framework.geometry.rpc_model`), its checks and the fitting
-(:mod:`~carto.framework.geometry.rpc_fitting`)."""
+the RPC model (:mod:`~carto.framework.geometry.rpc.model`), its checks and the fitting
+(:mod:`~carto.framework.geometry.rpc.fitting`)."""
 
 from __future__ import annotations
 

@@ -3,7 +3,7 @@
 :func:`fit_rpc` projects a 3-D ground grid through a
 :class:`~carto.framework.geometry.sensor.Sensor` and solves the rational functions by
 iteratively reweighted least squares, returning the
-:class:`~carto.framework.geometry.rpc_model.RPCCoefficients` and a :class:`FitReport` of the
+:class:`~carto.framework.geometry.rpc.model.RPCCoefficients` and a :class:`FitReport` of the
 fit and check errors; :func:`footprint` gives the ground domain an image sees between two
 heights (the default fitting ranges).
 """
@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from carto.framework.errors import InputError
-from carto.framework.geometry.rpc_model import (
+from carto.framework.geometry.rpc.model import (
     MIN_DENOMINATOR_RATIO,
     SANITY_GRID,
     RPCCoefficients,
@@ -154,7 +154,7 @@ def _solve_rational(
 
 def _pole_free(den: FloatArray) -> bool:
     """Whether a fitted denominator stays well away from zero over the whole normalised cube
-    (the criterion of :func:`carto.framework.geometry.rpc_model.validate_model`, with a
+    (the criterion of :func:`carto.framework.geometry.rpc.model.validate_model`, with a
     margin)."""
     axis = np.linspace(-1.0, 1.0, SANITY_GRID + 2)
     lon, lat, h = (a.ravel() for a in np.meshgrid(axis, axis, axis, indexing="ij"))
