@@ -11,7 +11,7 @@ from carto.framework.errors import InputError
 from carto.framework.geometry.decimated import DecimatedSensor
 from carto.framework.geometry.rpc.sensor import RPCSensor
 from carto.framework.raster.image_source import ArrayImage, DecimatedImage
-from tests.framework.geometry.test_rpc import synthetic_rpc
+from tests.framework.geometry.rpc.test_model import synthetic_rpc
 
 
 @pytest.mark.parametrize("factor", [2, 4])

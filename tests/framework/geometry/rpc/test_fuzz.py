@@ -1,6 +1,6 @@
 """Property-based fuzzing of every RPC reader (issue #15).
 
-Each format's file is written from one reference model (:func:`test_rpc.synthetic_rpc`, image
+Each format's file is written from one reference model (:func:`test_model.synthetic_rpc`, image
 10000 x 12400): ``_RPC.TXT`` in the IKONOS/Cartosat layout (every coefficient ``%+.15E``), a
 DigitalGlobe ``.RPB``, an OSSIM ``.geom``, a DIMAP v2 RPC XML, a WorldView ``<isd>`` XML and a
 GeoTIFF with GDAL's RPC tag. Hypothesis mutates it and reads it back.
@@ -56,7 +56,7 @@ from carto.framework.geometry.rpc.readers import (
 )
 from carto.framework.geometry.rpc.writers import write_geotiff_rpc
 
-from .test_rpc import _geom_text, _rpb_text, synthetic_rpc
+from .test_model import _geom_text, _rpb_text, synthetic_rpc
 
 REFERENCE = synthetic_rpc()
 TOLERANCE_PX = 0.01

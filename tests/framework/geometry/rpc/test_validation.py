@@ -26,7 +26,7 @@ from carto.framework.geometry.rpc.sensor import RPCSensor, RPCSensorType
 from carto.framework.geometry.rpc.writers import write_geotiff_rpc, write_rpc_txt
 from carto.framework.workflows.opening import open_sensor, sensor_type_for
 
-from .test_rpc import _geom_text, _rpb_text, synthetic_rpc
+from .test_model import _geom_text, _rpb_text, synthetic_rpc
 
 RPC_FILES = "rpc-files"
 IKONOS = f"{RPC_FILES}/rpc_IKONOS.txt"
