@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -57,6 +58,20 @@ def test_dem_from_a_scene_writes_every_product(run_carto, scene, tmp_path):
     report = json.loads((out / "report.json").read_text())
     assert report["iterations"]
     assert report["iterations"][0]["iteration"] == 1
+    # the record of the run (issue 34 item 1): versions, command line, times, inputs' hashes
+    import hashlib
+
+    from carto.framework import __version__
+
+    run = report["run"]
+    assert run["carto_version"] == __version__
+    assert run["plugins"]["carto-ior"]
+    assert run["command_line"].startswith("carto dem ")
+    assert run["started_utc"] <= run["ended_utc"]
+    inputs = {Path(i["path"]).name: i for i in run["inputs"]}
+    fore = scene / "fore.tif"
+    assert inputs["fore.tif"]["sha256"] == hashlib.sha256(fore.read_bytes()).hexdigest()
+    assert inputs["fore.tif"]["size_bytes"] == fore.stat().st_size
     for key in ("median_abs_mismatch_px", "matched_percent", "median_abs_dem_change_m"):
         assert key in report["iterations"][0]
     assert report["settings"]["posting_m"] == 10.0

@@ -54,6 +54,7 @@ from carto.framework.workflows.opening import (
 )
 from carto.framework.workflows.reporting import jsonable, progress, write_report
 from carto.framework.workflows.residual_plot import residual_misfit, residual_plot
+from carto.framework.workflows.run_record import record_run, utc_now
 
 Table = dict[str, NDArray]
 
@@ -168,8 +169,9 @@ def adjust_product(
         open_engine(workers, scheduler, quiet=quiet) as engine,
     ):
         work = stage / ".work"
+        started = utc_now()
         try:
-            return _adjust_into(
+            report = _adjust_into(
                 stage,
                 src,
                 n_gcps=n_gcps,
@@ -186,6 +188,7 @@ def adjust_product(
             )
         finally:
             shutil.rmtree(work, ignore_errors=True)
+        return record_run(stage / "report.json", report, inputs, started)
 
 
 def _adjust_into(  # noqa: C901, PLR0915 (issue 32: to split)

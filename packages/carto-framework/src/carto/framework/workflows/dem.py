@@ -50,6 +50,7 @@ from carto.framework.workflows.opening import (
 from carto.framework.workflows.pair_checks import checked_pair
 from carto.framework.workflows.reporting import progress, write_report
 from carto.framework.workflows.resumable import fingerprint, open_work, settle_work
+from carto.framework.workflows.run_record import record_run, utc_now
 
 __all__ = [
     "StereoInputs",
@@ -379,6 +380,7 @@ def dem_product(
         "coregister_accuracy_m": coregister_accuracy_m,
     }
     work: Path | None = None
+    started = utc_now()
     try:
         with staged_folder(out_dir, "dem", inputs=sources) as stage:
             work = open_work(out_dir, fingerprint(sources, facts), resume, quiet)
@@ -402,6 +404,7 @@ def dem_product(
                     coregister=coregister,
                     coregister_accuracy_m=coregister_accuracy_m,
                 )
+            report = record_run(stage / "report.json", report, sources, started)
     except BaseException as exc:
         if work is not None:
             settle_work(work, exc)

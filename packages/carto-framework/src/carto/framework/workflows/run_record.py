@@ -1,0 +1,90 @@
+"""The record of a run that every ``report.json`` carries (``run``, issue 34 item 1): the
+versions of carto and of every plugin loaded, the command line, when the run started and
+ended (UTC), and each input's path, size and SHA-256 (size and modification time for a file
+above :data:`HASH_LIMIT_BYTES`, whose hashing would cost more than the run reads of it)."""
+
+from __future__ import annotations
+
+import datetime
+import hashlib
+import os
+import shlex
+import sys
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+from typing import Any
+
+from carto.framework.workflows.reporting import write_report
+
+HASH_LIMIT_BYTES = 1 << 30
+"""Inputs above this size (1 GiB) are recorded by size and modification time, not hashed."""
+
+
+def utc_now() -> str:
+    """The current time, UTC, ISO 8601 to the second."""
+    return datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
+
+
+def input_record(path: Path) -> dict[str, Any]:
+    """One input file: absolute path, size, and SHA-256 (below :data:`HASH_LIMIT_BYTES`) or
+    modification time (above it)."""
+    stat = path.stat()
+    entry: dict[str, Any] = {"path": str(path.resolve()), "size_bytes": stat.st_size}
+    if stat.st_size > HASH_LIMIT_BYTES:
+        mtime = datetime.datetime.fromtimestamp(stat.st_mtime, datetime.UTC)
+        entry["mtime_utc"] = mtime.isoformat(timespec="seconds")
+        return entry
+    digest = hashlib.sha256()
+    with path.open("rb") as fh:
+        for chunk in iter(lambda: fh.read(1 << 20), b""):
+            digest.update(chunk)
+    entry["sha256"] = digest.hexdigest()
+    return entry
+
+
+def input_files(inputs: Iterable[str | os.PathLike[str] | None]) -> list[Path]:
+    """The files of a run's inputs: each file once, a folder's files (a scene) in order."""
+    seen: dict[Path, None] = {}
+    for item in inputs:
+        if item is None:
+            continue
+        path = Path(item)
+        files = sorted(p for p in path.rglob("*") if p.is_file()) if path.is_dir() else [path]
+        for file in files:
+            if file.is_file():
+                seen.setdefault(file.resolve(), None)
+    return list(seen)
+
+
+def run_record(inputs: Iterable[str | os.PathLike[str] | None], started_utc: str) -> dict[str, Any]:
+    """The ``run`` record of a report (see the module docstring)."""
+    from carto.framework import __version__
+    from carto.framework.plugins.registry import get_registry
+
+    plugins = {p.distribution: p.version for p in get_registry().plugins}
+    return {
+        "carto_version": __version__,
+        "plugins": dict(sorted(plugins.items())),
+        "command_line": shlex.join(["carto", *sys.argv[1:]]) if _from_cli() else None,
+        "python": sys.version.split()[0],
+        "started_utc": started_utc,
+        "ended_utc": utc_now(),
+        "inputs": [input_record(p) for p in input_files(inputs)],
+    }
+
+
+def record_run(
+    report_path: Path,
+    report: Mapping[str, Any],
+    inputs: Iterable[str | os.PathLike[str] | None],
+    started_utc: str,
+) -> dict[str, Any]:
+    """``report`` with its ``run`` record, written again to ``report_path``."""
+    out = {**report, "run": run_record(inputs, started_utc)}
+    write_report(report_path, out)
+    return out
+
+
+def _from_cli() -> bool:
+    """Whether this process runs the ``carto`` command (not a library call)."""
+    return Path(sys.argv[0]).name in ("carto", "carto.exe") or "carto._entry" in sys.modules
