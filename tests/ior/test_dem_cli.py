@@ -63,6 +63,15 @@ def test_dem_from_a_scene_writes_every_product(run_carto, scene, tmp_path):
 
     from carto.framework import __version__
 
+    # what GDAL users read (issue 34 item 3): the DEM band's name and unit, the quality
+    # layers' units
+    with rasterio.open(out / "dem.tif") as ds:
+        assert ds.descriptions == ("height",)
+        assert ds.units == ("metre",)
+    with rasterio.open(out / "quality.tif") as ds:
+        units = dict(zip(ds.descriptions, ds.units, strict=True))
+    assert units["sigma_m"] == units["spread_m"] == "metre"
+    assert not units["points"]
     run = report["run"]
     assert run["carto_version"] == __version__
     assert run["plugins"]["carto-ior"]

@@ -582,6 +582,7 @@ def write_ortho(
     band_descriptions: Sequence[str] | None = None,
     overview_resampling: str = "average",
     out_dtype: Any = None,
+    band_units: Sequence[str | None] | None = None,
 ) -> Path:
     """Write an ortho-image (or any raster on ``grid``) as a cloud-optimised GeoTIFF,
     atomically (:func:`carto.framework.raster.cog.cog_writer`: 256 x 256 tiles, DEFLATE,
@@ -602,6 +603,7 @@ def write_ortho(
         nodata: nodata value (default NaN for float data, none for integers).
         band_descriptions: one GDAL band description per band (what QGIS and ``gdalinfo``
             show as the band's name).
+        band_units: one unit per band (GDAL's ``units``, e.g. ``"metre"``; None: none).
         overview_resampling: how the overviews are made: ``"average"`` (images, heights)
             or ``"nearest"`` (flags, counts).
         out_dtype: write float data in this dtype (the input images' radiometry, e.g.
@@ -675,6 +677,16 @@ def write_ortho(
                 block = convert(block) if convert is not None else np.asarray(block, dtype)
                 dst.write(block, k, window=window)
         dst.update_tags(**all_tags)
-        for k, description in enumerate(band_descriptions or (), 1):
-            dst.set_band_description(k, str(description))
+        _describe_bands(dst, band_descriptions, band_units)
     return path
+
+
+def _describe_bands(
+    dst: Any, descriptions: Sequence[str] | None, units: Sequence[str | None] | None
+) -> None:
+    """Each band's GDAL description and unit (none where not given)."""
+    for k, description in enumerate(descriptions or (), 1):
+        dst.set_band_description(k, str(description))
+    for k, unit in enumerate(units or (), 1):
+        if unit:
+            dst.set_band_unit(k, str(unit))

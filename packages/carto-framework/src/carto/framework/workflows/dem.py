@@ -639,6 +639,7 @@ def _write_rasters(
             product.dem_grid,
             vertical=dem.vertical,
             tags={"CARTO_PRODUCT": "dem", "CARTO_GENERATOR": generator},
+            band_descriptions=["height"],
         ).name
     }
     for side, name, ortho in zip(("left", "right"), rasters, product.orthos, strict=True):
@@ -664,6 +665,7 @@ def _write_rasters(
                     **{f"BAND_{k}": layer.description for k, layer in enumerate(layers, 1)},
                 },
                 band_descriptions=[layer.name for layer in layers],
+                band_units=["metre" if layer.name.endswith("_m") else None for layer in layers],
                 overview_resampling="nearest",
             ).name
     return files
