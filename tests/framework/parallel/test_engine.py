@@ -190,3 +190,20 @@ def test_ctrl_c_while_the_local_cluster_starts_or_runs_is_an_interruption(tmp_pa
         check=False,
     )
     assert res.stdout.strip() == "interrupted", res.stderr[-2000:]
+
+
+def test_a_scheduler_without_workers_fails_after_the_timeout(monkeypatch):
+    """A scheduler no worker has joined: the tasks would wait for ever (issue 34, item 6);
+    the run fails with a usage error that says how to start one."""
+    from distributed import LocalCluster
+
+    from carto.framework.parallel import engine as engine_module
+
+    monkeypatch.setattr(engine_module, "WORKERS_TIMEOUT_S", 2.0)
+    with LocalCluster(n_workers=0, dashboard_address=None) as cluster:
+        address = cluster.scheduler_address
+        with (
+            pytest.raises(UsageError, match=f"--scheduler {address}: the scheduler has no worker"),
+            open_engine(scheduler=address),
+        ):
+            pass

@@ -269,6 +269,9 @@ def open_engine(
 
 SCHEDULER_TIMEOUT_S = 10.0
 """How long ``--scheduler`` may take to answer who it is."""
+WORKERS_TIMEOUT_S = 30.0
+"""How long a ``--scheduler`` without workers is waited for one, before the run fails (the
+tasks would wait for ever)."""
 
 
 def _identity(address: str, timeout_s: float = SCHEDULER_TIMEOUT_S) -> dict[str, Any]:
@@ -314,6 +317,13 @@ def _client(address: str) -> Iterator[Any]:
     except (OSError, TimeoutError) as exc:
         raise UsageError(f"--scheduler {address}: cannot connect: {_cause(exc)}") from None
     try:
+        try:
+            client.wait_for_workers(1, timeout=WORKERS_TIMEOUT_S)
+        except TimeoutError:
+            raise UsageError(
+                f"--scheduler {address}: the scheduler has no worker after "
+                f"{WORKERS_TIMEOUT_S:g} s; start some (dask worker {address}) and run again"
+            ) from None
         yield client
     finally:
         client.close()
