@@ -32,6 +32,17 @@ def interrupted() -> None:
     raise KeyboardInterrupt
 
 
+def dies_once(marker: str, x: int) -> int:
+    """Kills its worker process on its first call (marked in a file), then returns ``x``."""
+    import os
+
+    path = Path(marker)
+    if not path.exists():
+        path.write_text("died")
+        os._exit(1)
+    return x
+
+
 def worker_facts(_: int) -> tuple[int, str | None, str | None]:
     import os
 
@@ -207,3 +218,14 @@ def test_a_scheduler_without_workers_fails_after_the_timeout(monkeypatch):
             open_engine(scheduler=address),
         ):
             pass
+
+
+def test_a_worker_killed_mid_run_is_replaced_and_its_task_run_again(tmp_path):
+    """A worker process that dies under a task (killed, out of memory) is not fatal (issue
+    34, item 6): the cluster's nanny starts another, the task runs again, every result
+    comes back in order, on a real LocalCluster of processes."""
+    marker = tmp_path / "died.txt"
+    with open_engine(2) as engine:
+        tasks = [functools.partial(dies_once, str(marker), k) for k in range(4)]
+        assert engine.run(tasks) == [0, 1, 2, 3]
+    assert marker.read_text() == "died"
