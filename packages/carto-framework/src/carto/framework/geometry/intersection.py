@@ -300,7 +300,7 @@ def common_ray_heights_m(sensors: Sequence[Sensor]) -> tuple[float, float]:
     return (low, high) if low < high else RAY_HEIGHTS_M
 
 
-def intersect_sensors(  # noqa: PLR0915 (issue 32: to split)
+def intersect_sensors(
     sensors: Sequence[Sensor],
     lines: ArrayLike,
     samples: ArrayLike,
@@ -377,18 +377,7 @@ def intersect_sensors(  # noqa: PLR0915 (issue 32: to split)
         if active.size == 0:
             break
         la, ph, hh = lon[active], lat[active], h[active]
-        normal = np.zeros((active.size, 3, 3))
-        rhs = np.zeros((active.size, 3))
-        for i, sensor in enumerate(sensors):
-            pred = np.stack(sensor.project(la, ph, hh)[:2], axis=-1)  # (M, 2)
-            jac = sensor.ground_partials(la, ph, hh)  # (M, 2, 3)
-            wi = w[i, active]
-            ok = (wi > 0) & np.isfinite(pred).all(-1) & np.isfinite(jac).all((-1, -2))
-            wi = np.where(ok, wi, 0.0)
-            v = np.where(ok[:, None], observed[i, active] - pred, 0.0)
-            jac = np.where(ok[:, None, None], jac, 0.0)
-            normal += wi[:, None, None] * np.einsum("mri,mrj->mij", jac, jac)
-            rhs += wi[:, None] * np.einsum("mri,mr->mi", jac, v)
+        normal, rhs = _normal_equations(sensors, (la, ph, hh), w[:, active], observed[:, active])
         scale = np.trace(normal, axis1=1, axis2=2)
         singular = ~(np.linalg.eigvalsh(normal)[:, 0] > 1e-12 * scale) | ~np.isfinite(scale)
         step = _solve3(normal, rhs, singular)  # (M, 3) east, north, up metres
@@ -427,6 +416,32 @@ def intersect_sensors(  # noqa: PLR0915 (issue 32: to split)
         rms_px=rms_px,
         iterations=n_iter,
     )
+
+
+def _normal_equations(
+    sensors: Sequence[Sensor],
+    points: tuple[NDArray, NDArray, NDArray],
+    weights: NDArray,
+    observed: NDArray,
+) -> tuple[NDArray, NDArray]:
+    """The 3 x 3 normal equations (east, north, up metres) of each point ``(lon, lat, h)``
+    from every sensor's projection and ground partials: ``(M, 3, 3)`` and ``(M, 3)``; a
+    sensor whose projection or partials are not finite at a point, or whose weight is 0,
+    adds nothing there."""
+    la, ph, hh = points
+    normal = np.zeros((la.size, 3, 3))
+    rhs = np.zeros((la.size, 3))
+    for i, sensor in enumerate(sensors):
+        pred = np.stack(sensor.project(la, ph, hh)[:2], axis=-1)  # (M, 2)
+        jac = sensor.ground_partials(la, ph, hh)  # (M, 2, 3)
+        wi = weights[i]
+        ok = (wi > 0) & np.isfinite(pred).all(-1) & np.isfinite(jac).all((-1, -2))
+        wi = np.where(ok, wi, 0.0)
+        v = np.where(ok[:, None], observed[i] - pred, 0.0)
+        jac = np.where(ok[:, None, None], jac, 0.0)
+        normal += wi[:, None, None] * np.einsum("mri,mrj->mij", jac, jac)
+        rhs += wi[:, None] * np.einsum("mri,mr->mi", jac, v)
+    return normal, rhs
 
 
 def base_direction(
