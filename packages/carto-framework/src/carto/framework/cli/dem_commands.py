@@ -335,9 +335,22 @@ def add_dem(sub: argparse._SubParsersAction) -> None:
         "--geoid; the file's compound CRS says which",
     )
     p.add_argument("--init-height", type=finite_float, metavar="M", help="constant starting height")
-    p.add_argument("--posting", type=finite_float, metavar="M", help="DEM posting (default 10 m)")
+    p.add_argument(
+        "--posting",
+        "--tr",
+        dest="posting",
+        type=finite_float,
+        metavar="M",
+        help="DEM posting (default 10 m; --tr as in gdalwarp, one value: square posts)",
+    )
     p.add_argument("--ortho-res", type=finite_float, metavar="M", help="ortho pixel (default: GSD)")
-    p.add_argument("--crs", metavar="CRS", help="output CRS (default: the UTM zone)")
+    p.add_argument(
+        "--crs",
+        "--t_srs",
+        dest="crs",
+        metavar="CRS",
+        help="output CRS, projected in metres (default: the UTM zone; --t_srs as in gdalwarp)",
+    )
     p.add_argument("--max-iterations", type=positive_int, metavar="N", help="most DEM updates (6)")
     p.add_argument(
         "--tile-size",
