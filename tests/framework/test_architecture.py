@@ -219,7 +219,6 @@ LONG_FUNCTIONS = {
     "packages/carto-framework/src/carto/framework/geometry/linescan/raycast.py::ray_dem",
     "packages/carto-framework/src/carto/framework/geometry/linescan/raycast.py::camera_ray",
     "packages/carto-framework/src/carto/framework/geometry/rpc/fitting.py::fit_rpc",
-    "packages/carto-framework/src/carto/framework/geometry/surface.py::dem_surface_locate",
     "packages/carto-framework/src/carto/framework/geometry/trajectory.py::Trajectory.from_samples",
     "packages/carto-framework/src/carto/framework/imaging/ortho.py::write_ortho",
     "packages/carto-framework/src/carto/framework/matching/forstner.py::forstner_points",

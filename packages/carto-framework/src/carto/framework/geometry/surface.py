@@ -8,7 +8,7 @@ sight and refines the first crossing of the terrain (see its docstring).
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -23,7 +23,7 @@ if TYPE_CHECKING:  # any sensor: used through its methods only
 FloatArray = NDArray[np.float64]
 
 
-def dem_surface_locate(  # noqa: PLR0915 (issue 32: to split)
+def dem_surface_locate(
     sensor: Sensor,
     line: ArrayLike,
     sample: ArrayLike,
@@ -82,9 +82,27 @@ def dem_surface_locate(  # noqa: PLR0915 (issue 32: to split)
     if n == 0:
         return lon_out.reshape(shape), lat_out.reshape(shape), h_out.reshape(shape)
     dem_min, dem_max = dem.height_range
-    h_low, h_high = dem_min - 1.0 - tol_m, dem_max + 1.0 + tol_m
+    heights = (dem_min - 1.0 - tol_m, dem_max + 1.0 + tol_m)
+    brackets = _march(sensor, lines, samples, dem, heights, step_px, max_steps)
+    _regula_falsi(sensor, lines, samples, dem, brackets, tol_m, max_iter, (lon_out, lat_out, h_out))
+    return lon_out.reshape(shape), lat_out.reshape(shape), h_out.reshape(shape)
 
-    # 1. march down the (straightened) line of sight in DEM pixel space
+
+def _march(
+    sensor: Any,
+    lines: FloatArray,
+    samples: FloatArray,
+    dem: Any,
+    heights: tuple[float, float],
+    step_px: float,
+    max_steps: int,
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Step 1 of :func:`dem_surface_locate`: march down each (straightened) line of sight
+    from ``heights[1]`` to ``heights[0]`` in DEM pixel space; the heights below and above the
+    terrain that bracket its first crossing and the height differences there (NaN: no
+    bracket)."""
+    h_low, h_high = heights
+    n = lines.size
     lon_lo, lat_lo = sensor.image_to_ground(lines, samples, np.full(n, h_low))
     lon_hi, lat_hi = sensor.image_to_ground(lines, samples, np.full(n, h_high))
     r_lo, c_lo = dem.lonlat_to_pixel(np.asarray(lon_lo, float), np.asarray(lat_lo, float))
@@ -93,7 +111,6 @@ def dem_surface_locate(  # noqa: PLR0915 (issue 32: to split)
     span_px = np.hypot(r_lo - r_hi, c_lo - c_hi)
     longest = float(np.max(span_px[ok])) if ok.any() else 0.0
     n_steps = int(min(max(math.ceil(longest / step_px), 1), max_steps))
-
     active = np.flatnonzero(ok)
     f_prev = np.full(active.size, np.nan)
     bracket_lo = np.full(n, np.nan)  # height below the terrain (f >= 0)
@@ -119,8 +136,23 @@ def dem_surface_locate(  # noqa: PLR0915 (issue 32: to split)
         keep = ~found & ~(np.isfinite(f) & (f >= 0.0))
         active = active[keep]
         f_prev = f[keep]
+    return bracket_lo, bracket_hi, f_lo, f_hi
 
-    # 2. Illinois regula falsi on the bracket with the sensor's own line of sight
+
+def _regula_falsi(
+    sensor: Any,
+    lines: FloatArray,
+    samples: FloatArray,
+    dem: Any,
+    brackets: tuple[FloatArray, FloatArray, FloatArray, FloatArray],
+    tol_m: float,
+    max_iter: int,
+    out: tuple[FloatArray, FloatArray, FloatArray],
+) -> None:
+    """Step 2 of :func:`dem_surface_locate`: Illinois regula falsi on each bracket with the
+    sensor's own line of sight; the points found are written into ``out`` (lon, lat, h)."""
+    lon_out, lat_out, h_out = out
+    bracket_lo, bracket_hi, f_lo, f_hi = brackets
     active = np.flatnonzero(np.isfinite(bracket_lo))
     a, b = bracket_lo[active], bracket_hi[active]
     fa, fb = f_lo[active], f_hi[active]
@@ -147,4 +179,3 @@ def dem_surface_locate(  # noqa: PLR0915 (issue 32: to split)
         side = np.where(move_a, 1, np.where(move_b, -1, side)).astype(np.int8)
         keep = ~done & ~bad
         active, a, b, fa, fb, side = (v[keep] for v in (active, a, b, fa, fb, side))
-    return lon_out.reshape(shape), lat_out.reshape(shape), h_out.reshape(shape)
