@@ -18,7 +18,7 @@ observations that no closure confirms are dropped. The result is a :class:`Multi
 from __future__ import annotations
 
 import warnings
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from itertools import permutations
 from typing import Any
 
@@ -202,7 +202,7 @@ def ortho_parallax(
     return parallax
 
 
-def match_views(  # noqa: PLR0915 (issue 32: to split)
+def match_views(
     orthos: Mapping[str, NDArray],
     reference: str,
     points: ArrayLike,
@@ -314,49 +314,15 @@ def match_views(  # noqa: PLR0915 (issue 32: to split)
     covered |= np.isfinite(scores)
     # gross errors: offsets that one ground point cannot explain
     offsets = positions[1:] - pts[None]
-    vectors = None
-    if parallax is not None:
-        vectors = np.full(offsets.shape, np.nan)
-        for k in range(1, n_v):
-            ok = np.isfinite(positions[k, :, 0])
-            if ok.any():
-                vectors[k - 1, ok] = parallax(views[k], positions[k, ok])
-        unknown = ~np.isfinite(vectors).all(axis=2)
-        vectors[unknown] = 0.0
+    vectors = None if parallax is None else _parallax_vectors(parallax, views, positions)
     bad = inconsistent_points(pts, offsets, vectors, outlier_factor, outlier_floor_px)
     positions[1:, bad] = np.nan
     scores[1:, bad] = np.nan
     closure = np.zeros((n_v, n), bool)
     if n_v >= 3:
-        # agree[u, v]: the position in u, matched in v, lands on the reference's match in v
-        agree = np.zeros((n_v, n_v, n), bool)
-        pair_score = np.full((n_v, n_v, n), np.nan)
-        for u, v in permutations(range(1, n_v), 2):
-            both = np.flatnonzero(np.isfinite(scores[u]) & np.isfinite(scores[v]))
-            if both.size == 0:
-                continue
-            found = matcher.match_points(
-                images[u],
-                images[v],
-                positions[u, both],
-                guess_offsets=positions[v, both] - positions[u, both],
-                settings=closing,
-            )
-            rows = both[rows_of(positions[u, both], found)]
-            miss = np.hypot(
-                found.right_line - positions[v, rows, 0], found.right_sample - positions[v, rows, 1]
-            )
-            agree[u, v, rows] = miss <= float(closure_px)
-            pair_score[u, v, rows] = found.score
-        consistent = agree & agree.transpose(1, 0, 2)
-        closure[1:] = consistent[1:, 1:].any(axis=1)
-        with np.errstate(invalid="ignore"):
-            best_pair = np.where(
-                consistent, np.fmin(pair_score, pair_score.transpose(1, 0, 2)), np.nan
-            )
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN columns
-            confirm_score = np.nanmax(best_pair, axis=1)
+        closure[1:], confirm_score = _closures(
+            matcher, images, positions, scores, closing, float(closure_px)
+        )
         scores = np.where(closure, np.fmin(scores, confirm_score), scores)
         if require_closure:
             # a closure was possible for view k where another non-reference view covers it
@@ -370,3 +336,59 @@ def match_views(  # noqa: PLR0915 (issue 32: to split)
         warnings.simplefilter("ignore", RuntimeWarning)  # points without any match
         scores[0] = np.nanmin(scores[1:], axis=0)
     return MultiViewMatches(views, positions, scores, closure)
+
+
+def _parallax_vectors(
+    parallax: Callable[[str, NDArray], NDArray], views: Sequence[str], positions: NDArray
+) -> NDArray:
+    """Each other view's parallax direction at its matched positions (``(V-1, N, 2)``; zero
+    where unknown): what a height error moves a point along."""
+    vectors = np.full((len(views) - 1, positions.shape[1], 2), np.nan)
+    for k in range(1, len(views)):
+        ok = np.isfinite(positions[k, :, 0])
+        if ok.any():
+            vectors[k - 1, ok] = parallax(views[k], positions[k, ok])
+    vectors[~np.isfinite(vectors).all(axis=2)] = 0.0
+    return vectors
+
+
+def _closures(
+    matcher: Matcher,
+    images: Sequence[NDArray],
+    positions: NDArray,
+    scores: NDArray,
+    closing: MatchSettings,
+    closure_px: float,
+) -> tuple[NDArray, NDArray]:
+    """The closure of every other view of each point (it matches another view to where the
+    reference's match put it, both ways) and the best score that confirms it:
+    ``((V-1, N) bool, (V, N))``."""
+    n_v, n = scores.shape
+    # agree[u, v]: the position in u, matched in v, lands on the reference's match in v
+    agree = np.zeros((n_v, n_v, n), bool)
+    pair_score = np.full((n_v, n_v, n), np.nan)
+    for u, v in permutations(range(1, n_v), 2):
+        both = np.flatnonzero(np.isfinite(scores[u]) & np.isfinite(scores[v]))
+        if both.size == 0:
+            continue
+        found = matcher.match_points(
+            images[u],
+            images[v],
+            positions[u, both],
+            guess_offsets=positions[v, both] - positions[u, both],
+            settings=closing,
+        )
+        rows = both[rows_of(positions[u, both], found)]
+        miss = np.hypot(
+            found.right_line - positions[v, rows, 0], found.right_sample - positions[v, rows, 1]
+        )
+        agree[u, v, rows] = miss <= closure_px
+        pair_score[u, v, rows] = found.score
+    consistent = agree & agree.transpose(1, 0, 2)
+    closure = consistent[1:, 1:].any(axis=1)
+    with np.errstate(invalid="ignore"):
+        best_pair = np.where(consistent, np.fmin(pair_score, pair_score.transpose(1, 0, 2)), np.nan)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN columns
+        confirm_score = np.nanmax(best_pair, axis=1)
+    return closure, confirm_score
