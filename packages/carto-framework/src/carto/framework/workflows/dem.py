@@ -155,7 +155,7 @@ def open_pair(inputs: StereoInputs) -> StereoPair:
         from carto.framework.workflows.opening import check_models_of_scene, open_product
 
         if Path(source).is_file() and Path(source).name != "scene.json":
-            raise InputError(
+            raise UsageError(
                 f"{source}: not a scene folder; carto dem takes a scene (carto simulate) or "
                 "two images with --left/--right (their models beside them or with "
                 "--left-model/--right-model, e.g. the _RPC.TXT a carto adjust wrote)"
@@ -503,7 +503,7 @@ def _dem_into(
     if warnings and not allow_poor:
         raise InputError(f"dem: {'; '.join(warnings)} (--allow-poor writes it anyway)")
     for warning in warnings:
-        progress("dem", f"warning: {warning}", quiet)
+        progress("dem", f"warning: {warning}", False)  # warnings print under --quiet too
     geoid_grid = Geoid.open(geoid) if geoid else None
     dem, coregistration = coregistered(
         product.dem,
@@ -523,7 +523,7 @@ def _dem_into(
             "ellipsoid; if they are above the geoid (SRTM, Copernicus), tag it (gdal_edit.py "
             "-mo VERTICAL_REFERENCE=geoid:EGM96) and give --geoid"
         )
-        progress("dem", f"warning: {warnings[-1]}", quiet)
+        progress("dem", f"warning: {warnings[-1]}", False)
     written = dem.to_geoid(geoid_grid) if vertical == "geoid" else dem
     vertical_reference = vertical_tag(written.vertical)
     files = _write_rasters(out, written, product, {n: rasters[n] for n in names}, generator)

@@ -113,8 +113,8 @@ class PairCheck:
         if self.overlap < MIN_OVERLAP and not (judged and self.agreement >= MIN_AGREEMENT):
             return [
                 f"the two images overlap on {100 * self.overlap:.1f} % of the smaller "
-                f"footprint (< {100 * MIN_OVERLAP:g} %): images of two places or the "
-                "wrong models?"
+                f"footprint (< {100 * MIN_OVERLAP:g} %): images of two places, a starting "
+                "height far off the terrain (--init-height, --init-dem) or the wrong models?"
             ]
         if judged and self.agreement < MIN_AGREEMENT:
             return [
@@ -122,7 +122,8 @@ class PairCheck:
                 f"{self.blocks} blocks of {BLOCK_PX * self.resolution_m:.0f} m of their "
                 f"coarse ortho-images agree on a shift (< {100 * MIN_AGREEMENT:g} %; median "
                 f"correlation {self.correlation:.2f}): images of two places or dates, a "
-                "rotated or mirrored image, or a model that is not its image's?"
+                "rotated or mirrored image, a starting height far off the terrain "
+                "(--init-height, --init-dem), or a model that is not its image's?"
             ]
         return []
 
@@ -308,7 +309,8 @@ def checked_pair(
     if check.overlap == 0.0:
         raise InputError(
             "dem: the two images do not overlap on the ground (with their models, on the "
-            "starting DEM): images of two places or the wrong models?"
+            "starting DEM): images of two places, a starting height far off the terrain "
+            "(--init-height, --init-dem) or the wrong models?"
         )
     warnings = check.warnings()
     if warnings and not allow_poor:
