@@ -163,7 +163,10 @@ def adjust_product(
     inputs = [src, *configuration_files(src), *scene_files(src)]
     if ties not in ("auto", "none"):
         inputs.append(Path(ties))
-    inputs += [Path(c) for c in (options or {}).get("calibration") or []]
+    calibration = (options or {}).get("calibration") or []
+    if isinstance(calibration, str | os.PathLike):  # one file or folder, or a list of them
+        calibration = [calibration]
+    inputs += [Path(c) for c in calibration]
     with (
         staged_folder(out_dir, "adjust", inputs=inputs) as stage,
         open_engine(workers, scheduler, quiet=quiet) as engine,

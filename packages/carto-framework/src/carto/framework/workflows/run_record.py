@@ -42,18 +42,38 @@ def input_record(path: Path) -> dict[str, Any]:
     return entry
 
 
+MAX_FOLDER_FILES = 1000
+"""A folder input with more files than this is not listed (nor hashed) file by file: a scene
+holds a few dozen files; a folder of thousands is not one input."""
+
+
 def input_files(inputs: Iterable[str | os.PathLike[str] | None]) -> list[Path]:
-    """The files of a run's inputs: each file once, a folder's files (a scene) in order."""
+    """The files of a run's inputs: each file once, a folder's files (a scene) in order;
+    what cannot be read (permissions) is left out."""
     seen: dict[Path, None] = {}
     for item in inputs:
         if item is None:
             continue
-        path = Path(item)
-        files = sorted(p for p in path.rglob("*") if p.is_file()) if path.is_dir() else [path]
-        for file in files:
-            if file.is_file():
-                seen.setdefault(file.resolve(), None)
+        for file in _files_of(Path(item)):
+            seen.setdefault(file.resolve(), None)
     return list(seen)
+
+
+def _files_of(path: Path) -> list[Path]:
+    try:
+        if path.is_file():
+            return [path]
+        if not path.is_dir():
+            return []
+        files = []
+        for entry in path.rglob("*"):
+            if entry.is_file():
+                files.append(entry)
+                if len(files) > MAX_FOLDER_FILES:
+                    return []
+        return sorted(files)
+    except OSError:
+        return []
 
 
 def run_record(inputs: Iterable[str | os.PathLike[str] | None], started_utc: str) -> dict[str, Any]:
