@@ -91,6 +91,20 @@ def prepare_sensors(
     }
 
 
+def _frequencies(value: Any) -> tuple[float, ...] | str:
+    """``jitter_hz`` as ``"auto"`` or a tuple of floats (a single number is one frequency;
+    None: none)."""
+    if value is None:
+        return ()
+    if value == "auto":
+        return "auto"
+    if isinstance(value, int | float):
+        return (float(value),)
+    if isinstance(value, str) or not isinstance(value, Sequence):
+        raise UsageError(f"option jitter_hz must be 'auto' or a list of frequencies, got {value!r}")
+    return tuple(number("jitter_hz", 0.0, low_open=True)(v) for v in value)
+
+
 def _positive(name: str) -> Any:
     return number(name, 0.0, low_open=True)
 
@@ -113,7 +127,7 @@ class Cartosat2Settings(BundleSettings):
     smooth_sigma_deg: float = attrs.field(
         default=constants.ATTITUDE_SMOOTH_SIGMA_DEG, converter=_positive("smooth_sigma_deg")
     )
-    jitter_hz: Any = attrs.field(default="auto", converter=lambda v: _frequencies(v))
+    jitter_hz: Any = attrs.field(default="auto", converter=_frequencies)
     jitter_amplitude_deg: float = attrs.field(
         default=constants.ATTITUDE_JITTER_AMPLITUDE_DEG,
         converter=_positive("jitter_amplitude_deg"),
@@ -159,17 +173,3 @@ class Cartosat2BlockAdjuster(Adjuster):
         return adjust_with_jitter(
             prepared, observations, s.jitter_hz, amplitude, **s.bundle_options()
         )
-
-
-def _frequencies(value: Any) -> tuple[float, ...] | str:
-    """``jitter_hz`` as ``"auto"`` or a tuple of floats (a single number is one frequency;
-    None: none)."""
-    if value is None:
-        return ()
-    if value == "auto":
-        return "auto"
-    if isinstance(value, int | float):
-        return (float(value),)
-    if isinstance(value, str) or not isinstance(value, Sequence):
-        raise UsageError(f"option jitter_hz must be 'auto' or a list of frequencies, got {value!r}")
-    return tuple(number("jitter_hz", 0.0, low_open=True)(v) for v in value)

@@ -48,8 +48,8 @@ from carto.framework.workflows.adjust_checks import (
     poor_adjustment,
 )
 from carto.framework.workflows.configuration import configuration_files, read_configuration
-from carto.framework.workflows.dem_options import check_installed
 from carto.framework.workflows.opening import (
+    check_installed,
     open_product,
 )
 from carto.framework.workflows.reporting import jsonable, progress, write_report

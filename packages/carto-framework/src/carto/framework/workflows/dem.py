@@ -275,11 +275,11 @@ def choose_dem_generator(requested: str | None, types: Sequence[SensorType]) -> 
             return default
     if len(installed) == 1:
         return installed[0]
-    ranked = sorted(installed, key=lambda n: -registry.get("dem-generator", n).priority)
-    if ranked:
-        top = registry.get("dem-generator", ranked[0]).priority
-        if top > 0 and sum(registry.get("dem-generator", n).priority == top for n in ranked) == 1:
-            return ranked[0]
+    priority = {n: registry.get("dem-generator", n).priority for n in installed}
+    top = max(priority.values(), default=0)
+    best = [n for n, p in priority.items() if p == top]
+    if top > 0 and len(best) == 1:
+        return best[0]
     raise InputError(
         "dem: no default DEM generator for these images "
         f"(installed: {', '.join(installed) or 'none'}); name one with --generator"

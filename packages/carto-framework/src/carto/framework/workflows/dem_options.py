@@ -1,7 +1,6 @@
 """The arguments of a DEM run checked before any work (a usage error then leaves nothing,
 no work folder to resume): the generic options' values (:func:`check_options`; a generator
-checks its own too) and the components named (:func:`check_names`, :func:`check_installed`,
-which ``carto adjust`` uses too)."""
+checks its own too) and the components named (:func:`check_names`)."""
 
 from __future__ import annotations
 
@@ -11,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from carto.framework.errors import UsageError
-from carto.framework.plugins.registry import get_registry
+from carto.framework.workflows.opening import check_installed
 
 _POSITIVE_OPTIONS = ("posting_m", "ortho_res_m")
 
@@ -20,18 +19,6 @@ def check_names(generator: str | None, matcher: str) -> None:
     """The components named on the command line are installed: a usage error before any
     work (no work folder to resume)."""
     check_installed(("dem-generator", "--generator", generator), ("matcher", "--matcher", matcher))
-
-
-def check_installed(*named: tuple[str, str, str | None]) -> None:
-    """Each ``(kind, flag, name)`` names an installed component of ``kind`` (or is None):
-    a usage error naming the flag and what is installed otherwise, before any work."""
-    registry = get_registry()
-    for kind, flag, name in named:
-        if name is not None and name not in registry.names(kind):
-            raise UsageError(
-                f"{flag} {name!r}: not installed (installed: {', '.join(registry.names(kind))}; "
-                f"carto plugins --kind {kind})"
-            )
 
 
 def check_options(settings: Mapping[str, Any]) -> None:

@@ -16,7 +16,7 @@ from typing import Any
 
 import attrs
 
-from carto.framework.errors import InputError
+from carto.framework.errors import InputError, UsageError
 from carto.framework.geometry.sensor import Sensor, SensorType
 
 
@@ -66,6 +66,20 @@ def sensor_type_for(path: Path, sensor_type: str | None, what: str = "file") -> 
             f"({', '.join(t.name for t in top)}); choose one with --sensor"
         )
     return top[0]
+
+
+def check_installed(*named: tuple[str, str, str | None]) -> None:
+    """Each ``(kind, flag, name)`` names an installed component of ``kind`` (or is None):
+    a usage error naming the flag and what is installed otherwise, before any work."""
+    from carto.framework.plugins.registry import get_registry
+
+    registry = get_registry()
+    for kind, flag, name in named:
+        if name is not None and name not in registry.names(kind):
+            raise UsageError(
+                f"{flag} {name!r}: not installed (installed: {', '.join(registry.names(kind))}; "
+                f"carto plugins --kind {kind})"
+            )
 
 
 def open_options(trajectory_model: str | None = None) -> dict[str, Any]:
@@ -199,13 +213,8 @@ def _view_angle_deg(a: Sensor, b: Sensor) -> float:
     """Angle between two models' lines of sight at ``a``'s image centre, degrees."""
     import numpy as np
 
-    from carto.framework.geometry import frames
+    from carto.framework.geometry.intersection import sensor_rays
 
     n_l, n_s = a.image_shape
-    rays = []
-    for sensor in (a, b):
-        low = frames.geodetic_to_ecef(*sensor.image_to_ground(n_l / 2, n_s / 2, 0.0), 0.0)
-        high = frames.geodetic_to_ecef(*sensor.image_to_ground(n_l / 2, n_s / 2, 1000.0), 1000.0)
-        ray = np.ravel(high - low)
-        rays.append(ray / np.linalg.norm(ray))
+    rays = [np.ravel(sensor_rays(s, n_l / 2, n_s / 2, 0.0, 1000.0)[1]) for s in (a, b)]
     return float(np.degrees(np.arccos(np.clip(np.dot(rays[0], rays[1]), -1.0, 1.0))))
