@@ -57,3 +57,22 @@ def test_a_gcp_on_a_void_is_compared_with_the_heights_around_it() -> None:
     assert len(warning) == 1
     assert "off the heights of its models' 1 GCP(s)" in warning[0]
     assert "-20" in warning[0]  # -205 m and the relief of the posts around
+
+
+def test_gcps_are_not_judged_on_a_flat_dem_above_the_geoid() -> None:
+    """The adjustment's GCP check and the DEM's start check share one idea of a flat DEM: a
+    constant height above the geoid (a smooth 1.5 m slope in ellipsoidal heights) says
+    nothing of the terrain, so GCPs hundreds of metres above it are not refused."""
+    import pyproj
+
+    from carto.framework.workflows.adjust_checks import gcps_off_the_dem
+
+    rows, cols = np.indices((60, 60)) / 59.0
+    flat = _dem(2344.0 + 1.0 * rows + 0.5 * cols**2)
+    lon, lat = pyproj.Transformer.from_crs("EPSG:32631", "EPSG:4326", always_xy=True).transform(
+        500305.0, 4899695.0
+    )
+    gcps = {"id": np.array(["G1"]), "lon_deg": [lon], "lat_deg": [lat], "h_m": [2800.0]}
+    assert gcps_off_the_dem(gcps, flat) == []
+    relief = _dem(_relief(5.0))  # a DEM of relief about 500 m: the GCP 2300 m above, refused
+    assert "more than 100 m off the DEM" in gcps_off_the_dem(gcps, relief)[0]

@@ -144,3 +144,28 @@ def fill_voids(dem: DEM, bounds: Bounds | None = None) -> tuple[DEM, int]:
         n_filled = int((~valid & np.isfinite(sub)).sum())
     window = dem.transform @ Affine.translation(c0, r0)
     return attrs.evolve(dem, heights=sub, transform=window), n_filled
+
+
+FLAT_TOLERANCE_M = 1.0
+"""A DEM that departs from a smooth (quadratic) surface by less than this (1st to 99th
+percentile of the residuals) is flat: a constant height above the ellipsoid, or above the
+geoid (whose undulation rises 1.5 m across the 20 km of the Reunion products' RPC domain,
+smoothly). It says nothing of the relief; a real DEM of the flattest plain departs from any
+smooth surface by more in its noise alone."""
+
+
+def is_flat(dem: DEM, tolerance_m: float = FLAT_TOLERANCE_M) -> bool:
+    """Whether ``dem`` is a smooth surface within ``tolerance_m`` (or holds no height): a
+    quadratic of its row and column fitted to about 10,000 of its posts."""
+    rows, cols = np.nonzero(np.isfinite(dem.heights))
+    if rows.size < 6:
+        return True
+    step = max(1, rows.size // 10_000)
+    rows, cols = rows[::step], cols[::step]
+    h = dem.heights[rows, cols]
+    r = rows / max(float(rows.max()), 1.0)
+    c = cols / max(float(cols.max()), 1.0)
+    design = np.stack([np.ones_like(r), r, c, r * r, r * c, c * c], axis=1)
+    residual = h - design @ np.linalg.lstsq(design, h, rcond=None)[0]
+    low, high = np.percentile(residual, [1, 99])
+    return bool(high - low < tolerance_m)

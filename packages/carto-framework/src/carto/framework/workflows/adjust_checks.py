@@ -16,6 +16,7 @@ from numpy.typing import NDArray
 
 from carto.framework.adjustment.base import AdjustmentResult
 from carto.framework.files.control_table import ground_points
+from carto.framework.raster.dem_measures import is_flat
 
 POOR_SIGMA0 = 5.0
 """An adjustment whose sigma0 exceeds this fails (``--allow-poor`` writes it): its residuals
@@ -33,7 +34,7 @@ the checkpoints 1.2 km off with no warning (issue 31)."""
 def gcps_off_the_dem(gcps: Mapping[str, NDArray], dem: Any) -> list[str]:
     """Why the GCPs' heights are not this terrain's (empty when they are, or when there is no
     DEM of the terrain to tell): every GCP more than :data:`GCP_DEM_LIMIT_M` off the DEM."""
-    if dem is None or not np.nanstd(dem.heights) > 0:  # none, or a flat height
+    if dem is None or is_flat(dem):  # none, or a flat height (above the ellipsoid or geoid)
         return []
     ids, lon, lat, h = ground_points(gcps)
     terrain = dem.height(lon, lat)

@@ -14,6 +14,7 @@ import numpy as np
 from carto.framework.errors import InputError
 from carto.framework.files.control_table import ground_points
 from carto.framework.raster.dem import DEM
+from carto.framework.raster.dem_measures import is_flat
 
 MIN_MATCHED_FRACTION = 0.05
 """A DEM run that measured less than this share of the nodes fails (``--allow-poor`` writes
@@ -46,20 +47,13 @@ DEPARTURE_MEDIAN_M = 50.0
 simulated scenes, 4 m on Ventoux; a geoid grid taken as the start: 575 m)."""
 
 
-FLAT_START_M = 1.0
-"""A starting DEM that departs from a smooth (quadratic) surface by less than this (1st to
-99th percentile of the residuals) is a constant height, above the ellipsoid or above the
-geoid (whose undulation rises 1.5 m across the 20 km of the Reunion products' RPC domain,
-smoothly): it says nothing of the relief, and a DEM is not compared with it. A real DEM of
-the flattest plain departs from any smooth surface by more in its noise alone."""
-
-
 def departs_from_start(dem: DEM, start: DEM) -> list[str]:
     """Why a DEM is not the terrain its starting DEM says it is (empty when it is, or when
-    the start is a constant height, which says nothing of the relief)."""
+    the start is flat, a constant height above the ellipsoid or the geoid, which says nothing
+    of the relief: :func:`~carto.framework.raster.dem_measures.is_flat`)."""
     from carto.framework.evaluation.dem_accuracy import dem_accuracy
 
-    if _flat(start) or not np.isfinite(dem.heights).any():
+    if is_flat(start) or not np.isfinite(dem.heights).any():
         return []
     try:
         diff = dem_accuracy(dem, start)
@@ -74,22 +68,6 @@ def departs_from_start(dem: DEM, start: DEM) -> list[str]:
             "starting DEM?"
         ]
     return []
-
-
-def _flat(dem: DEM) -> bool:
-    """Whether a DEM is a smooth surface within :data:`FLAT_START_M` (or holds no height):
-    a quadratic of its row and column fitted to about 10,000 of its posts."""
-    rows, cols = np.nonzero(np.isfinite(dem.heights))
-    if rows.size < 6:
-        return True
-    step = max(1, rows.size // 10_000)
-    rows, cols = rows[::step].astype(float), cols[::step].astype(float)
-    h = dem.heights[rows.astype(int), cols.astype(int)]
-    r, c = rows / max(rows.max(), 1.0), cols / max(cols.max(), 1.0)
-    design = np.stack([np.ones_like(r), r, c, r * r, r * c, c * c], axis=1)
-    residual = h - design @ np.linalg.lstsq(design, h, rcond=None)[0]
-    low, high = np.percentile(residual, [1, 99])
-    return bool(high - low < FLAT_START_M)
 
 
 GCP_DATUM_LIMIT_M = 30.0
