@@ -48,6 +48,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from carto.framework.adjustment.base import AdjustmentResult
+from carto.framework.adjustment.dem_heights import dem_slopes
 from carto.framework.adjustment.observations import HEIGHT_OFFSET, Observations
 from carto.framework.adjustment.variance_components import solution_components
 from carto.framework.errors import AdjustmentError, InputError
@@ -83,6 +84,18 @@ def _height_targets(height_m: FloatArray, dem: Any, lon: FloatArray, lat: FloatA
         return height_m
     at = dem.height(lon, lat)
     return np.where(np.isfinite(at), at, height_m)
+
+
+def _height_row(dem: Any, lon: FloatArray, lat: FloatArray) -> FloatArray:
+    """Derivatives of a height constraint (point height minus the DEM's where the point is)
+    with respect to the point's east, north and up: ``(-slope_east, -slope_north, 1)``; the
+    slope is 0 for heights not read from a DEM."""
+    row = np.zeros((lon.size, 3))
+    row[:, 2] = 1.0
+    if dem is not None:
+        east, north = dem_slopes(dem, lon, lat)
+        row[:, 0], row[:, 1] = -east, -north
+    return row
 
 
 def _huber(v: FloatArray, k: float) -> FloatArray:
@@ -375,6 +388,7 @@ def _solve(  # noqa: C901, PLR0915 (issue 32: to split)
     # the last linearisation (kept for the variance components)
     linear: dict[str, tuple] = {}
     offset_linear: list[tuple] = []
+    a_h = np.zeros((0, 3))
     inv_pp = np.zeros((n_pts, 3, 3))
     cp_inv = np.zeros((n_pts, n_par, 3))
     iterations = 0
@@ -451,17 +465,18 @@ def _solve(  # noqa: C901, PLR0915 (issue 32: to split)
         if hidx.size:
             ok = hidx >= 0
             hh = hidx[ok]
-            target = _height_targets(obs.height_m[ok], dem, lon[hh], lat[hh])
             wgt = 1.0 / obs.height_sigma_m[ok] ** 2
-            offset = 0.0
-            if HEIGHT_OFFSET in par_index:  # target = h + offset
+            offset = values[par_index[HEIGHT_OFFSET]] if HEIGHT_OFFSET in par_index else 0.0
+            rho = _height_targets(obs.height_m[ok], dem, lon[hh], lat[hh]) - h[hh] - offset
+            # h + offset = DEM(east, north): the row's derivatives (the DEM's slope)
+            a_h = _height_row(dem, lon[hh], lat[hh])
+            if HEIGHT_OFFSET in par_index:
                 k = par_index[HEIGHT_OFFSET]
-                offset = values[k]
                 n_cc[k, k] += wgt.sum()
-                b_c[k] += np.sum(wgt * (target - h[hh] - offset))
-                np.add.at(n_cp[:, k, 2], hh, wgt)
-            np.add.at(n_pp[:, 2, 2], hh, wgt)
-            np.add.at(b_p[:, 2], hh, wgt * (target - h[hh] - offset))
+                b_c[k] += np.sum(wgt * rho)
+                np.add.at(n_cp[:, k, :], hh, wgt[:, None] * a_h)
+            np.add.at(n_pp, hh, wgt[:, None, None] * a_h[:, :, None] * a_h[:, None, :])
+            np.add.at(b_p, hh, (wgt * rho)[:, None] * a_h)
         # parameter priors
         finite = np.isfinite(prior_sigma)
         n_cc[finite, finite] += 1.0 / prior_sigma[finite] ** 2
@@ -562,6 +577,7 @@ def _solve(  # noqa: C901, PLR0915 (issue 32: to split)
         (gidx, hidx, oidx),
         (d_line, d_sample, v_gcp, v_off),
         v_h,
+        height_rows=a_h,
     )
     # outliers: normalised residuals above the threshold
     flagged: list[str] = []

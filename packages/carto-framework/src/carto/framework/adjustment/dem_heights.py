@@ -10,14 +10,19 @@ from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from carto.framework.adjustment.observations import Observations
 from carto.framework.errors import UsageError
 from carto.framework.geometry import frames
 from carto.framework.geometry.sensor import Sensor
+from carto.framework.raster.dem_measures import dem_pixel_size_m
+
+FloatArray = NDArray[np.float64]
 
 __all__ = [
     "WEAK_INTERSECTION_DEG",
+    "dem_slopes",
     "flat_heights",
     "intersection_angles_deg",
     "with_dem_heights",
@@ -25,6 +30,34 @@ __all__ = [
 
 WEAK_INTERSECTION_DEG = 10.0
 """Tie points whose rays meet at less than this get a DEM height constraint even with GCPs."""
+
+
+MEAN_EARTH_RADIUS_M = 6371008.8
+"""Radius that turns the slope steps of :func:`dem_slopes` into degrees (a slope is a ratio:
+the sphere's error of a few parts per thousand does not matter)."""
+
+
+def dem_slopes(dem: Any, lon_deg: FloatArray, lat_deg: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """The DEM's height gradient at points, metres per metre east and north: central
+    differences one post apart (at least 10 m), 0 where the DEM has no height on either side.
+
+    A height constraint read from the DEM where a point is follows the point over the
+    terrain; its derivative with respect to the point's position is this slope. Without it a
+    block held by a DEM alone slides over the terrain from iteration to iteration (a
+    Cartosat-1 pair without GCPs under ``--errors full``: 430 m across track, 40 iterations
+    without converging)."""
+    dx, dy = (float(np.median(v)) for v in dem_pixel_size_m(dem))
+    step_m = max(dx, dy, 10.0)
+    lat_rad = np.radians(lat_deg)
+    d_lat = np.degrees(step_m / MEAN_EARTH_RADIUS_M)
+    d_lon = d_lat / np.maximum(np.cos(lat_rad), 1e-6)
+    east = (dem.height(lon_deg + d_lon, lat_deg) - dem.height(lon_deg - d_lon, lat_deg)) / (
+        2.0 * step_m
+    )
+    north = (dem.height(lon_deg, lat_deg + d_lat) - dem.height(lon_deg, lat_deg - d_lat)) / (
+        2.0 * step_m
+    )
+    return np.nan_to_num(east), np.nan_to_num(north)
 
 
 def flat_heights(tie_heights: Any, flat_height_m: float | None, n_used: int) -> Any:

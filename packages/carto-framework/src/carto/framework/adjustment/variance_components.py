@@ -212,12 +212,14 @@ def solution_components(
     indices: tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.intp]],
     residuals: tuple[FloatArray, FloatArray, FloatArray, FloatArray],
     height_residuals: FloatArray,
+    height_rows: FloatArray | None = None,
 ) -> tuple[tuple[VarianceComponent, ...], FloatArray]:
     """Each observation group's variance factor and the covariance under them, for the
     bundle (:mod:`carto.framework.adjustment.bundle`) from its last linearisation
     (``linear``: the image rows by sensor ``(rows, points, own parameter names, a_p, a_c,
     residuals, ok)``, ``offsets``: the image offsets' rows, as the normal equations took them)
-    and its final residuals."""
+    and its final residuals; ``height_rows``: the height constraints' derivatives with
+    respect to their points' east, north and up (default: up only)."""
     d_line, d_sample, v_gcp, v_off = residuals
     images = set(linear) | set(obs.image.tolist())
     gidx, hidx, oidx = indices  # points of the GCPs, height constraints, offsets (-1: none)
@@ -248,6 +250,8 @@ def solution_components(
         n = int(ok.sum())
         a_p = np.zeros((n, 1, 3))
         a_p[:, 0, 2] = 1.0
+        if height_rows is not None:
+            a_p[:, 0, :] = height_rows
         idx = np.zeros(0, np.intp)
         a_c = None
         if HEIGHT_OFFSET in par_index:
