@@ -101,6 +101,23 @@ def test_usage_error_exit_code(run_carto):
     assert "invalid choice" in result.stderr
 
 
+@pytest.mark.parametrize(
+    ("args", "abbreviated"),
+    [
+        (["dem", "scene", "--out", "o", "--post", "20"], "--post"),
+        (["adjust", "scene", "--out", "o", "--work", "1"], "--work"),
+        (["simulate", "cartosat1-pair", "--out", "o", "--si", "100", "100"], "--si"),
+    ],
+)
+def test_options_are_never_abbreviated(args, abbreviated, capsys):
+    from carto.framework.cli import build_parser
+
+    with pytest.raises(SystemExit) as stop:
+        build_parser().parse_args(args)
+    assert stop.value.code == 2
+    assert f"unrecognized arguments: {abbreviated}" in capsys.readouterr().err
+
+
 @pytest.mark.parametrize("delay_s", [0.2, 0.5])
 def test_ctrl_c_during_start_up_exits_130_in_one_line(carto_exe, delay_s) -> None:
     """The command line imports its libraries for a second or more before a command runs;

@@ -11,6 +11,7 @@ import pyproj
 import pytest
 import rasterio
 from affine import Affine
+from pyproj.transformer import TransformerGroup
 from rio_cogeo.cogeo import cog_validate
 
 from carto.framework.errors import InputError
@@ -102,10 +103,20 @@ def test_heights_carry_the_vertical_crs(tmp_path: Path):
     _valid(ortho)
     with rasterio.open(path) as a, rasterio.open(ortho) as b:
         assert pyproj.CRS.from_wkt(a.crs.to_wkt()).sub_crs_list[1].to_epsg() == 5773
-        assert pyproj.CRS.from_wkt(b.crs.to_wkt()).sub_crs_list[1].name == (
-            "WGS 84 ellipsoidal height"
-        )
+        ellipsoidal = pyproj.CRS.from_wkt(b.crs.to_wkt())
+        egm96 = pyproj.CRS.from_wkt(a.crs.to_wkt())
         assert b.units == ("metre",)
+    # ellipsoidal heights: the projected CRS made 3-D on EPSG:4979, so that PROJ finds the
+    # geoid grid's transformation to EGM96 heights (not a ballpark one that ignores it)
+    assert not ellipsoidal.is_compound
+    assert len(ellipsoidal.axis_info) == 3
+    assert ellipsoidal.geodetic_crs.to_epsg() == 4979
+    assert ellipsoidal.to_2d().to_epsg() == 32631
+    group = TransformerGroup(ellipsoidal, egm96)
+    found = [t.description for t in group.transformers] + [
+        o.name for o in group.unavailable_operations
+    ]
+    assert any("WGS 84 to EGM96 height (1)" in f for f in found), found
 
 
 def test_a_failed_write_keeps_the_earlier_file(tmp_path: Path):

@@ -373,16 +373,16 @@ def test_write_read_round_trip_utm(tmp_path: Path):
     heights[4, 5] = np.nan
     dem = DEM.from_array(heights, transform, "EPSG:32631", vertical=ELLIPSOID)
     path = dem.write(tmp_path / "out.tif")
-    assert sorted(os.listdir(tmp_path)) == ["out.tif"]  # no temporary file left behind
+    # no temporary file left behind; the 3-D CRS's sidecar
+    assert sorted(os.listdir(tmp_path)) == ["out.tif", "out.tif.aux.xml"]
     with rasterio.open(path) as ds:
         assert ds.dtypes == ("float32",)
         assert math.isnan(ds.nodata)
-        # compound: the horizontal CRS and the ellipsoidal heights' vertical CRS (what GDAL,
-        # PROJ and QGIS read without our tag)
+        # GDAL reads the sidecar: the projected CRS made 3-D on EPSG:4979
         crs = pyproj.CRS.from_wkt(ds.crs.to_wkt())
-        assert crs.is_compound
-        assert crs.sub_crs_list[0].to_epsg() == 32631
-        assert crs.sub_crs_list[1].name == "WGS 84 ellipsoidal height"
+        assert not crs.is_compound
+        assert crs.to_2d().to_epsg() == 32631
+        assert crs.geodetic_crs.to_epsg() == 4979
         assert ds.tags()[VERTICAL_TAG] == "ellipsoid WGS84"
         assert ds.units == ("metre",)
         assert ds.transform.almost_equals(transform)
@@ -392,6 +392,21 @@ def test_write_read_round_trip_utm(tmp_path: Path):
     assert back.transform.almost_equals(transform)
     np.testing.assert_array_equal(np.isnan(back.heights), np.isnan(heights))
     np.testing.assert_allclose(back.heights, heights.astype(np.float32), rtol=0, atol=0)
+    # the keys alone (the sidecar lost in a copy): compound, the horizontal CRS and the
+    # ellipsoidal heights' vertical CRS, which GDAL, PROJ and QGIS read without our tag
+    with rasterio.Env(GDAL_PAM_ENABLED="NO"), rasterio.open(path) as ds:
+        keys = pyproj.CRS.from_wkt(ds.crs.to_wkt())
+    assert keys.is_compound
+    assert keys.sub_crs_list[0].to_epsg() == 32631
+    assert keys.sub_crs_list[1].name == "WGS 84 ellipsoidal height"
+    (tmp_path / "out.tif.aux.xml").unlink()
+    assert DEM.open(path).vertical == ELLIPSOID
+    # rewritten above a geoid, the file keeps no stale sidecar (it would override its keys)
+    DEM.from_array(heights, transform, "EPSG:32631", vertical=EGM96).write(path)
+    dem.write(path)
+    DEM.from_array(heights, transform, "EPSG:32631", vertical=EGM96).write(path)
+    assert not (tmp_path / "out.tif.aux.xml").exists()
+    assert DEM.open(path).vertical == EGM96
 
     geoidal = DEM.from_array(heights, GEO_TRANSFORM, "EPSG:4326", vertical=EGM96)
     again = DEM.open(geoidal.write(tmp_path / "geoid.tif"))

@@ -17,7 +17,7 @@ import signal
 import sys
 import textwrap
 from collections.abc import Iterator, Sequence
-from typing import NoReturn
+from typing import Any, NoReturn
 
 from carto.framework import __version__
 from carto.framework.cli.adjust_command import add_adjust
@@ -36,7 +36,12 @@ class _Parser(argparse.ArgumentParser):
     """argparse's parser whose usage errors are one line, as every other ``carto`` error
     (``carto: error: argument --workers: must be >= 1, got 0 (see carto dem --help)``),
     exit 2, and whose help may be completed only when asked for. Sub-command parsers are
-    made of the same class."""
+    made of the same class. Options are never abbreviated (``--post 20`` is not
+    ``--posting 20``: an abbreviation that works today breaks when an option is added)."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("allow_abbrev", False)
+        super().__init__(*args, **kwargs)
 
     def format_help(self) -> str:
         """The help, with an epilog (``lazy_epilog``: e.g. examples naming the installed

@@ -51,9 +51,12 @@ def cog_writer(
             classes), ``"bilinear"`` or ``"mode"``.
         what: what the file is, for the error message (``"cannot write DEM to ..."``).
         vertical: for heights, their vertical reference (``"ellipsoid"``,
-            ``"geoid:EGM96"``...): the CRS is made compound with its vertical CRS
-            (:func:`~carto.framework.raster.vertical_reference.with_vertical`), the
-            ``VERTICAL_REFERENCE`` tag names it and the bands' unit is metres.
+            ``"geoid:EGM96"``...): the CRS gets its vertical part
+            (:func:`~carto.framework.raster.vertical_reference.geotiff_crs`: a projected
+            CRS with ellipsoidal heights is compound in the keys and 3-D in a
+            ``.aux.xml`` sidecar written beside ``path``), the ``VERTICAL_REFERENCE`` tag
+            names it and the bands' unit is metres. A sidecar of an earlier file at
+            ``path`` is removed (its CRS would override the new file's keys).
 
     Raises:
         OutputError: the file cannot be written (full disk, unwritable folder).
@@ -67,16 +70,18 @@ def cog_writer(
         )
     path = Path(path)
     profile = dict(profile)
+    sidecar = None
     if vertical is not None:
         from rasterio.crs import CRS as RioCRS
 
         from carto.framework.raster.vertical_reference import (
             VERTICAL_TAG,
+            geotiff_crs,
             vertical_tag,
-            with_vertical,
         )
 
-        profile["crs"] = RioCRS.from_wkt(with_vertical(profile["crs"].to_wkt(), vertical).to_wkt())
+        keys, sidecar = geotiff_crs(profile["crs"].to_wkt(), vertical)
+        profile["crs"] = RioCRS.from_wkt(keys.to_wkt())
     try:
         with _staged_cog(path, profile, overview_resampling, what) as dst:
             yield dst
@@ -85,6 +90,29 @@ def cog_writer(
                 dst.units = ("metre",) * dst.count
     except (RasterioError, OSError) as exc:
         raise OutputError(f"cannot write {what} {path}: {gdal_cause(exc)}") from exc
+    _write_sidecar(path, sidecar, what)
+
+
+def _write_sidecar(path: Path, crs: Any, what: str) -> None:
+    """The ``.aux.xml`` of ``path`` holding ``crs`` (GDAL's own sidecar format, read before
+    the GeoTIFF keys), or none (an earlier one removed) when ``crs`` is None."""
+    from xml.sax.saxutils import escape
+
+    aux = Path(f"{path}.aux.xml")
+    if crs is None:
+        try:
+            aux.unlink(missing_ok=True)
+        except OSError as exc:
+            raise OutputError(f"cannot remove the stale {aux}: {exc.strerror or exc}") from exc
+        return
+    order = ",".join(str(k + 1) for k in range(len(crs.axis_info)))
+    text = (
+        "<PAMDataset>\n"
+        f'  <SRS dataAxisToSRSAxisMapping="{order}">{escape(crs.to_wkt())}</SRS>\n'
+        "</PAMDataset>\n"
+    )
+    with atomic_output(aux, f"{what} CRS sidecar") as tmp:
+        tmp.write_text(text, encoding="utf-8")
 
 
 @contextlib.contextmanager

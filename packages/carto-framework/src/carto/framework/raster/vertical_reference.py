@@ -5,11 +5,17 @@ sensors take) or ``"geoid:<NAME>"`` (orthometric heights above a geoid model, e.
 ``"geoid:EGM96"`` for SRTM). A raster of heights carries it twice, so that every reader
 knows it:
 
-- in its CRS, compound with a vertical part (:func:`with_vertical`): GDAL, QGIS and PROJ read
-  it without knowing Carto. EGM96, EGM2008 and EGM84 heights are the EPSG vertical CRSs
-  5773, 3855 and 5798; ellipsoidal heights are a vertical CRS named "WGS 84 ellipsoidal
-  height" on the WGS84 datum (GeoTIFF keys have no EPSG code for it; GDAL writes it as a
-  user-defined vertical CRS and reads it back);
+- in its CRS (:func:`with_vertical`), which GDAL, QGIS and PROJ read without knowing Carto.
+  Geoid heights make a compound CRS: EGM96, EGM2008 and EGM84 heights are the EPSG vertical
+  CRSs 5773, 3855 and 5798. Ellipsoidal heights make the horizontal CRS three-dimensional
+  (``CRS.to_3d()``: EPSG:4979 for longitude and latitude, a projected CRS on EPSG:4979's
+  base): PROJ then finds "WGS 84 to EGM96 height (1)" (its geoid grid) between a Carto DEM
+  and EGM96 heights, where a compound CRS with a user-defined "WGS 84 ellipsoidal height"
+  (as Carto wrote until issue 34) left it a ballpark transformation that ignores the geoid.
+  GeoTIFF keys cannot hold a projected 3-D CRS (GDAL keeps such a CRS in a ``.aux.xml``
+  sidecar only: OSGeo/gdal#9741), so a GeoTIFF of ellipsoidal heights on a projected CRS
+  carries the compound CRS in its keys, which any reader understands, and the 3-D CRS in
+  its sidecar, which GDAL reads first (:func:`geotiff_crs`); EPSG:4979 fits in the keys;
 - in the ``VERTICAL_REFERENCE`` metadata tag (``"ellipsoid WGS84"``, ``"geoid EGM96"``), as
   earlier Carto files did.
 
@@ -30,6 +36,7 @@ __all__ = [
     "EGM96",
     "ELLIPSOID",
     "VERTICAL_TAG",
+    "geotiff_crs",
     "normalise_vertical",
     "split_vertical",
     "vertical_tag",
@@ -98,15 +105,35 @@ def vertical_crs(vertical: str) -> pyproj.CRS:
 
 
 def with_vertical(horizontal: Any, vertical: str) -> pyproj.CRS:
-    """The compound CRS of a horizontal CRS (anything pyproj reads; a compound one is
-    reduced to its horizontal part first) and a vertical reference."""
+    """The CRS of heights above ``vertical`` on a horizontal CRS (anything pyproj reads; a
+    compound or 3-D one is reduced to its horizontal part first): the 3-D CRS for ellipsoidal
+    heights, the compound CRS for geoid heights (see the module docstring)."""
     import pyproj
     from pyproj.crs import CompoundCRS
 
     crs = pyproj.CRS.from_user_input(horizontal)
     crs = split_vertical(crs)[0]
+    if normalise_vertical(vertical) == ELLIPSOID:
+        return crs.to_3d()
     vert = vertical_crs(vertical)
     return pyproj.CRS.from_wkt(CompoundCRS(f"{crs.name} + {vert.name}", [crs, vert]).to_wkt())
+
+
+def geotiff_crs(horizontal: Any, vertical: str) -> tuple[pyproj.CRS, pyproj.CRS | None]:
+    """The CRS a GeoTIFF of heights above ``vertical`` carries in its keys, and the one its
+    ``.aux.xml`` sidecar carries (None: the keys hold :func:`with_vertical` whole). A
+    projected CRS with ellipsoidal heights is the one case GeoTIFF keys cannot encode (see
+    the module docstring): its keys get the compound CRS of a user-defined "WGS 84
+    ellipsoidal height", its sidecar the 3-D CRS."""
+    import pyproj
+    from pyproj.crs import CompoundCRS
+
+    crs = with_vertical(horizontal, vertical)
+    if not (crs.is_projected and normalise_vertical(vertical) == ELLIPSOID):
+        return crs, None
+    flat, vert = crs.to_2d(), vertical_crs(ELLIPSOID)
+    keys = pyproj.CRS.from_wkt(CompoundCRS(f"{flat.name} + {vert.name}", [flat, vert]).to_wkt())
+    return keys, crs
 
 
 def split_vertical(crs: pyproj.CRS) -> tuple[pyproj.CRS, str | None]:
