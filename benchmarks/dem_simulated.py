@@ -71,8 +71,10 @@ def evaluate(out: Path, truth_path: Path) -> dict[str, Any]:
 
     dem = DEM.open(out / "dem.tif")
     error = dem.heights - DEM.open(truth_path).height(*dem.node_lonlat())
-    with rasterio.open(out / "quality.tif") as ds:
-        bands = dict(zip(ds.descriptions, ds.read(), strict=True))
+    bands = {}
+    for name in ("quality.tif", "quality_flags.tif"):
+        with rasterio.open(out / name) as ds:
+            bands |= dict(zip(ds.descriptions, ds.read(), strict=True))
     filled = bands["filled"] == 1
     has = np.isfinite(error)
     measured = has & ~filled

@@ -211,8 +211,9 @@ def test_a_plugin_dem_generator_is_used_end_to_end(run_carto, scene, tmp_path):
     report = json.loads((out / "report.json").read_text())
     assert report["generator"] == "example-start"
     assert report["iterations"][0]["matched_percent"] > 20
-    with rasterio.open(out / "quality.tif") as ds:
+    with rasterio.open(out / "quality_flags.tif") as ds:
         assert ds.descriptions == ("start",)
+        assert ds.dtypes == ("uint8",)
     with rasterio.open(out / "dem.tif") as ds:
         dem, crs, transform = ds.read(1, masked=True).filled(np.nan), ds.crs, ds.transform
     with rasterio.open(scene / "init_dem.tif") as ds:

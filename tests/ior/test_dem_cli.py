@@ -71,7 +71,7 @@ def test_dem_from_a_scene_writes_every_product(run_carto, scene, tmp_path):
     with rasterio.open(out / "quality.tif") as ds:
         units = dict(zip(ds.descriptions, ds.units, strict=True))
     assert units["sigma_m"] == units["spread_m"] == "metre"
-    assert not units["points"]
+    assert not units["confidence"]
     run = report["run"]
     assert run["carto_version"] == __version__
     assert run["plugins"]["carto-ior"]
@@ -99,17 +99,24 @@ def test_dem_from_a_scene_writes_every_product(run_carto, scene, tmp_path):
         assert ds.res == pytest.approx((10.0, 10.0))
         assert "ellipsoid" in ds.tags()["VERTICAL_REFERENCE"].lower()
         assert np.isnan(ds.nodata)
-    with rasterio.open(out / "quality.tif") as ds:  # per DEM node
-        assert ds.descriptions == (
-            "confidence",
-            "points",
-            "spread_m",
-            "sigma_m",
-            "filled",
-        )  # GDAL's
+    # per DEM node; counts and flags in files of their own types (issue 34: every band
+    # float32 made matching.tif 14 MB beside a 0.6 MB DEM)
+    with rasterio.open(out / "quality.tif") as ds:
+        assert ds.descriptions == ("confidence", "spread_m", "sigma_m")  # GDAL's
+        assert ds.dtypes == ("float32",) * 3
         assert ds.res == pytest.approx((10.0, 10.0))
-        confidence, points, spread, sigma, filled = ds.read()
-        heights = DEM.open(out / "dem.tif").heights
+        confidence, spread, sigma = ds.read()
+    with rasterio.open(out / "quality_counts.tif") as ds:
+        assert ds.descriptions == ("points",)
+        assert ds.dtypes == ("uint16",)
+        assert ds.nodata == 65535
+        points = ds.read(1)
+    with rasterio.open(out / "quality_flags.tif") as ds:
+        assert ds.descriptions == ("filled",)
+        assert ds.dtypes == ("uint8",)
+        assert ds.nodata == 255
+        filled = ds.read(1)
+    heights = DEM.open(out / "dem.tif").heights
     has = np.isfinite(heights)
     measured = has & (filled == 0)
     assert measured.mean() > 0.5
@@ -126,8 +133,21 @@ def test_dem_from_a_scene_writes_every_product(run_carto, scene, tmp_path):
     assert counts["filled_nodes"] == int((has & (filled == 1)).sum())
     assert counts["measured_fraction"] == pytest.approx(report["matched_fraction"], abs=1e-6)
     with rasterio.open(out / "matching.tif") as ds:  # per ortho pixel
-        assert ds.descriptions == ("score", "valid")
+        assert ds.descriptions == ("score",)
+        assert ds.dtypes == ("float32",)
+    with rasterio.open(out / "matching_flags.tif") as ds:
+        assert ds.descriptions == ("valid",)
+        assert ds.dtypes == ("uint8",)
+        valid = ds.read(1)
+    assert set(np.unique(valid).tolist()) <= {0, 1, 255}
+    assert (valid == 1).any()
     assert report["matching_bands"] == ["score", "valid"]
+    assert report["quality_layers"]["points"] == {
+        "file": "quality_counts.tif",
+        "kind": "count",
+        "description": "matched ortho pixels whose rays gave the node's height",
+    }
+    assert report["quality_layers"]["valid"]["file"] == "matching_flags.tif"
     for name in ("ortho_left.tif", "ortho_right.tif"):  # in the images' radiometry
         with rasterio.open(out / name) as ds, rasterio.open(scene / "fore.tif") as raw:
             assert ds.dtypes == raw.dtypes == ("uint16",)

@@ -72,6 +72,7 @@ def ior_product(result: IORResult) -> DEMProduct:
                 "matched ortho pixels whose rays gave the node's height",
                 nodes["count"],
                 grid="dem",
+                kind="count",
             ),
             QualityLayer(
                 "spread_m",
@@ -94,11 +95,12 @@ def ior_product(result: IORResult) -> DEMProduct:
                 "1: height not measured in the last iteration (filled), 0: measured",
                 np.asarray(result.filled, np.float32),
                 grid="dem",
+                kind="flag",
             )
         )
     quality += [
         QualityLayer("score", "correlation score", result.score),
-        QualityLayer("valid", "valid match (1) or not (0)", _as_float(result.valid)),
+        QualityLayer("valid", "valid match (1) or not (0)", _as_float(result.valid), kind="flag"),
     ]
     return DEMProduct(
         dem=result.dem,

@@ -62,12 +62,12 @@ class StartDEMGenerator(DEMGenerator):
             progress("example-start: one dense match of the ortho-images")
         field = matcher.match_dense(*orthos) if matcher is not None else None
         known = np.isfinite(heights)
-        quality = [QualityLayer("start", "1: height from the starting DEM", known, "dem")]
+        quality = [QualityLayer("start", "1: height from the starting DEM", known, "dem", "flag")]
         measures = {}
         if field is not None:
             quality += [
                 QualityLayer("d_row", "right - left along ortho rows, px", field.d_row),
-                QualityLayer("valid", "valid match (1) or not (0)", field.valid),
+                QualityLayer("valid", "valid match (1) or not (0)", field.valid, kind="flag"),
             ]
             measures["matched_percent"] = round(100.0 * float(np.mean(field.valid)), 1)
             measures["median_abs_d_row_px"] = round(float(np.nanmedian(np.abs(field.d_row))), 3)

@@ -292,9 +292,10 @@ def add_dem(sub: argparse._SubParsersAction) -> None:
             "cloud-optimised GeoTIFFs dem.tif (float32,\nellipsoidal heights or with "
             "--vertical geoid above the geoid, nodata, compound CRS),\northo_left.tif, "
             "ortho_right.tif (in the images' radiometry, e.g. uint16 with nodata 0),\n"
-            "quality.tif (per DEM node: confidence, points, spread_m, sigma_m, filled), "
-            "matching.tif,\ndem_hillshade.png and report.json (one entry per iteration, "
-            "completeness); with\n--reference, the accuracy against it and "
+            "quality.tif (per DEM node: confidence, spread_m, sigma_m), quality_counts.tif\n"
+            "(points, uint16), quality_flags.tif (filled, uint8), matching.tif (score),\n"
+            "matching_flags.tif (valid), dem_hillshade.png and report.json (one entry per\n"
+            "iteration, completeness); with --reference, the accuracy against it and "
             "dem_difference.png."
         ),
         epilog=examples(

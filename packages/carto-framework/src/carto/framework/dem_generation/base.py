@@ -66,6 +66,10 @@ def _layer_values(value: Any) -> Any:
     return np.asarray(value, dtype=np.float32)
 
 
+LAYER_KINDS = ("measure", "count", "flag")
+"""What a quality layer holds (:attr:`QualityLayer.kind`)."""
+
+
 @attrs.frozen(eq=False)
 class QualityLayer:
     """One quality band of a DEM product: a measure per DEM node (``grid="dem"``, a band of
@@ -80,12 +84,18 @@ class QualityLayer:
             whole scenes).
         grid: ``"dem"`` (the product's DEM grid) or ``"ortho"`` (its ortho grid; the
             default, for generators written before DEM-grid layers existed).
+        kind: ``"measure"`` (float32, NaN = none: the bands of ``quality.tif`` and
+            ``matching.tif``), ``"count"`` (whole numbers, uint16 in
+            ``quality_counts.tif`` / ``matching_counts.tif``, nodata 65535) or ``"flag"``
+            (0/1 or small classes, uint8 in ``quality_flags.tif`` / ``matching_flags.tif``,
+            nodata 255). GeoTIFF bands of one file share one type.
     """
 
     name: str
     description: str
     values: Any = attrs.field(converter=_layer_values)
     grid: str = attrs.field(default="ortho", validator=attrs.validators.in_(("dem", "ortho")))
+    kind: str = attrs.field(default="measure", validator=attrs.validators.in_(LAYER_KINDS))
 
     def __attrs_post_init__(self) -> None:
         if self.values.ndim != 2:
@@ -133,8 +143,10 @@ class DEMProduct:
             folder, written out window by window).
         ortho_grid: the ortho-images' map grid (also the grid of the per-pixel quality
             layers).
-        quality: the quality layers: those on the DEM grid are the bands of ``quality.tif``,
-            those on the ortho grid the bands of ``matching.tif``.
+        quality: the quality layers: those on the DEM grid are the bands of ``quality.tif``
+            (counts and flags: ``quality_counts.tif``, ``quality_flags.tif``), those on the
+            ortho grid the bands of ``matching.tif`` (``matching_counts.tif``,
+            ``matching_flags.tif``).
         iterations: one record per iteration (possibly one for a single-pass generator).
         converged: whether the generator's own stopping test was met (``None`` for a
             generator without one).

@@ -552,6 +552,15 @@ def _dem_into(
         "vertical_reference": vertical_reference,
         "quality_bands": [layer.name for layer in product.quality if layer.grid == "dem"],
         "matching_bands": [layer.name for layer in product.quality if layer.grid == "ortho"],
+        "quality_layers": {
+            layer.name: {
+                "file": f"{'quality' if layer.grid == 'dem' else 'matching'}"
+                f"{LAYER_FILES[layer.kind][0]}.tif",
+                "kind": layer.kind,
+                "description": layer.description,
+            }
+            for layer in product.quality
+        },
         "converged": product.converged,
         "matched_fraction": product.matched_fraction,
         "warnings": warnings,
@@ -654,18 +663,32 @@ def _write_rasters(
         ("quality", "dem", product.dem_grid),
         ("matching", "ortho", product.ortho_grid),
     ):
-        layers = [layer for layer in product.quality if layer.grid == on]
-        if layers:
-            files[key] = write_ortho(
-                out / f"{key}.tif",
+        for kind, (suffix, dtype, nodata) in LAYER_FILES.items():
+            layers = [layer for layer in product.quality if layer.grid == on and layer.kind == kind]
+            if not layers:
+                continue
+            name = f"{key}{suffix}"
+            files[name] = write_ortho(
+                out / f"{name}.tif",
                 [layer.values for layer in layers],
                 grid,
                 tags={
                     "CARTO_PRODUCT": key,
                     **{f"BAND_{k}": layer.description for k, layer in enumerate(layers, 1)},
                 },
+                nodata=nodata,
+                out_dtype=dtype,
                 band_descriptions=[layer.name for layer in layers],
                 band_units=["metre" if layer.name.endswith("_m") else None for layer in layers],
                 overview_resampling="nearest",
             ).name
     return files
+
+
+LAYER_FILES = {
+    "measure": ("", None, None),
+    "count": ("_counts", "uint16", 65535),
+    "flag": ("_flags", "uint8", 255),
+}
+"""Per kind of quality layer: the file-name suffix, the band type and nodata (GeoTIFF bands
+of one file share one type: flags as float32 made matching.tif 14 MB, issue 34)."""
