@@ -40,6 +40,25 @@ def test_a_dem_of_another_terrain_than_its_relief_start_is_flagged() -> None:
     assert len(departs_from_start(_dem(_relief(300.0)), start)) == 1
 
 
+def test_a_small_dem_inside_a_coarse_start_is_compared_at_its_own_nodes() -> None:
+    """The Ventoux crop (250 m at 1 m, 60 % matched) starts from SRTM (90 m): compared on
+    the start's grid, where each post needs the DEM's nodes around it, its voids left no
+    common post and the check crashed on a missing NMAD. Here the voids sit at the posts."""
+    coarse = DEM.from_array(_relief(5.0), Affine(90.0, 0, 499_000.0, 0, -90.0, 4_901_000.0), 32631)
+    fine = Affine(1.0, 0.0, 501_000.0, 0.0, -1.0, 4_899_000.0)
+    rows, cols = np.indices((250, 250))
+    here = coarse.height(*DEM.from_array(np.zeros((250, 250)), fine, 32631).node_lonlat())
+    x, y = fine * (cols + 0.5, rows + 0.5)
+    near_post = (np.abs((x - 499_045.0 + 45.0) % 90.0 - 45.0) < 3.0) | (
+        np.abs((y - 4_900_955.0 + 45.0) % 90.0 - 45.0) < 3.0
+    )
+    here[near_post] = np.nan  # voids of what did not match
+    assert departs_from_start(DEM.from_array(here + 0.01 * rows, fine, 32631), coarse) == []
+    warning = departs_from_start(DEM.from_array(here + 80.0, fine, 32631), coarse)
+    assert len(warning) == 1
+    assert "median +80.0 m" in warning[0]
+
+
 def test_a_gcp_on_a_void_is_compared_with_the_heights_around_it() -> None:
     """An outside probe: --init-height 0 under terrain at 300-570 m gave a DEM 205 m low with
     exit 0, its one GCP on a void of the DEM. The posts around the GCP now judge it."""
