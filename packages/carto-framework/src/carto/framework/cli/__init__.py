@@ -22,6 +22,7 @@ from typing import Any, NoReturn
 from carto.framework import __version__
 from carto.framework.cli.adjust_command import add_adjust
 from carto.framework.cli.common import PROG, Handler, examples, formatter, warn_broken
+from carto.framework.cli.config_file import parse_with_config, used_config
 from carto.framework.cli.dem_commands import add_dem, add_evaluate
 from carto.framework.cli.demo_command import add_demo
 from carto.framework.cli.geometry_commands import add_project_locate
@@ -210,16 +211,29 @@ def _quiet_libraries(debug: bool) -> Iterator[None]:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ``carto`` with ``argv`` (default ``sys.argv[1:]``); return the exit code."""
     parser = build_parser()
-    args = parser.parse_args(argv)
+    argv = list(sys.argv[1:] if argv is None else argv)
+    try:
+        args = parse_with_config(parser, argv)
+    except UsageError as exc:
+        print(f"{PROG}: error: {_one_line(exc)}", file=sys.stderr)
+        return 2
     handler: Handler | None = getattr(args, "handler", None)
     if handler is None:
         parser.print_help(sys.stderr)
         return 2
+    from carto.framework.files.staging import remember_settings
     from carto.framework.parallel.engine import bound_gdal_cache
 
     bound_gdal_cache()
-    with _quiet_libraries(args.debug):
-        return _run(handler, args)
+    document = used_config(args)
+    remember_settings(None)
+    if document is not None:
+        remember_settings(document["command"], document)
+    try:
+        with _quiet_libraries(args.debug):
+            return _run(handler, args)
+    finally:
+        remember_settings(None)
 
 
 def _run(handler: Handler, args: argparse.Namespace) -> int:

@@ -12,6 +12,7 @@ from carto.framework.cli.common import (
     non_negative_int,
     positive_int,
 )
+from carto.framework.cli.config_file import add_config_option
 from carto.framework.errors import UsageError
 from carto.framework.parallel.engine import default_workers
 
@@ -161,6 +162,7 @@ def add_adjust(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("source", metavar="SCENE_OR_CONFIG", help="scene folder or JSON configuration")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
+    add_config_option(p, "adjust")
     p.add_argument(
         "--gcps", type=non_negative_int, metavar="N", help="number of GCPs to use (default all)"
     )

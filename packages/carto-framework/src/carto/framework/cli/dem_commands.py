@@ -16,6 +16,7 @@ from carto.framework.cli.common import (
     positive_int,
     table,
 )
+from carto.framework.cli.config_file import add_config_option
 from carto.framework.errors import InputError, UsageError
 from carto.framework.parallel.engine import default_workers
 
@@ -314,6 +315,7 @@ def add_dem(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("scene", nargs="?", metavar="SCENE", help="scene folder (carto simulate)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
+    add_config_option(p, "dem")
     p.add_argument("--left", metavar="IMAGE", help="left image (instead of a scene)")
     p.add_argument("--right", metavar="IMAGE", help="right image")
     p.add_argument("--left-model", metavar="FILE", help="model of the left image")

@@ -8,6 +8,7 @@ import time
 from pathlib import Path
 
 from carto.framework.cli.common import examples, formatter, non_negative_int, positive_int
+from carto.framework.cli.config_file import add_config_option
 from carto.framework.errors import InputError
 
 
@@ -106,6 +107,7 @@ def add_simulate(sub: argparse._SubParsersAction) -> None:
         "preset", metavar="PRESET", help="scene preset (carto plugins --kind scene-preset)"
     )
     p.add_argument("--out", required=True, metavar="DIR", help="scene folder to write")
+    add_config_option(p, "simulate")
     p.add_argument("--seed", type=non_negative_int, default=0, help="random seed (default 0)")
     p.add_argument(
         "--terrain",

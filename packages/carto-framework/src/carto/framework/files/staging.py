@@ -37,10 +37,12 @@ from carto.framework.files.paths import resolved as _resolved
 
 __all__ = [
     "MARKER",
+    "USED_CONFIG",
     "check_output_file",
     "committed_outputs",
     "committing",
     "note_interrupt",
+    "remember_settings",
     "require_complete_output",
     "staged_folder",
 ]
@@ -58,6 +60,23 @@ _COMMITTED: list[Path] = []
 """Output folders this process put in place (:func:`committed_outputs`)."""
 _COMMITTING: list[bool] = []
 """Non-empty while an output folder is being put in place (:func:`committing`)."""
+
+
+_USED_CONFIG: dict[str, Mapping[str, Any]] = {}
+"""The settings of the command this process runs, by command name (:func:`remember_settings`),
+written as ``used_config.json`` into that command's output folder."""
+
+USED_CONFIG = "used_config.json"
+"""The file of an output folder holding the settings its run used."""
+
+
+def remember_settings(command: str | None, document: Mapping[str, Any] | None = None) -> None:
+    """Record the settings of ``command`` (the ``carto`` command line's, checked): its
+    output folder will hold them as :data:`USED_CONFIG`; ``None`` forgets them all."""
+    if command is None:
+        _USED_CONFIG.clear()
+    elif document is not None:
+        _USED_CONFIG[command] = dict(document)
 
 
 def note_interrupt(what: str | None) -> None:
@@ -332,6 +351,9 @@ def _staged(
             "files": _listing(stage),
             **dict(info or {}),
         }
+        if command in _USED_CONFIG:
+            (stage / USED_CONFIG).write_text(json.dumps(_USED_CONFIG[command], indent=1) + "\n")
+            marker["files"] = _listing(stage)
         _COMMITTING.append(True)
         try:
             (stage / MARKER).write_text(json.dumps(marker, indent=2) + "\n")

@@ -52,7 +52,7 @@ from carto.framework.workflows.opening import (
     check_installed,
     open_product,
 )
-from carto.framework.workflows.reporting import jsonable, progress, write_report
+from carto.framework.workflows.reporting import jsonable, progress, resolved_settings, write_report
 from carto.framework.workflows.residual_plot import residual_misfit, residual_plot
 from carto.framework.workflows.run_record import record_run, utc_now
 
@@ -259,7 +259,7 @@ def _adjust_into(  # noqa: C901, PLR0915 (issue 32: to split)
     chosen_matcher = get_registry().get("matcher", matcher)
     name = choose_adjuster(adjuster, types)
     component = get_registry().get("adjuster", name)
-    component.settings({**options, "dem": None})  # the adjuster's options, before any work
+    resolved = component.settings({**options, "dem": None})  # before any work
     gcps = select_gcps(gcps, n_gcps) if gcps is not None else None
     n_used = len(set(gcps["id"].tolist())) if gcps is not None else 0
     early = gcps_off_the_dem(gcps, dem) if gcps is not None and flat_height_m is None else []
@@ -400,6 +400,15 @@ def _adjust_into(  # noqa: C901, PLR0915 (issue 32: to split)
             for k, v in options.items()
             if isinstance(v, str | int | float)
             or (isinstance(v, list) and all(isinstance(x, str) for x in v))
+        },
+        # every setting of the adjuster, defaults included
+        "settings": {
+            "adjuster": resolved_settings(resolved),
+            "gcp_transfer": gcp_transfer,
+            "tie_heights": tie_heights_flag,
+            "height_sigma_m": height_sigma_m,
+            "height_offset_sigma_m": height_offset_sigma_m,
+            "gcp_offset_sigma_px": offset_sigma_px,
         },
         "gcps_used": n_used,
         "tie_points": n_ties,

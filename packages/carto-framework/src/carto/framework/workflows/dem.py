@@ -48,7 +48,7 @@ from carto.framework.workflows.opening import (
     sensor_type_for,
 )
 from carto.framework.workflows.pair_checks import checked_pair
-from carto.framework.workflows.reporting import progress, write_report
+from carto.framework.workflows.reporting import progress, resolved_settings, write_report
 from carto.framework.workflows.resumable import fingerprint, open_work, settle_work
 from carto.framework.workflows.run_record import record_run, utc_now
 
@@ -442,7 +442,7 @@ def _dem_into(
     rasters, sensors, scene_dem = pair.rasters, pair.sensors, pair.init_dem
     generator = choose_dem_generator(generator, pair.types)
     component = get_registry().get("dem-generator", generator)
-    component.settings({k: v for k, v in settings.items() if v is not None})  # before any work
+    resolved = component.settings({k: v for k, v in settings.items() if v is not None})
     if inputs.source is not None and inputs.models is None:
         progress(
             "dem",
@@ -535,7 +535,11 @@ def _dem_into(
         "generator": generator,
         "matcher": matcher,
         "images": {n: str(rasters[n]) for n in names},
-        "settings": {k: v for k, v in settings.items() if isinstance(v, str | int | float)},
+        "settings": {
+            **{k: v for k, v in settings.items() if isinstance(v, str | int | float)},
+            "generator": resolved_settings(resolved),
+            "relative_orientation": resolved_settings(ro_settings),
+        },
         "workers": engine.workers,
         "engine": engine.description,
         "failed_tiles": list(product.failed_tiles),

@@ -39,6 +39,16 @@ def jsonable(value: Any) -> Any:
     return str(value)
 
 
+def resolved_settings(settings: Any) -> dict[str, Any]:
+    """A component's resolved settings (its attrs ``Settings``, defaults included) as JSON:
+    the record of what a run used, beside the options it was given."""
+    import attrs
+
+    if attrs.has(type(settings)):
+        return jsonable(attrs.asdict(settings, recurse=True))
+    return jsonable(dict(settings or {}))
+
+
 def write_report(path: str | os.PathLike[str], document: Mapping[str, Any]) -> Path:
     """Write a report document as JSON, atomically (see :func:`jsonable`)."""
     return write_json_atomic(path, jsonable(document))
