@@ -24,6 +24,7 @@ def test_adjust_a_scene_with_one_gcp_and_automatic_tie_points(run_carto, tmp_pat
         assert key in report
     assert report["gcps_used"] == 1
     assert report["tie_points"] >= 30
+    assert (report["format"], report["version"]) == ("carto-adjust-report", 1)
     run = report["run"]  # the record of the run (issue 34 item 1)
     assert run["command_line"].startswith("carto adjust ")
     gcps = next(i for i in run["inputs"] if i["path"].endswith("gcps.csv"))

@@ -72,6 +72,8 @@ def test_dem_from_a_scene_writes_every_product(run_carto, scene, tmp_path):
         units = dict(zip(ds.descriptions, ds.units, strict=True))
     assert units["sigma_m"] == units["spread_m"] == "metre"
     assert not units["confidence"]
+    assert (report["format"], report["version"]) == ("carto-dem-report", 1)  # docs/formats.md
+    assert list(report)[:2] == ["format", "version"]
     run = report["run"]
     assert run["carto_version"] == __version__
     assert run["plugins"]["carto-ior"]

@@ -191,7 +191,7 @@ def adjust_product(
             )
         finally:
             shutil.rmtree(work, ignore_errors=True)
-        return record_run(stage / "report.json", report, inputs, started)
+        return record_run(stage / "report.json", report, inputs, started, "adjust")
 
 
 def _adjust_into(  # noqa: C901, PLR0915 (issue 32: to split)

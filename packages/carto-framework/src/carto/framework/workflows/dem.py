@@ -404,7 +404,7 @@ def dem_product(
                     coregister=coregister,
                     coregister_accuracy_m=coregister_accuracy_m,
                 )
-            report = record_run(stage / "report.json", report, sources, started)
+            report = record_run(stage / "report.json", report, sources, started, "dem")
     except BaseException as exc:
         if work is not None:
             settle_work(work, exc)

@@ -93,14 +93,21 @@ def run_record(inputs: Iterable[str | os.PathLike[str] | None], started_utc: str
     }
 
 
+REPORT_VERSION = 1
+"""The ``version`` of the ``report.json`` documents (format ``carto-<command>-report``)."""
+
+
 def record_run(
     report_path: Path,
     report: Mapping[str, Any],
     inputs: Iterable[str | os.PathLike[str] | None],
     started_utc: str,
+    command: str,
 ) -> dict[str, Any]:
-    """``report`` with its ``run`` record, written again to ``report_path``."""
-    out = {**report, "run": run_record(inputs, started_utc)}
+    """``report`` of ``command`` with its ``format`` and ``version`` first and its ``run``
+    record last, written again to ``report_path``."""
+    head = {"format": f"carto-{command}-report", "version": REPORT_VERSION}
+    out = {**head, **report, "run": run_record(inputs, started_utc)}
     write_report(report_path, out)
     return out
 
