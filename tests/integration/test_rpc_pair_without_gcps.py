@@ -72,6 +72,20 @@ def test_a_flat_height_does_not_pull_a_block_without_gcps(run_carto, tmp_path, s
         ]
     )
     assert 0.5 < np.hypot(*relative) < 1.0
+    # ... and none of it along the stereo base, which would be a height change of the DEM
+    # (0.27 px, 0.48 m, before the condition): the epipolar direction in img_02 of a point of
+    # img_01 by GDAL's RPC transformers (pixel centres at 0.5 in both conventions)
+    with rasterio.open(d / "img_01.tif") as a, rasterio.open(d / "img_02.tif") as b:
+        rpc_a, rpc_b = a.rpcs, b.rpcs
+    heights = (rpc_a.height_off - 50.0, rpc_a.height_off + 50.0)
+    ends = []
+    for h in heights:
+        with RPCTransformer(rpc_a, RPC_HEIGHT=h) as ta, RPCTransformer(rpc_b, RPC_HEIGHT=h) as tb:
+            x, y = ta.xy(rpc_a.line_off, rpc_a.samp_off, offset="center")
+            ends.append(tb.rowcol(x, y, op=lambda v: v))
+    along = np.subtract(ends[1], ends[0]).astype(float).ravel()
+    along /= np.hypot(*along)
+    assert abs(float(relative @ along)) < 0.02
     refused = run_carto(
         ["adjust", str(config), "--out", str(tmp_path / "adj2"), "--dem-heights", "30"]
     )

@@ -86,6 +86,36 @@ def _height_targets(height_m: FloatArray, dem: Any, lon: FloatArray, lat: FloatA
     return np.where(np.isfinite(at), at, height_m)
 
 
+@attrs.frozen
+class ParameterConstraint:
+    """A linear pseudo-observation on parameters: ``sum(coefficients[n] * value[n]) = value``
+    with standard deviation ``sigma`` (a datum condition the diagonal priors cannot say, e.g.
+    "this image does not move along the stereo base")."""
+
+    coefficients: Mapping[str, float] = attrs.field(converter=dict)
+    sigma: float
+    value: float = 0.0
+
+
+def _add_constraints(
+    n_cc: FloatArray,
+    b_c: FloatArray,
+    values: FloatArray,
+    par_index: Mapping[str, int],
+    constraints: Sequence[ParameterConstraint],
+) -> None:
+    """Add the rows of ``constraints`` (on free parameters) to the reduced normal equations."""
+    for c in constraints:
+        terms = [(par_index[n], a) for n, a in c.coefficients.items() if n in par_index]
+        if not terms:
+            continue
+        idx = np.array([i for i, _ in terms], dtype=np.intp)
+        a = np.array([a for _, a in terms], dtype=np.float64)
+        w = 1.0 / c.sigma**2
+        n_cc[np.ix_(idx, idx)] += w * np.outer(a, a)
+        b_c[idx] += w * a * (c.value - float(a @ values[idx]))
+
+
 def _height_row(dem: Any, lon: FloatArray, lat: FloatArray) -> FloatArray:
     """Derivatives of a height constraint (point height minus the DEM's where the point is)
     with respect to the point's east, north and up: ``(-slope_east, -slope_north, 1)``; the
@@ -261,6 +291,7 @@ def adjust_bundle(
     robust: bool = True,
     outlier_threshold: float = 4.0,
     dem: Any = None,
+    constraints: Sequence[ParameterConstraint] = (),
     **unknown: Any,
 ) -> AdjustmentResult:
     """Adjust ``sensors`` to ``obs`` (see the module docstring); return the result.
@@ -275,6 +306,7 @@ def adjust_bundle(
             ``outlier_threshold``), then solve again without them.
         dem: optional DEM whose heights are re-read at the current position of points that
             have height constraints (the constraint follows the point over the terrain).
+        constraints: linear pseudo-observations on the parameters (datum conditions).
 
     Raises:
         AdjustmentError: the system is singular (names the undetermined parameters) or no
@@ -317,6 +349,7 @@ def adjust_bundle(
             dem,
             start=result,  # after a rejection, continue from the previous solution
             start_weights=weights,  # ... and its robust weights
+            constraints=constraints,
         )
         if not robust or not flagged:
             break
@@ -347,6 +380,7 @@ def _solve(  # noqa: C901, PLR0915 (issue 32: to split)
     dem: Any,
     start: AdjustmentResult | None = None,
     start_weights: tuple[FloatArray, FloatArray] | None = None,
+    constraints: Sequence[ParameterConstraint] = (),
 ) -> tuple[AdjustmentResult, list[str], tuple[FloatArray, FloatArray]]:
     heights = dict(zip(obs.height_id.tolist(), obs.height_m.tolist(), strict=True))
     point_ids = sorted(set(obs.point_id.tolist()))
@@ -481,6 +515,7 @@ def _solve(  # noqa: C901, PLR0915 (issue 32: to split)
         finite = np.isfinite(prior_sigma)
         n_cc[finite, finite] += 1.0 / prior_sigma[finite] ** 2
         b_c[finite] += (prior_value[finite] - values[finite]) / prior_sigma[finite] ** 2
+        _add_constraints(n_cc, b_c, values, par_index, constraints)
         # reduce: eliminate the points
         det = np.linalg.det(n_pp)
         good = det > 1e-18 * np.maximum(np.einsum("nii->n", n_pp) ** 3, 1e-300)
