@@ -21,10 +21,12 @@ import numpy as np
 
 from carto.framework.adjustment.relative_orientation import RelativeOrientationSettings
 from carto.framework.errors import InputError, UsageError
+from carto.framework.files.documents import write_json_atomic
 from carto.framework.files.staging import require_complete_output, staged_folder
 from carto.framework.geometry.sensor import Sensor, SensorType
 from carto.framework.plugins.registry import get_registry
 from carto.framework.products.scene import scene_files
+from carto.framework.products.stac import ITEM_FILE, dem_item
 from carto.framework.raster.dem import DEM, Geoid
 from carto.framework.raster.dem_file import states_vertical
 from carto.framework.raster.vertical_reference import vertical_tag
@@ -405,6 +407,8 @@ def dem_product(
                     coregister_accuracy_m=coregister_accuracy_m,
                 )
             report = record_run(stage / "report.json", report, sources, started, "dem")
+            item = dem_item(stage, report, Path(out_dir).resolve().name)
+            write_json_atomic(stage / ITEM_FILE, item)
     except BaseException as exc:
         if work is not None:
             settle_work(work, exc)
