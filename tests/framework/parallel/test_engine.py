@@ -229,3 +229,23 @@ def test_a_worker_killed_mid_run_is_replaced_and_its_task_run_again(tmp_path):
         tasks = [functools.partial(dies_once, str(marker), k) for k in range(4)]
         assert engine.run(tasks) == [0, 1, 2, 3]
     assert marker.read_text() == "died"
+
+
+def test_the_dashboard_is_announced_when_bokeh_can_serve_it(monkeypatch, capsys):
+    import importlib.util
+    import types
+
+    from carto.framework.parallel.engine import announce_dashboard
+
+    client = types.SimpleNamespace(dashboard_link="http://127.0.0.1:40123/status")
+    real = importlib.util.find_spec
+    monkeypatch.setattr(
+        importlib.util, "find_spec", lambda name: object() if name == "bokeh" else real(name)
+    )
+    assert announce_dashboard(client, quiet=False) is client
+    assert "carto: dask dashboard: http://127.0.0.1:40123/status" in capsys.readouterr().err
+    announce_dashboard(client, quiet=True)
+    assert capsys.readouterr().err == ""
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name: None)  # no bokeh: nothing
+    announce_dashboard(client, quiet=False)
+    assert capsys.readouterr().err == ""

@@ -22,6 +22,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
+import sys
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
@@ -250,6 +251,7 @@ def open_engine(
     if scheduler is not None:
         with _client(scheduler) as client:
             n = max(1, sum(client.nthreads().values()))
+            announce_dashboard(client, quiet)
             yield TileEngine(n, client, f"cluster {scheduler}", quiet)
         return
     n = default_workers() if workers is None else int(workers)
@@ -262,9 +264,21 @@ def open_engine(
             None,
             f"LocalCluster of {n} processes",
             quiet,
-            connect=lambda: stack.enter_context(_local_cluster(n)),
+            connect=lambda: announce_dashboard(stack.enter_context(_local_cluster(n)), quiet),
             disconnect=stack.close,
         )
+
+
+def announce_dashboard(client: Any, quiet: bool) -> Any:
+    """Say where the cluster's dask dashboard is (one line on stderr; it needs ``bokeh``:
+    ``pip install carto-framework[dashboard]``); return ``client``."""
+    import importlib.util
+
+    if not quiet and importlib.util.find_spec("bokeh") is not None:
+        link = getattr(client, "dashboard_link", None)
+        if link:
+            print(f"carto: dask dashboard: {link}", file=sys.stderr, flush=True)
+    return client
 
 
 SCHEDULER_TIMEOUT_S = 10.0
