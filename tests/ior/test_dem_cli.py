@@ -366,3 +366,42 @@ def test_a_generator_option_it_refuses_is_a_usage_error_before_any_work(run_cart
     assert "merge staggered" not in proc.stderr  # no image was prepared
     assert "--resume" not in proc.stderr
     assert list(tmp_path.iterdir()) == []
+
+
+def test_te_sets_the_extent_on_the_grid_every_run_shares(run_carto, scene, tmp_path):
+    """--te as gdalwarp's -te (issue 34 item 4): the DEM covers the extent asked for, snapped
+    outwards to multiples of the posting (target-aligned pixels): two runs share one grid."""
+    common = ["--models", str(scene / "truth"), "--posting", "20", "--max-iterations", "1"]
+    full = tmp_path / "full"
+    proc = run_carto(["dem", str(scene), *common, "--quiet", "--out", str(full)])
+    assert proc.returncode == 0, proc.stderr
+    with rasterio.open(full / "dem.tif") as ds:
+        left, bottom, right, top = ds.bounds
+        whole = ds.read(1)
+        whole_transform = ds.transform
+    te = [left + 111.0, bottom + 95.0, right - 130.0, top - 77.0]  # not on the grid
+    part = tmp_path / "part"
+    proc = run_carto(
+        ["dem", str(scene), *common, "--te", *map(str, te), "--quiet", "--out", str(part)]
+    )
+    assert proc.returncode == 0, proc.stderr
+    with rasterio.open(part / "dem.tif") as ds:
+        b = ds.bounds
+        assert (b.left, b.bottom) == (left + 100.0, bottom + 80.0)  # snapped outwards
+        assert (b.right, b.top) == (right - 120.0, top - 60.0)
+        # the same nodes as the full run's grid
+        col, row = ~whole_transform * (b.left, b.top)
+        assert (col, row) == (round(col), round(row))
+        inner = whole[int(row) : int(row) + ds.height, int(col) : int(col) + ds.width]
+        assert inner.shape == (ds.height, ds.width)
+    far = run_carto(
+        ["dem", str(scene), *common, "--te", "0", "0", "10", "10", "--out", str(tmp_path / "f")]
+    )
+    assert far.returncode == 1
+    assert "(--te) 0 0 10 10 does not overlap the images' common footprint" in far.stderr
+    flipped = run_carto(
+        ["dem", str(scene), *common, "--te", "10", "0", "0", "10", "--out", str(tmp_path / "g")]
+    )
+    assert flipped.returncode == 2
+    assert "XMIN < XMAX" in flipped.stderr
+    assert not (tmp_path / "g").exists()

@@ -50,6 +50,8 @@ def ior_grids(
     box = (max(la, lb), max(ba, bb), min(ra, rb), min(ta, tb))
     if not (box[0] < box[2] and box[1] < box[3]):
         raise InputError("dem: the two images do not overlap on the ground")
+    if settings.bounds is not None:  # --te: the extent asked for
+        box = _asked_extent(settings.bounds, box)
     width, height = box[2] - box[0], box[3] - box[1]
     size = f"{width:.0f} x {height:.0f} m"
     if 2.0 * posting > min(width, height):
@@ -90,3 +92,21 @@ def ior_grids(
         (dem_grid.shape[0] * k, dem_grid.shape[1] * k),
     )
     return dem_grid, ortho_grid, k
+
+
+def _asked_extent(
+    bounds: tuple[float, float, float, float], footprint: tuple[float, float, float, float]
+) -> tuple[float, float, float, float]:
+    """``bounds`` (``--te``) when they overlap the images' common ``footprint``."""
+    if not (
+        bounds[0] < footprint[2]
+        and footprint[0] < bounds[2]
+        and bounds[1] < footprint[3]
+        and footprint[1] < bounds[3]
+    ):
+        area = ", ".join(f"{v:.0f}" for v in footprint)
+        raise InputError(
+            f"{option_label('bounds')} {' '.join(f'{v:g}' for v in bounds)} does not overlap "
+            f"the images' common footprint ({area} in the output CRS)"
+        )
+    return bounds

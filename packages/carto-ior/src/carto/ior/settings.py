@@ -16,6 +16,7 @@ _FLAGS = {
     "posting_m": "--posting",
     "ortho_res_m": "--ortho-res",
     "crs": "--crs",
+    "bounds": "--te",
     "max_iterations": "--max-iterations",
     "tile_px": "--tile-size",
     "subpixel_steps": "--subpixel-steps",
@@ -37,6 +38,26 @@ def _number(name: str, low: float, high: float = math.inf, *, low_open: bool = F
 
 def _optional_number(name: str, low: float) -> Any:
     return optional(_number(name, low, low_open=True))
+
+
+def _bounds(value: Any) -> tuple[float, float, float, float] | None:
+    """``None`` or ``(xmin, ymin, xmax, ymax)``: four finite numbers, min below max."""
+    if value is None:
+        return None
+    try:
+        box = tuple(float(v) for v in value)
+    except (TypeError, ValueError):
+        raise UsageError(f"{option_label('bounds')}: expected 4 numbers, got {value!r}") from None
+    if (
+        len(box) != 4
+        or not all(map(math.isfinite, box))
+        or not (box[0] < box[2] and box[1] < box[3])
+    ):
+        raise UsageError(
+            f"{option_label('bounds')}: expected XMIN YMIN XMAX YMAX, finite, with XMIN < XMAX "
+            f"and YMIN < YMAX, got {value!r}"
+        )
+    return box  # type: ignore[return-value]
 
 
 def _integer(name: str, low: int, high: int) -> Any:
@@ -112,6 +133,9 @@ class IORSettings:
             than its reach.
         crs: map CRS of the DEM and orthos, projected in metres (default: the UTM zone of
             the scene).
+        bounds: ``(xmin, ymin, xmax, ymax)`` in ``crs``: the extent of the DEM (gdalwarp's
+            ``-te``; snapped outwards to multiples of the posting, as every grid is), instead
+            of the images' common footprint; it must overlap that footprint.
         min_init_coverage: the initial DEM must give a height at this share of the images'
             common footprint (its voids are filled for the starting surface; a DEM mostly
             void, or a tile of another place, is refused).
@@ -144,6 +168,7 @@ class IORSettings:
     tile_px: int = attrs.field(default=2048, converter=_integer("tile_px", 64, 1 << 20))
     overlap_px: int = attrs.field(default=128, converter=_integer("overlap_px", 0, 1 << 20))
     crs: Any = attrs.field(default=None, converter=_map_crs)
+    bounds: tuple[float, float, float, float] | None = attrs.field(default=None, converter=_bounds)
     min_init_coverage: float = attrs.field(
         default=0.75, converter=_number("min_init_coverage", 0.0, 1.0)
     )

@@ -211,6 +211,7 @@ def cmd_dem(args: argparse.Namespace) -> int:
         ("posting_m", args.posting),
         ("ortho_res_m", args.ortho_res),
         ("crs", args.crs),
+        ("bounds", tuple(args.te) if args.te else None),
         ("max_iterations", args.max_iterations),
         ("tile_px", args.tile_size),
         ("subpixel_steps", args.subpixel_steps),
@@ -353,6 +354,15 @@ def add_dem(sub: argparse._SubParsersAction) -> None:
         dest="crs",
         metavar="CRS",
         help="output CRS, projected in metres (default: the UTM zone; --t_srs as in gdalwarp)",
+    )
+    p.add_argument(
+        "--te",
+        nargs=4,
+        type=finite_float,
+        metavar=("XMIN", "YMIN", "XMAX", "YMAX"),
+        help="extent of the DEM in the output CRS, as gdalwarp's -te (default: the images' "
+        "common footprint); grids are snapped to multiples of the posting, so runs share "
+        "one grid",
     )
     p.add_argument("--max-iterations", type=positive_int, metavar="N", help="most DEM updates (6)")
     p.add_argument(
