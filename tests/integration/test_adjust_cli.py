@@ -24,6 +24,17 @@ def test_adjust_a_scene_with_one_gcp_and_automatic_tie_points(run_carto, tmp_pat
         assert key in report
     assert report["gcps_used"] == 1
     assert report["tie_points"] >= 30
+    # the matched tie points' sigma from the data (issue 34 item 5: the 0.3 px default was
+    # 10 x too large on simulated scenes and flagged a misfit on every normal run)
+    assert report["tie_sigma_px"]["a_priori"] == 0.3
+    assert 0.005 < report["tie_sigma_px"]["estimated"] < 0.3
+    assert 0.8 < report["sigma0"] < 1.2
+    assert not any(f.startswith("sigma0") for f in report["misfit"]["flags"])
+    assert (
+        "tie_image" not in report["misfit"]["groups"]
+        or not (report["misfit"]["groups"]["tie_image"]["misfit"])
+    )
+    assert "model misfit" not in res.stderr
     assert (report["format"], report["version"]) == ("carto-adjust-report", 1)
     run = report["run"]  # the record of the run (issue 34 item 1)
     assert run["command_line"].startswith("carto adjust ")

@@ -26,6 +26,7 @@ from carto.framework.cli.config_file import parse_with_config, used_config
 from carto.framework.cli.dem_commands import add_dem, add_evaluate
 from carto.framework.cli.demo_command import add_demo
 from carto.framework.cli.geometry_commands import add_project_locate
+from carto.framework.cli.logging_setup import command_logging
 from carto.framework.cli.plugins_command import add_plugins
 from carto.framework.cli.simulate_command import add_simulate
 from carto.framework.errors import CartoError, UsageError
@@ -171,7 +172,6 @@ def _quiet_libraries(debug: bool) -> Iterator[None]:
     if debug:
         yield
         return
-    import logging
     import warnings
 
     def show(message, category, filename, lineno, file=None, line=None):  # type: ignore[no-untyped-def]
@@ -181,14 +181,10 @@ def _quiet_libraries(debug: bool) -> Iterator[None]:
     # disk): the failure reaches us as an exception, which the one-line error names
     os.environ.setdefault("CPL_LOG", os.devnull)
     _silence_libtiff()
-    loggers = [logging.getLogger(n) for n in ("rasterio", "numba", "distributed", "fiona")]
-    levels = [logger.level for logger in loggers]
     previous = None
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         warnings.showwarning = show
-        for logger in loggers:
-            logger.setLevel(logging.CRITICAL)
         previous_int = None
         from carto.framework.files.staging import note_interrupt
 
@@ -199,8 +195,6 @@ def _quiet_libraries(debug: bool) -> Iterator[None]:
         try:
             yield
         finally:
-            for logger, level in zip(loggers, levels, strict=True):
-                logger.setLevel(level)
             if previous is not None:
                 signal.signal(signal.SIGTERM, previous)
             if previous_int is not None:
@@ -221,6 +215,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if handler is None:
         parser.print_help(sys.stderr)
         return 2
+    handler = _logged(handler)
     from carto.framework.files.staging import remember_settings
     from carto.framework.parallel.engine import bound_gdal_cache
 
@@ -234,6 +229,16 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _run(handler, args)
     finally:
         remember_settings(None)
+
+
+def _logged(handler: Handler) -> Handler:
+    """``handler`` with the logging its command's options ask for."""
+
+    def run(args: argparse.Namespace) -> int:
+        with command_logging(args):
+            return handler(args)
+
+    return run
 
 
 def _run(handler: Handler, args: argparse.Namespace) -> int:

@@ -13,6 +13,7 @@ from carto.framework.cli.common import (
     positive_int,
 )
 from carto.framework.cli.config_file import add_config_option
+from carto.framework.cli.logging_setup import add_logging_options
 from carto.framework.errors import UsageError
 from carto.framework.parallel.engine import default_workers
 
@@ -274,5 +275,5 @@ def add_adjust(sub: argparse._SubParsersAction) -> None:
         help="write the outputs of a poor adjustment (no tie point found, sigma0 > 5) with "
         "warnings, instead of failing",
     )
-    p.add_argument("--quiet", action="store_true", help="no progress messages")
+    add_logging_options(p)
     p.set_defaults(handler=cmd_adjust)

@@ -9,8 +9,8 @@ wins. They go through the same parsing as the command line: the same checks, the
 messages. ``used_config.json`` holds every setting of a run, defaults included, as such a
 configuration (input paths absolute); ``carto dem --config OUT/used_config.json --out OTHER``
 runs the same DEM again. Left out of it: where the output goes and how the work is run
-(``--out``, ``--resume``, ``--workers``, ``--scheduler``, ``--quiet``), which do not change
-the results.
+(``--out``, ``--resume``, ``--workers``, ``--scheduler``, ``--quiet``, ``--verbose``,
+``--log-file``), which do not change the results.
 """
 
 from __future__ import annotations
@@ -31,8 +31,11 @@ FORMAT = "carto-used-config"
 """The ``format`` field of ``used_config.json``."""
 
 NOT_RECORDED = frozenset(
-    {"config", "out", "resume", "workers", "scheduler", "quiet", "help", "debug"}
-)
+    {
+        "config", "out", "resume", "workers", "scheduler", "quiet", "verbose", "log_file",
+        "help", "debug",
+    }
+)  # fmt: skip
 """Options that say where the output goes or how the work runs, not what it is."""
 
 
@@ -161,6 +164,8 @@ def _tokens(
 
 def _option_tokens(action: argparse.Action, name: str, value: Any, path: str) -> list[str]:
     option = f"--{name}"
+    if isinstance(action, argparse._CountAction):  # -v -v
+        return [option] * int(value)
     if action.nargs == 0:  # a flag
         if not isinstance(value, bool):
             raise UsageError(f"--config {path}: {name} is a flag: true or false, got {value!r}")

@@ -17,6 +17,7 @@ from carto.framework.cli.common import (
     table,
 )
 from carto.framework.cli.config_file import add_config_option
+from carto.framework.cli.logging_setup import add_logging_options
 from carto.framework.errors import InputError, UsageError
 from carto.framework.parallel.engine import default_workers
 
@@ -439,5 +440,5 @@ def add_dem(sub: argparse._SubParsersAction) -> None:
         help="write a DEM that matched almost nothing (< 5 %% of the nodes), or whose failed "
         "tiles have no heights, with a warning, instead of failing",
     )
-    p.add_argument("--quiet", action="store_true", help="no progress messages")
+    add_logging_options(p)
     p.set_defaults(handler=cmd_dem)

@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 
 from carto.framework.cli.common import examples, formatter, non_negative_int, positive_int
+from carto.framework.cli.logging_setup import add_logging_options
 
 
 # --------------------------------------------------------------------------- demo
@@ -51,5 +52,5 @@ def add_demo(sub: argparse._SubParsersAction) -> None:
         help="image window in pixels (default 2000 2000)",
     )
     p.add_argument("--terrain", metavar="NAME", help="terrain preset (default hilly)")
-    p.add_argument("--quiet", action="store_true", help="no progress messages")
+    add_logging_options(p)
     p.set_defaults(handler=cmd_demo)

@@ -9,6 +9,7 @@ from pathlib import Path
 
 from carto.framework.cli.common import examples, formatter, non_negative_int, positive_int
 from carto.framework.cli.config_file import add_config_option
+from carto.framework.cli.logging_setup import add_logging_options
 from carto.framework.errors import InputError
 
 
@@ -157,5 +158,5 @@ def add_simulate(sub: argparse._SubParsersAction) -> None:
         action="store_true",
         help="paint bright targets at the control points (rendering checks)",
     )
-    p.add_argument("--quiet", action="store_true", help="no progress messages")
+    add_logging_options(p)
     p.set_defaults(handler=cmd_simulate)

@@ -148,6 +148,8 @@ class TileEngine:
             raise ValueError("run: one key per task")
         if self.client is None and self.connect is not None and len(tasks) > 1:
             self.client = self.connect()
+        where = self.description if self.client is not None else "this process"
+        logging.getLogger("carto.engine").debug("%s: %d task(s) on %s", desc, len(tasks), where)
         with stage_bar(len(tasks), desc, quiet=self.quiet) as bar:
             if self.client is None:
                 results = []

@@ -27,6 +27,7 @@ unchanged. The scene folder layout and file formats are in ``docs/formats.md``.
 
 from __future__ import annotations
 
+import logging
 import math
 import os
 import sys
@@ -62,8 +63,10 @@ FloatArray = NDArray[np.float64]
 DN_MAX = 1023
 
 
-def _progress(message: str) -> None:
-    print(f"carto simulate: {message}", file=sys.stderr, flush=True)
+def _progress(message: str, quiet: bool = False) -> None:
+    logging.getLogger("carto.simulate").info(message)
+    if not quiet:
+        print(f"carto simulate: {message}", file=sys.stderr, flush=True)
 
 
 class _Stage:
@@ -72,11 +75,12 @@ class _Stage:
 
     def __enter__(self) -> _Stage:
         self.t0 = time.perf_counter()
+        logging.getLogger("carto.simulate").debug("%s: started", self.what)
         return self
 
     def __exit__(self, *exc: object) -> None:
-        if not self.quiet and exc[0] is None:
-            _progress(f"{self.what} ({time.perf_counter() - self.t0:.1f} s)")
+        if exc[0] is None:
+            _progress(f"{self.what} ({time.perf_counter() - self.t0:.1f} s)", self.quiet)
 
 
 # ----------------------------------------------------------------------------- engine

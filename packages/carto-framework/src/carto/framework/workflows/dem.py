@@ -469,7 +469,7 @@ def _dem_into(
         gcps=control,
         constant_dem=init_height_m is not None,
         engine=engine,
-        progress=None if quiet else (lambda line: progress("dem", line, False)),
+        progress=lambda line: progress("dem", line, quiet),
     )
     sensors = {**sensors, names[0]: oriented.left or sensors[names[0]], names[1]: oriented.right}
     chosen_matcher = get_registry().get("matcher", matcher)
@@ -487,7 +487,7 @@ def _dem_into(
         [sensors[n] for n in names],
         init_dem=start,
         matcher=chosen_matcher,
-        progress=None if quiet else (lambda line: progress("dem", line, False)),
+        progress=lambda line: progress("dem", line, quiet),
         scheduler=engine,
         work_dir=work / "generator",
         keep_failed_tiles=allow_poor,

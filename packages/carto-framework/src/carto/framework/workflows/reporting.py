@@ -3,6 +3,7 @@ JSON-ready report documents."""
 
 from __future__ import annotations
 
+import logging
 import math
 import os
 import sys
@@ -16,7 +17,9 @@ from carto.framework.files.documents import write_json_atomic
 
 
 def progress(command: str, message: str, quiet: bool) -> None:
-    """One progress line ``carto COMMAND: message`` on stderr (nothing when ``quiet``)."""
+    """One progress line ``carto COMMAND: message`` on stderr (nothing when ``quiet``), and
+    an INFO record of the ``carto.COMMAND`` logger (``--log-file`` keeps it, even quiet)."""
+    logging.getLogger(f"carto.{command}").info(message)
     if not quiet:
         print(f"carto {command}: {message}", file=sys.stderr, flush=True)
 
