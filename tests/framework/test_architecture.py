@@ -368,3 +368,23 @@ def test_no_import_cycle_even_through_deferred_imports() -> None:
     )  # a deferred import counts
     assert _cycles(graph) == []
     assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+
+
+@pytest.mark.parametrize(
+    ("plugin", "components"),
+    [
+        ("carto.ior.plugin", ["carto.ior.generator"]),
+        ("carto.cartosat1.plugin", ["carto.cartosat1.adjust", "carto.cartosat1.sensor"]),
+        ("carto.cartosat2.plugin", ["carto.cartosat2.adjust", "carto.cartosat2.presets"]),
+        ("carto.pleiades.plugin", ["carto.pleiades.sensor"]),
+    ],
+)
+def test_plugins_import_their_components_inside_the_hooks(plugin: str, components: list) -> None:
+    """Issue 32 item 6: loading a plugin's entry point imports none of its components (nor
+    numba); the registry's hook call does."""
+    code = (
+        f"import sys, {plugin} as p; "
+        f"print(sorted(m for m in {components!r} + ['numba'] if m in sys.modules))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"

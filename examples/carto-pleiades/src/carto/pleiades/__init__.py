@@ -12,8 +12,21 @@ entry-point group (``docs/writing-a-plugin.md`` walks through it).
 
 from __future__ import annotations
 
-from carto.pleiades.dimap import DimapSensorModel, is_dimap_v14_sensor, read_dimap
-from carto.pleiades.sensor import PleiadesDimapType, line_scanner_from_dimap, open_dimap
+import importlib
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from carto.pleiades.dimap import DimapSensorModel, is_dimap_v14_sensor, read_dimap
+    from carto.pleiades.sensor import PleiadesDimapType, line_scanner_from_dimap, open_dimap
+
+_HOMES = {
+    "DimapSensorModel": "carto.pleiades.dimap",
+    "is_dimap_v14_sensor": "carto.pleiades.dimap",
+    "read_dimap": "carto.pleiades.dimap",
+    "PleiadesDimapType": "carto.pleiades.sensor",
+    "line_scanner_from_dimap": "carto.pleiades.sensor",
+    "open_dimap": "carto.pleiades.sensor",
+}
 
 __all__ = [
     "DimapSensorModel",
@@ -23,3 +36,11 @@ __all__ = [
     "open_dimap",
     "read_dimap",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    """The public names, imported on first use (loading the plugin's entry point, the
+    package's ``plugin`` module, stays cheap)."""
+    if name in _HOMES:
+        return getattr(importlib.import_module(_HOMES[name]), name)
+    raise AttributeError(f"module 'carto.pleiades' has no attribute {name!r}")

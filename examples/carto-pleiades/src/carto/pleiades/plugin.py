@@ -12,12 +12,16 @@ and the framework calls the hooks below through pluggy. Only public names of
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 from carto.framework import hookimpl
-from carto.framework.sdk.sensors import SensorType
-from carto.pleiades.sensor import PleiadesDimapType
+
+if TYPE_CHECKING:  # the hooks import what they return: loading a plugin stays cheap
+    from carto.framework.sdk.sensors import SensorType
 
 
 @hookimpl
 def carto_sensor_types() -> Sequence[SensorType]:
+    from carto.pleiades.sensor import PleiadesDimapType
+
     return [PleiadesDimapType()]

@@ -7,26 +7,32 @@ pluggy. Components are added here as they are implemented and tested.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
-from carto.cartosat2.adjust import Cartosat2BlockAdjuster
-from carto.cartosat2.presets import PaintbrushPreset, TripletPreset
-from carto.cartosat2.sensor import Cartosat2SensorType
 from carto.framework import hookimpl
-from carto.framework.sdk.adjusters import Adjuster
-from carto.framework.sdk.presets import ScenePreset
-from carto.framework.sdk.sensors import SensorType
+
+if TYPE_CHECKING:  # the hooks import what they return: loading a plugin stays cheap
+    from carto.framework.sdk.adjusters import Adjuster
+    from carto.framework.sdk.presets import ScenePreset
+    from carto.framework.sdk.sensors import SensorType
 
 
 @hookimpl
 def carto_scene_presets() -> Sequence[ScenePreset]:
+    from carto.cartosat2.presets import PaintbrushPreset, TripletPreset
+
     return [TripletPreset(), PaintbrushPreset()]
 
 
 @hookimpl
 def carto_sensor_types() -> Sequence[SensorType]:
+    from carto.cartosat2.sensor import Cartosat2SensorType
+
     return [Cartosat2SensorType()]
 
 
 @hookimpl
 def carto_adjusters() -> Sequence[Adjuster]:
+    from carto.cartosat2.adjust import Cartosat2BlockAdjuster
+
     return [Cartosat2BlockAdjuster()]

@@ -7,12 +7,16 @@ pluggy.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 from carto.framework import hookimpl
-from carto.framework.sdk.dem import DEMGenerator
-from carto.ior.generator import IORGenerator
+
+if TYPE_CHECKING:  # the hooks import what they return: loading a plugin stays cheap
+    from carto.framework.sdk.dem import DEMGenerator
 
 
 @hookimpl
 def carto_dem_generators() -> Sequence[DEMGenerator]:
+    from carto.ior.generator import IORGenerator
+
     return [IORGenerator()]

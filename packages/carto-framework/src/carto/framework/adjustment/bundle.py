@@ -48,8 +48,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from carto.framework.adjustment.base import AdjustmentResult
-from carto.framework.adjustment.dem_heights import dem_slopes
+from carto.framework.adjustment.dem_heights import height_row
 from carto.framework.adjustment.observations import HEIGHT_OFFSET, Observations
+from carto.framework.adjustment.parameter_constraints import ParameterConstraint, add_constraints
 from carto.framework.adjustment.variance_components import solution_components
 from carto.framework.errors import AdjustmentError, InputError
 from carto.framework.geometry import frames
@@ -84,48 +85,6 @@ def _height_targets(height_m: FloatArray, dem: Any, lon: FloatArray, lat: FloatA
         return height_m
     at = dem.height(lon, lat)
     return np.where(np.isfinite(at), at, height_m)
-
-
-@attrs.frozen
-class ParameterConstraint:
-    """A linear pseudo-observation on parameters: ``sum(coefficients[n] * value[n]) = value``
-    with standard deviation ``sigma`` (a datum condition the diagonal priors cannot say, e.g.
-    "this image does not move along the stereo base")."""
-
-    coefficients: Mapping[str, float] = attrs.field(converter=dict)
-    sigma: float
-    value: float = 0.0
-
-
-def _add_constraints(
-    n_cc: FloatArray,
-    b_c: FloatArray,
-    values: FloatArray,
-    par_index: Mapping[str, int],
-    constraints: Sequence[ParameterConstraint],
-) -> None:
-    """Add the rows of ``constraints`` (on free parameters) to the reduced normal equations."""
-    for c in constraints:
-        terms = [(par_index[n], a) for n, a in c.coefficients.items() if n in par_index]
-        if not terms:
-            continue
-        idx = np.array([i for i, _ in terms], dtype=np.intp)
-        a = np.array([a for _, a in terms], dtype=np.float64)
-        w = 1.0 / c.sigma**2
-        n_cc[np.ix_(idx, idx)] += w * np.outer(a, a)
-        b_c[idx] += w * a * (c.value - float(a @ values[idx]))
-
-
-def _height_row(dem: Any, lon: FloatArray, lat: FloatArray) -> FloatArray:
-    """Derivatives of a height constraint (point height minus the DEM's where the point is)
-    with respect to the point's east, north and up: ``(-slope_east, -slope_north, 1)``; the
-    slope is 0 for heights not read from a DEM."""
-    row = np.zeros((lon.size, 3))
-    row[:, 2] = 1.0
-    if dem is not None:
-        east, north = dem_slopes(dem, lon, lat)
-        row[:, 0], row[:, 1] = -east, -north
-    return row
 
 
 def _huber(v: FloatArray, k: float) -> FloatArray:
@@ -503,7 +462,7 @@ def _solve(  # noqa: C901, PLR0915 (issue 32: to split)
             offset = values[par_index[HEIGHT_OFFSET]] if HEIGHT_OFFSET in par_index else 0.0
             rho = _height_targets(obs.height_m[ok], dem, lon[hh], lat[hh]) - h[hh] - offset
             # h + offset = DEM(east, north): the row's derivatives (the DEM's slope)
-            a_h = _height_row(dem, lon[hh], lat[hh])
+            a_h = height_row(dem, lon[hh], lat[hh])
             if HEIGHT_OFFSET in par_index:
                 k = par_index[HEIGHT_OFFSET]
                 n_cc[k, k] += wgt.sum()
@@ -515,7 +474,7 @@ def _solve(  # noqa: C901, PLR0915 (issue 32: to split)
         finite = np.isfinite(prior_sigma)
         n_cc[finite, finite] += 1.0 / prior_sigma[finite] ** 2
         b_c[finite] += (prior_value[finite] - values[finite]) / prior_sigma[finite] ** 2
-        _add_constraints(n_cc, b_c, values, par_index, constraints)
+        add_constraints(n_cc, b_c, values, par_index, constraints)
         # reduce: eliminate the points
         det = np.linalg.det(n_pp)
         good = det > 1e-18 * np.maximum(np.einsum("nii->n", n_pp) ** 3, 1e-300)

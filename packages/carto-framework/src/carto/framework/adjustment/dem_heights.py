@@ -24,6 +24,7 @@ __all__ = [
     "WEAK_INTERSECTION_DEG",
     "dem_slopes",
     "flat_heights",
+    "height_row",
     "intersection_angles_deg",
     "with_dem_heights",
 ]
@@ -136,3 +137,15 @@ def intersection_angles_deg(obs: Observations, sensors: Mapping[str, Sensor]) ->
             cos = np.clip(np.einsum("nk,nk->n", rays[i], rays[j]), -1.0, 1.0)
             best = np.fmax(best, np.degrees(np.arccos(cos)))
     return dict(zip(ids.tolist(), best.tolist(), strict=True))
+
+
+def height_row(dem: Any, lon: FloatArray, lat: FloatArray) -> FloatArray:
+    """Derivatives of a height constraint (point height minus the DEM's where the point is)
+    with respect to the point's east, north and up: ``(-slope_east, -slope_north, 1)``; the
+    slope is 0 for heights not read from a DEM."""
+    row = np.zeros((lon.size, 3))
+    row[:, 2] = 1.0
+    if dem is not None:
+        east, north = dem_slopes(dem, lon, lat)
+        row[:, 0], row[:, 1] = -east, -north
+    return row

@@ -10,8 +10,9 @@ import numpy as np
 
 from carto.framework.adjustment.adjuster_settings import BundleSettings
 from carto.framework.adjustment.base import Adjuster, AdjustmentResult
-from carto.framework.adjustment.bundle import ParameterConstraint, adjust_bundle
+from carto.framework.adjustment.bundle import adjust_bundle
 from carto.framework.adjustment.observations import Observations
+from carto.framework.adjustment.parameter_constraints import ParameterConstraint
 from carto.framework.errors import InputError
 from carto.framework.geometry.sensor import Sensor
 from carto.framework.settings import choice, names
