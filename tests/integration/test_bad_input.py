@@ -234,7 +234,9 @@ def test_an_output_that_cannot_be_written_is_refused_before_any_work(
         (["dem", "{scene}", "--workers", "0"], ("--workers", "0")),
         (["dem", "{scene}", "--posting", "0"], ("--posting", "0")),
         (["dem", "{scene}", "--tr", "0"], ("--posting", "0")),  # gdalwarp's name (#34)
-        (["dem", "{scene}", "--t_srs", "EPSG:4326"], ("option crs (--crs)", "geographic")),
+        (["dem", "{scene}", "--t_srs", "EPSG:2263"], ("option crs (--crs)", "EPSG:2263")),
+        (["dem", "{scene}", "--t_srs", "EPSG:4258"], ("--t_srs EPSG:4258", "WGS84")),
+        (["dem", "{scene}", "--t_srs", "EPSG:4326", "--tr", "5"], ("--tr 5", "degrees")),
         (["dem", "{scene}", "--posting", "nan"], ("--posting",)),
         (["dem", "{scene}", "--ortho-res", "-1"], ("--ortho-res", "-1")),
         (["dem", "{scene}", "--max-iterations", "0"], ("--max-iterations",)),

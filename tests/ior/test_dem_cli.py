@@ -7,6 +7,7 @@ import shutil
 from pathlib import Path
 
 import numpy as np
+import pyproj
 import pytest
 import rasterio
 
@@ -357,12 +358,13 @@ def test_a_starting_dem_that_does_not_say_its_vertical_reference_is_warned_of(
 
 
 def test_a_generator_option_it_refuses_is_a_usage_error_before_any_work(run_carto, scene, tmp_path):
-    """``--crs EPSG:4326`` was refused by ior after the images had been prepared (issue 34,
-    item 6): the generator's settings are now checked before, with exit 2 and no work left."""
+    """A CRS the generator refuses was refused by ior after the images had been prepared
+    (issue 34, item 6): the generator's settings are now checked before, with exit 2 and no
+    work left (a projected CRS in US survey feet)."""
     out = tmp_path / "x"
-    proc = run_carto(["dem", str(scene), "--crs", "EPSG:4326", "--out", str(out)])
+    proc = run_carto(["dem", str(scene), "--crs", "EPSG:2263", "--out", str(out)])
     assert proc.returncode == 2, proc.stderr
-    assert "ior: option crs (--crs): 'EPSG:4326' is geographic" in proc.stderr
+    assert "ior: option crs (--crs): 'EPSG:2263'" in proc.stderr
     assert "merge staggered" not in proc.stderr  # no image was prepared
     assert "--resume" not in proc.stderr
     assert list(tmp_path.iterdir()) == []
@@ -405,3 +407,43 @@ def test_te_sets_the_extent_on_the_grid_every_run_shares(run_carto, scene, tmp_p
     assert flipped.returncode == 2
     assert "XMIN < XMAX" in flipped.stderr
     assert not (tmp_path / "g").exists()
+
+
+def test_a_geographic_dem_as_gdalwarp_users_ask_for_it(run_carto, scene, tmp_path):
+    """--t_srs EPSG:4326 --tr DEG (issue 34 item 4): the DEM on a longitude/latitude grid
+    snapped to multiples of the resolution, heights in EPSG:4979 (3-D, in the GeoTIFF keys),
+    as accurate against the simulator's truth as the projected run."""
+    common = ["--models", str(scene / "truth"), "--max-iterations", "2", "--quiet"]
+    geo = tmp_path / "geo"
+    proc = run_carto(
+        ["dem", str(scene), *common, "--t_srs", "EPSG:4326", "--tr", "0.0002", "--out", str(geo)]
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert not (geo / "dem.tif.aux.xml").exists()  # the keys hold EPSG:4979
+    with rasterio.open(geo / "dem.tif") as ds:
+        crs = pyproj.CRS.from_wkt(ds.crs.to_wkt())
+        assert crs.to_epsg() == 4979
+        assert ds.res == pytest.approx((0.0002, 0.0002))
+        for edge in (ds.bounds.left, ds.bounds.top):
+            assert edge / 0.0002 == pytest.approx(round(edge / 0.0002), abs=1e-6)
+    with rasterio.open(geo / "quality_flags.tif") as ds:
+        assert ds.dtypes == ("uint8",)
+        assert pyproj.CRS.from_wkt(ds.crs.to_wkt()).to_epsg() == 4326
+    with rasterio.open(geo / "ortho_left.tif") as ds:  # finer than the DEM, on its grid
+        assert ds.res[0] < 0.0002
+    report = json.loads((geo / "report.json").read_text())
+    assert report["dem_grid"]["crs"] == "EPSG:4326"
+    assert report["dem_grid"]["computed_on"]["crs"].startswith("EPSG:326")
+    projected = tmp_path / "utm"
+    proc = run_carto(["dem", str(scene), *common, "--posting", "22", "--out", str(projected)])
+    assert proc.returncode == 0, proc.stderr
+    truth = DEM.open(scene / "truth" / "dem.tif")
+    geo_acc = dem_accuracy(DEM.open(geo / "dem.tif"), truth)
+    utm_acc = dem_accuracy(DEM.open(projected / "dem.tif"), truth)
+    assert geo_acc["nmad_m"] < 1.5 * utm_acc["nmad_m"] + 0.05
+    assert abs(geo_acc["median_m"] - utm_acc["median_m"]) < 0.3
+    other = run_carto(
+        ["dem", str(scene), *common, "--t_srs", "EPSG:4258", "--out", str(tmp_path / "x")]
+    )
+    assert other.returncode == 2
+    assert "EPSG:4326" in other.stderr

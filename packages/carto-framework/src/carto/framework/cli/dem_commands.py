@@ -251,8 +251,9 @@ def cmd_dem(args: argparse.Namespace) -> int:
     )
     print(_dem_summary(report))
     grid = report["dem_grid"]
+    step = f"{grid['posting_m']:g} m" if "posting_m" in grid else f"{grid['resolution_deg']:g} deg"
     print(
-        f"DEM: {grid['shape'][1]} x {grid['shape'][0]} nodes at {grid['posting_m']:g} m, "
+        f"DEM: {grid['shape'][1]} x {grid['shape'][0]} nodes at {step}, "
         f"{grid['crs']}, heights above {report['vertical_reference']}"
     )
     acc = report.get("accuracy")

@@ -43,6 +43,7 @@ from carto.framework.workflows.dem_datum import (
     resolve_coregister,
 )
 from carto.framework.workflows.dem_options import check_names, check_options
+from carto.framework.workflows.geographic_output import geographic_output
 from carto.framework.workflows.opening import (
     check_model_of_image,
     open_options,
@@ -340,6 +341,7 @@ def dem_product(
     from carto.framework.parallel.engine import open_engine
 
     settings = dict(options or {})
+    geographic = geographic_output(settings)  # a lon/lat grid: warped after the generator
     check_options(settings)
     check_names(generator, matcher)
     try:
@@ -406,6 +408,8 @@ def dem_product(
                     coregister=coregister,
                     coregister_accuracy_m=coregister_accuracy_m,
                 )
+            if geographic is not None:
+                report = geographic.apply(stage, report)
             report = record_run(stage / "report.json", report, sources, started, "dem")
             item = dem_item(stage, report, Path(out_dir).resolve().name)
             write_json_atomic(stage / ITEM_FILE, item)
