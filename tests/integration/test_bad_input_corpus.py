@@ -720,8 +720,9 @@ def test_half_void_hgt(
     [
         ("--posting", "0.001", 1, ("--posting", "0.001", "cells", "at least")),
         ("--posting", "1e9", 1, ("--posting", "1e+09", "footprint", "2 x 2 nodes")),
-        # a CRS IOR cannot use whatever the scene: a usage error
-        ("--crs", "EPSG:4326", 2, ("--crs", "EPSG:4326", "geographic", "projected CRS")),
+        # a CRS IOR cannot use whatever the scene: a usage error (a geographic one is warped
+        # to, issue 34; feet are not metres)
+        ("--crs", "EPSG:2263", 2, ("--crs", "EPSG:2263", "projected CRS in metres")),
     ],
 )
 def test_dem_option_values_absurd_for_the_scene(

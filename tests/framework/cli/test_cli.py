@@ -156,3 +156,32 @@ def test_a_reader_that_stops_reading_ends_the_output_quietly(carto_exe) -> None:
     assert shell.stdout.strip() == "0", shell.stderr
     assert "Broken pipe" not in shell.stderr
     assert "error" not in shell.stderr.replace("plugin skipped", "")
+
+
+def test_an_interrupt_inside_a_ctypes_callback_prints_no_traceback(monkeypatch):
+    """A Ctrl-C that lands while numba compiles is raised inside llvmlite's ctypes callback,
+    where Python cannot propagate it and prints "Exception ignored ..." with a traceback (a
+    signal fuzz draw found it). The command stops at its next check, in one line; the
+    ignored interrupt reaches no hook. Other unraisable exceptions still do."""
+    import ctypes
+    import sys
+
+    from carto.framework.cli import _quiet_libraries
+
+    seen = []
+    monkeypatch.setattr(sys, "unraisablehook", lambda info: seen.append(info.exc_type))
+
+    def interrupted() -> None:
+        raise KeyboardInterrupt("SIGINT")
+
+    def broken() -> None:
+        raise ValueError("a real bug")
+
+    callback = ctypes.CFUNCTYPE(None)
+    with _quiet_libraries(False):
+        callback(interrupted)()
+        assert seen == []
+        callback(broken)()
+        assert seen == [ValueError]
+    callback(interrupted)()  # the hook is put back afterwards
+    assert seen == [ValueError, KeyboardInterrupt]

@@ -174,6 +174,16 @@ def _quiet_libraries(debug: bool) -> Iterator[None]:
         return
     import warnings
 
+    previous_hook = sys.unraisablehook
+
+    def unraisable(info: Any) -> None:
+        # an interrupt raised inside a ctypes callback (llvmlite's, while numba compiles)
+        # cannot propagate: Python printed "Exception ignored ..." and its traceback; it is
+        # recorded (note_interrupt) and stops the run at the next check, in one line
+        if isinstance(info.exc_value, KeyboardInterrupt):
+            return
+        previous_hook(info)
+
     def show(message, category, filename, lineno, file=None, line=None):  # type: ignore[no-untyped-def]
         print(f"{PROG}: warning: {' '.join(str(message).split())}", file=sys.stderr)
 
@@ -185,6 +195,7 @@ def _quiet_libraries(debug: bool) -> Iterator[None]:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         warnings.showwarning = show
+        sys.unraisablehook = unraisable
         previous_int = None
         from carto.framework.files.staging import note_interrupt
 
@@ -195,6 +206,7 @@ def _quiet_libraries(debug: bool) -> Iterator[None]:
         try:
             yield
         finally:
+            sys.unraisablehook = previous_hook
             if previous is not None:
                 signal.signal(signal.SIGTERM, previous)
             if previous_int is not None:
