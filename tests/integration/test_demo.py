@@ -7,10 +7,14 @@ import json
 
 def test_demo_runs_the_chain_and_reports_accuracy(run_carto, tmp_path):
     res = run_carto(
-        ["demo", "--out", str(tmp_path / "d"), "--size", "300", "300", "--seed", "2", "--quiet"],
+        ["demo", "--out", str(tmp_path / "d"), "--size", "300", "300", "--seed", "2"],
         with_test_plugins=False,
     )
     assert res.returncode == 0, res.stderr
+    # no warning on a normal run (issue 34: every demo printed model-misfit warnings, its
+    # automatic tie points' a-priori sigma 10 x too large)
+    assert "warning" not in res.stderr
+    assert "misfit" not in res.stderr
     assert "checkpoint RMSE (m)" in res.stdout
     assert "system level (ancillary only)" in res.stdout
     report = json.loads((tmp_path / "d" / "report.json").read_text())

@@ -466,7 +466,10 @@ def _adjust_into(  # noqa: C901, PLR0915 (issue 32: to split)
     if gcps is not None and gcps["id"].size:  # the datum of a later relative orientation
         write_point_table(out / "gcps.csv", gcps)
         report["files"]["gcps"] = "gcps.csv"
-    if tie_table is not None:
+    if tie_table is not None:  # with the sigma they were adjusted with (reused: the same)
+        if tie_sigma is not None and "sigma_px" in tie_table:
+            scale = tie_sigma.estimated_px / tie_sigma.a_priori_px
+            tie_table = {**tie_table, "sigma_px": np.asarray(tie_table["sigma_px"]) * scale}
         write_point_table(out / "tie_points.csv", tie_table)
         report["files"]["tie_points"] = "tie_points.csv"
     report["gcp_transfer"] = transfer
