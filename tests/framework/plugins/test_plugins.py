@@ -228,3 +228,33 @@ def test_every_registered_component_pickles(registry):
         copy = pickle.loads(pickle.dumps(info.component))
         assert type(copy) is type(info.component), info.name
         assert copy.name == info.name
+
+
+def test_an_interrupted_plugin_import_is_an_interrupt_not_a_broken_plugin():
+    """Ctrl-C while a hook imports its components can surface as another exception (compiled
+    code turns it into a SystemError whose context is the interrupt): the registry raises the
+    interrupt again instead of listing every plugin as broken (a fresh-clone run: "carto:
+    error: 9 plugin problem(s)", exit 1 instead of 130)."""
+    from carto.framework.plugins.registry import _describe_error
+
+    try:
+        try:
+            raise KeyboardInterrupt("SIGINT")
+        except KeyboardInterrupt as interrupt:
+            raise SystemError(
+                "<built-in function init> returned a result with an exception"
+            ) from interrupt
+    except SystemError as wrapped:
+        with pytest.raises(KeyboardInterrupt, match="SIGINT"):
+            _describe_error(wrapped)
+    assert _describe_error(ValueError("bad table")) == "ValueError: bad table"
+    # an interrupt the signal handler recorded but that was lost on its way (raised inside a
+    # ctypes callback), then a half-imported module's error: the interrupt again
+    from carto.framework.files.staging import note_interrupt
+
+    note_interrupt("SIGINT")
+    try:
+        with pytest.raises(KeyboardInterrupt, match="SIGINT"):
+            _describe_error(ImportError("cannot import name (partially initialized module)"))
+    finally:
+        note_interrupt(None)

@@ -41,6 +41,7 @@ __all__ = [
     "check_output_file",
     "committed_outputs",
     "committing",
+    "interrupted",
     "note_interrupt",
     "remember_settings",
     "require_complete_output",
@@ -88,6 +89,11 @@ def note_interrupt(what: str | None) -> None:
         _COMMITTED.clear()
     else:
         _INTERRUPTS.append(what)
+
+
+def interrupted() -> str | None:
+    """The last interrupt this process received (:func:`note_interrupt`), or None."""
+    return _INTERRUPTS[-1] if _INTERRUPTS else None
 
 
 def committing() -> bool:

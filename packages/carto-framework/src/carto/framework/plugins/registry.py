@@ -142,6 +142,21 @@ class ComponentInfo:
 
 
 def _describe_error(exc: BaseException) -> str:
+    """The one line of a plugin's failure; a Ctrl-C behind it (an import interrupted inside
+    compiled code surfaces as another exception) is raised again: the user stopped the
+    command, no plugin is broken (plugins import their components inside the hooks, so an
+    interrupt lands there more often)."""
+    from carto.framework.files.staging import interrupted
+
+    if interrupted() is not None:  # the interrupt itself was lost on its way (ctypes)
+        raise KeyboardInterrupt(interrupted())
+    seen: set[int] = set()
+    cause: BaseException | None = exc
+    while cause is not None and id(cause) not in seen:
+        if isinstance(cause, KeyboardInterrupt):
+            raise cause
+        seen.add(id(cause))
+        cause = cause.__cause__ or cause.__context__
     return f"{type(exc).__name__}: {exc}"
 
 
