@@ -62,3 +62,17 @@ class ConvergenceError(CartoError):
 
 class AdjustmentError(CartoError):
     """A least-squares adjustment is singular, under-determined or failed to converge."""
+
+
+def interrupt_behind(exc: BaseException) -> KeyboardInterrupt | None:
+    """The KeyboardInterrupt behind ``exc`` (itself, or in its chain of causes and contexts),
+    if any: compiled code (numba's, an interrupted import) turns a Ctrl-C into another
+    exception, e.g. a ``SystemError`` whose context is the interrupt."""
+    seen: set[int] = set()
+    current: BaseException | None = exc
+    while current is not None and id(current) not in seen:
+        if isinstance(current, KeyboardInterrupt):
+            return current
+        seen.add(id(current))
+        current = current.__cause__ or current.__context__
+    return None

@@ -29,7 +29,7 @@ from carto.framework.cli.geometry_commands import add_project_locate
 from carto.framework.cli.logging_setup import command_logging
 from carto.framework.cli.plugins_command import add_plugins
 from carto.framework.cli.simulate_command import add_simulate
-from carto.framework.errors import CartoError, UsageError
+from carto.framework.errors import CartoError, UsageError, interrupt_behind
 
 __all__ = ["build_parser", "main"]
 
@@ -99,19 +99,6 @@ def _one_line(exc: BaseException) -> str:
     parts = [" ".join(str(exc).split())]
     parts += [" ".join(str(n).split()) for n in getattr(exc, "__notes__", ())]
     return "; ".join(p for p in parts if p)
-
-
-def _interrupt_in(exc: BaseException) -> KeyboardInterrupt | None:
-    """The KeyboardInterrupt behind ``exc``, if any (compiled code, e.g. numba's, turns a
-    Ctrl-C into a ``SystemError`` whose context is the interrupt)."""
-    seen: set[int] = set()
-    current: BaseException | None = exc
-    while current is not None and id(current) not in seen:
-        if isinstance(current, KeyboardInterrupt):
-            return current
-        seen.add(id(current))
-        current = current.__cause__ or current.__context__
-    return None
 
 
 def _terminate(signum: int, frame: object) -> None:
@@ -290,7 +277,7 @@ def _run(handler: Handler, args: argparse.Namespace) -> int:
         print(f"{PROG}: error: {where}{exc.strerror or exc}{_notes(exc)}", file=sys.stderr)
         return 1
     except Exception as exc:
-        if _interrupt_in(exc) is not None:
+        if interrupt_behind(exc) is not None:
             print(_interrupted(exc), file=sys.stderr)
             return 130
         if args.debug:

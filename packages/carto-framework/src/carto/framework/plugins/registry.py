@@ -28,7 +28,7 @@ import attrs
 import pluggy
 
 from carto.framework.component import NAME_PATTERN, Component
-from carto.framework.errors import PluginError, UnknownComponentError
+from carto.framework.errors import PluginError, UnknownComponentError, interrupt_behind
 from carto.framework.plugins import hookspecs
 
 _FW = "carto.framework"
@@ -150,13 +150,9 @@ def _describe_error(exc: BaseException) -> str:
 
     if interrupted() is not None:  # the interrupt itself was lost on its way (ctypes)
         raise KeyboardInterrupt(interrupted())
-    seen: set[int] = set()
-    cause: BaseException | None = exc
-    while cause is not None and id(cause) not in seen:
-        if isinstance(cause, KeyboardInterrupt):
-            raise cause
-        seen.add(id(cause))
-        cause = cause.__cause__ or cause.__context__
+    interrupt = interrupt_behind(exc)
+    if interrupt is not None:
+        raise interrupt
     return f"{type(exc).__name__}: {exc}"
 
 
