@@ -14,3 +14,24 @@ def simulate(preset: str, out: Path, **options) -> Path:
         out, SimulationOptions(**options), quiet=True
     )
     return out
+
+
+def on_grid(grid_path: Path, path: Path, resampling: str = "nearest"):
+    """Band 1 of the raster ``path`` on the grid of the raster ``grid_path`` (GDAL's warper,
+    float64, NaN where it has no value): a DEM against a truth DEM of another grid."""
+    import numpy as np
+    import rasterio
+    from rasterio.warp import Resampling, reproject
+
+    with rasterio.open(grid_path) as grid, rasterio.open(path) as src:
+        values = np.full(grid.shape, np.nan)
+        reproject(
+            rasterio.band(src, 1),
+            values,
+            dst_transform=grid.transform,
+            dst_crs=grid.crs,
+            src_nodata=np.nan if src.nodata is None else src.nodata,
+            dst_nodata=np.nan,
+            resampling=Resampling[resampling],
+        )
+    return values

@@ -127,3 +127,14 @@ def test_inertial_to_earth_fixed_is_astropys_gcrs_to_itrs():
     # not the sidereal-angle-only frame: precession since J2000 alone is ~0.36 deg
     gmst_only = np.einsum("nij,j->ni", frames.rot_z(-frames.gmst_rad(t0 + dt)), v)
     assert np.abs(gmst_only - itrs).max() > 1e4
+
+
+def test_metres_per_radian_match_the_ellipsoid():
+    """A small step east and north on the ellipsoid, divided by its angle."""
+    lat, h = np.array([0.0, 19.5, -60.0]), np.array([0.0, 500.0, 2000.0])
+    m_lon, m_lat = frames.metres_per_radian(lat, h)
+    d = 1e-6  # degrees
+    east = frames.geodetic_to_ecef(10.0 + d, lat, h) - frames.geodetic_to_ecef(10.0, lat, h)
+    north = frames.geodetic_to_ecef(10.0, lat + d, h) - frames.geodetic_to_ecef(10.0, lat, h)
+    np.testing.assert_allclose(m_lon, np.linalg.norm(east, axis=-1) / np.radians(d), rtol=1e-6)
+    np.testing.assert_allclose(m_lat, np.linalg.norm(north, axis=-1) / np.radians(d), rtol=1e-6)

@@ -10,6 +10,7 @@ from carto.framework.matching.candidates import (
     candidate_cells,
     candidate_points,
     frame_cells,
+    in_cell_range,
     window_candidates,
 )
 from carto.framework.matching.tiled_ties import (
@@ -92,3 +93,15 @@ def test_halo_and_margin():
     assert _widened(((2, 5), (0, 3)), (6, 4), 3) == ((0, 6), (0, 4))
     # the pyramid's reach at the coarsest level plus the shift
     assert tile_margin(15, 11, 4, 100.0) == (7 + 11 + 2) * 8 + 100 + 16
+
+
+def test_the_points_a_tile_owns_are_those_of_its_cells():
+    frame, cells = (100, 90), (5, 3)  # cells of 20 x 30 pixels
+    points = np.array([[0.5, 0.5], [19.9, 29.9], [20.0, 30.0], [99.5, 89.5], [45.0, 65.0]])
+    owned = in_cell_range(points, frame, cells, ((1, 3), (1, 3)))
+    assert owned.tolist() == [False, False, True, False, True]
+    every = in_cell_range(points, frame, cells, ((0, 5), (0, 3)))
+    assert every.all()
+    cell = frame_cells(points, frame, cells)
+    assert (cell[owned] >= 1).all()
+    assert (cell[owned] < 3).all()

@@ -307,26 +307,61 @@ def _check_generation(doc: _Document) -> None:
         )
 
 
-def read_dimap(path: str | Path) -> DimapSensorModel:  # noqa: C901, PLR0915 (issue 32: to split)
-    """Read and validate the physical model of a Pleiades DIMAP v1.4 SENSOR product.
+@attrs.frozen
+class _Timing:
+    """``UTC_Sensor_Model_Range`` and ``SENSOR_LINE_PERIOD``: row 1's time as written and
+    parsed, the same in seconds since J2000, the model's end and the line period."""
 
-    Raises:
-        InputError: one line naming the file, the element and the value (see the module
-            docstring for what is checked).
-    """
-    path = Path(path)
-    doc = _Document(path)
-    _check_generation(doc)
-    root = doc.root
-    dataset_name = (root.findtext("Dataset_Identification/DATASET_NAME") or "").strip()
-    n_rows = doc.integer(root, "Raster_Dimensions/NROWS")
-    n_cols = doc.integer(root, "Raster_Dimensions/NCOLS")
+    start_utc: str
+    start: np.datetime64
+    epoch_j2000_s: float
+    end_dt_s: float
+    period_s: float
+
+
+@attrs.frozen(eq=False)
+class _Ephemeris:
+    """``Sensor_Ephemeris``: times (seconds after ``START``), ECEF positions, Earth-relative
+    ECEF velocities and the velocity convention of the file."""
+
+    dt_s: FloatArray
+    position_ecef_m: FloatArray
+    velocity_ecef_m_s: FloatArray
+    convention: str
+
+
+@attrs.frozen(eq=False)
+class _Attitude:
+    """``Sensor_Attitudes``: the ``(4, K)`` quaternion coefficients, the time of ``tau = 0``
+    (seconds after ``START``) and ``SCALE``."""
+
+    coeffs_wxyz: FloatArray
+    dt_ref_s: float
+    scale_s: float
+
+
+@attrs.frozen
+class _Viewing:
+    """``Sensor_Viewing_Model``: the retina range and the look-angle tangent polynomials."""
+
+    first_col: int
+    last_col: int
+    psi_x: tuple[float, ...]
+    psi_y: tuple[float, ...]
+
+
+def _read_raster_size(doc: _Document) -> tuple[int, int]:
+    """``Raster_Dimensions``: ``(NROWS, NCOLS)``, each at least 2."""
+    n_rows = doc.integer(doc.root, "Raster_Dimensions/NROWS")
+    n_cols = doc.integer(doc.root, "Raster_Dimensions/NCOLS")
     for name, value in (("NROWS", n_rows), ("NCOLS", n_cols)):
         if value < 2:
             raise doc.fail(f"Raster_Dimensions/{name}", f"{value} is not an image size (>= 2)")
+    return n_rows, n_cols
 
-    smc = doc.element(root, SMC)
-    # ---- time
+
+def _read_timing(doc: _Document, smc: ET.Element, n_rows: int) -> _Timing:
+    """The model's time range and line period, which must agree with ``NROWS``."""
     start_el = doc.element(smc, "UTC_Sensor_Model_Range", SMC)
     where = f"{SMC}/UTC_Sensor_Model_Range"
     start_utc = doc.text(start_el, "START", where)
@@ -346,14 +381,14 @@ def read_dimap(path: str | Path) -> DimapSensorModel:  # noqa: C901, PLR0915 (is
             f"{period_ms} ms = {expected:.6f} s",
         )
     epoch_j2000_s = frames.utc_to_j2000_s(str(start) + "Z")
+    return _Timing(start_utc, start, float(epoch_j2000_s), end_dt, period_s)
 
-    # ---- ephemeris
-    where = f"{SMC}/Sensor_Ephemeris/Point_List"
-    points = doc.element(smc, "Sensor_Ephemeris/Point_List", SMC).findall("Point")
-    if len(points) < EPHEMERIS_LAGRANGE_POINTS:
-        raise doc.fail(
-            where, f"{len(points)} Point(s), need >= {EPHEMERIS_LAGRANGE_POINTS} (Lagrange)"
-        )
+
+def _read_points(
+    doc: _Document, points: list[ET.Element], where: str, start: np.datetime64
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The ephemeris points as read: times after ``start``, positions and velocities (units
+    checked, positions at a satellite's distance from the Earth's centre)."""
     t_eph = np.empty(len(points))
     pos = np.empty((len(points), 3))
     vel = np.empty((len(points), 3))
@@ -370,11 +405,24 @@ def read_dimap(path: str | Path) -> DimapSensorModel:  # noqa: C901, PLR0915 (is
                 f"{here}/LOCATION_VALUES",
                 f"{radius:.0f} m from the Earth's centre is not a satellite position (ECEF m)",
             )
+    return t_eph, pos, vel
+
+
+def _read_ephemeris(doc: _Document, smc: ET.Element, timing: _Timing, n_rows: int) -> _Ephemeris:
+    """The ephemeris: enough points, increasing times that surround the image with half a
+    Lagrange window on each side, velocities consistent with the positions."""
+    where = f"{SMC}/Sensor_Ephemeris/Point_List"
+    points = doc.element(smc, "Sensor_Ephemeris/Point_List", SMC).findall("Point")
+    if len(points) < EPHEMERIS_LAGRANGE_POINTS:
+        raise doc.fail(
+            where, f"{len(points)} Point(s), need >= {EPHEMERIS_LAGRANGE_POINTS} (Lagrange)"
+        )
+    t_eph, pos, vel = _read_points(doc, points, where, timing.start)
     if np.any(np.diff(t_eph) <= 0):
         i = int(np.argmax(np.diff(t_eph) <= 0)) + 2
         raise doc.fail(f"{where}/Point[{i}]/UTC_TIME", "ephemeris times must increase strictly")
     half = EPHEMERIS_LAGRANGE_POINTS // 2
-    t_last_row = (n_rows - 1) * period_s
+    t_last_row = (n_rows - 1) * timing.period_s
     if t_eph[half - 1] > 0.0 or t_eph[-half] < t_last_row:
         raise doc.fail(
             where,
@@ -382,8 +430,24 @@ def read_dimap(path: str | Path) -> DimapSensorModel:  # noqa: C901, PLR0915 (is
             f"surround the image (0 .. {t_last_row:.1f} s) with {half} points on each side",
         )
     velocity_ecef, convention = _ecef_velocity(doc, where, t_eph, pos, vel)
+    return _Ephemeris(t_eph, pos, velocity_ecef, convention)
 
-    # ---- attitude
+
+def _attitude_reference(start: np.datetime64, offset_s: float, t_last_row: float) -> float:
+    """The time of ``tau = 0``, seconds after ``START``."""
+    midnight = start.astype("datetime64[D]").astype("datetime64[ns]")
+    # OFFSET counts from midnight of the acquisition day; take the day (START's, the one
+    # before or after, for a strip across midnight) that puts the image nearest tau = 0
+    candidates = [_seconds(midnight, start) + 86400.0 * d + offset_s for d in (-1, 0, 1)]
+    t_mid = 0.5 * t_last_row
+    return min(candidates, key=lambda ref: abs(t_mid - ref))
+
+
+def _read_attitude(
+    doc: _Document, smc: ET.Element, start: np.datetime64, t_last_row: float
+) -> _Attitude:
+    """The attitude polynomials, which must cover the image and give unit quaternions over
+    it."""
     where = f"{SMC}/Sensor_Attitudes"
     att = doc.element(smc, "Sensor_Attitudes", SMC)
     polys = [doc.polynomial(att, f"Polynomial_Models/Q{i}", where) for i in range(4)]
@@ -395,12 +459,7 @@ def read_dimap(path: str | Path) -> DimapSensorModel:  # noqa: C901, PLR0915 (is
     scale_s = doc.number(att, "SCALE", where)
     if not scale_s > 0:
         raise doc.fail(f"{where}/SCALE", f"{scale_s!r} s is not a time scale (> 0)")
-    midnight = start.astype("datetime64[D]").astype("datetime64[ns]")
-    # OFFSET counts from midnight of the acquisition day; take the day (START's, the one
-    # before or after, for a strip across midnight) that puts the image nearest tau = 0
-    candidates = [_seconds(midnight, start) + 86400.0 * d + offset_s for d in (-1, 0, 1)]
-    t_mid = 0.5 * t_last_row
-    dt_ref = min(candidates, key=lambda ref: abs(t_mid - ref))
+    dt_ref = _attitude_reference(start, offset_s, t_last_row)
     tau = (np.array([0.0, t_last_row]) - dt_ref) / scale_s
     if np.abs(tau).max() > QUATERNION_TAU_LIMIT:
         raise doc.fail(
@@ -418,10 +477,12 @@ def read_dimap(path: str | Path) -> DimapSensorModel:  # noqa: C901, PLR0915 (is
             f"the quaternion polynomials are not unit quaternions over the image (|q| - 1 up to "
             f"{worst:.2e}, allowed {QUATERNION_NORM_TOLERANCE:g}): a damaged coefficient",
         )
+    return _Attitude(coeffs, dt_ref, scale_s)
 
-    # ---- viewing directions
-    where = f"{SMC}/Sensor_Viewing_Model"
-    view = doc.element(smc, "Sensor_Viewing_Model", SMC)
+
+def _read_retina(doc: _Document, view: ET.Element, where: str, n_cols: int) -> tuple[int, int]:
+    """``Position_In_Retina``: ``(FIRST_COL, LAST_COL)``, covering the image's columns (a
+    wider range is read with a warning)."""
     first_col = doc.integer(view, "Position_In_Retina/FIRST_COL", where)
     last_col = doc.integer(view, "Position_In_Retina/LAST_COL", where)
     if first_col < 1 or last_col - first_col + 1 < n_cols:
@@ -437,8 +498,17 @@ def read_dimap(path: str | Path) -> DimapSensorModel:  # noqa: C901, PLR0915 (is
             f"{doc.path}: {where}/Position_In_Retina: FIRST_COL {first_col} .. LAST_COL "
             f"{last_col} is {last_col - first_col + 1 - n_cols} column(s) wider than the "
             f"{n_cols} image columns; image column 1 is detector {first_col}",
-            stacklevel=2,
+            stacklevel=4,  # read_dimap's caller
         )
+    return first_col, last_col
+
+
+def _read_viewing(doc: _Document, smc: ET.Element, n_cols: int) -> _Viewing:
+    """The viewing model: the retina range and look-angle tangents of a narrow-field
+    pushbroom over the image's detectors, the across-track one monotonic."""
+    where = f"{SMC}/Sensor_Viewing_Model"
+    view = doc.element(smc, "Sensor_Viewing_Model", SMC)
+    first_col, last_col = _read_retina(doc, view, where, n_cols)
     psi_x = doc.polynomial(view, "Viewing_Directions/PsiX_Model", where)
     psi_y = doc.polynomial(view, "Viewing_Directions/PsiY_Model", where)
     k = np.linspace(first_col - 1, first_col - 1 + n_cols - 1, 101)  # the image's detectors
@@ -456,27 +526,55 @@ def read_dimap(path: str | Path) -> DimapSensorModel:  # noqa: C901, PLR0915 (is
             f"{where}/Viewing_Directions/PsiX_Model",
             "the across-track look angle must change monotonically along the detectors",
         )
+    return _Viewing(
+        first_col,
+        last_col,
+        tuple(float(c) for c in psi_x),
+        tuple(float(c) for c in psi_y),
+    )
 
+
+def read_dimap(path: str | Path) -> DimapSensorModel:
+    """Read and validate the physical model of a Pleiades DIMAP v1.4 SENSOR product.
+
+    The sections are read in turn (identification, raster size, time, ephemeris, attitude,
+    viewing directions), each checked against the ones before it.
+
+    Raises:
+        InputError: one line naming the file, the element and the value (see the module
+            docstring for what is checked).
+    """
+    path = Path(path)
+    doc = _Document(path)
+    _check_generation(doc)
+    root = doc.root
+    dataset_name = (root.findtext("Dataset_Identification/DATASET_NAME") or "").strip()
+    n_rows, n_cols = _read_raster_size(doc)
+    smc = doc.element(root, SMC)
+    timing = _read_timing(doc, smc, n_rows)
+    ephemeris = _read_ephemeris(doc, smc, timing, n_rows)
+    attitude = _read_attitude(doc, smc, timing.start, (n_rows - 1) * timing.period_s)
+    viewing = _read_viewing(doc, smc, n_cols)
     return DimapSensorModel(
         path=path,
         dataset_name=dataset_name,
         n_rows=n_rows,
         n_cols=n_cols,
-        start_utc=start_utc,
-        epoch_j2000_s=float(epoch_j2000_s),
-        end_dt_s=end_dt,
-        line_period_s=period_s,
-        ephemeris_dt_s=t_eph,
-        position_ecef_m=pos,
-        velocity_ecef_m_s=velocity_ecef,
-        velocity_convention=convention,
-        quaternion_coeffs_wxyz=coeffs,
-        quaternion_dt_ref_s=dt_ref,
-        quaternion_scale_s=scale_s,
-        psi_x_coeffs=tuple(float(c) for c in psi_x),
-        psi_y_coeffs=tuple(float(c) for c in psi_y),
-        retina_first_col=first_col,
-        retina_last_col=last_col,
+        start_utc=timing.start_utc,
+        epoch_j2000_s=timing.epoch_j2000_s,
+        end_dt_s=timing.end_dt_s,
+        line_period_s=timing.period_s,
+        ephemeris_dt_s=ephemeris.dt_s,
+        position_ecef_m=ephemeris.position_ecef_m,
+        velocity_ecef_m_s=ephemeris.velocity_ecef_m_s,
+        velocity_convention=ephemeris.convention,
+        quaternion_coeffs_wxyz=attitude.coeffs_wxyz,
+        quaternion_dt_ref_s=attitude.dt_ref_s,
+        quaternion_scale_s=attitude.scale_s,
+        psi_x_coeffs=viewing.psi_x,
+        psi_y_coeffs=viewing.psi_y,
+        retina_first_col=viewing.first_col,
+        retina_last_col=viewing.last_col,
     )
 
 

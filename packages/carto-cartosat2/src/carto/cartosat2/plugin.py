@@ -19,9 +19,9 @@ if TYPE_CHECKING:  # the hooks import what they return: loading a plugin stays c
 
 @hookimpl
 def carto_scene_presets() -> Sequence[ScenePreset]:
-    from carto.cartosat2.presets import PaintbrushPreset, TripletPreset
+    from carto.cartosat2.presets import PaintbrushPreset, StereoPaintbrushPreset, TripletPreset
 
-    return [TripletPreset(), PaintbrushPreset()]
+    return [TripletPreset(), PaintbrushPreset(), StereoPaintbrushPreset()]
 
 
 @hookimpl

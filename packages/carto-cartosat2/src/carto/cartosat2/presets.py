@@ -104,6 +104,15 @@ def triplet_plan(
     )
 
 
+PAINTBRUSH_SPACING_S = 20.0
+"""Time between the swaths of a paint-brush set, seconds."""
+STEREO_VIEWS_S = (("fore", -45.0), ("aft", 45.0))
+"""Views of each swath of a stereo paint-brush set: name and centre time (the triplet's
+fore and aft: about +26 and -26 degrees along track, B/H about 1)."""
+STEREO_SPACING_S = 10.0
+"""Time between the swaths' views of a stereo set (a view lasts about 9 s)."""
+
+
 def paintbrush_plan(
     width_px: int,
     target: tuple[float, float] = DEFAULT_TARGET,
@@ -111,26 +120,33 @@ def paintbrush_plan(
     n_swaths: int = 3,
     overlap: float = 0.15,
     aim_height_m: float = 500.0,
+    views: tuple[tuple[str, float], ...] = (),
 ) -> ScenePlan:
     """``n_swaths`` adjacent strips side by side (``overlap`` of the window width), imaged one
-    after the other during one pass."""
+    after the other during one pass: once each (``views`` empty: ``swath1``...), or once per
+    view (name, centre time: ``swath1_fore``, ``swath1_aft``...) for a stereo set."""
     epoch_utc, epoch, elements, _, along, left = _geometry(target, date)
     spacing_m = width_px * GSD_M * (1.0 - overlap)
     segments = []
     for i in range(n_swaths):
-        offset = (i - (n_swaths - 1) / 2.0) * spacing_m
-        aim = frames.geodetic_to_ecef(target[0], target[1], aim_height_m) + offset * left
+        rank = i - (n_swaths - 1) / 2.0
+        aim = frames.geodetic_to_ecef(target[0], target[1], aim_height_m) + rank * spacing_m * left
         lon, lat, _ = frames.ecef_to_geodetic(aim)
-        t_c = (i - (n_swaths - 1) / 2.0) * 20.0
-        segments.append(_segment(f"swath{i + 1}", epoch, t_c, aim, along, (float(lon), float(lat))))
+        centre = (float(lon), float(lat))
+        if not views:
+            t_c = rank * PAINTBRUSH_SPACING_S
+            segments.append(_segment(f"swath{i + 1}", epoch, t_c, aim, along, centre))
+        for name, t_view in views:
+            t_c = t_view + rank * STEREO_SPACING_S
+            segments.append(_segment(f"swath{i + 1}_{name}", epoch, t_c, aim, along, centre))
     return ScenePlan(
-        preset="cartosat2-paintbrush",
-        control_min_views=1,
+        preset="cartosat2-paintbrush-stereo" if views else "cartosat2-paintbrush",
+        control_min_views=2 if views else 1,
         platform="Cartosat-2",
         epoch_utc=epoch_utc,
         elements=elements,
         target=target,
-        segments=tuple(segments),
+        segments=tuple(sorted(segments, key=lambda seg: seg.span_s[0])),
         gsd_m=GSD_M,
         agile=True,
         default_terrain="hilly",
@@ -159,3 +175,17 @@ class PaintbrushPreset(ScenePreset):
     def plan(self, options: SimulationOptions) -> ScenePlan:
         width = (options.size or (2000, 2000))[0]
         return paintbrush_plan(width)
+
+
+class StereoPaintbrushPreset(ScenePreset):
+    """Cartosat-2 stereo paint-brush: three adjacent swaths, each imaged fore and aft in one
+    pass: a DEM per swath, joined into one."""
+
+    name = "cartosat2-paintbrush-stereo"
+    description = (
+        "Cartosat-2 stereo paint-brush: 3 adjacent swaths, each fore and aft, 15 % overlap"
+    )
+
+    def plan(self, options: SimulationOptions) -> ScenePlan:
+        width = (options.size or (2000, 2000))[0]
+        return paintbrush_plan(width, views=STEREO_VIEWS_S)

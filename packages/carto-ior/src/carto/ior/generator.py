@@ -42,7 +42,35 @@ def ior_product(result: IORResult) -> DEMProduct:
     ortho-images are that many times coarser; its pixels are coarse pixels),
     ``median_search_px`` (the median per-node bound of the search along the base; NaN: the
     pyramid's reach)."""
-    iterations = [
+    quality = [
+        *_node_layers(result),
+        QualityLayer("score", "correlation score", result.score),
+        QualityLayer("valid", "valid match (1) or not (0)", _as_float(result.valid), kind="flag"),
+    ]
+    return DEMProduct(
+        dem=result.dem,
+        dem_grid=result.dem_grid,
+        orthos=(result.ortho_left, result.ortho_right),
+        ortho_grid=result.ortho_grid,
+        quality=quality,
+        iterations=_iteration_records(result),
+        converged=result.converged,
+        failed_tiles=result.failed_tiles,
+        matched_fraction=(
+            result.iterations[-1].matched_percent / 100.0 if result.iterations else None
+        ),
+        extras={
+            "b_over_h": result.b_over_h,
+            "init_dem_coverage_percent": round(100.0 * result.init_coverage, 2),
+            "init_dem_filled_percent": round(100.0 * result.init_filled, 2),
+            "completeness": dict(result.nodes),
+        },
+    )
+
+
+def _iteration_records(result: IORResult) -> list[IterationRecord]:
+    """Each iteration's measures (see :func:`ior_product`)."""
+    return [
         IterationRecord(
             r.iteration,
             r.seconds,
@@ -57,6 +85,12 @@ def ior_product(result: IORResult) -> DEMProduct:
         )
         for r in result.iterations
     ]
+
+
+def _node_layers(result: IORResult) -> list[QualityLayer]:
+    """The quality layers per DEM node: the matched points' mean correlation score, their
+    number and spread, the predicted height standard deviation (when the result has them)
+    and whether the height was filled (when it says)."""
     quality = []
     nodes = result.node_quality
     if nodes:
@@ -98,29 +132,7 @@ def ior_product(result: IORResult) -> DEMProduct:
                 kind="flag",
             )
         )
-    quality += [
-        QualityLayer("score", "correlation score", result.score),
-        QualityLayer("valid", "valid match (1) or not (0)", _as_float(result.valid), kind="flag"),
-    ]
-    return DEMProduct(
-        dem=result.dem,
-        dem_grid=result.dem_grid,
-        orthos=(result.ortho_left, result.ortho_right),
-        ortho_grid=result.ortho_grid,
-        quality=quality,
-        iterations=iterations,
-        converged=result.converged,
-        failed_tiles=result.failed_tiles,
-        matched_fraction=(
-            result.iterations[-1].matched_percent / 100.0 if result.iterations else None
-        ),
-        extras={
-            "b_over_h": result.b_over_h,
-            "init_dem_coverage_percent": round(100.0 * result.init_coverage, 2),
-            "init_dem_filled_percent": round(100.0 * result.init_filled, 2),
-            "completeness": dict(result.nodes),
-        },
-    )
+    return quality
 
 
 def _as_float(layer: Any) -> Any:

@@ -190,7 +190,7 @@ def _stage_label(factor: int) -> str:
     return f"1/{factor} resolution, " if factor > 1 else ""
 
 
-def iterate(  # noqa: PLR0915 (issue 32: to split)
+def iterate(
     images: tuple[Any, Any],
     sensors: tuple[Sensor, Sensor],
     dem_grid: OrthoGrid,
@@ -210,129 +210,41 @@ def iterate(  # noqa: PLR0915 (issue 32: to split)
     ortho-images are that many times coarser than the final ones; ``apply_last``: the last
     iteration's measurement updates the surface too, for a stage whose result is a start,
     not a product: ``surface`` is then one update ahead of ``dem``)."""
-    from carto.framework.sdk.dem import TiledLayer, TilePiece, piece_path
-
-    left, right = sensors
-    heights = state.heights
-    n_r, n_c = dem_grid.shape
-    c_lon, c_lat = dem_grid.lonlat(n_r / 2, n_c / 2)
-    bh, base_en = base_direction(
-        left, right, float(c_lon), float(c_lat), float(np.nanmedian(heights))
-    )
-    base_rc = np.array([-base_en[1], base_en[0]])  # (row, col) of the north-up grid
-    tile_n = max(16, s.tile_px // k)
-    overlap_n = max(2, -(-s.overlap_px // k))
-    plan = _tile_plan((left, right), dem_grid, heights, tile_n)
-    keys = [f"tile {rows.start // tile_n},{cols.start // tile_n}" for rows, cols in plan]
+    stage = _Stage(
+        images, sensors, dem_grid, ortho_grid, k, s, space, engine, matcher,
+        keep_failed_tiles, factor, _stage_plan(sensors, dem_grid, state.heights, k, s),
+    )  # fmt: skip
+    heights, guess, search = state.heights, state.guess, state.search_px
     reports = [IterationReport(**r) for r in state.reports]
-    converged = False
-    guess = state.guess
-    search = state.search_px
-    px_per_m = bh * k / abs(dem_grid.transform.a)  # along-base pixels per metre of height
-    failed: list[str] = []
+    start_refined = bool(state.facts.get("start_refined"))
     iteration = state.iteration
     while True:
         t0 = time.perf_counter()
         current = heights
-        close = (
-            reports[-1].median_abs_mismatch_px < 2.0
-            if reports
-            else bool(state.facts.get("start_refined"))
-        )
-        levels = s.refine_levels if close else s.levels
-        job = TileJob(
-            images,
-            (left, right),
-            space.heights_path(iteration),
-            dem_grid,
-            k,
-            overlap_n,
-            s,
-            levels,
-            guess,
-            matcher,
-            (float(np.nanmin(current)), float(np.nanmax(current))),
-            space.iteration_dir(iteration),
-            (float(base_rc[0]), float(base_rc[1])),
-            smoothing_variance_factor(s.smoothing_nodes, iteration - 1, s.window, k),
-            None if search is None else space.search_path(iteration),
-        )
-        tasks = [functools.partial(run_tile, job, rows, cols) for rows, cols in plan]
-        outcomes = _run_tiles(
-            engine, tasks, f"IOR {_stage_label(factor)}iteration {iteration}", keys
-        )
-        failed = [str(o) for o in outcomes if isinstance(o, TaskFailure)]
-        if failed and not keep_failed_tiles:
-            raise TileFailure(
-                f"ior: {len(failed)} of {len(plan)} tiles failed in iteration {iteration} "
-                f"({failed[0]})"
-            )
-        # the grids of the coordinator: heights in float64, offsets in float32 (what the
-        # tiles measured to a hundredth of a pixel), the rest as masks
-        new = np.full(dem_grid.shape, np.nan)
-        d_row = np.full(dem_grid.shape, np.nan, np.float32)
-        d_col = np.full(dem_grid.shape, np.nan, np.float32)
-        covered = np.zeros(dem_grid.shape, bool)
-        for (rows, cols), outcome in zip(plan, outcomes, strict=True):
-            if isinstance(outcome, TaskFailure):
-                continue
-            arrays = tile_arrays(outcome, NODE_LAYERS)
-            new[rows, cols] = arrays["new_height"]
-            d_row[rows, cols] = arrays["d_row_px"]
-            d_col[rows, cols] = arrays["d_col_px"]
-            covered[rows, cols] = arrays["covered"]
-        matched = np.isfinite(d_row) & covered
-        # the mismatch a height change removes: along the base; across it, what the
-        # relative orientation leaves (reported, and the next search starts from it)
-        m_row, m_col = d_row[matched], d_col[matched]
-        del d_row, d_col
-        b_row, b_col = float(base_rc[0]), float(base_rc[1])  # float32 products
-        along = m_row * b_row + m_col * b_col
-        across = m_col * b_row - m_row * b_col
-        med = float(np.median(np.abs(along))) if along.size else float("nan")
-        across_px = float(np.median(across)) if across.size else float("nan")
-        del m_row, m_col, along, across
-        if matched.any():  # the across-base offset stays; the along-base one the DEM removes
-            guess = (-across_px * float(base_rc[1]), across_px * float(base_rc[0]))
-        pct = 100.0 * float(matched.sum()) / max(int(covered.sum()), 1)
-        # converged: the mismatch is below the threshold, or it no longer improves (what
-        # is left is the matching noise, which no height change removes)
-        stalled = (
-            bool(reports) and med > (1.0 - s.min_improvement) * reports[-1].median_abs_mismatch_px
-        )
-        # a stage that starts from a coarser one updates at least once at its own resolution:
-        # a small median mismatch there says the coarse relief is right, not the fine one
-        first_here = not reports and bool(state.facts.get("start_refined"))
-        done = bool(matched.any() and (med < s.threshold_px or stalled)) and not first_here
-        bounded = None if search is None else search[covered]
-        med_search = (
-            float(np.nanmedian(bounded))
-            if bounded is not None and np.isfinite(bounded).any()
-            else float("nan")
-        )
+        close = reports[-1].median_abs_mismatch_px < 2.0 if reports else start_refined
+        outcomes = _run_iteration(stage, iteration, current, guess, search, close)
+        measured = _measured(stage, outcomes)
+        # the across-base offset stays; the along-base one the DEM removes
+        if measured.matched.any():
+            across_px = measured.across_px
+            guess = (-across_px * stage.plan.base_rc[1], across_px * stage.plan.base_rc[0])
+        done = _converged(measured, reports, s, start_refined)
+        med_search = _median_search(search, measured.covered)
         last = done or iteration > s.max_iterations
         med_change = 0.0
-        if not last or (apply_last and matched.any()):
-            heights, _ = regularise(current, new, s)
-            search = next_search_px(search, heights - current, matched, px_per_m)
-            change = np.abs(heights - current)[covered]
-            med_change = float(np.median(change)) if change.size else 0.0
+        if not last or (apply_last and measured.matched.any()):
+            heights, search, med_change = _updated(
+                current, measured, search, s, stage.plan.px_per_m
+            )
         seconds = time.perf_counter() - t0
-        reports.append(
-            IterationReport(iteration, med, pct, med_change, across_px, seconds, factor, med_search)
-        )
+        report = IterationReport(
+            iteration, measured.median_abs_px, measured.matched_percent, med_change,
+            measured.across_px, seconds, factor, med_search,
+        )  # fmt: skip
+        reports.append(report)
         if progress:
-            ending = (
-                (" (converged)" if done else " (last)")
-                if last
-                else f", median DEM change {med_change:.2f} m"
-            )
-            progress(
-                f"{_stage_label(factor)}iteration {iteration}: median mismatch {med:.3f} px "
-                f"along the base, {pct:.1f} % matched{ending}"
-            )
+            progress(_iteration_line(report, done, last))
         if last:
-            converged = done
             break
         iteration += 1
         space.begin(
@@ -345,18 +257,255 @@ def iterate(  # noqa: PLR0915 (issue 32: to split)
                 search,
             )
         )
-    # the last iteration's tiles hold the orthos made on the final DEM, its matching (ortho
-    # grid: k pixels per node) and the points per node (DEM grid)
+    return _stage_result(
+        stage, state, iteration, outcomes, measured, heights,
+        _Ending(tuple(reports), done, guess, search),
+    )  # fmt: skip
+
+
+@attrs.frozen(eq=False)
+class _StagePlan:
+    """What the tiles of every iteration of a stage share: the pair's base-to-height ratio
+    at the grid centre and the base's direction on the north-up grid ``(d_row, d_col)``,
+    the tiles (node slices) both images see with their keys, the tiles' overlap (nodes)
+    and the along-base ortho pixels per metre of height."""
+
+    b_over_h: float
+    base_rc: tuple[float, float]
+    tiles: list[tuple[slice, slice]]
+    keys: list[str]
+    overlap_n: int
+    px_per_m: float
+
+
+def _stage_plan(
+    sensors: tuple[Sensor, Sensor],
+    dem_grid: OrthoGrid,
+    heights: FloatArray,
+    k: int,
+    s: IORSettings,
+) -> _StagePlan:
+    """The plan of a stage whose starting heights are ``heights``."""
+    left, right = sensors
+    n_r, n_c = dem_grid.shape
+    c_lon, c_lat = dem_grid.lonlat(n_r / 2, n_c / 2)
+    bh, base_en = base_direction(
+        left, right, float(c_lon), float(c_lat), float(np.nanmedian(heights))
+    )
+    base_rc = np.array([-base_en[1], base_en[0]])  # (row, col) of the north-up grid
+    tile_n = max(16, s.tile_px // k)
+    overlap_n = max(2, -(-s.overlap_px // k))
+    tiles = _tile_plan((left, right), dem_grid, heights, tile_n)
+    keys = [f"tile {rows.start // tile_n},{cols.start // tile_n}" for rows, cols in tiles]
+    px_per_m = bh * k / abs(dem_grid.transform.a)  # along-base pixels per metre of height
+    return _StagePlan(bh, (float(base_rc[0]), float(base_rc[1])), tiles, keys, overlap_n, px_per_m)
+
+
+@attrs.frozen(eq=False)
+class _Stage:
+    """What every iteration of :func:`iterate` shares: its arguments and the stage's plan."""
+
+    images: tuple[Any, Any]
+    sensors: tuple[Sensor, Sensor]
+    dem_grid: OrthoGrid
+    ortho_grid: OrthoGrid
+    k: int
+    s: IORSettings
+    space: Workspace
+    engine: Any
+    matcher: Matcher | None
+    keep_failed_tiles: bool
+    factor: int
+    plan: _StagePlan
+
+
+def _run_iteration(
+    stage: _Stage,
+    iteration: int,
+    current: FloatArray,
+    guess: tuple[float, float],
+    search: NDArray[np.float32] | None,
+    close: bool,
+) -> list[Any]:
+    """The tiles of one iteration on the heights ``current`` (``close``: the last mismatch
+    was small, the matching's pyramid is shallow); each tile's file, or its failure."""
+    s, space = stage.s, stage.space
+    levels = s.refine_levels if close else s.levels
+    job = TileJob(
+        stage.images,
+        stage.sensors,
+        space.heights_path(iteration),
+        stage.dem_grid,
+        stage.k,
+        stage.plan.overlap_n,
+        s,
+        levels,
+        guess,
+        stage.matcher,
+        (float(np.nanmin(current)), float(np.nanmax(current))),
+        space.iteration_dir(iteration),
+        stage.plan.base_rc,
+        smoothing_variance_factor(s.smoothing_nodes, iteration - 1, s.window, stage.k),
+        None if search is None else space.search_path(iteration),
+    )
+    tasks = [functools.partial(run_tile, job, rows, cols) for rows, cols in stage.plan.tiles]
+    outcomes = _run_tiles(
+        stage.engine,
+        tasks,
+        f"IOR {_stage_label(stage.factor)}iteration {iteration}",
+        stage.plan.keys,
+    )
+    failed = _failures(outcomes)
+    if failed and not stage.keep_failed_tiles:
+        raise TileFailure(
+            f"ior: {len(failed)} of {len(stage.plan.tiles)} tiles failed in iteration {iteration} "
+            f"({failed[0]})"
+        )
+    return outcomes
+
+
+def _failures(outcomes: list[Any]) -> list[str]:
+    """The causes of the tiles that failed (``"tile R,C: cause"``)."""
+    return [str(o) for o in outcomes if isinstance(o, TaskFailure)]
+
+
+@attrs.frozen(eq=False)
+class _Measured:
+    """What an iteration's tiles measured on the DEM grid: the heights of the matched nodes
+    (``new_height``), which nodes matched and which both images cover; the median
+    |mismatch| along the base and the median offset across it (ortho pixels; NaN: no
+    match), and the share of covered nodes matched (percent)."""
+
+    new_height: FloatArray
+    matched: NDArray[np.bool_]
+    covered: NDArray[np.bool_]
+    median_abs_px: float
+    across_px: float
+    matched_percent: float
+
+
+def _measured(stage: _Stage, outcomes: list[Any]) -> _Measured:
+    """The tiles' node layers assembled on the DEM grid, and their mismatch."""
+    shape = stage.dem_grid.shape
+    # the grids of the coordinator: heights in float64, offsets in float32 (what the
+    # tiles measured to a hundredth of a pixel), the rest as masks
+    new = np.full(shape, np.nan)
+    d_row = np.full(shape, np.nan, np.float32)
+    d_col = np.full(shape, np.nan, np.float32)
+    covered = np.zeros(shape, bool)
+    for (rows, cols), outcome in zip(stage.plan.tiles, outcomes, strict=True):
+        if isinstance(outcome, TaskFailure):
+            continue
+        arrays = tile_arrays(outcome, NODE_LAYERS)
+        new[rows, cols] = arrays["new_height"]
+        d_row[rows, cols] = arrays["d_row_px"]
+        d_col[rows, cols] = arrays["d_col_px"]
+        covered[rows, cols] = arrays["covered"]
+    matched = np.isfinite(d_row) & covered
+    # the mismatch a height change removes: along the base; across it, what the
+    # relative orientation leaves (reported, and the next search starts from it)
+    m_row, m_col = d_row[matched], d_col[matched]
+    del d_row, d_col
+    b_row, b_col = stage.plan.base_rc  # float32 products
+    along = m_row * b_row + m_col * b_col
+    across = m_col * b_row - m_row * b_col
+    med = float(np.median(np.abs(along))) if along.size else float("nan")
+    across_px = float(np.median(across)) if across.size else float("nan")
+    del m_row, m_col, along, across
+    pct = 100.0 * float(matched.sum()) / max(int(covered.sum()), 1)
+    return _Measured(new, matched, covered, med, across_px, pct)
+
+
+def _converged(
+    measured: _Measured, reports: list[IterationReport], s: IORSettings, start_refined: bool
+) -> bool:
+    """Whether the iterations end here, converged."""
+    med = measured.median_abs_px
+    # converged: the mismatch is below the threshold, or it no longer improves (what
+    # is left is the matching noise, which no height change removes)
+    stalled = bool(reports) and med > (1.0 - s.min_improvement) * reports[-1].median_abs_mismatch_px
+    # a stage that starts from a coarser one updates at least once at its own resolution:
+    # a small median mismatch there says the coarse relief is right, not the fine one
+    first_here = not reports and start_refined
+    return bool(measured.matched.any() and (med < s.threshold_px or stalled)) and not first_here
+
+
+def _median_search(search: NDArray[np.float32] | None, covered: NDArray[np.bool_]) -> float:
+    """The median search bound of the covered nodes, ortho pixels (NaN: none)."""
+    bounded = None if search is None else search[covered]
+    return (
+        float(np.nanmedian(bounded))
+        if bounded is not None and np.isfinite(bounded).any()
+        else float("nan")
+    )
+
+
+def _updated(
+    current: FloatArray,
+    measured: _Measured,
+    search: NDArray[np.float32] | None,
+    s: IORSettings,
+    px_per_m: float,
+) -> tuple[FloatArray, NDArray[np.float32], float]:
+    """The regularised next heights, the next search bounds and the median |height change|
+    of the covered nodes (m)."""
+    heights, _ = regularise(current, measured.new_height, s)
+    search = next_search_px(search, heights - current, measured.matched, px_per_m)
+    change = np.abs(heights - current)[measured.covered]
+    med_change = float(np.median(change)) if change.size else 0.0
+    return heights, search, med_change
+
+
+def _iteration_line(report: IterationReport, done: bool, last: bool) -> str:
+    """The progress line of an iteration."""
+    ending = (
+        (" (converged)" if done else " (last)")
+        if last
+        else f", median DEM change {report.median_abs_dem_change_m:.2f} m"
+    )
+    return (
+        f"{_stage_label(report.factor)}iteration {report.iteration}: median mismatch "
+        f"{report.median_abs_mismatch_px:.3f} px along the base, "
+        f"{report.matched_percent:.1f} % matched{ending}"
+    )
+
+
+@attrs.frozen(eq=False)
+class _Ending:
+    """How the iterations ended: their reports, whether they converged, and the last offset
+    across the base and search bounds."""
+
+    reports: tuple[IterationReport, ...]
+    converged: bool
+    guess: tuple[float, float]
+    search: NDArray[np.float32] | None
+
+
+def _stage_result(
+    stage: _Stage,
+    state: RunState,
+    iteration: int,
+    outcomes: list[Any],
+    measured: _Measured,
+    heights: FloatArray,
+    ending: _Ending,
+) -> IORResult:
+    """The result of the stage's iterations: the last iteration's tiles hold the orthos made
+    on the final DEM, its matching (ortho grid: k pixels per node) and the points per node
+    (DEM grid)."""
+    from carto.framework.sdk.dem import TiledLayer, TilePiece, piece_path
+
+    dem_grid, ortho_grid, k = stage.dem_grid, stage.ortho_grid, stage.k
     finished = [
         (rows, cols)
-        for (rows, cols), outcome in zip(plan, outcomes, strict=True)
+        for (rows, cols), outcome in zip(stage.plan.tiles, outcomes, strict=True)
         if not isinstance(outcome, TaskFailure)
     ]
 
     def tiled(name: str, scale: int, shape: tuple[int, int], dtype: Any, fill: Any) -> Any:
         pieces = [
             TilePiece(
-                piece_path(space.iteration_dir(iteration), rows.start, cols.start),
+                piece_path(stage.space.iteration_dir(iteration), rows.start, cols.start),
                 name,
                 rows.start * scale,
                 cols.start * scale,
@@ -378,10 +527,10 @@ def iterate(  # noqa: PLR0915 (issue 32: to split)
     }
     # heights where the last iteration measured and in the holes it encloses; none beyond
     failed_nodes = np.zeros(dem_grid.shape, bool)
-    for (rows, cols), outcome in zip(plan, outcomes, strict=True):
+    for (rows, cols), outcome in zip(stage.plan.tiles, outcomes, strict=True):
         if isinstance(outcome, TaskFailure):
             failed_nodes[rows, cols] = True
-    footprint = node_footprint(matched, covered, failed_nodes)
+    footprint = node_footprint(measured.matched, measured.covered, failed_nodes)
     final = np.where(footprint.has_height, heights, np.nan)
     dem = DEM.from_array(final, dem_grid.transform, dem_grid.crs.to_wkt(), vertical=ELLIPSOID)
     return IORResult(
@@ -392,16 +541,16 @@ def iterate(  # noqa: PLR0915 (issue 32: to split)
         layers["ortho_right"],
         layers["score"],
         layers["valid"],
-        tuple(reports),
-        converged,
-        bh,
+        ending.reports,
+        ending.converged,
+        stage.plan.b_over_h,
         init_coverage=float(state.facts.get("init_coverage", 1.0)),
         init_filled=float(state.facts.get("init_filled", 0.0)),
-        failed_tiles=tuple(failed),
+        failed_tiles=tuple(_failures(outcomes)),
         node_quality=node_quality,
         filled=footprint.filled,
         nodes=footprint.counts(),
         surface=heights,
-        guess=guess,
-        search_px=search,
+        guess=ending.guess,
+        search_px=ending.search,
     )

@@ -59,7 +59,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from carto.framework.sdk.common import InputError
-from carto.framework.sdk.dem import DEM
+from carto.framework.sdk.dem import DEM, OrthoGrid
 from carto.framework.sdk.matchers import Matcher
 from carto.framework.sdk.sensors import Sensor
 from carto.ior.coarse_to_fine import coarse_stages, search_on
@@ -183,57 +183,76 @@ def refine_dem(
         space = Workspace(folder)
         state = space.load(dem_grid.shape)
         if state is None:
-            # the initial DEM on the final grid: its coverage checked, its voids counted
-            cover = initial_coverage(init_dem, dem_grid, (left, right), s.min_init_coverage)
-            if progress and cover.filled > 0.0:
-                progress(
-                    f"initial DEM {init_dem.name}: {100.0 * cover.filled:.1f} % of the "
-                    "footprint filled (voids)"
-                )
-            facts = {"init_coverage": cover.coverage, "init_filled": cover.filled}
+            facts = _initial_facts(init_dem, dem_grid, (left, right), s, progress)
             stages = coarse_stages(
                 images, (left, right), init_dem, s, dem_grid.crs, k, folder, engine, matcher,
                 progress, keep_failed_tiles,
             )  # fmt: skip
-            if stages is None:  # no coarse stage: from the initial DEM
-                start = starting_surface(init_dem, dem_grid, (left, right), 0.0)
-                state = RunState(1, start.heights, (0.0, 0.0), (), facts)
-            else:
-                start_dem, guess, reports, search = stages
-                start = starting_surface(start_dem, dem_grid, (left, right), 0.0)
-                bound = None if search is None else search_on(search, dem_grid, 1)
-                facts["coarse_reports"] = [attrs.asdict(r) for r in reports]
-                facts["start_refined"] = True
-                state = RunState(1, start.heights, guess, (), facts, bound)
+            state = _first_state(stages, init_dem, dem_grid, (left, right), facts)
             space.begin(state)
         elif progress:
             progress(f"resuming at iteration {state.iteration} from {folder}")
         result = iterate(
-            images,
-            (left, right),
-            dem_grid,
-            ortho_grid,
-            k,
-            s,
-            state,
-            space,
-            engine,
-            matcher,
-            progress,
-            keep_failed_tiles,
+            images, (left, right), dem_grid, ortho_grid, k, s, state, space, engine, matcher,
+            progress, keep_failed_tiles,
+        )  # fmt: skip
+        return _delivered(result, state, kept)
+
+
+def _initial_facts(
+    init_dem: DEM,
+    dem_grid: OrthoGrid,
+    sensors: tuple[Sensor, Sensor],
+    s: IORSettings,
+    progress: Callable[[str], None] | None,
+) -> dict[str, Any]:
+    """What the initial DEM gives on the final grid (its coverage checked, its voids
+    counted), for the run's facts."""
+    cover = initial_coverage(init_dem, dem_grid, sensors, s.min_init_coverage)
+    if progress and cover.filled > 0.0:
+        progress(
+            f"initial DEM {init_dem.name}: {100.0 * cover.filled:.1f} % of the "
+            "footprint filled (voids)"
         )
-        coarse = [IterationReport(**r) for r in state.facts.get("coarse_reports", ())]
-        every = [
-            attrs.evolve(r, iteration=i + 1) for i, r in enumerate(coarse + list(result.iterations))
-        ]
-        result = attrs.evolve(result, iterations=tuple(every))
-        if not kept:  # the temporary folder goes: read the layers now
-            result = attrs.evolve(
-                result,
-                ortho_left=np.asarray(result.ortho_left),
-                ortho_right=np.asarray(result.ortho_right),
-                score=np.asarray(result.score),
-                valid=np.asarray(result.valid),
-                node_quality={k: np.asarray(v) for k, v in result.node_quality.items()},
-            )
-        return result
+    return {"init_coverage": cover.coverage, "init_filled": cover.filled}
+
+
+def _first_state(
+    stages: tuple[DEM, tuple[float, float], list[IterationReport], DEM | None] | None,
+    init_dem: DEM,
+    dem_grid: OrthoGrid,
+    sensors: tuple[Sensor, Sensor],
+    facts: dict[str, Any],
+) -> RunState:
+    """The state a new run starts the final grid's iterations from: the surface, offset and
+    search bounds of the coarse-to-fine ``stages`` (:func:`coarse_stages`), or without a
+    stage the initial DEM."""
+    if stages is None:  # no coarse stage: from the initial DEM
+        start = starting_surface(init_dem, dem_grid, sensors, 0.0)
+        return RunState(1, start.heights, (0.0, 0.0), (), facts)
+    start_dem, guess, reports, search = stages
+    start = starting_surface(start_dem, dem_grid, sensors, 0.0)
+    bound = None if search is None else search_on(search, dem_grid, 1)
+    facts["coarse_reports"] = [attrs.asdict(r) for r in reports]
+    facts["start_refined"] = True
+    return RunState(1, start.heights, guess, (), facts, bound)
+
+
+def _delivered(result: IORResult, state: RunState, kept: bool) -> IORResult:
+    """The final grid's result with every iteration, the coarse stages' first, numbered from
+    1; its layers read into arrays unless the work folder is ``kept``."""
+    coarse = [IterationReport(**r) for r in state.facts.get("coarse_reports", ())]
+    every = [
+        attrs.evolve(r, iteration=i + 1) for i, r in enumerate(coarse + list(result.iterations))
+    ]
+    result = attrs.evolve(result, iterations=tuple(every))
+    if not kept:  # the temporary folder goes: read the layers now
+        result = attrs.evolve(
+            result,
+            ortho_left=np.asarray(result.ortho_left),
+            ortho_right=np.asarray(result.ortho_right),
+            score=np.asarray(result.score),
+            valid=np.asarray(result.valid),
+            node_quality={k: np.asarray(v) for k, v in result.node_quality.items()},
+        )
+    return result

@@ -19,6 +19,7 @@ from carto.framework.sdk.dem import DEM, ELLIPSOID, OrthoGrid, orthorectify, pie
 from carto.framework.sdk.matchers import (
     DenseSettings,
     Matcher,
+    OffsetField,
     levels_for_reach,
     limit_along_base,
     refine_along_base,
@@ -146,79 +147,24 @@ def refine_tile(
     need, and matches beyond their node's bound are refused.
     """
 
-    n_r, n_c = dem_grid.shape
-    r0, r1 = max(0, rows.start - overlap), min(n_r, rows.stop + overlap)
-    c0, c1 = max(0, cols.start - overlap), min(n_c, cols.stop + overlap)
-    sub = dem_grid.window(r0, c0, r1 - r0, c1 - c0)
-    window = np.asarray(heights[r0:r1, c0:c1], np.float64)
-    dem = _dem_on(sub, window)
-    t = sub.transform
-    from affine import Affine
-
-    ogrid = OrthoGrid(
-        sub.crs, Affine(t.a / k, 0.0, t.c, 0.0, t.e / k, t.f), ((r1 - r0) * k, (c1 - c0) * k)
-    )
-    ortho = [orthorectify(img, s, ogrid, dem) for img, s in zip(images, sensors, strict=True)]
-    depth = settings.levels if levels is None else levels
-    bound = None
-    if search_px is not None:  # per pixel: its node's bound
-        nodes = np.asarray(search_px[r0:r1, c0:c1], np.float32)
-        bound = np.repeat(np.repeat(np.where(np.isnan(nodes), np.inf, nodes), k, 0), k, 1)
-        depth = min(depth, levels_for_reach(float(bound.max())))
-    field = (matcher or _default_matcher()).match_dense(
-        ortho[0],
-        ortho[1],
-        settings=DenseSettings(
-            levels=depth,
-            guess=guess,
-            window=settings.window,
-            min_score=settings.min_score,
-            base=base,
-            search_px=bound,
-        ),
-    )
+    w = _tile_window(dem_grid, heights, rows, cols, overlap, k)
+    ortho = [
+        orthorectify(img, s, w.ortho_grid, w.dem) for img, s in zip(images, sensors, strict=True)
+    ]
     direction = base if base is not None else (0.0, 1.0)
-    if settings.subpixel_steps:  # least-squares sub-pixel offsets along the base
-        field = refine_along_base(
-            ortho[0], ortho[1], field, settings.window, direction, settings.subpixel_steps
-        )
-    if bound is not None:
-        field = limit_along_base(field, bound, guess, direction)
-    # node offsets: the mean of the valid offsets of the node's k x k ortho pixels
-    shape = (r1 - r0, c1 - c0)
-    d_row = _block_mean(field.d_row, k, shape)
-    d_col = _block_mean(field.d_col, k, shape)
-    covered = np.isfinite(_block_mean(ortho[0], k, shape)) & np.isfinite(
-        _block_mean(ortho[1], k, shape)
-    )
+    field = _matched(ortho, w, settings, levels, guess, matcher, base, direction, search_px)
+    d_row, d_col, covered = _node_offsets(field, ortho, k, w.shape)
     # heights: every valid match intersected, carried to its node, the median per node
-    surface = np.asarray(dem.heights, np.float64)
-    rays = RayField.sample(sensors, sub, surface)
+    surface = np.asarray(w.dem.heights, np.float64)
+    rays = RayField.sample(sensors, w.grid, surface)
     if h_range is None:
         h_range = (float(np.nanmin(heights)), float(np.nanmax(heights)))
     nodes = node_heights(
-        field.d_row, field.d_col, field.valid, field.score, surface, sub, k, rays, h_range
+        field.d_row, field.d_col, field.valid, field.score, surface, w.grid, k, rays, h_range
     )
     new = np.where(covered, nodes.height_m, np.nan)
-    # the predicted precision: the matching's bound, checked across the base; local B/H
-    node_r, node_c = np.meshgrid(np.arange(shape[0]), np.arange(shape[1]), indexing="ij")
-    t = rays.at(node_r, node_c)
-    bh = np.hypot(t[0, 0] - t[1, 0], t[0, 1] - t[1, 1])
-    sigma, _ = node_sigma_m(
-        ortho[0],
-        ortho[1],
-        field,
-        settings.window,
-        direction,
-        k,
-        ogrid.resolution[0],
-        bh,
-        variance_factor,
-    )
-    ir = slice(rows.start - r0, rows.stop - r0)
-    ic = slice(cols.start - c0, cols.stop - c0)
-    orr = slice(ir.start * k, ir.stop * k)
-    occ = slice(ic.start * k, ic.stop * k)
+    sigma = _predicted_sigma(ortho, field, rays, settings.window, direction, w, variance_factor)
+    ir, ic, orr, occ = w.interior(rows, cols)
     return TileResult(
         rows,
         cols,
@@ -235,6 +181,144 @@ def refine_tile(
         field.score[orr, occ],
         field.valid[orr, occ],
     )
+
+
+@attrs.frozen(eq=False)
+class _TileWindow:
+    """What a tile reads of the DEM grid: nodes ``r0:r1, c0:c1`` (its own with the overlap
+    around them, clipped to the grid), their grid, the ortho grid over them (``k`` ortho
+    pixels per node) and the current DEM on them (its voids at the window's median)."""
+
+    r0: int
+    r1: int
+    c0: int
+    c1: int
+    k: int
+    grid: OrthoGrid
+    ortho_grid: OrthoGrid
+    dem: DEM
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """The window's nodes, rows and columns."""
+        return (self.r1 - self.r0, self.c1 - self.c0)
+
+    def interior(self, rows: slice, cols: slice) -> tuple[slice, slice, slice, slice]:
+        """The tile's own nodes ``rows, cols`` in the window (rows, columns), then its own
+        ortho pixels (rows, columns)."""
+        ir = slice(rows.start - self.r0, rows.stop - self.r0)
+        ic = slice(cols.start - self.c0, cols.stop - self.c0)
+        return (
+            ir,
+            ic,
+            slice(ir.start * self.k, ir.stop * self.k),
+            slice(ic.start * self.k, ic.stop * self.k),
+        )
+
+
+def _tile_window(
+    dem_grid: OrthoGrid, heights: FloatArray, rows: slice, cols: slice, overlap: int, k: int
+) -> _TileWindow:
+    """The window of the tile ``rows, cols`` with ``overlap`` nodes around it, read from
+    the whole grid's ``heights``."""
+    from affine import Affine
+
+    n_r, n_c = dem_grid.shape
+    r0, r1 = max(0, rows.start - overlap), min(n_r, rows.stop + overlap)
+    c0, c1 = max(0, cols.start - overlap), min(n_c, cols.stop + overlap)
+    sub = dem_grid.window(r0, c0, r1 - r0, c1 - c0)
+    window = np.asarray(heights[r0:r1, c0:c1], np.float64)
+    t = sub.transform
+    ogrid = OrthoGrid(
+        sub.crs, Affine(t.a / k, 0.0, t.c, 0.0, t.e / k, t.f), ((r1 - r0) * k, (c1 - c0) * k)
+    )
+    return _TileWindow(r0, r1, c0, c1, k, sub, ogrid, _dem_on(sub, window))
+
+
+def _matched(
+    ortho: list[NDArray],
+    w: _TileWindow,
+    settings: IORSettings,
+    levels: int | None,
+    guess: tuple[float, float],
+    matcher: Matcher | None,
+    base: tuple[float, float] | None,
+    direction: tuple[float, float],
+    search_px: FloatArray | None,
+) -> OffsetField:
+    """The dense offsets of the tile's right ortho-image against its left one: matched
+    within the nodes' search bounds (``search_px``: the whole grid's; the pyramid no deeper
+    than they need), refined to sub-pixel along the base (``direction``), matches beyond
+    their node's bound refused."""
+    depth = settings.levels if levels is None else levels
+    bound = None
+    if search_px is not None:  # per pixel: its node's bound
+        k = w.k
+        nodes = np.asarray(search_px[w.r0 : w.r1, w.c0 : w.c1], np.float32)
+        bound = np.repeat(np.repeat(np.where(np.isnan(nodes), np.inf, nodes), k, 0), k, 1)
+        depth = min(depth, levels_for_reach(float(bound.max())))
+    field = (matcher or _default_matcher()).match_dense(
+        ortho[0],
+        ortho[1],
+        settings=DenseSettings(
+            levels=depth,
+            guess=guess,
+            window=settings.window,
+            min_score=settings.min_score,
+            base=base,
+            search_px=bound,
+        ),
+    )
+    if settings.subpixel_steps:  # least-squares sub-pixel offsets along the base
+        field = refine_along_base(
+            ortho[0], ortho[1], field, settings.window, direction, settings.subpixel_steps
+        )
+    if bound is not None:
+        field = limit_along_base(field, bound, guess, direction)
+    return field
+
+
+def _node_offsets(
+    field: OffsetField, ortho: list[NDArray], k: int, shape: tuple[int, int]
+) -> tuple[FloatArray, FloatArray, NDArray[np.bool_]]:
+    """Per node of the window: the offsets (rows, columns) and whether both ortho-images
+    cover it."""
+    # node offsets: the mean of the valid offsets of the node's k x k ortho pixels
+    d_row = _block_mean(field.d_row, k, shape)
+    d_col = _block_mean(field.d_col, k, shape)
+    covered = np.isfinite(_block_mean(ortho[0], k, shape)) & np.isfinite(
+        _block_mean(ortho[1], k, shape)
+    )
+    return d_row, d_col, covered
+
+
+def _predicted_sigma(
+    ortho: list[NDArray],
+    field: OffsetField,
+    rays: RayField,
+    window: int,
+    direction: tuple[float, float],
+    w: _TileWindow,
+    variance_factor: float,
+) -> NDArray[np.float32]:
+    """Per node of the window, the predicted height standard deviation, m
+    (:func:`~carto.ior.height_precision.node_sigma_m`)."""
+    # the predicted precision: the matching's bound, checked across the base; local B/H
+    node_r, node_c = np.meshgrid(np.arange(w.shape[0]), np.arange(w.shape[1]), indexing="ij")
+    t = rays.at(node_r, node_c)
+    bh = np.hypot(t[0, 0] - t[1, 0], t[0, 1] - t[1, 1])
+    sigma, _ = node_sigma_m(
+        ortho[0],
+        ortho[1],
+        field,
+        window,
+        direction,
+        w.k,
+        w.ortho_grid.resolution[0],
+        bh,
+        variance_factor,
+    )
+    return sigma
 
 
 @attrs.frozen(eq=False)

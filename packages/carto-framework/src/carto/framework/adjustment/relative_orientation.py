@@ -104,6 +104,7 @@ from carto.framework.adjustment.pair_correction import (
     MIN_POINTS,
     MODES,
     SHIFT_SPACING_PX,
+    Fit,
     RelativeOrientationSettings,
     correction_px,
     estimate_correction,
@@ -118,7 +119,7 @@ from carto.framework.adjustment.pair_observations import (
     ties_to_observations,
 )
 from carto.framework.errors import InputError
-from carto.framework.geometry.line_correction import LineCorrected
+from carto.framework.geometry.line_correction import LineBasis, LineCorrected
 from carto.framework.geometry.sensor import Sensor
 
 FloatArray = NDArray[np.float64]
@@ -246,8 +247,6 @@ def relative_orientation(
     (ellipsoidal); ``gcps``: a control table of GCPs measured in both images (the datum);
     ``constant_dem``: the starting DEM is a constant height (the datum is then the models').
     """
-    from carto.framework.matching.tiepoints import automatic_tie_points
-
     names = tuple(sensors)
     if len(names) != 2:
         raise InputError(f"relative orientation needs two images, got {len(names)}")
@@ -257,20 +256,7 @@ def relative_orientation(
     if kind == "none":
         return RelativeOrientation(right, {**record, "applied": False})
     spacing = settings.tie_spacing_px if kind == "line" else SHIFT_SPACING_PX
-    table = automatic_tie_points(
-        {n: images[n] for n in names},
-        {n: sensors[n] for n in names},
-        dem,
-        candidates="grid",
-        spacing_px=spacing,
-        per_cell=1,
-        subpixel="lsm",
-        template=TIE_TEMPLATE_PX,
-        min_points=0,
-        require_closure=False,
-        engine=engine,
-        prepared=True,
-    )
+    table = _match_ties(images, sensors, dem, spacing, engine)
     platform = platform_of(left, right) if kind == "line" and settings.platform_jitter else None
     obs = ties_to_observations(table, names, left, right, dem, platform, TIE_TEMPLATE_PX)
     record["tie_points"] = int(obs.line.size)
@@ -291,13 +277,51 @@ def relative_orientation(
         left_corrected = with_platform_jitter(left, platform, fit.platform_hz, fit.platform_rad)
         right_jittered = with_platform_jitter(right, platform, fit.platform_hz, fit.platform_rad)
     corrected = LineCorrected(right_jittered, basis, fit.coefficients)
+    kept = obs.subset(keep)
+    record.update(_fit_record(obs, keep, basis, fit, _line_rate_hz(right)))
+    if progress is not None:
+        progress(_progress_message(names, kind, datum, kept, record, basis, fit))
+    return RelativeOrientation(corrected, record, left_corrected)
+
+
+def _match_ties(
+    images: Mapping[str, Any], sensors: Mapping[str, Sensor], dem: Any, spacing: float, engine: Any
+) -> Any:
+    """The tie points of the pair: a grid over the common area (every ``spacing`` ortho
+    pixels: ``tie_spacing_px`` for a line correction, :data:`SHIFT_SPACING_PX` for a
+    shift), one per cell, refined by least-squares matching."""
+    from carto.framework.matching.tiepoints import automatic_tie_points
+
+    names = tuple(sensors)
+    return automatic_tie_points(
+        {n: images[n] for n in names},
+        {n: sensors[n] for n in names},
+        dem,
+        candidates="grid",
+        spacing_px=spacing,
+        per_cell=1,
+        subpixel="lsm",
+        template=TIE_TEMPLATE_PX,
+        min_points=0,
+        require_closure=False,
+        engine=engine,
+        prepared=True,
+    )
+
+
+def _fit_record(
+    obs: Observations, keep: NDArray[np.bool_], basis: LineBasis, fit: Fit, rate: float | None
+) -> dict[str, Any]:
+    """What ``report.json`` says of an applied correction: the residuals of the points kept
+    before and after it, the noise and datum found, and the correction along the base
+    (pixels and what it does to heights) over every point; ``rate``: the right image's
+    lines per second (jitter frequencies in Hz), None when it is no line scanner."""
     b, _ = basis.design(obs.line)
     model = b @ fit.coefficients.T
     kept = obs.subset(keep)
     u, _, norm = base_axes(obs.parallax)
     along_shift = np.einsum("ij,ij->i", u, model)
-    rate = _line_rate_hz(right)
-    record.update(
+    return dict(
         applied=True,
         datum=fit.datum,
         rejected=int((~keep).sum()),
@@ -324,18 +348,29 @@ def relative_orientation(
         coefficients=np.round(fit.coefficients, 5).tolist(),
         platform_jitter=_platform_record(fit),
     )
-    if progress is not None:
-        progress(
-            f"relative orientation of {names[1]} to {names[0]} ({kind}, datum {datum}, "
-            f"{kept.line.size} points): across-base parallax "
-            f"{record['before']['median_across_base_px']:+.3f} -> "
-            f"{record['after']['median_across_base_px']:+.3f} px, along-base correction "
-            f"{record['correction_height_m']['min']:+.2f} .. "
-            f"{record['correction_height_m']['max']:+.2f} m"
-            + (
-                f", {len(basis.frequencies) + len(fit.platform_hz)} jitter frequencies"
-                if basis.frequencies or fit.platform_hz
-                else ""
-            )
+
+
+def _progress_message(
+    names: tuple[str, ...],
+    kind: str,
+    datum: str,
+    kept: Observations,
+    record: dict[str, Any],
+    basis: LineBasis,
+    fit: Fit,
+) -> str:
+    """The one line :func:`relative_orientation` reports: what was corrected to what, and
+    the across-base parallax and along-base correction it found."""
+    return (
+        f"relative orientation of {names[1]} to {names[0]} ({kind}, datum {datum}, "
+        f"{kept.line.size} points): across-base parallax "
+        f"{record['before']['median_across_base_px']:+.3f} -> "
+        f"{record['after']['median_across_base_px']:+.3f} px, along-base correction "
+        f"{record['correction_height_m']['min']:+.2f} .. "
+        f"{record['correction_height_m']['max']:+.2f} m"
+        + (
+            f", {len(basis.frequencies) + len(fit.platform_hz)} jitter frequencies"
+            if basis.frequencies or fit.platform_hz
+            else ""
         )
-    return RelativeOrientation(corrected, record, left_corrected)
+    )

@@ -27,6 +27,7 @@ from carto.framework.cli.dem_commands import add_dem, add_evaluate
 from carto.framework.cli.demo_command import add_demo
 from carto.framework.cli.geometry_commands import add_project_locate
 from carto.framework.cli.logging_setup import command_logging
+from carto.framework.cli.mosaic_command import add_mosaic
 from carto.framework.cli.plugins_command import add_plugins
 from carto.framework.cli.simulate_command import add_simulate
 from carto.framework.errors import CartoError, UsageError, interrupt_behind
@@ -91,6 +92,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_demo(sub)
     add_dem(sub)
     add_evaluate(sub)
+    add_mosaic(sub)
     return parser
 
 

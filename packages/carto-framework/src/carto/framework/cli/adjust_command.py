@@ -6,16 +6,15 @@ import argparse
 import math
 
 from carto.framework.cli.common import (
+    add_parallel_options,
     examples,
     finite_float,
     formatter,
     non_negative_int,
-    positive_int,
 )
 from carto.framework.cli.config_file import add_config_option
 from carto.framework.cli.logging_setup import add_logging_options
 from carto.framework.errors import UsageError
-from carto.framework.parallel.engine import default_workers
 
 
 # --------------------------------------------------------------------------- adjust
@@ -161,12 +160,27 @@ def add_adjust(sub: argparse._SubParsersAction) -> None:
         ),
         formatter_class=formatter,
     )
+    _add_input_options(p)
+    _add_adjuster_options(p)
+    _add_tie_options(p)
+    _add_component_options(p)
+    _add_run_options(p)
+    add_logging_options(p)
+    p.set_defaults(handler=cmd_adjust)
+
+
+def _add_input_options(p: argparse.ArgumentParser) -> None:
+    """The scene or configuration, the output folder, the GCPs."""
     p.add_argument("source", metavar="SCENE_OR_CONFIG", help="scene folder or JSON configuration")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
     add_config_option(p, "adjust")
     p.add_argument(
         "--gcps", type=non_negative_int, metavar="N", help="number of GCPs to use (default all)"
     )
+
+
+def _add_adjuster_options(p: argparse.ArgumentParser) -> None:
+    """The adjuster and the parameters it estimates."""
     p.add_argument("--adjuster", metavar="NAME", help="adjuster (carto plugins --kind adjuster)")
     p.add_argument(
         "--mode",
@@ -200,6 +214,11 @@ def add_adjust(sub: argparse._SubParsersAction) -> None:
         "image (Legendre 1..K over the image; adjusters that tie images on one trajectory; "
         "0: off; default: the adjuster's)",
     )
+
+
+def _add_tie_options(p: argparse.ArgumentParser) -> None:
+    """The observations besides the GCPs: tie points, DEM heights, calibrations, the GCP
+    transfer."""
     p.add_argument(
         "--ties",
         default="auto",
@@ -240,6 +259,10 @@ def add_adjust(sub: argparse._SubParsersAction) -> None:
         metavar="PX",
         help=_offset_sigma_help,
     )
+
+
+def _add_component_options(p: argparse.ArgumentParser) -> None:
+    """The components the product is read and matched with."""
     p.add_argument("--sensor", metavar="TYPE", help="sensor type of the product")
     p.add_argument(
         "--matcher",
@@ -253,20 +276,14 @@ def add_adjust(sub: argparse._SubParsersAction) -> None:
         help="trajectory model fitted to the ancillary data (default: the one the ancillary "
         "files name, polynomial; carto plugins --kind trajectory)",
     )
-    p.add_argument(
-        "--workers",
-        type=positive_int,
-        metavar="N",
-        help="tie-point tiles (and the stagger merge, the GCP transfer) processed in parallel "
-        f"by a local cluster of N worker processes (default: all cores, {default_workers()}; "
-        "1: in this process); images are read by windows, so memory does not grow with "
-        "the scene",
-    )
-    p.add_argument(
-        "--scheduler",
-        metavar="ADDRESS",
-        help="run the tiles on a running dask.distributed cluster (e.g. tcp://host:8786; "
-        "see docs/cluster.md); its workers must see the input and output folders",
+
+
+def _add_run_options(p: argparse.ArgumentParser) -> None:
+    """Where the work runs and how a poor result is treated."""
+    add_parallel_options(
+        p,
+        "tie-point tiles (and the stagger merge, the GCP transfer)",
+        "; images are read by windows, so memory does not grow with the scene",
     )
     p.add_argument("--no-robust", action="store_true", help="no outlier rejection")
     p.add_argument(
@@ -275,5 +292,3 @@ def add_adjust(sub: argparse._SubParsersAction) -> None:
         help="write the outputs of a poor adjustment (no tie point found, sigma0 > 5) with "
         "warnings, instead of failing",
     )
-    add_logging_options(p)
-    p.set_defaults(handler=cmd_adjust)

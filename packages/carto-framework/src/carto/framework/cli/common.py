@@ -40,6 +40,26 @@ positive_int = _integer_at_least(1)
 """An argparse ``type``: an integer >= 1 (sizes)."""
 
 
+def add_parallel_options(p: argparse.ArgumentParser, tasks: str, note: str = "") -> None:
+    """``--workers`` and ``--scheduler``: where a command's ``tasks`` run (a local cluster or
+    a running dask.distributed one); ``note`` ends the help of ``--workers``."""
+    from carto.framework.parallel.engine import default_workers
+
+    p.add_argument(
+        "--workers",
+        type=positive_int,
+        metavar="N",
+        help=f"{tasks} processed in parallel by a local cluster of N worker processes "
+        f"(default: all cores, {default_workers()}; 1: in this process){note}",
+    )
+    p.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="run the tiles on a running dask.distributed cluster (e.g. tcp://host:8786; "
+        "see docs/cluster.md); its workers must see the input and output folders",
+    )
+
+
 def finite_float(text: str) -> float:
     """An argparse ``type``: a finite number (``nan`` and ``inf`` are refused here; each
     option's range is checked by the settings it feeds)."""

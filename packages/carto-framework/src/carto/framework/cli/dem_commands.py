@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from carto.framework.cli.common import (
+    add_parallel_options,
     examples,
     finite_float,
     formatter,
@@ -19,7 +20,6 @@ from carto.framework.cli.common import (
 from carto.framework.cli.config_file import add_config_option
 from carto.framework.cli.logging_setup import add_logging_options
 from carto.framework.errors import InputError, UsageError
-from carto.framework.parallel.engine import default_workers
 
 
 # --------------------------------------------------------------------------- evaluate
@@ -207,6 +207,91 @@ def _add_coregister(p: argparse.ArgumentParser, default: str | None, when: str) 
 def cmd_dem(args: argparse.Namespace) -> int:
     from carto.framework.workflows.dem import StereoInputs, dem_product
 
+    options = _generator_options(args)
+    if _multiview(args):
+        return _cmd_multiview_dem(args, options)
+    if args.keep_pairs:
+        raise UsageError("--keep-pairs is for three or more images (--images, --pairs)")
+    report = dem_product(
+        args.out,
+        StereoInputs(
+            args.scene,
+            args.left,
+            args.right,
+            args.left_model,
+            args.right_model,
+            args.sensor,
+            args.models,
+            args.pair,
+        ),
+        **_dem_options(args, options),
+        resume=args.resume,
+    )
+    print(_dem_summary(report))
+    _print_dem_figures(report, args.out)
+    return 0
+
+
+def _multiview(args: argparse.Namespace) -> bool:
+    """Whether the run pairs and fuses three or more images (see
+    :mod:`carto.framework.workflows.multiview_dem`): ``--images``, ``--pairs``, or a scene
+    of three or more images without ``--pair``."""
+    if args.images is None and args.pairs is None:
+        if args.scene is None or args.pair is not None:
+            return False
+        from carto.framework.products.scene import Scene
+
+        scene = Path(args.scene)
+        if not (scene / "scene.json").is_file():
+            return False
+        return len(Scene.open(scene).image_names) >= 3
+    given = [
+        o
+        for o, v in (("--pair", args.pair), ("--left", args.left), ("--right", args.right))
+        if v is not None
+    ]
+    if given:
+        raise UsageError(f"--images/--pairs choose a scene's images: {', '.join(given)} excluded")
+    if args.scene is None:
+        raise UsageError("--images/--pairs choose images of a scene folder: give the scene")
+    if args.resume:
+        raise UsageError("--resume is for one pair; a multi-view run starts again")
+    return True
+
+
+def _cmd_multiview_dem(args: argparse.Namespace, options: dict[str, object]) -> int:
+    from carto.framework.workflows.multiview_dem import (
+        MultiViewRequest,
+        multiview_dem_product,
+        parse_pairs,
+    )
+
+    request = MultiViewRequest(
+        out_dir=args.out,
+        source=args.scene,
+        models=args.models,
+        sensor_type=args.sensor,
+        images=tuple(args.images) if args.images else None,
+        pairs=parse_pairs(args.pairs) if args.pairs else None,
+        keep_pairs=args.keep_pairs,
+    )
+    report = multiview_dem_product(request, **_dem_options(args, options))
+    for pair in report["pairs"]:
+        figures = (
+            f"NMAD {pair['nmad_m']:.2f} m against the reference"
+            if pair.get("nmad_m") is not None
+            else "done"
+        )
+        state = figures if pair["status"] == "done" else f"failed: {pair['error']}"
+        print(f"pair {pair['left']}/{pair['right']} (B/H {pair['b_over_h']:.2f}): {state}")
+    fusion = report["fusion"]
+    counts = ", ".join(f"{n} pair(s) {c}" for n, c in fusion["nodes_by_pairs"].items())
+    print(f"fused {fusion['nodes']} nodes ({counts}; filled {fusion['nodes_filled']})")
+    _print_dem_figures(report, args.out)
+    return 0
+
+
+def _generator_options(args: argparse.Namespace) -> dict[str, object]:
     options: dict[str, object] = {}
     for key, value in (
         ("posting_m", args.posting),
@@ -220,42 +305,35 @@ def cmd_dem(args: argparse.Namespace) -> int:
     ):
         if value is not None:
             options[key] = value
-    report = dem_product(
-        args.out,
-        StereoInputs(
-            args.scene,
-            args.left,
-            args.right,
-            args.left_model,
-            args.right_model,
-            args.sensor,
-            args.models,
-            args.pair,
-        ),
-        init_dem=args.init_dem,
-        geoid=args.geoid,
-        init_height_m=args.init_height,
-        generator=args.generator,
-        matcher=args.matcher,
-        reference=args.reference,
-        vertical=args.vertical,
-        options=options,
-        quiet=args.quiet,
-        allow_poor=args.allow_poor,
-        workers=args.workers,
-        scheduler=args.scheduler,
-        resume=args.resume,
-        relative_orientation=args.relative_orientation,
-        coregister=args.coregister,
-        coregister_accuracy_m=args.coregister_accuracy,
-    )
-    print(_dem_summary(report))
-    grid = report["dem_grid"]
-    step = f"{grid['posting_m']:g} m" if "posting_m" in grid else f"{grid['resolution_deg']:g} deg"
-    print(
-        f"DEM: {grid['shape'][1]} x {grid['shape'][0]} nodes at {step}, "
-        f"{grid['crs']}, heights above {report['vertical_reference']}"
-    )
+    return options
+
+
+def _dem_options(args: argparse.Namespace, options: dict[str, object]) -> dict[str, Any]:
+    """The options of :func:`~carto.framework.workflows.dem.dem_product` from the command
+    line (every pair of a multi-view run gets them)."""
+    return {
+        "init_dem": args.init_dem,
+        "geoid": args.geoid,
+        "init_height_m": args.init_height,
+        "generator": args.generator,
+        "matcher": args.matcher,
+        "reference": args.reference,
+        "vertical": args.vertical,
+        "options": options,
+        "quiet": args.quiet,
+        "allow_poor": args.allow_poor,
+        "workers": args.workers,
+        "scheduler": args.scheduler,
+        "relative_orientation": args.relative_orientation,
+        "coregister": args.coregister,
+        "coregister_accuracy_m": args.coregister_accuracy,
+    }
+
+
+def _print_dem_figures(report: dict[str, Any], out: str) -> None:
+    grid = report.get("dem_grid")
+    if grid is not None:
+        _print_grid(grid, report["vertical_reference"])
     acc = report.get("accuracy")
     if acc:
         print(
@@ -263,8 +341,15 @@ def cmd_dem(args: argparse.Namespace) -> int:
             f"NMAD {acc['nmad_m']:.2f} m, RMSE {acc['rmse_m']:.2f} m, LE90 {acc['le90_m']:.2f} "
             f"m, completeness {100 * acc['completeness']:.1f} %"
         )
-    print(f"outputs in {args.out}: {', '.join(report['files'].values())}, report.json")
-    return 0
+    print(f"outputs in {out}: {', '.join(report['files'].values())}, report.json")
+
+
+def _print_grid(grid: dict[str, Any], vertical: str) -> None:
+    step = f"{grid['posting_m']:g} m" if "posting_m" in grid else f"{grid['resolution_deg']:g} deg"
+    print(
+        f"DEM: {grid['shape'][1]} x {grid['shape'][0]} nodes at {step}, "
+        f"{grid['crs']}, heights above {vertical}"
+    )
 
 
 def _dem_summary(report: dict[str, Any]) -> str:
@@ -300,7 +385,12 @@ def add_dem(sub: argparse._SubParsersAction) -> None:
             "(points, uint16), quality_flags.tif (filled, uint8), matching.tif (score),\n"
             "matching_flags.tif (valid), dem_hillshade.png and report.json (one entry per\n"
             "iteration, completeness); with --reference, the accuracy against it and "
-            "dem_difference.png."
+            "dem_difference.png.\n\n"
+            "Three or more images (a scene of three or more without --pair, --images or "
+            "--pairs):\nevery pair with B/H >= 0.05 whose footprints overlap by 20 % or more "
+            "runs as above,\nthen one DEM is fused node by node (sigma-weighted, outliers "
+            "rejected; quality.tif:\nsigma_m, spread_m; quality_counts.tif: pairs) with "
+            "ortho_NAME.tif per image on it;\na pair that fails is reported and left out."
         ),
         epilog=examples(
             "carto dem scene1 --models adj1 --posting 10 --out dem1",
@@ -313,9 +403,22 @@ def add_dem(sub: argparse._SubParsersAction) -> None:
             "carto dem scene1 --models adj1 --out dem1 --resume   # after an interruption",
             "carto dem scene1 --models adj1 --relative-orientation none --out dem1",
             "carto dem scene1 --models adj0 --coregister lidar.tif --out dem1",
+            "carto dem triplet --models adj --out dem   # every pair of the triplet, fused",
+            "carto dem triplet --models adj --pairs fore:aft,nadir:aft --keep-pairs --out dem",
         ),
         formatter_class=formatter,
     )
+    _add_dem_inputs(p)
+    _add_dem_grid_options(p)
+    _add_dem_run_options(p)
+    _add_dem_method_options(p)
+    add_logging_options(p)
+    p.set_defaults(handler=cmd_dem)
+
+
+def _add_dem_inputs(p: argparse.ArgumentParser) -> None:
+    """The stereo pair (a scene or two images with their models), the output folder, the
+    starting surface and the vertical reference."""
     p.add_argument("scene", nargs="?", metavar="SCENE", help="scene folder (carto simulate)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
     add_config_option(p, "dem")
@@ -326,6 +429,16 @@ def add_dem(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--sensor", metavar="TYPE", help="sensor type of the models (e.g. rpc)")
     p.add_argument("--models", metavar="DIR", help="adjusted models (a carto adjust output)")
     p.add_argument("--pair", nargs=2, metavar=("LEFT", "RIGHT"), help="image names of a scene")
+    p.add_argument(
+        "--images",
+        nargs="+",
+        metavar="NAME",
+        help="a scene's images to pair and fuse (default: all of a scene of three or more)",
+    )
+    p.add_argument("--pairs", metavar="A:B,B:C", help="explicit pairs of a scene's images to fuse")
+    p.add_argument(
+        "--keep-pairs", action="store_true", help="keep each pair's DEM folder under pairs/"
+    )
     p.add_argument("--init-dem", metavar="FILE", help="starting DEM (GeoTIFF, SRTM .hgt)")
     p.add_argument(
         "--geoid",
@@ -341,6 +454,10 @@ def add_dem(sub: argparse._SubParsersAction) -> None:
         "--geoid; the file's compound CRS says which",
     )
     p.add_argument("--init-height", type=finite_float, metavar="M", help="constant starting height")
+
+
+def _add_dem_grid_options(p: argparse.ArgumentParser) -> None:
+    """The grids of the DEM and the ortho-images: posting, resolution, CRS, extent."""
     p.add_argument(
         "--posting",
         "--tr",
@@ -366,6 +483,11 @@ def add_dem(sub: argparse._SubParsersAction) -> None:
         "common footprint); grids are snapped to multiples of the posting, so runs share "
         "one grid",
     )
+
+
+def _add_dem_run_options(p: argparse.ArgumentParser) -> None:
+    """How the work is divided and where it runs: iterations, tiles, sub-pixel steps,
+    coarse-to-fine stages, workers, resuming."""
     p.add_argument("--max-iterations", type=positive_int, metavar="N", help="most DEM updates (6)")
     p.add_argument(
         "--tile-size",
@@ -388,25 +510,18 @@ def add_dem(sub: argparse._SubParsersAction) -> None:
         help="coarse-to-fine: first iterations on images and ortho-images reduced 2**N, ..., "
         "4, 2 times, then the final resolution (default 2; 0: all at the final resolution)",
     )
-    p.add_argument(
-        "--workers",
-        type=positive_int,
-        metavar="N",
-        help="tiles processed in parallel by a local cluster of N worker processes (default: "
-        f"all cores, {default_workers()}; 1: in this process)",
-    )
-    p.add_argument(
-        "--scheduler",
-        metavar="ADDRESS",
-        help="run the tiles on a running dask.distributed cluster (e.g. tcp://host:8786; "
-        "see docs/cluster.md); its workers must see the input and output folders",
-    )
+    add_parallel_options(p, "tiles")
     p.add_argument(
         "--resume",
         action="store_true",
         help="continue an interrupted or failed run into the same --out from its finished "
         "tiles (same inputs and options)",
     )
+
+
+def _add_dem_method_options(p: argparse.ArgumentParser) -> None:
+    """The generator, the matcher, the relative orientation and co-registration, the
+    reference DEM and whether a poor DEM is written."""
     p.add_argument(
         "--generator",
         metavar="NAME",
@@ -441,5 +556,3 @@ def add_dem(sub: argparse._SubParsersAction) -> None:
         help="write a DEM that matched almost nothing (< 5 %% of the nodes), or whose failed "
         "tiles have no heights, with a warning, instead of failing",
     )
-    add_logging_options(p)
-    p.set_defaults(handler=cmd_dem)

@@ -54,6 +54,21 @@ _PIXELS = (
 )
 
 
+def _add_model_and_points(p: argparse.ArgumentParser, points: str, columns: str) -> None:
+    """The arguments ``project`` and ``locate`` share: the model, the input point table (the
+    option ``points`` with the ``columns`` it holds), the output table and the sensor type."""
+    p.add_argument(
+        "model",
+        metavar="MODEL",
+        help="model file or product any sensor plugin opens (RPC GeoTIFF, _RPC.TXT ...)",
+    )
+    p.add_argument(points, required=True, metavar="IN.csv", help=columns)
+    p.add_argument("--out", required=True, metavar="OUT.csv", help="output CSV")
+    p.add_argument(
+        "--sensor", metavar="TYPE", help="sensor type (see `carto plugins --kind sensor`)"
+    )
+
+
 def add_project_locate(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "project",
@@ -66,16 +81,7 @@ def add_project_locate(sub: argparse._SubParsersAction) -> None:
         ),
         formatter_class=formatter,
     )
-    p.add_argument(
-        "model",
-        metavar="MODEL",
-        help="model file or product any sensor plugin opens (RPC GeoTIFF, _RPC.TXT ...)",
-    )
-    p.add_argument("--ground", required=True, metavar="IN.csv", help="lon_deg,lat_deg,h_m")
-    p.add_argument("--out", required=True, metavar="OUT.csv", help="output CSV")
-    p.add_argument(
-        "--sensor", metavar="TYPE", help="sensor type (see `carto plugins --kind sensor`)"
-    )
+    _add_model_and_points(p, "--ground", "lon_deg,lat_deg,h_m")
     p.set_defaults(handler=cmd_project)
 
     p = sub.add_parser(
@@ -90,14 +96,5 @@ def add_project_locate(sub: argparse._SubParsersAction) -> None:
         ),
         formatter_class=formatter,
     )
-    p.add_argument(
-        "model",
-        metavar="MODEL",
-        help="model file or product any sensor plugin opens (RPC GeoTIFF, _RPC.TXT ...)",
-    )
-    p.add_argument("--image", required=True, metavar="IN.csv", help="line,sample,h_m")
-    p.add_argument("--out", required=True, metavar="OUT.csv", help="output CSV")
-    p.add_argument(
-        "--sensor", metavar="TYPE", help="sensor type (see `carto plugins --kind sensor`)"
-    )
+    _add_model_and_points(p, "--image", "line,sample,h_m")
     p.set_defaults(handler=cmd_locate)

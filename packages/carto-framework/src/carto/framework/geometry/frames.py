@@ -126,6 +126,17 @@ J2000_JD = 2451545.0
 _J2000_UTC = np.datetime64("2000-01-01T12:00:00", "ns")
 
 
+def metres_per_radian(lat_deg: ArrayLike, h_m: ArrayLike) -> tuple[FloatArray, FloatArray]:
+    """Metres per radian of longitude and of latitude at geodetic points: the radius of the
+    parallel ``(N + h) cos(lat)`` and the meridian's ``M + h`` (WGS84 radii of curvature),
+    which turn local east and north displacements into angles."""
+    phi = np.radians(lat_deg)
+    root = np.sqrt(1.0 - WGS84_E2 * np.sin(phi) ** 2)
+    m_per_rad_lat = WGS84_A_M * (1.0 - WGS84_E2) / root**3 + h_m
+    m_per_rad_lon = (WGS84_A_M / root + h_m) * np.cos(phi)
+    return m_per_rad_lon, m_per_rad_lat
+
+
 def utc_to_j2000_s(utc: str) -> float:
     """ISO-8601 UTC time (``"2026-03-01T05:12:33.250Z"``) -> seconds since J2000 (no leap s)."""
     text = str(utc).strip().removesuffix("Z").removesuffix("+00:00")

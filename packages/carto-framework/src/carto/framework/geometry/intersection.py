@@ -45,11 +45,10 @@ from numpy.typing import ArrayLike, NDArray
 from carto.framework.arrays import as_float_arrays
 from carto.framework.errors import GeometryError, InputError
 from carto.framework.geometry.frames import (
-    WGS84_A_M,
-    WGS84_E2,
     ecef_to_geodetic,
     enu_basis,
     geodetic_to_ecef,
+    metres_per_radian,
 )
 from carto.framework.geometry.sensor import RAY_HEIGHTS_M, Sensor
 
@@ -280,17 +279,6 @@ def sensor_rays(
 
 
 # ----------------------------------------------------------------------------- sensors
-def _local_scales(
-    lon_deg: FloatArray, lat_deg: FloatArray, h_m: FloatArray
-) -> tuple[FloatArray, FloatArray]:
-    """Metres per radian of latitude and longitude (as in ``Sensor.ground_partials``)."""
-    phi = np.radians(lat_deg)
-    root = np.sqrt(1.0 - WGS84_E2 * np.sin(phi) ** 2)
-    m_per_rad_lat = WGS84_A_M * (1.0 - WGS84_E2) / root**3 + h_m
-    m_per_rad_lon = (WGS84_A_M / root + h_m) * np.cos(phi)
-    return m_per_rad_lon, m_per_rad_lat
-
-
 def common_ray_heights_m(sensors: Sequence[Sensor]) -> tuple[float, float]:
     """The heights all ``sensors`` trace lines of sight over (the narrowest of their
     :attr:`~carto.framework.geometry.sensor.Sensor.ray_heights_m`), or the default when they
@@ -338,6 +326,45 @@ def intersect_sensors(
         locations at the final height plus and minus 1 m: the tangents of curved lines of
         sight) to the final point.
     """
+    pts = _image_points(sensors, lines, samples, weights)
+    h_low, h_high = (float(v) for v in (h_range_m or common_ray_heights_m(sensors)))
+    if not h_low < h_high:
+        raise InputError(f"h_range_m {h_range_m} must be (low, high) with low < high")
+
+    # 1. straight rays through the ground locations at the two heights
+    first = _intersect_straight_rays(sensors, pts, (h_low, h_high), min_angle_rad, on_degenerate)
+    lon, lat, h = first.lon_deg.copy(), first.lat_deg.copy(), first.h_m.copy()
+    invalid = ~first.valid
+
+    # 2. Gauss-Newton in local east/north/up metres with the sensors' own projections
+    n_iter = _refine_points(sensors, pts, (lon, lat, h), invalid, iterations, tol_m)
+
+    _check_degenerate(invalid, on_degenerate, "solution")
+    lon, lat, h = (np.where(invalid, np.nan, v) for v in (lon, lat, h))
+
+    # 3. residuals: image space through each sensor; metres to the local lines of sight
+    return _sensor_result(sensors, pts, (lon, lat, h), invalid, n_iter)
+
+
+@attrs.frozen(eq=False)
+class _ImagePoints:
+    """The measurements of :func:`intersect_sensors`: ``(K, N)`` image coordinates (pixels)
+    and weights, the weight 0 where a point is not measured in an image."""
+
+    lines: FloatArray
+    samples: FloatArray
+    w: FloatArray
+
+    @property
+    def observed(self) -> FloatArray:
+        """``(K, N, 2)`` measured ``(line, sample)``."""
+        return np.stack([self.lines, self.samples], axis=-1)
+
+
+def _image_points(
+    sensors: Sequence[Sensor], lines: ArrayLike, samples: ArrayLike, weights: ArrayLike | None
+) -> _ImagePoints:
+    """Check the image coordinates against ``K = len(sensors)`` and weigh them."""
     k = len(sensors)
     lines_a = np.asarray(lines, dtype=np.float64)
     samples_a = np.asarray(samples, dtype=np.float64)
@@ -350,38 +377,69 @@ def intersect_sensors(
         )
     if k < 2:
         raise InputError(f"intersection needs at least 2 sensors, got {k}")
-    h_low, h_high = (float(v) for v in (h_range_m or common_ray_heights_m(sensors)))
-    if not h_low < h_high:
-        raise InputError(f"h_range_m {h_range_m} must be (low, high) with low < high")
     n = lines_a.shape[1]
     w = _ray_weights(weights, k, n)
     measured = np.isfinite(lines_a) & np.isfinite(samples_a)
-    w = np.where(measured, w, 0.0)
+    return _ImagePoints(lines_a, samples_a, np.where(measured, w, 0.0))
 
-    # 1. straight rays through the ground locations at the two heights
+
+def _sensors_rays(
+    sensors: Sequence[Sensor], pts: _ImagePoints, h_low_m: ArrayLike, h_high_m: ArrayLike
+) -> tuple[FloatArray, FloatArray]:
+    """``(K, N, 3)`` origins and unit directions (ECEF) of every sensor's line of sight
+    through its image points, from its ground locations at the two heights."""
+    k, n = pts.lines.shape
     origins = np.empty((k, n, 3))
     directions = np.empty((k, n, 3))
     for i, sensor in enumerate(sensors):
-        origins[i], directions[i] = sensor_rays(sensor, lines_a[i], samples_a[i], h_low, h_high)
-    first = intersect_rays(
-        origins, directions, w, min_angle_rad=min_angle_rad, on_degenerate=on_degenerate
-    )
-    lon, lat, h = first.lon_deg.copy(), first.lat_deg.copy(), first.h_m.copy()
-    invalid = ~first.valid
+        origins[i], directions[i] = sensor_rays(
+            sensor, pts.lines[i], pts.samples[i], h_low_m, h_high_m
+        )
+    return origins, directions
 
-    # 2. Gauss-Newton in local east/north/up metres with the sensors' own projections
+
+def _intersect_straight_rays(
+    sensors: Sequence[Sensor],
+    pts: _ImagePoints,
+    h_range_m: tuple[float, float],
+    min_angle_rad: float,
+    on_degenerate: OnDegenerate,
+) -> IntersectionResult:
+    """The first estimate: the straight rays through each sensor's ground locations at the
+    two heights of ``h_range_m``, intersected."""
+    origins, directions = _sensors_rays(sensors, pts, *h_range_m)
+    return intersect_rays(
+        origins, directions, pts.w, min_angle_rad=min_angle_rad, on_degenerate=on_degenerate
+    )
+
+
+def _refine_points(
+    sensors: Sequence[Sensor],
+    pts: _ImagePoints,
+    geodetic: tuple[FloatArray, FloatArray, FloatArray],
+    invalid: BoolArray,
+    iterations: int,
+    tol_m: float,
+) -> int:
+    """Gauss-Newton in local east/north/up metres with the sensors' own projections.
+
+    Updates the points ``geodetic`` (lon, lat degrees, h metres) in place and flags in
+    ``invalid`` those whose step failed; returns the number of iterations run."""
+    lon, lat, h = geodetic
     active = np.flatnonzero(~invalid)
-    observed = np.stack([lines_a, samples_a], axis=-1)  # (K, N, 2)
+    observed = pts.observed  # (K, N, 2)
     n_iter = 0
     for n_iter in range(1, iterations + 1):  # noqa: B007 - reported in the result
         if active.size == 0:
             break
         la, ph, hh = lon[active], lat[active], h[active]
-        normal, rhs = _normal_equations(sensors, (la, ph, hh), w[:, active], observed[:, active])
+        normal, rhs = _normal_equations(
+            sensors, (la, ph, hh), pts.w[:, active], observed[:, active]
+        )
         scale = np.trace(normal, axis1=1, axis2=2)
         singular = ~(np.linalg.eigvalsh(normal)[:, 0] > 1e-12 * scale) | ~np.isfinite(scale)
         step = _solve3(normal, rhs, singular)  # (M, 3) east, north, up metres
-        m_lon, m_lat = _local_scales(la, ph, hh)
+        m_lon, m_lat = metres_per_radian(ph, hh)
         lon[active] = la + np.degrees(step[:, 0] / m_lon)
         lat[active] = ph + np.degrees(step[:, 1] / m_lat)
         h[active] = hh + step[:, 2]
@@ -389,18 +447,27 @@ def intersect_sensors(
         invalid[active[failed]] = True
         moved = np.linalg.norm(step, axis=-1)
         active = active[~failed & (moved > tol_m)]
+    return n_iter
 
-    _check_degenerate(invalid, on_degenerate, "solution")
-    lon, lat, h = (np.where(invalid, np.nan, v) for v in (lon, lat, h))
 
-    # 3. residuals: image space through each sensor; metres to the local lines of sight
+def _sensor_result(
+    sensors: Sequence[Sensor],
+    pts: _ImagePoints,
+    geodetic: tuple[FloatArray, FloatArray, FloatArray],
+    invalid: BoolArray,
+    n_iter: int,
+) -> IntersectionResult:
+    """The result at the final points: image residuals through each sensor, and distances
+    (metres) to the local lines of sight (ground locations at the final height +- 1 m)."""
+    lon, lat, h = geodetic
+    k, n = pts.lines.shape
+    observed = pts.observed
     residuals_px = np.full((k, n, 2), np.nan)
-    local_o = np.empty((k, n, 3))
-    local_u = np.empty((k, n, 3))
     for i, sensor in enumerate(sensors):
         pred = np.stack(sensor.project(lon, lat, h)[:2], axis=-1)
-        residuals_px[i] = np.where(w[i, :, None] > 0, observed[i] - pred, np.nan)
-        local_o[i], local_u[i] = sensor_rays(sensor, lines_a[i], samples_a[i], h - 1.0, h + 1.0)
+        residuals_px[i] = np.where(pts.w[i, :, None] > 0, observed[i] - pred, np.nan)
+    local_o, local_u = _sensors_rays(sensors, pts, h - 1.0, h + 1.0)
+    w = pts.w
     rms_px = np.where(invalid, np.nan, _weighted_rms(np.linalg.norm(residuals_px, axis=-1), w))
     xyz = geodetic_to_ecef(lon, lat, h)
     usable = np.isfinite(local_o).all(-1) & np.isfinite(local_u).all(-1)

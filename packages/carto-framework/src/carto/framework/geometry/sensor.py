@@ -251,12 +251,9 @@ class Sensor(abc.ABC):
         tangent frame, well scaled for adjustment). Central differences of 1 m by default.
         """
         lon, lat, h = (a.ravel() for a in as_float_arrays(lon_deg, lat_deg, h_m))
-        from carto.framework.geometry.frames import WGS84_A_M, WGS84_E2
+        from carto.framework.geometry.frames import metres_per_radian
 
-        phi = np.radians(lat)
-        w = np.sqrt(1.0 - WGS84_E2 * np.sin(phi) ** 2)
-        m_per_rad_lat = WGS84_A_M * (1 - WGS84_E2) / w**3 + h
-        m_per_rad_lon = (WGS84_A_M / w + h) * np.cos(phi)
+        m_per_rad_lon, m_per_rad_lat = metres_per_radian(lat, h)
         steps = [
             (np.degrees(1.0 / m_per_rad_lon), 0.0, 0.0),
             (0.0, np.degrees(1.0 / m_per_rad_lat), 0.0),

@@ -172,43 +172,15 @@ class Trajectory:
         t_all = np.concatenate([ephemeris.dt_s, attitude.dt_s])
         t_mid = 0.5 * (t_all.min() + t_all.max())
         t_half = max(0.5 * (t_all.max() - t_all.min()), 1e-3)
+        span = _TimeSpan(float(t_mid), float(t_half))
 
-        # ephemeris in the inertial frame
-        if ephemeris.frame == "ecef":
-            p_eci, v_eci = frames.EarthOrientation.at(epoch_j2000_s).to_eci(
-                ephemeris.dt_s, ephemeris.position_m, ephemeris.velocity_m_s
-            )
-        else:
-            p_eci, v_eci = ephemeris.position_m, ephemeris.velocity_m_s
-        orbit_values = np.concatenate([p_eci, v_eci], axis=1)
-        if isinstance(interpolation, str):
-            points = order if interpolation == "polynomial" else lagrange_points
-            orbit: TimeSeries = BuiltinSeries.fit(
-                ephemeris.dt_s, orbit_values, interpolation, points, t_mid, t_half
-            )
-        else:
-            orbit = interpolation.fit_series(
-                ephemeris.dt_s, orbit_values, role="orbit", t_mid_s=t_mid, t_half_s=t_half
-            )
+        orbit_values = _inertial_orbit(epoch_j2000_s, ephemeris)
+        points = order if interpolation == "polynomial" else lagrange_points
+        orbit = _fit_series(interpolation, ephemeris.dt_s, orbit_values, "orbit", points, span)
 
-        # attitude as three angles
-        r_att = frames.quat_to_matrix(attitude.quaternion_wxyz)
-        if attitude.frame == "orbit":
-            r_ref = np.eye(3)
-            angles = np.stack(frames.matrix_to_rpy(r_att), axis=-1)
-        else:
-            r_ref = r_att[attitude.dt_s.shape[0] // 2]
-            angles = frames.matrix_to_rotvec(r_ref.T @ r_att)
-        angles = np.unwrap(angles, axis=0)
-        if isinstance(interpolation, str):
-            att_points = min(order, 3) if interpolation == "polynomial" else min(lagrange_points, 4)
-            ang: TimeSeries = BuiltinSeries.fit(
-                attitude.dt_s, angles, interpolation, att_points, t_mid, t_half
-            )
-        else:
-            ang = interpolation.fit_series(
-                attitude.dt_s, angles, role="attitude", t_mid_s=t_mid, t_half_s=t_half
-            )
+        angles, r_ref = _attitude_angles(attitude)
+        att_points = min(order, 3) if interpolation == "polynomial" else min(lagrange_points, 4)
+        ang = _fit_series(interpolation, attitude.dt_s, angles, "attitude", att_points, span)
 
         report = FitReport(
             ("x_m", "y_m", "z_m", "vx_m_s", "vy_m_s", "vz_m_s", "a1_rad", "a2_rad", "a3_rad"),
@@ -494,6 +466,57 @@ class Trajectory:
             raise InputError(f"trajectory: missing field {exc.args[0]!r}") from None
         except (TypeError, ValueError) as exc:
             raise InputError(f"trajectory: invalid value: {exc}") from None
+
+
+@attrs.frozen
+class _TimeSpan:
+    """The normalisation of time over the samples: ``tau = (dt_s - t_mid_s) / t_half_s``."""
+
+    t_mid_s: float
+    t_half_s: float
+
+
+def _inertial_orbit(epoch_j2000_s: float, ephemeris: EphemerisSamples) -> FloatArray:
+    """The ephemeris samples in the inertial frame: ``(N, 6)`` position (m), velocity (m/s)."""
+    if ephemeris.frame == "ecef":
+        p_eci, v_eci = frames.EarthOrientation.at(epoch_j2000_s).to_eci(
+            ephemeris.dt_s, ephemeris.position_m, ephemeris.velocity_m_s
+        )
+    else:
+        p_eci, v_eci = ephemeris.position_m, ephemeris.velocity_m_s
+    return np.concatenate([p_eci, v_eci], axis=1)
+
+
+def _attitude_angles(attitude: AttitudeSamples) -> tuple[FloatArray, FloatArray]:
+    """The attitude as three unwrapped angles per sample and their reference rotation:
+    roll, pitch, yaw for an orbit-frame attitude (reference: identity), else the rotation
+    vector with respect to the middle sample's rotation."""
+    r_att = frames.quat_to_matrix(attitude.quaternion_wxyz)
+    if attitude.frame == "orbit":
+        r_ref = np.eye(3)
+        angles = np.stack(frames.matrix_to_rpy(r_att), axis=-1)
+    else:
+        r_ref = r_att[attitude.dt_s.shape[0] // 2]
+        angles = frames.matrix_to_rotvec(r_ref.T @ r_att)
+    return np.unwrap(angles, axis=0), r_ref
+
+
+def _fit_series(
+    interpolation: Interpolation | SeriesModel,
+    dt_s: FloatArray,
+    values: FloatArray,
+    role: str,
+    points: int,
+    span: _TimeSpan,
+) -> TimeSeries:
+    """One component group (``role``: ``"orbit"`` or ``"attitude"``) fitted or interpolated:
+    a built-in series of ``points`` (polynomial order or Lagrange samples), or the trajectory
+    model's own ``fit_series``."""
+    if isinstance(interpolation, str):
+        return BuiltinSeries.fit(dt_s, values, interpolation, points, span.t_mid_s, span.t_half_s)
+    return interpolation.fit_series(
+        dt_s, values, role=role, t_mid_s=span.t_mid_s, t_half_s=span.t_half_s
+    )
 
 
 def _correction_parameters(

@@ -617,11 +617,7 @@ def write_ortho(
     Raises:
         InputError: data of the wrong shape or dtype, bad vertical reference, unwritable path.
     """
-    from rasterio.crs import CRS as RioCRS
-    from rasterio.windows import Window
-
     from carto.framework.raster.cog import cog_writer
-    from carto.framework.raster.tiled_layer import layer_window
 
     if not isinstance(grid, OrthoGrid):
         raise InputError(f"write_ortho: grid must be an OrthoGrid, got {type(grid).__name__}")
@@ -634,51 +630,81 @@ def write_ortho(
     dtype = np.result_type(*[b.dtype for b in bands])
     convert = None
     if out_dtype is not None and np.dtype(out_dtype) != dtype:
-        target = np.dtype(out_dtype)
-        if not np.issubdtype(target, np.integer) and not np.issubdtype(target, np.floating):
-            raise InputError(f"write_ortho: out_dtype {target} cannot be written")
-        if np.issubdtype(target, np.integer) and nodata is None:
-            nodata = 0
-        convert, dtype = _converter(target, nodata), target
+        dtype, convert, nodata = _conversion(np.dtype(out_dtype), nodata)
     if band_descriptions is not None and len(band_descriptions) != len(bands):
         raise InputError(
             f"write_ortho: {len(band_descriptions)} band descriptions for {len(bands)} bands"
         )
+    dtype, nodata = _written_dtype(dtype, nodata)
+    all_tags = {"AREA_OR_POINT": "Area", **{str(k): str(v) for k, v in (tags or {}).items()}}
+    profile = _profile(grid, len(bands), dtype, nodata)
+    path = Path(path)
+    with cog_writer(
+        path, profile, overview_resampling=overview_resampling, what="ortho", vertical=vertical
+    ) as dst:
+        _write_rows(dst, bands, grid.shape, dtype, convert)
+        dst.update_tags(**all_tags)
+        _describe_bands(dst, band_descriptions, band_units)
+    return path
+
+
+def _conversion(target: np.dtype, nodata: float | None) -> tuple[np.dtype, Any, float | None]:
+    """``(dtype, converter, nodata)`` of data written in ``out_dtype`` ``target``
+    (:func:`_converter`; an integer dtype's nodata defaults to 0), refused unless numeric."""
+    if not np.issubdtype(target, np.integer) and not np.issubdtype(target, np.floating):
+        raise InputError(f"write_ortho: out_dtype {target} cannot be written")
+    if np.issubdtype(target, np.integer) and nodata is None:
+        nodata = 0
+    return target, _converter(target, nodata), nodata
+
+
+def _written_dtype(dtype: np.dtype, nodata: float | None) -> tuple[np.dtype, float | None]:
+    """The dtype the GeoTIFF holds (float16 as float32; refused unless integer or float) and
+    its nodata (NaN for float data unless given)."""
     if dtype == np.float16:
         dtype = np.dtype(np.float32)
     if not (np.issubdtype(dtype, np.integer) or np.issubdtype(dtype, np.floating)):
         raise InputError(f"write_ortho: dtype {dtype} cannot be written")
-    is_float = np.issubdtype(dtype, np.floating)
-    if nodata is None and is_float:
+    if nodata is None and np.issubdtype(dtype, np.floating):
         nodata = float("nan")
-    all_tags = {"AREA_OR_POINT": "Area"}
-    for key, value in (tags or {}).items():
-        all_tags[str(key)] = str(value)
+    return dtype, nodata
+
+
+def _profile(grid: OrthoGrid, count: int, dtype: np.dtype, nodata: float | None) -> dict[str, Any]:
+    """The rasterio profile of ``count`` bands of ``dtype`` on ``grid`` (nodata when given)."""
+    from rasterio.crs import CRS as RioCRS
+
     rows, cols = grid.shape
     profile: dict[str, Any] = {
         "height": rows,
         "width": cols,
-        "count": len(bands),
+        "count": count,
         "dtype": dtype,
         "crs": RioCRS.from_wkt(grid.crs.to_wkt()),
         "transform": grid.transform,
     }
     if nodata is not None:
         profile["nodata"] = nodata
-    path = Path(path)
-    with cog_writer(
-        path, profile, overview_resampling=overview_resampling, what="ortho", vertical=vertical
-    ) as dst:
-        # by blocks of rows: tiled layers are read window by window, never whole
-        for r0 in range(0, rows, _WRITE_ROWS):
-            window = Window(0, r0, cols, min(_WRITE_ROWS, rows - r0))
-            for k, band in enumerate(bands, 1):
-                block = layer_window(band, slice(r0, r0 + window.height), slice(0, cols))
-                block = convert(block) if convert is not None else np.asarray(block, dtype)
-                dst.write(block, k, window=window)
-        dst.update_tags(**all_tags)
-        _describe_bands(dst, band_descriptions, band_units)
-    return path
+    return profile
+
+
+def _write_rows(
+    dst: Any, bands: list[Any], shape: tuple[int, int], dtype: np.dtype, convert: Any
+) -> None:
+    """The bands of ``shape`` written by blocks of :data:`_WRITE_ROWS` rows, as ``dtype`` or
+    by ``convert`` (:func:`_converter`) when given."""
+    from rasterio.windows import Window
+
+    from carto.framework.raster.tiled_layer import layer_window
+
+    rows, cols = shape
+    # by blocks of rows: tiled layers are read window by window, never whole
+    for r0 in range(0, rows, _WRITE_ROWS):
+        window = Window(0, r0, cols, min(_WRITE_ROWS, rows - r0))
+        for k, band in enumerate(bands, 1):
+            block = layer_window(band, slice(r0, r0 + window.height), slice(0, cols))
+            block = convert(block) if convert is not None else np.asarray(block, dtype)
+            dst.write(block, k, window=window)
 
 
 def _describe_bands(

@@ -70,6 +70,18 @@ def _finite_at(image: NDArray[np.float32], points: NDArray[np.float64]) -> NDArr
     return np.isfinite(image[index[:, 0], index[:, 1]])
 
 
+def _checked(image: ArrayLike, method: str, spacing_px: float) -> tuple[NDArray, float]:
+    """The image (:func:`~carto.framework.matching.inputs.as_image`) and the spacing, refused
+    unless the method is one of :data:`CANDIDATE_METHODS` and the spacing at least 4 px."""
+    img = as_image(image, "image")
+    if method not in CANDIDATE_METHODS:
+        raise InputError(f"candidates {method!r} is not one of {', '.join(CANDIDATE_METHODS)}")
+    spacing = float(spacing_px)
+    if not spacing >= 4.0:
+        raise InputError(f"spacing_px must be >= 4 pixels, got {spacing_px}")
+    return img, spacing
+
+
 def candidate_points(
     image: ArrayLike,
     spacing_px: float = 40.0,
@@ -92,12 +104,7 @@ def candidate_points(
     :func:`grid_points` every ``spacing_px`` with a margin of two thirds of it, where the pixel
     holds data.
     """
-    img = as_image(image, "image")
-    if method not in CANDIDATE_METHODS:
-        raise InputError(f"candidates {method!r} is not one of {', '.join(CANDIDATE_METHODS)}")
-    spacing = float(spacing_px)
-    if not spacing >= 4.0:
-        raise InputError(f"spacing_px must be >= 4 pixels, got {spacing_px}")
+    img, spacing = _checked(image, method, spacing_px)
     if method == "grid":
         points = grid_points(img.shape, spacing, margin=2 * spacing / 3)
         return points[_finite_at(img, points)]
@@ -132,6 +139,19 @@ def frame_cells(
     return out
 
 
+def in_cell_range(
+    points: NDArray[np.float64],
+    frame_shape: tuple[int, int],
+    cells: tuple[int, int],
+    cell_range: tuple[tuple[int, int], tuple[int, int]],
+) -> NDArray[np.bool_]:
+    """True for the points (frame pixels) whose cell (:func:`frame_cells`) is in
+    ``cell_range = ((row0, row1), (col0, col1))``: the points a tile owns."""
+    cell = frame_cells(points, frame_shape, cells)
+    (r0, r1), (c0, c1) = cell_range
+    return (cell[:, 0] >= r0) & (cell[:, 0] < r1) & (cell[:, 1] >= c0) & (cell[:, 1] < c1)
+
+
 def window_candidates(
     image: ArrayLike,
     spacing_px: float,
@@ -153,20 +173,11 @@ def window_candidates(
     The window must reach beyond those cells by the operator's border (``window + 2``) for
     the result to equal :func:`candidate_points` on the whole frame; the Forstner weight
     quantile is the window's. Positions in the window's pixels (first pixel centre 0.5)."""
-    img = as_image(image, "image")
-    if method not in CANDIDATE_METHODS:
-        raise InputError(f"candidates {method!r} is not one of {', '.join(CANDIDATE_METHODS)}")
-    spacing = float(spacing_px)
-    if not spacing >= 4.0:
-        raise InputError(f"spacing_px must be >= 4 pixels, got {spacing_px}")
+    img, spacing = _checked(image, method, spacing_px)
     frame = (int(frame_shape[0]), int(frame_shape[1]))
     cells = candidate_cells(frame, spacing)
     off = np.asarray(offset, np.float64)
     (r0, r1), (c0, c1) = cell_range
-
-    def owned(points: NDArray[np.float64]) -> NDArray[np.bool_]:
-        cell = frame_cells(points, frame, cells)
-        return (cell[:, 0] >= r0) & (cell[:, 0] < r1) & (cell[:, 1] >= c0) & (cell[:, 1] < c1)
 
     def in_window(local: NDArray[np.float64]) -> NDArray[np.bool_]:
         ok = (local >= 0.5).all(axis=1)
@@ -175,14 +186,14 @@ def window_candidates(
 
     if method == "grid":
         points = grid_points(frame, spacing, margin=2 * spacing / 3)
-        points = points[owned(points)] - off
+        points = points[in_cell_range(points, frame, cells, cell_range)] - off
         points = points[in_window(points)]
         return points[_finite_at(img, points)]
     found = forstner_points(  # all points, best first
         img, window=window, min_roundness=min_roundness, weight_quantile=weight_quantile
     )
     glob = found + off
-    mine = owned(glob)
+    mine = in_cell_range(glob, frame, cells, cell_range)
     glob = glob[mine]
     order = spread_order(glob, -np.arange(glob.shape[0], dtype=np.float64), frame, cells, per_cell)
     points = glob[order]

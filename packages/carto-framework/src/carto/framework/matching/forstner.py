@@ -291,9 +291,56 @@ def forstner_points(
     Raises:
         InputError: malformed image or options.
     """
-    import cv2
-
     img = as_image(image, "image")
+    options = _forstner_options(
+        window,
+        min_roundness,
+        weight_quantile,
+        min_weight,
+        nms_radius,
+        max_points,
+        grid_cells,
+        per_cell,
+        subpixel,
+    )
+    t = _structure_tensor(img, options.window)
+    w, q = _weight_roundness(t)
+    rows, cols = _peak_pixels(t, w, q, options)
+    if rows.size == 0:
+        return np.empty((0, 2))
+    points = _peak_index(t, w, rows, cols, options) + 0.5
+    return points[_kept_order(points, w[rows, cols].astype(np.float64), w.shape, options)]
+
+
+@attrs.frozen
+class _ForstnerOptions:
+    """The checked options of :func:`forstner_points` (see there); ``radius_px`` is the
+    non-maximum suppression's radius, ``cells`` and ``per_cell`` as :func:`_cells` gives
+    them."""
+
+    window: int
+    min_roundness: float
+    weight_quantile: float
+    min_weight: float
+    radius_px: float
+    max_points: int | None
+    cells: tuple[int, ...] | None
+    per_cell: int | None
+    subpixel: str
+
+
+def _forstner_options(
+    window: Any,
+    min_roundness: float,
+    weight_quantile: float,
+    min_weight: float,
+    nms_radius: float | None,
+    max_points: int | None,
+    grid_cells: tuple[int, int] | None,
+    per_cell: int | None,
+    subpixel: str,
+) -> _ForstnerOptions:
+    """The options of :func:`forstner_points` checked, or InputError."""
     window = _check_window(window)
     if not 0.0 <= float(min_roundness) < 1.0:
         raise InputError(f"min_roundness must be within [0, 1), got {min_roundness}")
@@ -309,37 +356,78 @@ def forstner_points(
     if subpixel not in FORSTNER_SUBPIXEL:
         raise InputError(f"subpixel {subpixel!r} is not one of {', '.join(FORSTNER_SUBPIXEL)}")
     cells, per_cell = _cells(grid_cells, per_cell, max_points)
-    t = _structure_tensor(img, window)
-    w, q = _weight_roundness(t)
-    empty = np.empty((0, 2))
+    return _ForstnerOptions(
+        window,
+        float(min_roundness),
+        float(weight_quantile),
+        float(min_weight),
+        radius,
+        max_points,
+        cells,
+        per_cell,
+        subpixel,
+    )
+
+
+def _peak_pixels(
+    t: _StructureTensor,
+    w: NDArray[np.float32],
+    q: NDArray[np.float32],
+    options: _ForstnerOptions,
+) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """``(rows, cols)`` of the candidate pixels (roundness and weight above the thresholds)
+    whose weight is the largest within the suppression radius; none where no window is
+    valid."""
+    import cv2
+
+    none = np.empty(0, np.intp)
     if not t.valid.any():
-        return empty
-    threshold = max(float(np.quantile(w[t.valid], float(weight_quantile))), float(min_weight))
-    candidate = t.valid & (q > float(min_roundness)) & (w > threshold)
+        return none, none
+    quantile = float(np.quantile(w[t.valid], options.weight_quantile))
+    threshold = max(quantile, options.min_weight)
+    candidate = t.valid & (q > options.min_roundness) & (w > threshold)
     if not candidate.any():
-        return empty
-    n_rows, n_cols = w.shape
+        return none, none
     # exact ties (plateaus of a synthetic image) broken by a fixed pseudo-random order
     flat = np.flatnonzero(candidate)
     ranked = np.zeros(w.shape, np.float32)
     ranked.ravel()[flat] = w.ravel()[flat] * (1.0 + 1e-5 * ((flat * _GOLDEN) % 1.0))
-    peak = candidate & (ranked >= cv2.dilate(ranked, _disk(radius)))
-    rows, cols = np.nonzero(peak)
-    weight = w[rows, cols].astype(np.float64)
-    if subpixel == "lsq":
-        index = _lsq_corners(t, rows, cols, window)
-    elif subpixel == "parabola":
-        index = _parabola_peaks(w, rows, cols)
-    else:
-        index = np.stack([rows, cols], axis=1).astype(np.float64)
-    points = index + 0.5
-    if cells is not None:
-        order = spread_order(points, weight, (n_rows, n_cols), cells, per_cell)
+    peak = candidate & (ranked >= cv2.dilate(ranked, _disk(options.radius_px)))
+    return np.nonzero(peak)
+
+
+def _peak_index(
+    t: _StructureTensor,
+    w: NDArray[np.float32],
+    rows: NDArray[np.intp],
+    cols: NDArray[np.intp],
+    options: _ForstnerOptions,
+) -> NDArray[np.float64]:
+    """The sub-pixel location of each peak pixel by the ``subpixel`` method of
+    :func:`forstner_points`, 0-based index coordinates."""
+    if options.subpixel == "lsq":
+        return _lsq_corners(t, rows, cols, options.window)
+    if options.subpixel == "parabola":
+        return _parabola_peaks(w, rows, cols)
+    return np.stack([rows, cols], axis=1).astype(np.float64)
+
+
+def _kept_order(
+    points: NDArray[np.float64],
+    weight: NDArray[np.float64],
+    shape: tuple[int, int],
+    options: _ForstnerOptions,
+) -> NDArray[np.intp]:
+    """Indices of the points :func:`forstner_points` returns, in its order: by decreasing
+    weight (round-robin over the cells with ``grid_cells``, :func:`spread_order`), at most
+    ``max_points``."""
+    if options.cells is not None:
+        order = spread_order(points, weight, shape, options.cells, options.per_cell)
     else:
         order = np.argsort(-weight, kind="stable")
-    if max_points is not None:
-        order = order[:max_points]
-    return points[order]
+    if options.max_points is not None:
+        order = order[: options.max_points]
+    return order
 
 
 def _cells(

@@ -197,13 +197,145 @@ def _keys_kernel(f: float, out: np.ndarray, deriv: np.ndarray) -> None:  # pragm
     deriv[3] = (1.5 * f - 1.0) * f
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _keys_sample(right, pr, pc, wr, dwr, wc, dwc):  # pragma: no cover
+    """``right`` at the 0-based index position ``(pr, pc)`` by Keys cubic convolution (16
+    taps; the caller keeps them inside the image) and its derivatives along rows and columns:
+    ``(value, d value / d pr, d value / d pc)``. ``wr``, ``dwr``, ``wc``, ``dwc``: work arrays
+    of 4 (the taps' weights and their derivatives)."""
+    ir, ic = int(np.floor(pr)), int(np.floor(pc))
+    _keys_kernel(pr - ir, wr, dwr)
+    _keys_kernel(pc - ic, wc, dwc)
+    val = 0.0
+    g_r = 0.0
+    g_c = 0.0
+    for u in range(4):
+        along = 0.0
+        along_d = 0.0
+        for v in range(4):
+            x = right[ir - 1 + u, ic - 1 + v]
+            along += wc[v] * x
+            along_d += dwc[v] * x
+        val += wr[u] * along
+        g_r += dwr[u] * along
+        g_c += wr[u] * along_d
+    return val, g_r, g_c
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _normal_equations(
+    left, right, r0, c0, p, t, wr, dwr, wc, dwc, jac, normal, rhs
+):  # pragma: no cover
+    """The Gauss-Newton normal equations of one template (top-left 0-based index ``(r0, c0)``
+    in ``left``) at the parameters ``p`` (d_r, d_c, a_rr, a_rc, a_cr, a_cc, gain, bias): the
+    upper triangle of ``normal`` (8 x 8) and ``rhs`` (8), overwritten. False, leaving them
+    incomplete, where a resampled position leaves the image (one pixel of margin, two on the
+    far sides: the 16 taps) or the resampled value is not finite. ``jac``: a work array of 8;
+    the others as :func:`_keys_sample`."""
+    h, w = right.shape
+    half = t // 2
+    c_r, c_c = float(r0 + half), float(c0 + half)
+    normal[:] = 0.0
+    rhs[:] = 0.0
+    for i in range(t):
+        x_r = float(i - half)
+        for j in range(t):
+            x_c = float(j - half)
+            pr = c_r + p[0] + (1.0 + p[2]) * x_r + p[3] * x_c
+            pc = c_c + p[1] + p[4] * x_r + (1.0 + p[5]) * x_c
+            if not (pr >= 1.0 and pr < h - 2.0 and pc >= 1.0 and pc < w - 2.0):
+                return False
+            val, g_r, g_c = _keys_sample(right, pr, pc, wr, dwr, wc, dwc)
+            if not np.isfinite(val):
+                return False
+            gain = p[6]
+            jac[0] = gain * g_r
+            jac[1] = gain * g_c
+            jac[2] = gain * g_r * x_r
+            jac[3] = gain * g_r * x_c
+            jac[4] = gain * g_c * x_r
+            jac[5] = gain * g_c * x_c
+            jac[6] = val
+            jac[7] = 1.0
+            resid = left[r0 + i, c0 + j] - gain * val - p[7]
+            for a in range(8):
+                rhs[a] += jac[a] * resid
+                for b in range(a, 8):
+                    normal[a, b] += jac[a] * jac[b]
+    return True
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _solve_normal(normal, rhs, scale, chol, step):  # pragma: no cover
+    """The Gauss-Newton step of :func:`_normal_equations` into ``step``: a Cholesky solve of
+    the Jacobi-scaled normal equations, damped by 1e-6 of their diagonal. False where the
+    system is singular (a diagonal element not positive, a pivot below 1e-12). ``scale`` (8)
+    and ``chol`` (8 x 8): work arrays."""
+    ok = True
+    for a in range(8):
+        if not normal[a, a] > 0.0:
+            ok = False
+        else:
+            scale[a] = 1.0 / np.sqrt(normal[a, a] * (1.0 + 1e-6))
+    if not ok:
+        return False
+    for a in range(8):
+        for b in range(a, 8):
+            value = normal[a, b] * scale[a] * scale[b]
+            for m in range(a):
+                value -= chol[m, a] * chol[m, b]
+            if a == b:
+                if value <= 1e-12:
+                    return False
+                chol[a, a] = np.sqrt(value)
+            else:
+                chol[a, b] = value / chol[a, a]
+    for a in range(8):  # forward: chol^T y = scaled rhs
+        value = rhs[a] * scale[a]
+        for m in range(a):
+            value -= chol[m, a] * step[m]
+        step[a] = value / chol[a, a]
+    for a in range(7, -1, -1):  # back: chol x = y
+        value = step[a]
+        for m in range(a + 1, 8):
+            value -= chol[a, m] * step[m]
+        step[a] = value / chol[a, a]
+    for a in range(8):
+        step[a] *= scale[a]
+    return True
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _converged(step, rel_r, rel_c, half):  # pragma: no cover
+    """Whether a step moved the point (``(rel_r, rel_c)`` from the template centre) by less
+    than 0.001 px and the template corners (``half`` from the centre) by less than 0.01 px."""
+    moved_r = step[0] + step[2] * rel_r + step[3] * rel_c
+    moved_c = step[1] + step[4] * rel_r + step[5] * rel_c
+    corner = max(abs(step[2]), abs(step[3]), abs(step[4]), abs(step[5])) * half
+    return np.hypot(moved_r, moved_c) < 1e-3 and corner < 1e-2
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _plausible(p, start_r, start_c):  # pragma: no cover
+    """Whether the final parameters ``p`` are a valid estimate: ``|A|`` entries within 0.6, a
+    positive gain, a shift within 2 pixels of the start ``(start_r, start_c)``, all finite."""
+    a_max = max(abs(p[2]), abs(p[3]), abs(p[4]), abs(p[5]))
+    ok = a_max <= 0.6 and p[6] > 0.0
+    ok = ok and abs(p[0] - start_r) <= 2.0 and abs(p[1] - start_c) <= 2.0
+    for a in range(8):
+        ok = ok and np.isfinite(p[a])
+    return ok
+
+
 @numba.njit(parallel=True, cache=True, nogil=True)
-def _lsm_affine_kernel(  # noqa: C901, PLR0915 (issue 32: to split)
+def _lsm_affine_kernel(
     left, right, t0, offset, points, t, iterations, result, good
 ):  # pragma: no cover
     """The Gauss-Newton iterations of :func:`lsm_affine_refine`, one point per thread:
-    ``result[k]`` the offset at point ``k``, ``good[k]`` whether it is valid."""
-    h, w = right.shape
+    ``result[k]`` the offset at point ``k``, ``good[k]`` whether it is valid. Each iteration
+    builds the normal equations (:func:`_normal_equations`), solves them
+    (:func:`_solve_normal`) and stops when the step is small (:func:`_converged`); the
+    estimate is then checked (:func:`_plausible`)."""
     half = t // 2
     for k in numba.prange(t0.shape[0]):
         wr = np.empty(4)
@@ -222,101 +354,17 @@ def _lsm_affine_kernel(  # noqa: C901, PLR0915 (issue 32: to split)
         rel_r, rel_c = points[k, 0] - 0.5 - c_r, points[k, 1] - 0.5 - c_c
         ok = True
         for _ in range(iterations):
-            normal[:] = 0.0
-            rhs[:] = 0.0
-            for i in range(t):
-                x_r = float(i - half)
-                for j in range(t):
-                    x_c = float(j - half)
-                    pr = c_r + p[0] + (1.0 + p[2]) * x_r + p[3] * x_c
-                    pc = c_c + p[1] + p[4] * x_r + (1.0 + p[5]) * x_c
-                    if not (pr >= 1.0 and pr < h - 2.0 and pc >= 1.0 and pc < w - 2.0):
-                        ok = False
-                        break
-                    ir, ic = int(np.floor(pr)), int(np.floor(pc))
-                    _keys_kernel(pr - ir, wr, dwr)
-                    _keys_kernel(pc - ic, wc, dwc)
-                    val = 0.0
-                    g_r = 0.0
-                    g_c = 0.0
-                    for u in range(4):
-                        along = 0.0
-                        along_d = 0.0
-                        for v in range(4):
-                            x = right[ir - 1 + u, ic - 1 + v]
-                            along += wc[v] * x
-                            along_d += dwc[v] * x
-                        val += wr[u] * along
-                        g_r += dwr[u] * along
-                        g_c += wr[u] * along_d
-                    if not np.isfinite(val):
-                        ok = False
-                        break
-                    gain = p[6]
-                    jac[0] = gain * g_r
-                    jac[1] = gain * g_c
-                    jac[2] = gain * g_r * x_r
-                    jac[3] = gain * g_r * x_c
-                    jac[4] = gain * g_c * x_r
-                    jac[5] = gain * g_c * x_c
-                    jac[6] = val
-                    jac[7] = 1.0
-                    resid = left[t0[k, 0] + i, t0[k, 1] + j] - gain * val - p[7]
-                    for a in range(8):
-                        rhs[a] += jac[a] * resid
-                        for b in range(a, 8):
-                            normal[a, b] += jac[a] * jac[b]
-                if not ok:
-                    break
-            if not ok:
-                break
+            ok = _normal_equations(
+                left, right, t0[k, 0], t0[k, 1], p, t, wr, dwr, wc, dwc, jac, normal, rhs
+            )
             # Jacobi-scaled, damped Cholesky solve
-            for a in range(8):
-                if not normal[a, a] > 0.0:
-                    ok = False
-                else:
-                    scale[a] = 1.0 / np.sqrt(normal[a, a] * (1.0 + 1e-6))
+            ok = ok and _solve_normal(normal, rhs, scale, chol, step)
             if not ok:
                 break
             for a in range(8):
-                for b in range(a, 8):
-                    value = normal[a, b] * scale[a] * scale[b]
-                    for m in range(a):
-                        value -= chol[m, a] * chol[m, b]
-                    if a == b:
-                        if value <= 1e-12:
-                            ok = False
-                            break
-                        chol[a, a] = np.sqrt(value)
-                    else:
-                        chol[a, b] = value / chol[a, a]
-                if not ok:
-                    break
-            if not ok:
-                break
-            for a in range(8):  # forward: chol^T y = scaled rhs
-                value = rhs[a] * scale[a]
-                for m in range(a):
-                    value -= chol[m, a] * step[m]
-                step[a] = value / chol[a, a]
-            for a in range(7, -1, -1):  # back: chol x = y
-                value = step[a]
-                for m in range(a + 1, 8):
-                    value -= chol[a, m] * step[m]
-                step[a] = value / chol[a, a]
-            for a in range(8):
-                step[a] *= scale[a]
                 p[a] += step[a]
-            moved_r = step[0] + step[2] * rel_r + step[3] * rel_c
-            moved_c = step[1] + step[4] * rel_r + step[5] * rel_c
-            corner = max(abs(step[2]), abs(step[3]), abs(step[4]), abs(step[5])) * half
-            if np.hypot(moved_r, moved_c) < 1e-3 and corner < 1e-2:
+            if _converged(step, rel_r, rel_c, half):
                 break
-        a_max = max(abs(p[2]), abs(p[3]), abs(p[4]), abs(p[5]))
-        ok = ok and a_max <= 0.6 and p[6] > 0.0
-        ok = ok and abs(p[0] - offset[k, 0]) <= 2.0 and abs(p[1] - offset[k, 1]) <= 2.0
-        for a in range(8):
-            ok = ok and np.isfinite(p[a])
-        good[k] = ok
+        good[k] = ok and _plausible(p, offset[k, 0], offset[k, 1])
         result[k, 0] = p[0] + p[2] * rel_r + p[3] * rel_c
         result[k, 1] = p[1] + p[4] * rel_r + p[5] * rel_c

@@ -267,12 +267,38 @@ def match_views(
         guesses: first guesses by view, instead of the coarse shift.
         matcher: the matcher of steps 2 and 3 (default: a new ``"ncc"`` matcher).
     """
-    from carto.framework.matching.shifts import coarse_shift
-
     if matcher is None:
-        from carto.framework.matching.ncc_matcher import NCCMatcher
+        matcher = _ncc_matcher()
+    primary, closing = _match_settings(
+        template, search, levels, min_score, tolerance_px, subpixel, closure_search
+    )
+    pts = _checked_points(orthos, reference, points, closure_px)
+    views = (reference, *(n for n in orthos if n != reference))
+    images = [as_image(orthos[v], v) for v in views]
+    found = _reference_matches(matcher, images, views, pts, guesses, primary)
+    _drop_inconsistent(found, views, parallax, outlier_factor, outlier_floor_px)
+    closure = _closure_check(matcher, images, found, closing, float(closure_px), require_closure)
+    return found.result(views, closure)
 
-        matcher = NCCMatcher()
+
+def _ncc_matcher() -> Matcher:
+    """The default matcher of :func:`match_views`: a new ``"ncc"`` matcher."""
+    from carto.framework.matching.ncc_matcher import NCCMatcher
+
+    return NCCMatcher()
+
+
+def _match_settings(
+    template: int,
+    search: int,
+    levels: int,
+    min_score: float,
+    tolerance_px: float,
+    subpixel: str,
+    closure_search: int,
+) -> tuple[MatchSettings, MatchSettings]:
+    """The settings of :func:`match_views`' reference -> view matches (step 2) and of its
+    closures (step 3: one level, one direction, ``+-closure_search`` pixels)."""
     primary = MatchSettings(
         template_px=template,
         search_px=search,
@@ -283,7 +309,14 @@ def match_views(
         subpixel=subpixel,
     )
     closing = attrs.evolve(primary, search_px=closure_search, levels=1, two_way=False)
+    return primary, closing
 
+
+def _checked_points(
+    orthos: Mapping[str, NDArray], reference: str, points: ArrayLike, closure_px: float
+) -> NDArray[np.float64]:
+    """The candidate points of :func:`match_views` as ``(N, 2)``, once its inputs are checked
+    (InputError otherwise)."""
     if reference not in orthos:
         raise InputError(f"tie points: reference {reference!r} is not one of the images")
     if not float(closure_px) > 0.0:
@@ -291,51 +324,127 @@ def match_views(
     pts = as_points(points, "points")
     if np.unique(pts, axis=0).shape[0] != pts.shape[0]:
         raise InputError("tie points: the candidate points must be distinct")
-    views = (reference, *(n for n in orthos if n != reference))
-    images = [as_image(orthos[v], v) for v in views]
+    return pts
+
+
+@attrs.frozen(eq=False)
+class _ViewMatches:
+    """The reference's candidates matched in every view, as :func:`match_views` filters them
+    (the arrays are updated in place).
+
+    Attributes:
+        positions: ``(V, N, 2)`` ortho positions; ``positions[0]`` are the candidates; NaN
+            where a view has no accepted match.
+        scores: ``(V, N)`` scores of the accepted matches, NaN elsewhere (the reference row
+            until :meth:`result`).
+        covered: ``(V, N)`` True where a view has data around the point's expected position,
+            or a match.
+    """
+
+    positions: NDArray[np.float64]
+    scores: NDArray[np.float64]
+    covered: NDArray[np.bool_]
+
+    def result(self, views: tuple[str, ...], closure: NDArray[np.bool_]) -> MultiViewMatches:
+        """The :class:`MultiViewMatches`, the reference row of the scores the smallest of the
+        point's views."""
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # points without any match
+            self.scores[0] = np.nanmin(self.scores[1:], axis=0)
+        return MultiViewMatches(views, self.positions, self.scores, closure)
+
+
+def _first_guess(
+    images: Sequence[NDArray],
+    views: Sequence[str],
+    k: int,
+    guesses: Mapping[str, tuple[float, float]] | None,
+) -> NDArray[np.float64]:
+    """The first guess ``(d_line, d_sample)`` of view ``k`` against the reference (step 1 of
+    :func:`match_views`): ``guesses[view]``, else the coarse shift."""
+    from carto.framework.matching.shifts import coarse_shift
+
+    if guesses is not None and views[k] in guesses:
+        return np.asarray(guesses[views[k]], np.float64).reshape(2)
+    d_line, d_sample, _ = coarse_shift(images[0], images[k])
+    return np.array([d_line, d_sample])
+
+
+def _reference_matches(
+    matcher: Matcher,
+    images: Sequence[NDArray],
+    views: Sequence[str],
+    pts: NDArray[np.float64],
+    guesses: Mapping[str, tuple[float, float]] | None,
+    primary: MatchSettings,
+) -> _ViewMatches:
+    """Steps 1 and 2 of :func:`match_views`: the candidates ``pts`` of the reference
+    (``images[0]``) matched in every other view, and where each view covers them (data in the
+    ``template + 2 search`` window around the expected position)."""
     n_v, n = len(views), pts.shape[0]
     positions = np.full((n_v, n, 2), np.nan)
     scores = np.full((n_v, n), np.nan)
     covered = np.zeros((n_v, n), bool)
     positions[0] = pts
+    window_px = primary.template_px + 2 * primary.search_px
     for k in range(1, n_v):
-        if guesses is not None and views[k] in guesses:
-            guess = np.asarray(guesses[views[k]], np.float64).reshape(2)
-        else:
-            d_line, d_sample, _ = coarse_shift(images[0], images[k])
-            guess = np.array([d_line, d_sample])
+        guess = _first_guess(images, views, k, guesses)
         found = matcher.match_points(
             images[0], images[k], pts, guess_offsets=guess, settings=primary
         )
         rows = rows_of(pts, found)
         positions[k, rows] = np.stack([found.right_line, found.right_sample], axis=1)
         scores[k, rows] = found.score
-        covered[k] = _covered(images[k], pts + guess, template + 2 * search)
+        covered[k] = _covered(images[k], pts + guess, window_px)
     covered |= np.isfinite(scores)
-    # gross errors: offsets that one ground point cannot explain
-    offsets = positions[1:] - pts[None]
-    vectors = None if parallax is None else _parallax_vectors(parallax, views, positions)
+    return _ViewMatches(positions, scores, covered)
+
+
+def _drop_inconsistent(
+    found: _ViewMatches,
+    views: Sequence[str],
+    parallax: ParallaxFunction | None,
+    outlier_factor: float | None,
+    outlier_floor_px: float | None,
+) -> None:
+    """Step 2b of :func:`match_views`, in place: the points whose offsets one ground point
+    cannot explain (gross errors, :func:`inconsistent_points`) lose their other views."""
+    pts = found.positions[0]
+    offsets = found.positions[1:] - pts[None]
+    vectors = None if parallax is None else _parallax_vectors(parallax, views, found.positions)
     bad = inconsistent_points(pts, offsets, vectors, outlier_factor, outlier_floor_px)
-    positions[1:, bad] = np.nan
-    scores[1:, bad] = np.nan
+    found.positions[1:, bad] = np.nan
+    found.scores[1:, bad] = np.nan
+
+
+def _closure_check(
+    matcher: Matcher,
+    images: Sequence[NDArray],
+    found: _ViewMatches,
+    closing: MatchSettings,
+    closure_px: float,
+    require_closure: bool,
+) -> NDArray[np.bool_]:
+    """Steps 3 and 4 of :func:`match_views`: the ``(V, N)`` closure flags (the reference row:
+    any view confirmed); the scores of confirmed observations take their closures' into
+    account and, with ``require_closure``, the unconfirmed ones that could have been are
+    dropped (in place). No closure with fewer than three views."""
+    n_v, n = found.scores.shape
     closure = np.zeros((n_v, n), bool)
     if n_v >= 3:
         closure[1:], confirm_score = _closures(
-            matcher, images, positions, scores, closing, float(closure_px)
+            matcher, images, found.positions, found.scores, closing, closure_px
         )
-        scores = np.where(closure, np.fmin(scores, confirm_score), scores)
+        found.scores[:] = np.where(closure, np.fmin(found.scores, confirm_score), found.scores)
         if require_closure:
             # a closure was possible for view k where another non-reference view covers it
-            others = covered[1:].sum(axis=0)[None, :] - covered[1:]
+            others = found.covered[1:].sum(axis=0)[None, :] - found.covered[1:]
             drop = np.zeros((n_v, n), bool)
-            drop[1:] = np.isfinite(scores[1:]) & ~closure[1:] & (others > 0)
-            positions[drop] = np.nan
-            scores[drop] = np.nan
+            drop[1:] = np.isfinite(found.scores[1:]) & ~closure[1:] & (others > 0)
+            found.positions[drop] = np.nan
+            found.scores[drop] = np.nan
     closure[0] = closure[1:].any(axis=0)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)  # points without any match
-        scores[0] = np.nanmin(scores[1:], axis=0)
-    return MultiViewMatches(views, positions, scores, closure)
+    return closure
 
 
 def _parallax_vectors(

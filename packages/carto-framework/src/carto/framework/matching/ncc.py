@@ -23,7 +23,8 @@ module holds the correlation that Carto's own matcher
   matches that do not come back within ``tolerance`` pixels are dropped.
 
 :func:`correlate_points` and :func:`correlate_bidirectional` are the same on prepared inputs
-(per input point, :class:`Found`), for the other area-based matchers:
+(per input point, :class:`Found`; :func:`prepared_pair` checks and prepares them,
+:func:`correlate_pair` runs either), for the other area-based matchers:
 :func:`~carto.framework.matching.pyramid.pyramid_match` (coarse-to-fine over image pyramids).
 First guesses of a global translation come from :mod:`~carto.framework.matching.shifts`
 (phase correlation, masked correlation of reduced images), candidate points from
@@ -251,6 +252,63 @@ def as_guesses(guess_offsets: ArrayLike | None, n: int) -> NDArray[np.float64]:
     return np.array(guess)
 
 
+def check_tolerance(tolerance: float) -> None:
+    """InputError unless the left-right ``tolerance`` of :func:`match_bidirectional` is valid."""
+    if not float(tolerance) > 0.0:
+        raise InputError(f"tolerance must be > 0 pixels, got {tolerance}")
+
+
+@attrs.frozen(eq=False)
+class PreparedPair:
+    """The checked inputs of a correlation (:func:`prepared_pair`).
+
+    Attributes:
+        left, right: the images, float32 (NaN = no data).
+        points: ``(N, 2)`` ``(line, sample)`` in the left image.
+        guess: ``(N, 2)`` expected offsets ``right - left``, pixels.
+        nan_left, nan_right: the images' NaN tables
+            (:func:`~carto.framework.matching.inputs.nan_integral`).
+    """
+
+    left: NDArray[np.float32]
+    right: NDArray[np.float32]
+    points: NDArray[np.float64]
+    guess: NDArray[np.float64]
+    nan_left: NDArray[np.integer] | None
+    nan_right: NDArray[np.integer] | None
+
+
+def prepared_pair(
+    left: ArrayLike, right: ArrayLike, points_left: ArrayLike, guess_offsets: ArrayLike | None
+) -> PreparedPair:
+    """The images, points and guesses of :func:`match_ncc` checked and prepared, or
+    InputError."""
+    left_img, right_img = as_image(left, "left"), as_image(right, "right")
+    points = as_points(points_left, "points_left")
+    guess = as_guesses(guess_offsets, points.shape[0])
+    return PreparedPair(
+        left_img, right_img, points, guess, nan_integral(left_img), nan_integral(right_img)
+    )
+
+
+def correlate_pair(
+    pair: PreparedPair,
+    template: int,
+    search: int,
+    subpixel: str,
+    min_score: float,
+    tolerance: float | None,
+) -> Found:
+    """The correlation of a prepared pair around its guesses, one row per point: both
+    directions within ``tolerance`` pixels (:func:`correlate_bidirectional`), or left -> right
+    only when ``tolerance`` is None (:func:`correlate_points`)."""
+    images = (pair.left, pair.right, pair.points, pair.guess)
+    options = (template, search, subpixel, min_score)
+    if tolerance is None:
+        return correlate_points(*images, *options, pair.nan_left, pair.nan_right)
+    return correlate_bidirectional(*images, *options, tolerance, pair.nan_left, pair.nan_right)
+
+
 # ----------------------------------------------------------------------------- matching
 def match_ncc(
     left: ArrayLike,
@@ -289,22 +347,9 @@ def match_ncc(
         InputError: malformed images, points, guesses or options.
     """
     check_options(template, search, subpixel, min_score)
-    left_img, right_img = as_image(left, "left"), as_image(right, "right")
-    points = as_points(points_left, "points_left")
-    guess = as_guesses(guess_offsets, points.shape[0])
-    found = correlate_points(
-        left_img,
-        right_img,
-        points,
-        guess,
-        template,
-        search,
-        subpixel,
-        float(min_score),
-        nan_integral(left_img),
-        nan_integral(right_img),
-    )
-    return found_matches(points, found)
+    pair = prepared_pair(left, right, points_left, guess_offsets)
+    found = correlate_pair(pair, template, search, subpixel, float(min_score), None)
+    return found_matches(pair.points, found)
 
 
 def correlate_bidirectional(
@@ -375,22 +420,7 @@ def match_bidirectional(
     as :func:`match_ncc`.
     """
     check_options(template, search, subpixel, min_score)
-    if not float(tolerance) > 0.0:
-        raise InputError(f"tolerance must be > 0 pixels, got {tolerance}")
-    left_img, right_img = as_image(left, "left"), as_image(right, "right")
-    points = as_points(points_left, "points_left")
-    guess = as_guesses(guess_offsets, points.shape[0])
-    found = correlate_bidirectional(
-        left_img,
-        right_img,
-        points,
-        guess,
-        template,
-        search,
-        subpixel,
-        float(min_score),
-        float(tolerance),
-        nan_integral(left_img),
-        nan_integral(right_img),
-    )
-    return found_matches(points, found)
+    check_tolerance(tolerance)
+    pair = prepared_pair(left, right, points_left, guess_offsets)
+    found = correlate_pair(pair, template, search, subpixel, float(min_score), float(tolerance))
+    return found_matches(pair.points, found)

@@ -99,27 +99,22 @@ class NCCMatcher(Matcher):
                 d_line, d_sample, response = global_shift(left_img, right_img)
                 if response >= self.min_response:
                     guess_offsets = np.array([d_line, d_sample])
+        # what both ways of matching take from the settings
+        ncc = {
+            "template": settings.template_px,
+            "search": settings.search_px,
+            "subpixel": settings.subpixel,
+            "min_score": settings.min_score,
+            "guess_offsets": guess_offsets,
+        }
         if settings.levels == 1 and not settings.two_way:
-            return match_ncc(
-                left_img,
-                right_img,
-                points,
-                template=settings.template_px,
-                search=settings.search_px,
-                subpixel=settings.subpixel,
-                min_score=settings.min_score,
-                guess_offsets=guess_offsets,
-            )
+            return match_ncc(left_img, right_img, points, **ncc)
         return pyramid_match(
             left_img,
             right_img,
             points,
             levels=settings.levels,
-            template=settings.template_px,
-            search=settings.search_px,
-            subpixel=settings.subpixel,
-            min_score=settings.min_score,
-            guess_offsets=guess_offsets,
+            **ncc,
             bidirectional=settings.two_way,
             tolerance=settings.tolerance_px,
         )

@@ -9,19 +9,20 @@ the conventions of :mod:`~carto.framework.matching.ncc`.
 
 from __future__ import annotations
 
+import attrs
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from carto.framework.errors import InputError
 from carto.framework.matching.base import Matches
-from carto.framework.matching.inputs import as_image, as_points, check_int, nan_integral
+from carto.framework.matching.inputs import check_int, nan_integral
 from carto.framework.matching.ncc import (
-    as_guesses,
+    PreparedPair,
     check_options,
-    correlate_bidirectional,
-    correlate_points,
+    check_tolerance,
+    correlate_pair,
     found_matches,
     peak_method,
+    prepared_pair,
 )
 
 
@@ -93,65 +94,62 @@ def pyramid_match(
     Returns:
         the full-resolution matches, in the input order.
     """
-    import cv2
-
     check_options(template, search, subpixel, min_score)
     levels = check_int(levels, "levels", 1)
-    if not float(tolerance) > 0.0:
-        raise InputError(f"tolerance must be > 0 pixels, got {tolerance}")
-    left_img, right_img = as_image(left, "left"), as_image(right, "right")
-    points = as_points(points_left, "points_left")
-    offsets = as_guesses(guess_offsets, points.shape[0])
-    pyramid = [(left_img, right_img)]
-    need = template + 2 * search
+    check_tolerance(tolerance)
+    pair = prepared_pair(left, right, points_left, guess_offsets)
+    pyramid = _pyramid(pair.left, pair.right, levels, template + 2 * search)
+    offsets = _coarse_offsets(
+        pyramid, pair, template, search, peak_method(subpixel), float(coarse_min_score)
+    )
+    found = correlate_pair(
+        attrs.evolve(pair, guess=offsets),
+        template,
+        search,
+        subpixel,
+        float(min_score),
+        float(tolerance) if bidirectional else None,
+    )
+    return found_matches(pair.points, found)
+
+
+def _pyramid(
+    left: NDArray[np.float32], right: NDArray[np.float32], levels: int, need: int
+) -> list[tuple[NDArray[np.float32], NDArray[np.float32]]]:
+    """The ``(left, right)`` images of each pyramid level, full resolution first
+    (``cv2.pyrDown``): at most ``levels``, fewer where a level's images would get smaller than
+    two windows of ``need`` pixels."""
+    import cv2
+
+    pyramid = [(left, right)]
     while len(pyramid) < levels:
         a, b = pyramid[-1]
         if min(*a.shape, *b.shape) < 2 * need:
             break
         pyramid.append((cv2.pyrDown(a), cv2.pyrDown(b)))
+    return pyramid
+
+
+def _coarse_offsets(
+    pyramid: list[tuple[NDArray[np.float32], NDArray[np.float32]]],
+    pair: PreparedPair,
+    template: int,
+    search: int,
+    peak: str,
+    coarse_min_score: float,
+) -> NDArray[np.float64]:
+    """The guesses of the full-resolution level: the coarse levels matched from the coarsest
+    down (sub-pixel by ``peak``), starting from the pair's guesses, each level's offsets
+    (full-resolution pixels, cleaned by :func:`_regularise`) the guesses of the next; the
+    pair's own guesses without coarse levels."""
+    points, offsets = pair.points, pair.guess
     for level in range(len(pyramid) - 1, 0, -1):
         a, b = pyramid[level]
         scale = 2.0**level
-        found = correlate_points(
-            a,
-            b,
-            points / scale,
-            offsets / scale,
-            template,
-            search,
-            peak_method(subpixel),
-            float(coarse_min_score),
-            nan_integral(a),
-            nan_integral(b),
+        coarse = PreparedPair(
+            a, b, points / scale, offsets / scale, nan_integral(a), nan_integral(b)
         )
+        found = correlate_pair(coarse, template, search, peak, coarse_min_score, None)
         level_offsets = (found.right - points / scale) * scale
         offsets = _regularise(points, level_offsets, found.ok, offsets, 2.0 * scale)
-    found = (
-        correlate_bidirectional(
-            left_img,
-            right_img,
-            points,
-            offsets,
-            template,
-            search,
-            subpixel,
-            float(min_score),
-            float(tolerance),
-            nan_integral(left_img),
-            nan_integral(right_img),
-        )
-        if bidirectional
-        else correlate_points(
-            left_img,
-            right_img,
-            points,
-            offsets,
-            template,
-            search,
-            subpixel,
-            float(min_score),
-            nan_integral(left_img),
-            nan_integral(right_img),
-        )
-    )
-    return found_matches(points, found)
+    return offsets

@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import math
 
+import attrs
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -144,6 +145,161 @@ def _guess_across(
     return float(new[0]), float(new[1])
 
 
+def _checked_pair(left: NDArray, right: NDArray) -> tuple[FloatArray, FloatArray]:
+    """The two images as float32, refused unless 2-D, of one shape and at least 8 x 8."""
+    a = np.asarray(left, np.float32)
+    b = np.asarray(right, np.float32)
+    if a.ndim != 2 or a.shape != b.shape or min(a.shape) < 8:
+        raise InputError(
+            f"matcher sgm: two 2-D images of one shape (at least 8 x 8) are needed, got "
+            f"{a.shape} and {b.shape}"
+        )
+    return a, b
+
+
+def _disparity_count(left: FloatArray, settings: DenseSettings) -> int:
+    """OpenCV's number of disparities (a multiple of 16) covering the search each way along
+    the base: the caller's reach ``radius * (2**levels - 1)`` pixels, or the largest of its
+    per-pixel bounds ``search_px`` over the left image's data when smaller."""
+    s = settings
+    reach = s.radius * (2**s.levels - 1)
+    if s.search_px is not None:  # the caller's per-pixel bound: no wider than needed
+        bound = np.asarray(s.search_px, np.float32)[np.isfinite(left)]
+        if bound.size and np.isfinite(bound).all():
+            reach = min(reach, max(2, math.ceil(float(bound.max()))))
+    return 16 * max(1, math.ceil(2 * reach / 16))
+
+
+@attrs.frozen
+class _TurnedPair:
+    """The two images turned so that the base runs along rows (:func:`_turned_pair`).
+
+    Attributes:
+        rotation: the affine map (2 x 3, OpenCV's ``(x, y)``) from the image to the turned
+            frame (:func:`_rotation`).
+        left, right: the turned images (float32, zeros where no data; ``right`` sampled at
+            ``p + guess`` before turning).
+        left_8bit, right_8bit: the same stretched to 8 bits (:func:`_to_8bit`), SGM's input.
+        left_inside, right_inside: pixels whose whole SGM block lies on each image's data.
+    """
+
+    rotation: NDArray
+    left: FloatArray
+    right: FloatArray
+    left_8bit: NDArray[np.uint8]
+    right_8bit: NDArray[np.uint8]
+    left_inside: NDArray[np.bool_]
+    right_inside: NDArray[np.bool_]
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """``(rows, cols)`` of the turned frame."""
+        rows, cols = self.left.shape
+        return rows, cols
+
+
+def _turned_pair(
+    a: FloatArray, b: FloatArray, base: tuple[float, float], guess: tuple[float, float], block: int
+) -> _TurnedPair:
+    """The right image shifted by ``guess`` (``(d_row, d_col)``, cubic), then both turned
+    so that ``base`` runs along rows (cubic; validity masks nearest), stretched to 8 bits and
+    their masks eroded by the SGM ``block``."""
+    import cv2
+
+    rows, cols = a.shape
+    m, width, height = _rotation(a.shape, base)
+    g_row, g_col = guess
+    # the right image sampled at p + guess, then both turned
+    shift = np.array([[1.0, 0.0, -g_col], [0.0, 1.0, -g_row]])
+    valid_a, valid_b = np.isfinite(a), np.isfinite(b)
+    flags = cv2.INTER_CUBIC
+    b_shifted = cv2.warpAffine(np.where(valid_b, b, 0.0), shift, (cols, rows), flags=flags)
+    vb_shifted = cv2.warpAffine(
+        valid_b.astype(np.uint8), shift, (cols, rows), flags=cv2.INTER_NEAREST
+    ).astype(bool)
+    turned = [
+        cv2.warpAffine(img, m, (width, height), flags=flags)
+        for img in (np.where(valid_a, a, 0.0).astype(np.float32), b_shifted)
+    ]
+    masks = [
+        cv2.warpAffine(v.astype(np.uint8), m, (width, height), flags=cv2.INTER_NEAREST) > 0
+        for v in (valid_a, vb_shifted)
+    ]
+    pairs = zip(turned, masks, strict=True)
+    eight = [_to_8bit(img, mask).astype(np.uint8) for img, mask in pairs]
+    # a block that reaches beyond either image's data (zeros there) matches the edge of
+    # the data, not the ground: only blocks wholly inside count
+    kernel = np.ones((block, block), np.uint8)
+    masks = [cv2.erode(mask.astype(np.uint8), kernel).astype(bool) for mask in masks]
+    return _TurnedPair(m, turned[0], turned[1], eight[0], eight[1], masks[0], masks[1])
+
+
+def _along_on_grid(along: FloatArray, pair: _TurnedPair, shape: tuple[int, int]) -> FloatArray:
+    """The offsets along the base (turned frame, NaN where none) kept where the match falls
+    inside the right image's data, turned back onto the images' grid of ``shape`` (nearest,
+    NaN outside)."""
+    import cv2
+
+    height, width = pair.shape
+    rows, cols = shape
+    # the match must fall inside the right image
+    yy, xx = np.mgrid[0:height, 0:width].astype(np.float32)
+    x_r = xx + np.nan_to_num(along)
+    inside = cv2.remap(
+        pair.right_inside.astype(np.uint8), x_r, yy, cv2.INTER_NEAREST, borderValue=0
+    ).astype(bool)
+    along = np.where(inside, along, np.nan)
+    back = cv2.invertAffineTransform(pair.rotation)
+    return cv2.warpAffine(
+        along, back, (cols, rows), flags=cv2.INTER_NEAREST, borderValue=float("nan")
+    )
+
+
+def _scored_field(
+    a: FloatArray,
+    b: FloatArray,
+    t: FloatArray,
+    d_row: FloatArray,
+    d_col: FloatArray,
+    s: DenseSettings,
+) -> OffsetField:
+    """The offset field of the matches ``(d_row, d_col)`` (``t``: the offset along the base,
+    NaN where none), scored by the NCC of the windows at the match, the confidence; flat
+    windows, low scores and matches off either image are invalid."""
+    import cv2
+
+    rows, cols = a.shape
+    valid_a, valid_b = np.isfinite(a), np.isfinite(b)
+    # confidence: NCC of the windows at the match
+    gy, gx = np.mgrid[0:rows, 0:cols].astype(np.float32)
+    warped = cv2.remap(
+        np.where(valid_b, b, 0.0).astype(np.float32),
+        gx + np.nan_to_num(d_col),
+        gy + np.nan_to_num(d_row),
+        cv2.INTER_CUBIC,
+        borderMode=cv2.BORDER_CONSTANT,
+        borderValue=0.0,
+    )
+    a_filled = np.where(valid_a, a, float(np.mean(a[valid_a])) if valid_a.any() else 0.0)
+    score, std = window_ncc(a_filled.astype(np.float32), warped, s.window)
+    lo, hi = np.percentile(a[valid_a], [2, 98]) if valid_a.any() else (0.0, 1.0)
+    valid = (
+        np.isfinite(t)
+        & valid_a
+        & np.isfinite(score)
+        & (score >= s.min_score)
+        & (std > s.min_std * max(float(hi - lo), 1e-12))
+    )
+    nan = np.float32(np.nan)
+    return OffsetField(
+        np.where(valid, d_row, nan),
+        np.where(valid, d_col, nan),
+        np.where(np.isfinite(t), score, nan).astype(np.float32),
+        valid,
+        np.full(a.shape, nan, np.float32),
+    )
+
+
 class SGMMatcher(Matcher):
     """Semi-global matching along the stereo base (see the module docstring).
 
@@ -196,106 +352,40 @@ class SGMMatcher(Matcher):
         """Offsets along ``settings.base`` (default: along rows) around ``settings.guess``
         for every pixel of ``left``; ``right`` must have the shape of ``left`` (two
         ortho-images of one grid)."""
+        s = settings or DenseSettings()
+        a, b = _checked_pair(left, right)
+        base = s.base if s.base is not None else (0.0, 1.0)
+        n_disp = _disparity_count(a, s)
+        guess = _guess_across(a, b, s, base)
+        pair = _turned_pair(a, b, base, guess, self.block)
+        disparity = self._disparity(pair, n_disp, s.consistency_px)
+        found = (disparity >= -n_disp // 2) & pair.left_inside
+        if self.subpixel == "ncc":
+            disparity = _refine_along_rows(pair.left, pair.right, disparity, found, s.window)
+        # OpenCV: left x matches right x - d; our offset right - left along the base is -d
+        along = np.where(found, -disparity, np.nan).astype(np.float32)
+        t = _along_on_grid(along, pair, a.shape)
+        d_row = (t * base[0] + guess[0]).astype(np.float32)
+        d_col = (t * base[1] + guess[1]).astype(np.float32)
+        return _scored_field(a, b, t, d_row, d_col, s)
+
+    def _disparity(self, pair: _TurnedPair, n_disp: int, consistency_px: float) -> FloatArray:
+        """OpenCV's SGM disparities (pixels, float32) of the turned pair, with this matcher's
+        block, penalties, paths and uniqueness and the caller's left-right tolerance."""
         import cv2
 
-        s = settings or DenseSettings()
-        a = np.asarray(left, np.float32)
-        b = np.asarray(right, np.float32)
-        if a.ndim != 2 or a.shape != b.shape or min(a.shape) < 8:
-            raise InputError(
-                f"matcher sgm: two 2-D images of one shape (at least 8 x 8) are needed, got "
-                f"{a.shape} and {b.shape}"
-            )
-        base = s.base if s.base is not None else (0.0, 1.0)
-        rows, cols = a.shape
-        reach = s.radius * (2**s.levels - 1)
-        if s.search_px is not None:  # the caller's per-pixel bound: no wider than needed
-            bound = np.asarray(s.search_px, np.float32)[np.isfinite(a)]
-            if bound.size and np.isfinite(bound).all():
-                reach = min(reach, max(2, math.ceil(float(bound.max()))))
-        n_disp = 16 * max(1, math.ceil(2 * reach / 16))
-        m, width, height = _rotation(a.shape, base)
-        g_row, g_col = _guess_across(a, b, s, base)
-        # the right image sampled at p + guess, then both turned
-        shift = np.array([[1.0, 0.0, -g_col], [0.0, 1.0, -g_row]])
-        valid_a, valid_b = np.isfinite(a), np.isfinite(b)
-        flags = cv2.INTER_CUBIC
-        b_shifted = cv2.warpAffine(np.where(valid_b, b, 0.0), shift, (cols, rows), flags=flags)
-        vb_shifted = cv2.warpAffine(
-            valid_b.astype(np.uint8), shift, (cols, rows), flags=cv2.INTER_NEAREST
-        ).astype(bool)
-        turned = [
-            cv2.warpAffine(img, m, (width, height), flags=flags)
-            for img in (np.where(valid_a, a, 0.0).astype(np.float32), b_shifted)
-        ]
-        masks = [
-            cv2.warpAffine(v.astype(np.uint8), m, (width, height), flags=cv2.INTER_NEAREST) > 0
-            for v in (valid_a, vb_shifted)
-        ]
-        pairs = zip(turned, masks, strict=True)
-        eight = [_to_8bit(img, mask).astype(np.uint8) for img, mask in pairs]
-        # a block that reaches beyond either image's data (zeros there) matches the edge of
-        # the data, not the ground: only blocks wholly inside count
-        kernel = np.ones((self.block, self.block), np.uint8)
-        masks = [cv2.erode(mask.astype(np.uint8), kernel).astype(bool) for mask in masks]
         sgbm = cv2.StereoSGBM_create(
             minDisparity=-n_disp // 2,
             numDisparities=n_disp,
             blockSize=self.block,
             P1=self.p1 * self.block**2,
             P2=self.p2 * self.block**2,
-            disp12MaxDiff=max(1, round(s.consistency_px)),
+            disp12MaxDiff=max(1, round(consistency_px)),
             uniquenessRatio=self.uniqueness,
             speckleWindowSize=0,
             mode=getattr(cv2, _MODES[self.paths]),
         )
-        disparity = sgbm.compute(eight[0], eight[1]).astype(np.float32) / 16.0
-        found = (disparity >= -n_disp // 2) & masks[0]
-        if self.subpixel == "ncc":
-            disparity = _refine_along_rows(turned[0], turned[1], disparity, found, s.window)
-        # OpenCV: left x matches right x - d; our offset right - left along the base is -d
-        along = np.where(found, -disparity, np.nan).astype(np.float32)
-        # the match must fall inside the right image
-        yy, xx = np.mgrid[0:height, 0:width].astype(np.float32)
-        x_r = xx + np.nan_to_num(along)
-        inside = cv2.remap(
-            masks[1].astype(np.uint8), x_r, yy, cv2.INTER_NEAREST, borderValue=0
-        ).astype(bool)
-        along = np.where(inside, along, np.nan)
-        back = cv2.invertAffineTransform(m)
-        t = cv2.warpAffine(
-            along, back, (cols, rows), flags=cv2.INTER_NEAREST, borderValue=float("nan")
-        )
-        d_row = (t * base[0] + g_row).astype(np.float32)
-        d_col = (t * base[1] + g_col).astype(np.float32)
-        # confidence: NCC of the windows at the match
-        gy, gx = np.mgrid[0:rows, 0:cols].astype(np.float32)
-        warped = cv2.remap(
-            np.where(valid_b, b, 0.0).astype(np.float32),
-            gx + np.nan_to_num(d_col),
-            gy + np.nan_to_num(d_row),
-            cv2.INTER_CUBIC,
-            borderMode=cv2.BORDER_CONSTANT,
-            borderValue=0.0,
-        )
-        a_filled = np.where(valid_a, a, float(np.mean(a[valid_a])) if valid_a.any() else 0.0)
-        score, std = window_ncc(a_filled.astype(np.float32), warped, s.window)
-        lo, hi = np.percentile(a[valid_a], [2, 98]) if valid_a.any() else (0.0, 1.0)
-        valid = (
-            np.isfinite(t)
-            & valid_a
-            & np.isfinite(score)
-            & (score >= s.min_score)
-            & (std > s.min_std * max(float(hi - lo), 1e-12))
-        )
-        nan = np.float32(np.nan)
-        return OffsetField(
-            np.where(valid, d_row, nan),
-            np.where(valid, d_col, nan),
-            np.where(np.isfinite(t), score, nan).astype(np.float32),
-            valid,
-            np.full(a.shape, nan, np.float32),
-        )
+        return sgbm.compute(pair.left_8bit, pair.right_8bit).astype(np.float32) / 16.0
 
     def match_points(
         self,

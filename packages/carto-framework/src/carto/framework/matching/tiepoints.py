@@ -54,9 +54,10 @@ of the observations more than 1 px off), hence the affine model.
 
 from __future__ import annotations
 
+import functools
 import inspect
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -126,10 +127,9 @@ def automatic_tie_points(
     prepared: bool = False,
 ) -> dict[str, NDArray]:
     """Tie points of ``sensors``' images, as a long table ``id, image, line, sample, score,
-    sigma_px`` (raw image coordinates; one row per point and image).
-
-    The method is the module's (system-level orthos, Forstner candidates, multi-view matching
-    with closures, a well-distributed subset, back to raw coordinates).
+    sigma_px`` (raw image coordinates; one row per point and image), by the module's method
+    (system-level orthos, Forstner candidates, multi-view matching with closures, a
+    well-distributed subset, back to raw coordinates).
 
     Args:
         rasters: image name -> raster file or array (raw, as recorded).
@@ -170,48 +170,67 @@ def automatic_tie_points(
         (the reference row: the smallest of its images'). Ids are ``A`` and the candidate's
         index.
     """
+    settings = _pipeline_settings(locals())  # the arguments by name (no other local yet)
+    ref = _checked_reference(sensors, reference)
+    grid = block_grid(rasters, sensors, dem, resolution_m)
+    images = rasters if prepared else prepared_sources(rasters, sensors, dem, work_dir, engine)
+    views = {n: images[n] for n in sensors}
+    match = functools.partial(tiled_tie_points, views, sensors, dem, grid, ref)
+    return _denser_until_enough(match, settings, spacing_px, min_points, engine, tile_px)
 
+
+_MATCHING_OPTIONS = (
+    "template",
+    "search",
+    "levels",
+    "min_score",
+    "tolerance_px",
+    "closure_px",
+    "require_closure",
+    "subpixel",
+    "matcher",
+)
+"""The arguments of :func:`automatic_tie_points` that are options of :func:`match_views`."""
+
+_SELECTION_OPTIONS = ("points", "candidates", "forstner", "per_cell", "min_views", "sigma_px")
+"""The arguments of :func:`automatic_tie_points` that choose the candidates and the points
+kept, as the ``settings`` of :func:`tiled_tie_points` name them."""
+
+
+def _pipeline_settings(arguments: Mapping[str, Any]) -> dict[str, Any]:
+    """The ``settings`` of :func:`tiled_tie_points` (candidates, ``matching``: the options of
+    :func:`match_views`, selection) out of the arguments of :func:`automatic_tie_points`."""
+    settings = {k: arguments[k] for k in _SELECTION_OPTIONS}
+    settings["matching"] = {k: arguments[k] for k in _MATCHING_OPTIONS}
+    return settings
+
+
+def _checked_reference(sensors: Mapping[str, Sensor], reference: str | None) -> str:
+    """The reference image (default: the first), refused unless one of at least two."""
     names = list(sensors)
     if len(names) < 2:
         raise InputError("tie points need at least two images")
     ref = reference or names[0]
     if ref not in sensors:
         raise InputError(f"tie points: reference {ref!r} is not one of {', '.join(names)}")
-    grid = block_grid(rasters, sensors, dem, resolution_m)
-    images = rasters if prepared else prepared_sources(rasters, sensors, dem, work_dir, engine)
-    given = points
+    return ref
+
+
+def _denser_until_enough(
+    match: Callable[..., dict[str, NDArray]],
+    settings: Mapping[str, Any],
+    spacing_px: float,
+    min_points: int,
+    engine: Any,
+    tile_px: int,
+) -> dict[str, NDArray]:
+    """The tie-point table of ``match`` (:func:`tiled_tie_points` on the block, given the
+    cell spacing, ``settings``, ``engine`` and ``tile_px``), matched again with denser cells
+    while fewer than ``min_points`` points are kept (unless the candidates are given)."""
+    given = settings["points"]
     spacing = float(spacing_px)
-    settings = dict(
-        points=given,
-        candidates=candidates,
-        forstner=forstner,
-        matching=dict(
-            template=template,
-            search=search,
-            levels=levels,
-            min_score=min_score,
-            tolerance_px=tolerance_px,
-            closure_px=closure_px,
-            require_closure=require_closure,
-            subpixel=subpixel,
-            matcher=matcher,
-        ),
-        per_cell=per_cell,
-        min_views=min_views,
-        sigma_px=sigma_px,
-    )
     while True:
-        table = tiled_tie_points(
-            {n: images[n] for n in sensors},
-            sensors,
-            dem,
-            grid,
-            ref,
-            spacing,
-            settings,
-            engine=engine,
-            tile_px=tile_px,
-        )
+        table = match(spacing, settings, engine=engine, tile_px=tile_px)
         n = len(set(table["id"].tolist()))
         # a small common area (large system-level misregistration, partial overlap) leaves
         # few cells: denser candidates, down to MIN_SPACING_PX, until min_points are kept

@@ -37,6 +37,7 @@ import math
 from collections.abc import Mapping
 from typing import Any
 
+import attrs
 import numpy as np
 from numpy.typing import NDArray
 
@@ -45,7 +46,7 @@ from carto.framework.geometry.sensor import Sensor
 from carto.framework.matching.candidates import (
     candidate_cells,
     candidate_points,
-    frame_cells,
+    in_cell_range,
     window_candidates,
 )
 from carto.framework.matching.forstner import spread_order
@@ -122,6 +123,26 @@ def tie_points_on_orthos(
         parallax=ortho_parallax(grid, sensors, dem, ref),
         guesses=guesses,
     )
+    raw = _raw_positions(mv, grid, sensors, dem)
+    seen = np.isfinite(raw).all(axis=2)
+    n_seen = seen.sum(axis=0)
+    good = seen[0] & (n_seen >= max(int(min_views), 2))
+    if returned is not None:
+        good &= np.asarray(returned, bool)
+    keep = np.flatnonzero(good)
+    if keep.size == 0:
+        return _empty_table()
+    if per_cell:
+        frame = tuple(grid.shape) if frame_shape is None else tuple(frame_shape)
+        spread = _Spread(frame, spacing_px, per_cell, offset)
+        keep = _spread_subset(keep, points, n_seen, mv.scores[0], spread)
+    return _long_table(mv, raw, seen, keep, id_prefix, sigma_px)
+
+
+def _raw_positions(mv: Any, grid: Any, sensors: Mapping[str, Sensor], dem: Any) -> NDArray:
+    """``(views, points, 2)`` raw image ``(line, sample)`` of the matches ``mv`` (ortho
+    positions on ``grid``), each computed with the model that made that view's ortho; NaN
+    where a view has no match."""
     # back to raw image coordinates, with the model that made each ortho
     raw = np.full(mv.positions.shape, np.nan)
     for k, name in enumerate(mv.views):
@@ -132,25 +153,53 @@ def tie_points_on_orthos(
         lon, lat = grid.lonlat(px[:, 0] - 0.5, px[:, 1] - 0.5)
         line, sample = sensors[name].ground_to_image(lon, lat, dem.height(lon, lat))
         raw[k, ok] = np.stack([line, sample], axis=1)
-    seen = np.isfinite(raw).all(axis=2)
-    n_seen = seen.sum(axis=0)
-    good = seen[0] & (n_seen >= max(int(min_views), 2))
-    if returned is not None:
-        good &= np.asarray(returned, bool)
-    keep = np.flatnonzero(good)
-    if keep.size == 0:
-        return _empty_table()
-    if per_cell:
-        weight = n_seen[keep] + 0.5 * np.nan_to_num(mv.scores[0, keep], nan=-1.0)
-        frame = tuple(grid.shape) if frame_shape is None else tuple(frame_shape)
-        order = spread_order(
-            points[keep] + np.asarray(offset, np.float64),
-            weight,
-            frame,
-            candidate_cells(frame, spacing_px),
-            per_cell,
-        )
-        keep = np.sort(keep[order])
+    return raw
+
+
+@attrs.frozen
+class _Spread:
+    """How the kept points are spread: ``per_cell`` per cell of ``spacing_px`` pixels of a
+    frame of ``frame_shape`` in which the matched window lies at ``offset`` (row, col)."""
+
+    frame_shape: tuple[int, ...]
+    spacing_px: float
+    per_cell: int
+    offset: tuple[int, int]
+
+
+def _spread_subset(
+    keep: NDArray[np.intp],
+    points: NDArray[np.float64],
+    n_seen: NDArray[np.intp],
+    ref_scores: NDArray,
+    spread: _Spread,
+) -> NDArray[np.intp]:
+    """The candidates of ``keep`` (indices of ``points``) that
+    :func:`~carto.framework.matching.forstner.spread_order` keeps per cell (those seen in
+    most views, best reference score first), in index order."""
+    weight = n_seen[keep] + 0.5 * np.nan_to_num(ref_scores[keep], nan=-1.0)
+    frame = spread.frame_shape
+    order = spread_order(
+        points[keep] + np.asarray(spread.offset, np.float64),
+        weight,
+        frame,
+        candidate_cells(frame, spread.spacing_px),
+        spread.per_cell,
+    )
+    return np.sort(keep[order])
+
+
+def _long_table(
+    mv: Any,
+    raw: NDArray,
+    seen: NDArray[np.bool_],
+    keep: NDArray[np.intp],
+    id_prefix: str,
+    sigma_px: float,
+) -> dict[str, NDArray]:
+    """The tie-point table (one row per kept point and view that sees it, by point, then
+    view) of the matches ``mv`` at raw positions ``raw``; ids ``id_prefix`` and the
+    candidate's index."""
     point_pos, view_idx = np.nonzero(seen[:, keep].T)  # row-major: by point, then view
     point_idx = keep[point_pos]
     ids = np.array([f"{id_prefix}{i:05d}" for i in keep], object)
@@ -205,24 +254,32 @@ def coverage_lattice(
     return np.stack([rr, cc], axis=2), seen
 
 
+@attrs.frozen(eq=False)
+class _Scene:
+    """What every task orthorectifies from: image name -> prepared image (an ImageSource or
+    array), image name -> model, the DEM and the block grid."""
+
+    images: Mapping[str, Any]
+    sensors: Mapping[str, Sensor]
+    dem: Any
+    grid: Any
+
+    def ortho(self, name: str, sub: Any) -> NDArray:
+        """Image ``name`` orthorectified on ``sub``, a window of the grid."""
+        from carto.framework.imaging.ortho import orthorectify
+
+        return orthorectify(self.images[name], self.sensors[name], sub, self.dem)
+
+
 def _probe_task(
-    images: Mapping[str, Any],
-    sensors: Mapping[str, Sensor],
-    dem: Any,
-    grid: Any,
-    window: tuple[int, int, int, int],
-    ref: str,
-    other: str,
+    scene: _Scene, window: tuple[int, int, int, int], ref: str, other: str
 ) -> tuple[float, float, float]:
     """:func:`~carto.framework.matching.shifts.coarse_shift` of ``other``'s ortho against
-    ``ref``'s on one window of ``grid``."""
-    from carto.framework.imaging.ortho import orthorectify
+    ``ref``'s on one window of the scene's grid."""
     from carto.framework.matching.shifts import coarse_shift
 
-    sub = grid.window(*window)
-    a = orthorectify(images[ref], sensors[ref], sub, dem)
-    b = orthorectify(images[other], sensors[other], sub, dem)
-    return coarse_shift(a, b)
+    sub = scene.grid.window(*window)
+    return coarse_shift(scene.ortho(ref, sub), scene.ortho(other, sub))
 
 
 def probe_guesses(
@@ -244,6 +301,7 @@ def probe_guesses(
     from carto.framework.parallel.engine import TaskFailure
 
     nodes, seen = lattice
+    scene = _Scene(images, sensors, dem, grid)
     others = [n for n in sensors if n != ref]
     tasks, keys, names = [], [], []
     guesses = {n: (0.0, 0.0) for n in others}
@@ -256,7 +314,7 @@ def probe_guesses(
             int(np.clip(round(centre[k] - size[k] / 2), 0, grid.shape[k] - size[k])) for k in (0, 1)
         ]
         window = (start[0], start[1], size[0], size[1])
-        tasks.append(functools.partial(_probe_task, images, sensors, dem, grid, window, ref, name))
+        tasks.append(functools.partial(_probe_task, scene, window, ref, name))
         keys.append(f"probe {name}")
         names.append(name)
     for name, found in zip(
@@ -292,50 +350,41 @@ def tile_margin(template: int, search: int, levels: int, shift_px: float) -> int
     return math.ceil(reach + float(shift_px)) + 16
 
 
+@attrs.frozen
+class _Tile:
+    """One task of :func:`tiled_tie_points`: the ``window`` ``(row0, col0, rows, cols)`` of
+    the grid it orthorectifies, the range of the grid's cells whose candidates it owns (None:
+    the whole grid, with the pipeline's own candidates) and the prefix of its point ids."""
+
+    window: tuple[int, int, int, int]
+    cell_range: Range | None
+    id_prefix: str
+
+
 def _tile_task(
-    images: Mapping[str, Any],
-    sensors: Mapping[str, Sensor],
-    dem: Any,
-    grid: Any,
-    window: tuple[int, int, int, int],
-    cell_range: Range | None,
+    scene: _Scene,
+    tile: _Tile,
     ref: str,
     spacing_px: float,
     settings: Mapping[str, Any],
     guesses: Mapping[str, tuple[float, float]] | None,
-    id_prefix: str,
 ) -> dict[str, NDArray]:
     """One tile: its window orthorectified from every image, its candidates matched; the
-    tie-point table (``cell_range`` None: the whole grid, with the pipeline's own
+    tie-point table (``tile.cell_range`` None: the whole grid, with the pipeline's own
     candidates)."""
-    from carto.framework.imaging.ortho import orthorectify
-
     s = dict(settings)
-    sub = grid.window(*window)
-    orthos = {n: orthorectify(images[n], sensors[n], sub, dem) for n in sensors}
+    window, frame = tile.window, tuple(scene.grid.shape)
+    sub = scene.grid.window(*window)
+    orthos = {n: scene.ortho(n, sub) for n in scene.sensors}
     points = s.pop("points")
     returned = None
-    if cell_range is not None:
-        frame = tuple(grid.shape)
-        cells = candidate_cells(frame, spacing_px)
-        wide = _widened(cell_range, cells, HALO_CELLS)
-        points = window_candidates(
-            orthos[ref],
-            spacing_px,
-            (window[0], window[1]),
-            frame,
-            wide,
-            method=s["candidates"],
-            **dict(s["forstner"] or {}),
-        )
-        cell = frame_cells(points + np.array(window[:2], np.float64), frame, cells)
-        (r0, r1), (c0, c1) = cell_range
-        returned = (cell[:, 0] >= r0) & (cell[:, 0] < r1) & (cell[:, 1] >= c0) & (cell[:, 1] < c1)
+    if tile.cell_range is not None:
+        points, returned = _tile_candidates(orthos[ref], tile, frame, spacing_px, s)
     return tie_points_on_orthos(
         sub,
         orthos,
-        sensors,
-        dem,
+        scene.sensors,
+        scene.dem,
         ref,
         spacing_px,
         points,
@@ -347,10 +396,37 @@ def _tile_task(
         s["sigma_px"],
         guesses=guesses,
         offset=(window[0], window[1]),
-        frame_shape=tuple(grid.shape),
-        id_prefix=id_prefix,
+        frame_shape=frame,
+        id_prefix=tile.id_prefix,
         returned=returned,
     )
+
+
+def _tile_candidates(
+    ortho: NDArray,
+    tile: _Tile,
+    frame: tuple[int, ...],
+    spacing_px: float,
+    settings: Mapping[str, Any],
+) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """The candidates of a tile's reference ``ortho`` in its cells and the halo around them
+    (window pixels), and which of them are its own (in its ``cell_range``: returned)."""
+    cells = candidate_cells(frame, spacing_px)
+    wide = _widened(tile.cell_range, cells, HALO_CELLS)
+    window = tile.window
+    points = window_candidates(
+        ortho,
+        spacing_px,
+        (window[0], window[1]),
+        frame,
+        wide,
+        method=settings["candidates"],
+        **dict(settings["forstner"] or {}),
+    )
+    returned = in_cell_range(
+        points + np.array(window[:2], np.float64), frame, cells, tile.cell_range
+    )
+    return points, returned
 
 
 def _widened(cell_range: Range, cells: tuple[int, int], halo: int) -> Range:
@@ -394,23 +470,11 @@ def tiled_tie_points(
     from carto.framework.parallel.engine import TaskFailure, TileEngine
 
     engine = engine if engine is not None else TileEngine(quiet=True)
+    scene = _Scene(images, sensors, dem, grid)
     shape = (int(grid.shape[0]), int(grid.shape[1]))
-    whole = (0, 0, shape[0], shape[1])
     if settings.get("points") is not None or max(shape) <= int(tile_px):
-        task = functools.partial(
-            _tile_task,
-            images,
-            sensors,
-            dem,
-            grid,
-            whole,
-            None,
-            ref,
-            spacing_px,
-            settings,
-            None,
-            "A",
-        )
+        whole = _Tile((0, 0, shape[0], shape[1]), None, "A")
+        task = functools.partial(_tile_task, scene, whole, ref, spacing_px, settings, None)
         found = engine.run([task], desc="tie points", keys=["tile 0"])[0]
         if isinstance(found, TaskFailure):
             raise InputError(f"tie points: {found}")
@@ -420,13 +484,48 @@ def tiled_tie_points(
     m = settings["matching"]
     shift = max((math.hypot(*g) for g in guesses.values()), default=0.0)
     margin = tile_margin(m.get("template", 15), m.get("search", 11), m.get("levels", 4), shift)
-    cells = candidate_cells(shape, spacing_px)
+    tiles = _seen_tiles(shape, spacing_px, tile_px, margin, _useful_nodes(lattice, ref, guesses))
+    tasks = [
+        functools.partial(_tile_task, scene, tile, ref, spacing_px, settings, guesses)
+        for tile in tiles
+    ]
+    keys = [f"tile {tile.cell_range[0][0]},{tile.cell_range[1][0]}" for tile in tiles]
+    tables = engine.run(tasks, desc="tie points", keys=keys)
+    failed = [t for t in tables if isinstance(t, TaskFailure)]
+    if failed:
+        raise InputError(f"tie points: {len(failed)} of {len(tasks)} tiles failed ({failed[0]})")
+    if not tables:
+        return _empty_table()
+    return {k: np.concatenate([t[k] for t in tables]) for k in tables[0]}
+
+
+def _useful_nodes(
+    lattice: tuple[NDArray, Mapping[str, NDArray]],
+    ref: str,
+    guesses: Mapping[str, tuple[float, float]],
+) -> tuple[NDArray, NDArray[np.bool_]]:
+    """The lattice's nodes and whether each is useful: the reference sees it and so does
+    another image's ortho, moved by its guessed shift."""
     nodes, seen = lattice
     others = np.zeros(nodes.shape[:2], bool)
     for name, guess in guesses.items():  # where the other image's ortho shows ref's ground
         others |= _shifted(seen[name], -np.asarray(guess) / LATTICE_PX)
-    useful = seen[ref] & others
-    tasks, keys = [], []
+    return nodes, seen[ref] & others
+
+
+def _seen_tiles(
+    shape: tuple[int, int],
+    spacing_px: float,
+    tile_px: int,
+    margin: int,
+    useful_nodes: tuple[NDArray, NDArray[np.bool_]],
+) -> list[_Tile]:
+    """The tiles of the grid (:func:`plan_tiles`) that two images see (a useful node within
+    ``margin`` pixels of the tile's cells and halo), each with its window: those cells and
+    halo widened by ``margin`` (within the grid), ids ``A<k>.`` by the tile's plan index."""
+    nodes, useful = useful_nodes
+    cells = candidate_cells(shape, spacing_px)
+    tiles = []
     for k, cell_range in enumerate(plan_tiles(shape, spacing_px, tile_px)):
         (r0, r1), (c0, c1) = cell_bounds(_widened(cell_range, cells, HALO_CELLS), shape, cells)
         near = (
@@ -439,27 +538,5 @@ def tiled_tie_points(
             continue  # no two images see this tile
         w0, v0 = max(0, r0 - margin), max(0, c0 - margin)
         window = (w0, v0, min(shape[0], r1 + margin) - w0, min(shape[1], c1 + margin) - v0)
-        tasks.append(
-            functools.partial(
-                _tile_task,
-                images,
-                sensors,
-                dem,
-                grid,
-                window,
-                cell_range,
-                ref,
-                spacing_px,
-                settings,
-                guesses,
-                f"A{k}.",
-            )
-        )
-        keys.append(f"tile {cell_range[0][0]},{cell_range[1][0]}")
-    tables = engine.run(tasks, desc="tie points", keys=keys)
-    failed = [t for t in tables if isinstance(t, TaskFailure)]
-    if failed:
-        raise InputError(f"tie points: {len(failed)} of {len(tasks)} tiles failed ({failed[0]})")
-    if not tables:
-        return _empty_table()
-    return {k: np.concatenate([t[k] for t in tables]) for k in tables[0]}
+        tiles.append(_Tile(window, cell_range, f"A{k}."))
+    return tiles

@@ -267,6 +267,17 @@ class Geoid:
 
 # ----------------------------------------------------------------------------- DEM
 @attrs.frozen(eq=False)
+class _FileGrid:
+    """Heights as a DEM file holds them (scale and offset applied, NaN = nodata), the
+    transform of their first post, the horizontal CRS and the vertical reference."""
+
+    heights: FloatArray
+    transform: Affine
+    crs: pyproj.CRS
+    vertical: str
+
+
+@attrs.frozen(eq=False)
 class DEM:
     """An immutable digital elevation model: heights on a regular grid, sampled bilinearly.
 
@@ -393,45 +404,14 @@ class DEM:
                 valid height (all nodata or implausible), ``bounds`` not covered, geoid
                 heights with ``require_ellipsoidal`` and no geoid.
         """
-        import rasterio
-        from rasterio.errors import RasterioError
-        from rasterio.transform import Affine
-        from rasterio.windows import Window
-
         path = existing_file(path, "DEM")
-        try:
-            with rasterio.open(path) as ds:
-                band = check_dem_file(ds, band, path)
-                crs, file_vertical = split_vertical(_to_crs(ds.crs))
-                vref = vertical_of(ds, vertical, file_vertical, path)
-                window = None
-                transform = ds.transform
-                if rows is not None:
-                    r0, r1 = max(0, int(rows[0])), min(ds.height, int(rows[1]))
-                    if r0 >= r1:
-                        raise InputError(
-                            f"DEM {path}: rows {rows[0]}..{rows[1]} are outside its "
-                            f"{ds.height} rows"
-                        )
-                    window = Window(0, r0, ds.width, r1 - r0)
-                    transform = transform @ Affine.translation(0, r0)
-                elif bounds is not None:
-                    full = cls(np.zeros((1, 1)), transform, crs, source=str(path))
-                    rows, cols = full._window_for(bounds, ds.height, ds.width)
-                    window = Window(cols[0], rows[0], cols[1] - cols[0], rows[1] - rows[0])
-                    transform = transform @ Affine.translation(cols[0], rows[0])
-                grid = ds.read(band, window=window, masked=True)
-                grid = grid.astype(np.float64).filled(np.nan)
-                scale, offset = ds.scales[band - 1], ds.offsets[band - 1]
-        except RasterioError as exc:
-            raise InputError(f"DEM {path}: not a readable raster ({gdal_cause(exc)})") from exc
-        if scale not in (None, 1.0) or offset not in (None, 0.0):
-            grid = grid * (1.0 if scale is None else scale) + (offset or 0.0)
-        dem = cls(grid, transform, crs, vertical=vref, source=str(path))
-        if rows is None and not np.isfinite(dem.heights).any():
-            where = "" if bounds is None else " in the requested bounds"
+        raw = cls._read_file(path, band=band, vertical=vertical, bounds=bounds, rows=rows)
+        dem = cls(raw.heights, raw.transform, raw.crs, vertical=raw.vertical, source=str(path))
+        # a window read (``rows``, or the one covering ``bounds``) may hold no valid height
+        if rows is None and bounds is None and not np.isfinite(dem.heights).any():
+            grid = raw.heights
             raise InputError(
-                f"DEM {path}: no valid height{where} (all {grid.shape[1]} x {grid.shape[0]} "
+                f"DEM {path}: no valid height (all {grid.shape[1]} x {grid.shape[0]} "
                 f"posts are nodata or outside {_HEIGHT_RANGE})"
             )
         if geoid is not None:
@@ -439,6 +419,67 @@ class DEM:
         if require_ellipsoidal:
             dem.check_ellipsoidal()
         return dem
+
+    @classmethod
+    def _read_file(
+        cls,
+        path: Path,
+        *,
+        band: int | None,
+        vertical: str | None,
+        bounds: Bounds | None,
+        rows: tuple[int, int] | None,
+    ) -> _FileGrid:
+        """The heights of :meth:`open` as the file holds them (its band checked, the window
+        of ``rows`` or ``bounds`` only, scale and offset applied), placed and referenced."""
+        import rasterio
+        from rasterio.errors import RasterioError
+
+        try:
+            with rasterio.open(path) as ds:
+                band = check_dem_file(ds, band, path)
+                crs, file_vertical = split_vertical(_to_crs(ds.crs))
+                vref = vertical_of(ds, vertical, file_vertical, path)
+                window, transform = cls._file_window(ds, path, crs, bounds, rows)
+                grid = ds.read(band, window=window, masked=True)
+                grid = grid.astype(np.float64).filled(np.nan)
+                scale, offset = ds.scales[band - 1], ds.offsets[band - 1]
+        except RasterioError as exc:
+            raise InputError(f"DEM {path}: not a readable raster ({gdal_cause(exc)})") from exc
+        if scale not in (None, 1.0) or offset not in (None, 0.0):
+            grid = grid * (1.0 if scale is None else scale) + (offset or 0.0)
+        return _FileGrid(grid, transform, crs, vref)
+
+    @classmethod
+    def _file_window(
+        cls,
+        ds: Any,
+        path: Path,
+        crs: pyproj.CRS,
+        bounds: Bounds | None,
+        rows: tuple[int, int] | None,
+    ) -> tuple[Any, Affine]:
+        """The window of the open raster ``ds`` to read (``rows`` if given, else the one
+        covering ``bounds``, else None: all) and the transform of its first pixel."""
+        from rasterio.transform import Affine
+        from rasterio.windows import Window
+
+        window = None
+        transform = ds.transform
+        if rows is not None:
+            r0, r1 = max(0, int(rows[0])), min(ds.height, int(rows[1]))
+            if r0 >= r1:
+                raise InputError(
+                    f"DEM {path}: rows {rows[0]}..{rows[1]} are outside its {ds.height} rows"
+                )
+            window = Window(0, r0, ds.width, r1 - r0)
+            transform = transform @ Affine.translation(0, r0)
+        elif bounds is not None:
+            full = cls(np.zeros((1, 1)), transform, crs, source=str(path))
+            rows, cols = full._window_for(bounds, ds.height, ds.width)
+            window = Window(cols[0], rows[0], cols[1] - cols[0], rows[1] - rows[0])
+            transform = transform @ Affine.translation(cols[0], rows[0])
+        return window, transform
 
     # ------------------------------------------------------------------ properties
     @property

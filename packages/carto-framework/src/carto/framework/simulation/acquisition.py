@@ -24,6 +24,24 @@ AttitudeLaw = Callable[[FloatArray], tuple[FloatArray, FloatArray, FloatArray]]
 ANCILLARY_STEP_S = 0.125
 
 
+def _sun_synchronous_elements(
+    lon_deg: float, lat_deg: float, epoch_utc: str, altitude_m: float, descending: bool
+) -> tuple[float, orbit.OrbitElements]:
+    """``(epoch_j2000_s, elements)`` of the circular sun-synchronous orbit at ``altitude_m``
+    whose ground track crosses ``(lon_deg, lat_deg)`` at ``epoch_utc``."""
+    epoch = frames.utc_to_j2000_s(epoch_utc)
+    a = frames.WGS84_A_M + altitude_m
+    elements = orbit.circular_orbit_over(
+        lon_deg,
+        lat_deg,
+        epoch,
+        altitude_m,
+        orbit.sun_synchronous_inclination(a),
+        descending=descending,
+    )
+    return epoch, elements
+
+
 def sun_synchronous_pass(
     target_lon_deg: float,
     target_lat_deg: float,
@@ -41,15 +59,8 @@ def sun_synchronous_pass(
     """
     if not span_s[0] < 0 < span_s[1]:
         raise InputError(f"pass span must contain 0 (the epoch), got {span_s}")
-    epoch = frames.utc_to_j2000_s(epoch_utc)
-    a = frames.WGS84_A_M + altitude_m
-    el = orbit.circular_orbit_over(
-        target_lon_deg,
-        target_lat_deg,
-        epoch,
-        altitude_m,
-        orbit.sun_synchronous_inclination(a),
-        descending=descending,
+    epoch, el = _sun_synchronous_elements(
+        target_lon_deg, target_lat_deg, epoch_utc, altitude_m, descending
     )
     p0, v0 = orbit.elements_to_state(el)
     n0 = int(np.floor(span_s[0] / step_s))
@@ -79,16 +90,7 @@ def sun_synchronous_overpass(
     """A sun-synchronous circular orbit over ``(lon, lat)`` at ``local_hours`` local solar time
     on ``date``: ``(epoch_utc, epoch_j2000_s, elements at the epoch)``."""
     epoch_utc = local_time_epoch(lon_deg, date, local_hours)
-    epoch = frames.utc_to_j2000_s(epoch_utc)
-    a = frames.WGS84_A_M + altitude_m
-    elements = orbit.circular_orbit_over(
-        lon_deg,
-        lat_deg,
-        epoch,
-        altitude_m,
-        orbit.sun_synchronous_inclination(a),
-        descending=descending,
-    )
+    epoch, elements = _sun_synchronous_elements(lon_deg, lat_deg, epoch_utc, altitude_m, descending)
     return epoch_utc, epoch, elements
 
 

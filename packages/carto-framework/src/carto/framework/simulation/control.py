@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
+import attrs
 import numpy as np
 from numpy.typing import NDArray
 
@@ -59,6 +60,134 @@ def _select_points(
     return idx[np.asarray(chosen, dtype=np.intp)]
 
 
+_COLUMNS = (
+    "id",
+    "lon_deg",
+    "lat_deg",
+    "h_m",
+    "image",
+    "line",
+    "sample",
+    "sigma_planimetric_m",
+    "sigma_h_m",
+    "sigma_px",
+)
+"""The columns of the observation rows (long format: one row per point and image)."""
+
+_POOL_SIDE = 160
+"""Candidate points per side of the grid over the DEM the control points are chosen from."""
+
+_MARGIN_PX = 16.0
+"""How far inside an image's border a candidate must project to count as seen."""
+
+
+@attrs.frozen(eq=False)
+class _Pool:
+    """The candidate points (a grid over the DEM, heights from it) with, by image name,
+    their projections ``(line, sample)`` and whether the image sees them."""
+
+    lon_deg: FloatArray
+    lat_deg: FloatArray
+    h_m: FloatArray
+    proj: dict[str, tuple[FloatArray, FloatArray]]
+    seen_by: dict[str, NDArray[np.bool_]]
+
+
+def _pool(sensors: dict[str, Any], dem: Any) -> _Pool:
+    """Project the grid of candidates over ``dem`` into every image of ``sensors``."""
+    west, south, east, north = dem.bounds_lonlat
+    n = _POOL_SIDE
+    gx, gy = np.meshgrid(np.linspace(west, east, n), np.linspace(south, north, n))
+    lon, lat = gx.ravel(), gy.ravel()
+    h = dem.height(lon, lat)
+    proj, seen_by = {}, {}
+    for name, s in sensors.items():
+        line, sample = s.ground_to_image(lon, lat, np.nan_to_num(h))
+        n_l, n_s = s.image_shape
+        margin = _MARGIN_PX
+        seen_by[name] = (
+            np.isfinite(h)
+            & np.isfinite(line)
+            & (line > margin)
+            & (line < n_l - margin)
+            & (sample > margin)
+            & (sample < n_s - margin)
+        )
+        proj[name] = (line, sample)
+    return _Pool(lon, lat, h, proj, seen_by)
+
+
+def _project_exactly(pool: _Pool, exact: dict[str, Any], chosen: NDArray[np.intp]) -> None:
+    """Replace the projections of the ``chosen`` points by those of the ``exact`` geometry
+    (in place)."""
+    for name, geometry in exact.items():
+        line, sample = geometry.ground_to_image(
+            pool.lon_deg[chosen], pool.lat_deg[chosen], pool.h_m[chosen]
+        )
+        pool.proj[name][0][chosen] = line
+        pool.proj[name][1][chosen] = sample
+
+
+def _measured_ground(
+    lon_deg: float, lat_deg: float, h_m: float, errors: ErrorModel, rng: np.random.Generator
+) -> tuple[float, float, float]:
+    """A GCP's ground coordinates as surveyed: planimetric and height noise of ``errors``
+    (no draw for a source switched off)."""
+    plan_sigma = errors.gcp_planimetric_m / math.sqrt(2.0)
+    m_lat = 111_320.0
+    m_lon = m_lat * math.cos(math.radians(lat_deg))
+    de, dn = rng.normal(0.0, plan_sigma, 2) if plan_sigma else (0.0, 0.0)
+    lon_m, lat_m = lon_deg + de / m_lon, lat_deg + dn / m_lat
+    h_meas = h_m + (rng.normal(0.0, errors.gcp_height_m) if errors.gcp_height_m else 0)
+    return lon_m, lat_m, h_meas
+
+
+def _rows(
+    pool: _Pool,
+    indices: NDArray[np.intp],
+    prefix: str,
+    noisy: bool,
+    image_px: float,
+    errors: ErrorModel,
+    rng: np.random.Generator,
+) -> dict[str, list]:
+    """The observation rows of the points ``indices``, named ``prefix`` + number: ground
+    noise when ``noisy`` (GCPs), image noise of ``image_px``, one row per image that sees
+    the point."""
+    table: dict[str, list] = {c: [] for c in _COLUMNS}
+    for k, i in enumerate(indices):
+        lo_, la_, hh = pool.lon_deg[i], pool.lat_deg[i], pool.h_m[i]
+        if noisy:
+            lo_m, la_m, hh_m = _measured_ground(lo_, la_, hh, errors, rng)
+        else:
+            lo_m, la_m, hh_m = lo_, la_, hh
+        for name, seen in pool.seen_by.items():
+            if not seen[i]:
+                continue
+            line, sample = pool.proj[name][0][i], pool.proj[name][1][i]
+            if image_px:
+                line += rng.normal(0.0, image_px)
+                sample += rng.normal(0.0, image_px)
+            for c, value in zip(
+                _COLUMNS,
+                (
+                    f"{prefix}{k + 1:03d}",
+                    lo_m,
+                    la_m,
+                    hh_m,
+                    name,
+                    line,
+                    sample,
+                    errors.gcp_planimetric_m if noisy else 0.0,
+                    errors.gcp_height_m if noisy else 0.0,
+                    image_px,
+                ),
+                strict=True,
+            ):
+                table[c].append(value)
+    return table
+
+
 def control_points(
     sensors: dict[str, Any],
     dem: Any,
@@ -80,93 +209,18 @@ def control_points(
 
     Points are chosen where at least ``min_views`` images (None: all) see them; each gets a
     row for every image that sees it."""
-    west, south, east, north = dem.bounds_lonlat
-    n = 160
-    gx, gy = np.meshgrid(np.linspace(west, east, n), np.linspace(south, north, n))
-    lon, lat = gx.ravel(), gy.ravel()
-    h = dem.height(lon, lat)
-    proj, seen_by = {}, {}
-    for name, s in sensors.items():
-        line, sample = s.ground_to_image(lon, lat, np.nan_to_num(h))
-        n_l, n_s = s.image_shape
-        margin = 16.0
-        seen_by[name] = (
-            np.isfinite(h)
-            & np.isfinite(line)
-            & (line > margin)
-            & (line < n_l - margin)
-            & (sample > margin)
-            & (sample < n_s - margin)
-        )
-        proj[name] = (line, sample)
-    n_seen = np.sum(list(seen_by.values()), axis=0)
+    pool = _pool(sensors, dem)
+    lon, lat = pool.lon_deg, pool.lat_deg
+    n_seen = np.sum(list(pool.seen_by.values()), axis=0)
     inside = n_seen >= (len(sensors) if min_views is None else min_views)
     gcp_idx = _select_points(lon, lat, n_gcps, rng, exclude=~inside)
     taken = ~inside
     taken[gcp_idx] = True
     check_idx = _select_points(lon, lat, n_check, rng, exclude=taken)
-    if exact is not None:
-        chosen = np.concatenate([gcp_idx, check_idx])
-        for name, geometry in exact.items():
-            line, sample = geometry.ground_to_image(lon[chosen], lat[chosen], h[chosen])
-            proj[name][0][chosen] = line
-            proj[name][1][chosen] = sample
     # exact projections of the chosen points (refined ground -> image, true models)
-    cols = (
-        "id",
-        "lon_deg",
-        "lat_deg",
-        "h_m",
-        "image",
-        "line",
-        "sample",
-        "sigma_planimetric_m",
-        "sigma_h_m",
-        "sigma_px",
-    )
-
-    def rows(
-        indices: NDArray[np.intp], prefix: str, noisy: bool, image_px: float
-    ) -> dict[str, list]:
-        table: dict[str, list] = {c: [] for c in cols}
-        plan_sigma = errors.gcp_planimetric_m / math.sqrt(2.0)
-        for k, i in enumerate(indices):
-            lo_, la_, hh = lon[i], lat[i], h[i]
-            if noisy:
-                m_lat = 111_320.0
-                m_lon = m_lat * math.cos(math.radians(la_))
-                de, dn = rng.normal(0.0, plan_sigma, 2) if plan_sigma else (0.0, 0.0)
-                lo_m, la_m = lo_ + de / m_lon, la_ + dn / m_lat
-                hh_m = hh + (rng.normal(0.0, errors.gcp_height_m) if errors.gcp_height_m else 0)
-            else:
-                lo_m, la_m, hh_m = lo_, la_, hh
-            for name in sensors:
-                if not seen_by[name][i]:
-                    continue
-                line, sample = proj[name][0][i], proj[name][1][i]
-                if image_px:
-                    line += rng.normal(0.0, image_px)
-                    sample += rng.normal(0.0, image_px)
-                for c, value in zip(
-                    cols,
-                    (
-                        f"{prefix}{k + 1:03d}",
-                        lo_m,
-                        la_m,
-                        hh_m,
-                        name,
-                        line,
-                        sample,
-                        errors.gcp_planimetric_m if noisy else 0.0,
-                        errors.gcp_height_m if noisy else 0.0,
-                        image_px,
-                    ),
-                    strict=True,
-                ):
-                    table[c].append(value)
-        return table
-
+    if exact is not None:
+        _project_exactly(pool, exact, np.concatenate([gcp_idx, check_idx]))
     all_idx = np.concatenate([gcp_idx, check_idx])
-    gcps = rows(gcp_idx, "G", True, errors.gcp_image_px)
-    checks = rows(check_idx, "C", False, errors.checkpoint_image_px)
+    gcps = _rows(pool, gcp_idx, "G", True, errors.gcp_image_px, errors, rng)
+    checks = _rows(pool, check_idx, "C", False, errors.checkpoint_image_px, errors, rng)
     return gcps, checks, (lon[all_idx], lat[all_idx])

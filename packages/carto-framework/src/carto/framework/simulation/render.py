@@ -22,110 +22,108 @@ simulator generates them so; :func:`locate_pixels` and :func:`render_reflectance
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numba
 import numpy as np
 from numpy.typing import NDArray
 
 from carto.framework.errors import InputError
-from carto.framework.geometry import frames
 from carto.framework.geometry.linescan.raycast import (
-    camera_ray,
-    geographic_grid,
+    HEIGHT_TOLERANCE_M,
+    MAX_STEPS,
+    CameraStates,
+    DemGrid,
+    GeoGrid,
+    camera_states,
+    dem_grid,
+    geo_grid,
     grid_bilinear,
     interp_time,
-    max_terrain_slope,
-    ray_dem,
-    sensor_arrays,
+    trace_pixel,
 )
 from carto.framework.geometry.linescan.scanner import LineScanner
 
 FloatArray = NDArray[np.float64]
 
-_A = frames.WGS84_A_M
-_B = frames.WGS84_B_M
-_E2 = frames.WGS84_E2
-_EP2 = (_A * _A - _B * _B) / (_B * _B)
-HEIGHT_TOLERANCE_M = 1e-4
-MAX_STEPS = 4000
+__all__ = ["HEIGHT_TOLERANCE_M", "MAX_STEPS", "render_band", "render_reflectance"]
+
+
+class _RenderWindow(NamedTuple):
+    """The pixels one kernel call renders: image lines ``line0 ... line0 + n_lines - 1`` and
+    ``n_cols`` detectors from ``first_sample`` (0-based detector index), each integrated over
+    ``supersample x supersample`` sub-pixel rays; detectors with odd index look along track by
+    the extra tangent ``stagger_tan``."""
+
+    line0: int
+    n_lines: int
+    n_cols: int
+    first_sample: int
+    stagger_tan: float
+    supersample: int
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _render_pixel(
+    window: _RenderWindow,
+    cam: CameraStates,
+    dem: DemGrid,
+    tex: GeoGrid,
+    i: int,
+    j: int,
+    ray: NDArray,
+) -> float:  # pragma: no cover - compiled
+    """Mean texture value of the sub-pixel rays of window pixel ``(i, j)``; NaN unless every
+    ray meets the DEM and the texture. ``ray`` is scratch space, ``(6,)``."""
+    supersample = window.supersample
+    inv = 1.0 / supersample
+    k = window.first_sample + j
+    stagger = window.stagger_tan if (k % 2) == 1 else 0.0
+    acc = 0.0
+    count = 0
+    for a in range(supersample):
+        line = window.line0 + i + (a + 0.5) * inv
+        t = interp_time(line, cam.line_nodes, cam.t_nodes)
+        for b in range(supersample):
+            s = k + (b + 0.5) * inv
+            lon, lat, _h = trace_pixel(t, s, stagger, cam, dem, ray)
+            if not np.isfinite(lon):
+                continue
+            v = grid_bilinear(tex.values, tex.x0_deg, tex.dx_deg, tex.y0_deg, tex.dy_deg, lon, lat)
+            if np.isfinite(v):
+                acc += v
+                count += 1
+    if count == supersample * supersample:
+        return acc / count
+    return np.nan
 
 
 @numba.njit(parallel=True, cache=True, nogil=True)
 def _render_kernel(
-    line0: int,
-    n_lines: int,
-    n_cols: int,
-    first_sample: int,
-    stagger_tan: float,
-    supersample: int,
-    line_nodes: NDArray,
-    t_nodes: NDArray,
-    node0: float,
-    spacing: float,
-    pos: NDArray,
-    rot: NDArray,
-    beta: NDArray,
-    omega_c: NDArray,
-    tan_x: NDArray,
-    tan_y: NDArray,
-    half: float,
-    dem: NDArray,
-    x0: float,
-    dx: float,
-    y0: float,
-    dy: float,
-    h_top: float,
-    h_bottom: float,
-    max_slope: float,
-    tex: NDArray,
-    tx0: float,
-    tdx: float,
-    ty0: float,
-    tdy: float,
+    window: _RenderWindow, cam: CameraStates, dem: DemGrid, tex: GeoGrid
 ) -> NDArray:  # pragma: no cover - compiled
-    image = np.full((n_lines, n_cols), np.nan, dtype=np.float32)
-    inv = 1.0 / supersample
-    for i in numba.prange(n_lines):
+    image = np.full((window.n_lines, window.n_cols), np.nan, dtype=np.float32)
+    for i in numba.prange(window.n_lines):
         ray = np.empty(6)
-        for j in range(n_cols):
-            k = first_sample + j
-            stagger = stagger_tan if (k % 2) == 1 else 0.0
-            acc = 0.0
-            count = 0
-            for a in range(supersample):
-                line = line0 + i + (a + 0.5) * inv
-                t = interp_time(line, line_nodes, t_nodes)
-                for b in range(supersample):
-                    s = k + (b + 0.5) * inv
-                    if not camera_ray(
-                        t, s, stagger, node0, spacing, pos, rot, beta, tan_x, tan_y, half, ray
-                    ):
-                        continue
-                    lon, lat, _h = ray_dem(
-                        ray[0],
-                        ray[1],
-                        ray[2],
-                        ray[3],
-                        ray[4],
-                        ray[5],
-                        dem,
-                        x0,
-                        dx,
-                        y0,
-                        dy,
-                        h_top,
-                        h_bottom,
-                        max_slope,
-                        omega_c,
-                    )
-                    if not np.isfinite(lon):
-                        continue
-                    v = grid_bilinear(tex, tx0, tdx, ty0, tdy, lon, lat)
-                    if np.isfinite(v):
-                        acc += v
-                        count += 1
-            if count == supersample * supersample:
-                image[i, j] = acc / count
+        for j in range(window.n_cols):
+            image[i, j] = _render_pixel(window, cam, dem, tex, i, j, ray)
     return image
+
+
+def _stagger_tan(sensor: LineScanner, stagger: bool) -> float:
+    """The extra along-track tangent of the odd-indexed detectors: those of the even array
+    when ``stagger`` (the camera describes the odd array, or the even one: then the others
+    look back by as much), else 0."""
+    if not stagger:
+        return 0.0
+    tan = float(sensor.camera.stagger_tan)
+    return -tan if sensor.camera.array == "even" else tan
+
+
+def _check_supersample(supersample: int) -> None:
+    """InputError unless at least one sub-pixel ray per pixel side."""
+    if supersample < 1:
+        raise InputError(f"supersample must be >= 1, got {supersample}")
 
 
 def render_reflectance(
@@ -150,53 +148,18 @@ def render_reflectance(
 
     Pixels whose rays leave the DEM or the texture are NaN.
     """
-    if supersample < 1:
-        raise InputError(f"supersample must be >= 1, got {supersample}")
-    grid, x0, dx, y0, dy = geographic_grid(dem.heights, dem.transform, dem.crs, "DEM")
+    _check_supersample(supersample)
+    dem_search = dem_grid(dem)
     tex_values = getattr(texture, "reflectance", None)
     if tex_values is None:
         tex_values = texture.values
-    tex, tx0, tdx, ty0, tdy = geographic_grid(
-        tex_values, texture.transform, getattr(texture, "crs", "EPSG:4326"), "texture"
-    )
-    arr = sensor_arrays(sensor)
+    tex = geo_grid(tex_values, texture.transform, getattr(texture, "crs", "EPSG:4326"), "texture")
+    cam = camera_states(sensor)
     n_lines, n_cols = sensor.image_shape
-    lat_c = y0 + dy * grid.shape[0] / 2
-    stagger_tan = sensor.camera.stagger_tan if stagger else 0.0
-    if sensor.camera.array == "even":
-        stagger_tan = -stagger_tan if stagger else 0.0
-    return _render_kernel(
-        0,
-        n_lines,
-        n_cols,
-        sensor.first_sample,
-        stagger_tan,
-        supersample,
-        arr["line_nodes"],
-        arr["t_nodes"],
-        arr["node0"],
-        arr["spacing"],
-        arr["pos"],
-        arr["rot"],
-        arr["beta"],
-        arr["omega_c"],
-        arr["tan_x"],
-        arr["tan_y"],
-        arr["half"],
-        grid,
-        x0,
-        dx,
-        y0,
-        dy,
-        float(np.nanmax(grid)) + 1.0,
-        float(np.nanmin(grid)) - 1.0,
-        max_terrain_slope(grid, dx, dy, lat_c),
-        tex,
-        tx0,
-        tdx,
-        ty0,
-        tdy,
+    window = _RenderWindow(
+        0, n_lines, n_cols, sensor.first_sample, _stagger_tan(sensor, stagger), supersample
     )
+    return _render_kernel(window, cam, dem_search, tex)
 
 
 def render_band(
@@ -219,46 +182,21 @@ def render_band(
     safely for slopes up to ``max_slope`` (rise/run) whatever the windows, so a band gives
     the pixels of the whole image rendered at once.
     """
-    if supersample < 1:
-        raise InputError(f"supersample must be >= 1, got {supersample}")
-    grid, x0, dx, y0, dy = geographic_grid(dem.heights, dem.transform, dem.crs, "DEM")
+    _check_supersample(supersample)
+    dem_search = dem_grid(dem, h_range, max_slope)
     t = texture.transform
-    tex, tx0, tdx, ty0, tdy = np.ascontiguousarray(texture.reflectance), t.c, t.a, t.f, t.e
-    arr = sensor_arrays(sensor)
-    stagger_tan = sensor.camera.stagger_tan if stagger else 0.0
-    if sensor.camera.array == "even":
-        stagger_tan = -stagger_tan if stagger else 0.0
+    tex = GeoGrid(
+        np.ascontiguousarray(texture.reflectance), float(t.c), float(t.a), float(t.f), float(t.e)
+    )
+    cam = camera_states(sensor)
     first, last = lines
     s0, s1 = samples or (0, sensor.image_shape[1])
-    return _render_kernel(
+    window = _RenderWindow(
         int(first),
         int(last - first),
         int(s1 - s0),
         sensor.first_sample + int(s0),
-        stagger_tan,
+        _stagger_tan(sensor, stagger),
         supersample,
-        arr["line_nodes"],
-        arr["t_nodes"],
-        arr["node0"],
-        arr["spacing"],
-        arr["pos"],
-        arr["rot"],
-        arr["beta"],
-        arr["omega_c"],
-        arr["tan_x"],
-        arr["tan_y"],
-        arr["half"],
-        grid,
-        x0,
-        dx,
-        y0,
-        dy,
-        float(h_range[1]) + 1.0,
-        float(h_range[0]) - 1.0,
-        float(max_slope),
-        tex,
-        tx0,
-        tdx,
-        ty0,
-        tdy,
     )
+    return _render_kernel(window, cam, dem_search, tex)

@@ -28,11 +28,9 @@ unchanged. The scene folder layout and file formats are in ``docs/formats.md``.
 from __future__ import annotations
 
 import logging
-import math
 import os
 import sys
 import time
-from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -44,11 +42,14 @@ from carto.framework.errors import InputError
 from carto.framework.files.documents import write_json_atomic
 from carto.framework.files.point_table import write_point_table
 from carto.framework.geometry import frames
+from carto.framework.geometry.camera import Camera
+from carto.framework.geometry.linescan.scanner import LineScanner
 from carto.framework.geometry.linescan.timing import LineTiming
 from carto.framework.products.ancillary import ImageSpec
 from carto.framework.products.scene import SCENE_FORMAT, SCENE_VERSION
 from carto.framework.simulation import truth_geometry as tg
 from carto.framework.simulation.control import control_points
+from carto.framework.simulation.error_draws import draw_product_errors
 from carto.framework.simulation.plan import (
     ErrorModel,
     ScenePlan,
@@ -56,6 +57,7 @@ from carto.framework.simulation.plan import (
     ViewPlan,
     check_error_size,
 )
+from carto.framework.simulation.reference.attitude import AttitudeLaw
 from carto.framework.simulation.reference.pushbroom import ReferenceImager
 from carto.framework.simulation.truth_products import ERRORS_NOTE, measured_ancillary
 
@@ -84,75 +86,6 @@ class _Stage:
 
 
 # ----------------------------------------------------------------------------- engine
-def _draw_unmodelled(
-    errors: ErrorModel,
-    rng: np.random.Generator,
-    n_segments: int,
-    cameras: Sequence[str],
-    views: Sequence[str],
-) -> dict[str, Any]:
-    """The draws of the errors outside the adjusters' parameters (``--errors full``). Every
-    draw is made whatever the sizes (scaled by them), so switching one source off leaves the
-    others unchanged."""
-    deg = math.radians
-
-    def normal(sigma: float, n: int | None = None) -> Any:
-        z = rng.standard_normal(n)
-        return (np.asarray(z) * sigma).tolist()
-
-    interior = {
-        c: {
-            "focal_ppm": normal(errors.focal_length_ppm),
-            "line_offset_px": normal(errors.detector_line_offset_px),
-            "principal_point_px": normal(errors.principal_point_px),
-            "rotation_rad": normal(deg(errors.ccd_rotation_deg)),
-        }
-        for c in cameras
-    }
-    timing = {
-        v: {
-            "offset_s": normal(errors.line_time_offset_s),
-            "period_ppm": normal(errors.line_period_ppm),
-        }
-        for v in views
-    }
-    wander = [
-        {
-            "amplitude_rad": (
-                deg(errors.attitude_wander_deg) * rng.uniform(0.5, 1.0, (3, 3))
-            ).tolist(),
-            "period_s": rng.uniform(15.0, 90.0, 3).tolist(),
-            "phase_rad": rng.uniform(0.0, 2.0 * math.pi, (3, 3)).tolist(),
-            "ephemeris_noise_seed": int(rng.integers(2**31)),
-        }
-        for _ in range(n_segments)
-    ]
-    return {"camera_interior": interior, "line_timing": timing, "segments": wander}
-
-
-def _draw_errors(
-    errors: ErrorModel, rng: np.random.Generator, n_segments: int, cameras: Sequence[str]
-) -> dict[str, Any]:
-    def draw(sigma: float) -> list[float]:
-        """Three normal draws of ``sigma`` (none when the source is switched off)."""
-        return (rng.normal(0.0, sigma, 3) if sigma else np.zeros(3)).tolist()
-
-    deg = np.radians
-    eph = draw(errors.ephemeris_bias_m)
-    seg = [
-        {
-            "ephemeris_bias_m": eph,
-            "attitude_bias_rad": draw(deg(errors.attitude_bias_deg)),
-            "attitude_drift_rad_s": draw(deg(errors.attitude_drift_deg_s)),
-            "attitude_tau2_rad": draw(deg(errors.attitude_smooth_deg)),
-            "attitude_tau3_rad": draw(deg(errors.attitude_smooth_deg)),
-        }
-        for _ in range(n_segments)
-    ]
-    mis = {c: draw(deg(errors.misalignment_deg)) for c in cameras}
-    return {"segments": seg, "camera_misalignment_rad": mis}
-
-
 def _window(
     view: ViewPlan, size: tuple[int, int], target_line: float, target_sample: float
 ) -> tuple[int, int, int, int]:
@@ -183,20 +116,108 @@ def _radiometry(
     return np.clip(np.rint(dn), 0, DN_MAX).astype(np.uint16)
 
 
-def simulate_scene(  # noqa: C901, PLR0915 (issue 32: to split)
-    plan: ScenePlan,
-    out_dir: str | os.PathLike[str],
-    options: SimulationOptions = SimulationOptions(),  # noqa: B008 (frozen, immutable)
-    *,
-    quiet: bool = False,
-) -> Path:
-    """Render ``plan`` into the scene folder ``out_dir``; return the path of ``scene.json``."""
-    from carto.framework.raster.dem import DEM
-    from carto.framework.simulation import scene_tiles
-    from carto.framework.simulation import terrain as terrain_mod
-    from carto.framework.simulation.texture import GroundTexture
+@attrs.frozen
+class _Settings:
+    """The run's choices resolved from the options and the plan's defaults, validated."""
 
-    out = Path(out_dir)
+    errors: ErrorModel
+    terrain_name: str
+    size: tuple[int, int]
+    n_gcps: int
+    n_check: int
+
+
+@attrs.frozen(eq=False)
+class _Streams:
+    """One random stream per purpose, spawned from ``SeedSequence(seed)``: switching one
+    error source off leaves the others' draws unchanged."""
+
+    err: np.random.Generator
+    jit: np.random.Generator
+    terrain: np.random.Generator
+    tex: np.random.Generator
+    ctl: np.random.Generator
+    noise: np.random.Generator
+    init: np.random.Generator
+    full: np.random.Generator
+
+    @classmethod
+    def from_seed(cls, seed: int) -> _Streams:
+        streams = np.random.SeedSequence(int(seed)).spawn(8)
+        return cls(*(np.random.default_rng(s) for s in streams))
+
+
+@attrs.frozen(eq=False)
+class _Reference:
+    """The true geometry of every view, by view name: the jittered attitude laws (one per
+    segment), the full-image reference imagers, the views, their true model cameras and the
+    index of their segment."""
+
+    world: tg.World
+    laws: list[AttitudeLaw]
+    full_imagers: dict[str, ReferenceImager]
+    views: dict[str, ViewPlan]
+    cameras: dict[str, Camera]
+    seg_of: dict[str, int]
+
+
+@attrs.frozen(eq=False)
+class _Truth:
+    """What the truth stage yields for rendering: the true DEM's height range and steepest
+    slope, and the ground texture."""
+
+    h_lo_m: float
+    h_hi_m: float
+    max_slope: float
+    ground: Any
+
+
+@attrs.frozen(eq=False)
+class _TrueScene:
+    """The scene the last stages render and write: the terrain (and its manifest name), and
+    by view name the true line-scanner model and the product's image."""
+
+    terrain: Any
+    terrain_name: str
+    sensors: dict[str, LineScanner]
+    specs: dict[str, ImageSpec]
+
+
+@attrs.frozen
+class _Written:
+    """The product files the manifest names: ancillary file by view, truth model path by
+    view (relative to the scene folder) and the true ortho-image."""
+
+    anc_files: dict[str, str]
+    models: dict[str, Path]
+    ortho: Path
+
+
+@attrs.frozen(eq=False)
+class _Run:
+    """What every stage reads: the plan, the user's options, the settings resolved from
+    both, the scene folder and whether progress is printed."""
+
+    plan: ScenePlan
+    options: SimulationOptions
+    settings: _Settings
+    out: Path
+    quiet: bool
+
+
+def _check_seeds(options: SimulationOptions) -> None:
+    """Refuse a seed that is not an integer >= 0."""
+    for name in ("seed", "platform_seed"):
+        value = getattr(options, name)
+        wrong = isinstance(value, bool) or not isinstance(value, int) or value < 0
+        if value is not None and wrong:
+            raise InputError(f"--{name.replace('_', '-')} must be an integer >= 0, got {value!r}")
+
+
+def _settings(plan: ScenePlan, options: SimulationOptions) -> _Settings:
+    """The options checked and completed with the plan's defaults."""
+    from carto.framework.simulation import terrain as terrain_mod
+
     errors = ErrorModel.named(options.errors, agile=plan.agile)
     terrain_name = options.terrain or plan.default_terrain
     if options.dem_path is None and terrain_name not in terrain_mod.TERRAINS:
@@ -208,41 +229,16 @@ def simulate_scene(  # noqa: C901, PLR0915 (issue 32: to split)
     n_check = plan.default_checkpoints if options.n_checkpoints is None else options.n_checkpoints
     if n_gcps < 0 or n_check < 0:
         raise InputError("--gcps and --checkpoints must be >= 0")
-    for name in ("seed", "platform_seed"):
-        value = getattr(options, name)
-        wrong = isinstance(value, bool) or not isinstance(value, int) or value < 0
-        if value is not None and wrong:
-            raise InputError(f"--{name.replace('_', '-')} must be an integer >= 0, got {value!r}")
+    _check_seeds(options)
     if options.error_sizes:
         for name, value in options.error_sizes:
             check_error_size(name, value)
         errors = attrs.evolve(errors, **dict(options.error_sizes))
-    streams = np.random.SeedSequence(int(options.seed)).spawn(8)
-    rng_err, rng_jit, rng_terrain, rng_tex, rng_ctl, rng_noise, rng_init, rng_full = (
-        np.random.default_rng(s) for s in streams
-    )
-    epoch = frames.utc_to_j2000_s(plan.epoch_utc)
-    cameras = sorted({v.camera.name for s in plan.segments for v in s.views})
-    drawn = _draw_errors(errors, rng_err, len(plan.segments), cameras)
-    view_names = [v.name for seg in plan.segments for v in seg.views]
-    unmodelled = _draw_unmodelled(errors, rng_full, len(plan.segments), cameras, view_names)
-    drawn["camera_interior"] = unmodelled["camera_interior"]
-    drawn["line_timing"] = unmodelled["line_timing"]
-    for seg_draw, extra in zip(drawn["segments"], unmodelled["segments"], strict=True):
-        seg_draw.update(
-            {
-                f"attitude_wander_{k}" if k != "ephemeris_noise_seed" else k: v
-                for k, v in extra.items()
-            }
-        )
-    if options.platform_seed is not None:
-        platform_rng = np.random.default_rng(int(options.platform_seed))
-        drawn["camera_misalignment_rad"] = {
-            c: (platform_rng.normal(0.0, math.radians(errors.misalignment_deg), 3)).tolist()
-            for c in cameras
-        }
-    out.mkdir(parents=True, exist_ok=True)
+    return _Settings(errors, terrain_name, size, n_gcps, n_check)
 
+
+def _check_size(plan: ScenePlan, size: tuple[int, int]) -> None:
+    """Refuse a window larger than a view's full image."""
     for seg in plan.segments:
         for view in seg.views:
             if not (size[0] <= view.camera.n_detectors and size[1] <= view.n_lines_full):
@@ -251,85 +247,125 @@ def simulate_scene(  # noqa: C901, PLR0915 (issue 32: to split)
                     f"{view.camera.n_detectors} x {view.n_lines_full} of {view.name}"
                 )
 
-    # --- true geometry (the reference): full images, then windows centred on the target
-    h_range = _terrain_range(terrain_name, options.dem_path)
-    h_mid = 0.5 * sum(h_range)
-    with _Stage("true orbit and attitude (reference geometry)", quiet):
-        w = tg.world(plan)
-        laws, full_imagers, views, cameras, seg_of = [], {}, {}, {}, {}
-        for seg in plan.segments:
-            law = tg.jittered(seg.attitude, errors.jitter_deg, errors.jitter_hz, rng_jit)
-            laws.append(law)
-            if law is not seg.attitude:  # the jitter drawn, for whoever rebuilds the truth
-                drawn["segments"][len(laws) - 1]["attitude_jitter"] = {
-                    "amplitude_rad": [list(a) for a in law.amplitude_rad],
-                    "frequency_hz": list(law.frequency_hz),
-                    "phase_rad": [list(p) for p in law.phase_rad],
-                }
-            for view in seg.views:
-                mis = drawn["camera_misalignment_rad"][view.camera.name]
-                interior = drawn["camera_interior"][view.camera.name]
-                period = view.period_s * (
-                    1.0 + 1e-6 * drawn["line_timing"][view.name]["period_ppm"]
-                )
-                full_imagers[view.name] = tg.full_imager(
-                    w,
-                    view,
-                    tg.camera_geometry(view.camera, mis, interior),
-                    law,
-                    seg,
-                    view.target or plan.target,
-                    h_mid,
-                    period_s=period,
-                )
-                views[view.name] = view
-                cameras[view.name] = tg.model_camera(view.camera, mis, interior)
-                seg_of[view.name] = len(laws) - 1
 
-    def place(h_target: float) -> dict[str, tuple[ReferenceImager, int]]:
-        """Windows centred on the target seen at height ``h_target``."""
-        placed = {}
-        for name, full in full_imagers.items():
-            target = views[name].target or plan.target
-            t_line, t_sample = full.ground_to_image(target[0], target[1], h_target)
-            first_line, first_sample, height, width = _window(
-                views[name], size, float(t_line), float(t_sample)
+def _reference(
+    plan: ScenePlan,
+    errors: ErrorModel,
+    drawn: dict[str, Any],
+    h_mid_m: float,
+    rng: np.random.Generator,
+) -> _Reference:
+    """The true orbit and attitude (jitter drawn from ``rng``, recorded in ``drawn``) and every
+    view's full-image reference imager, pointed at its target seen at ``h_mid_m``."""
+    w = tg.world(plan)
+    laws, full_imagers, views, cameras, seg_of = [], {}, {}, {}, {}
+    for seg in plan.segments:
+        law = tg.jittered(seg.attitude, errors.jitter_deg, errors.jitter_hz, rng)
+        laws.append(law)
+        if law is not seg.attitude:  # the jitter drawn, for whoever rebuilds the truth
+            drawn["segments"][len(laws) - 1]["attitude_jitter"] = {
+                "amplitude_rad": [list(a) for a in law.amplitude_rad],
+                "frequency_hz": list(law.frequency_hz),
+                "phase_rad": [list(p) for p in law.phase_rad],
+            }
+        for view in seg.views:
+            mis = drawn["camera_misalignment_rad"][view.camera.name]
+            interior = drawn["camera_interior"][view.camera.name]
+            period = view.period_s * (1.0 + 1e-6 * drawn["line_timing"][view.name]["period_ppm"])
+            full_imagers[view.name] = tg.full_imager(
+                w,
+                view,
+                tg.camera_geometry(view.camera, mis, interior),
+                law,
+                seg,
+                view.target or plan.target,
+                h_mid_m,
+                period_s=period,
             )
-            placed[name] = (tg.window(full, first_line, first_sample, height, width), first_line)
-        return placed
+            views[view.name] = view
+            cameras[view.name] = tg.model_camera(view.camera, mis, interior)
+            seg_of[view.name] = len(laws) - 1
+    return _Reference(w, laws, full_imagers, views, cameras, seg_of)
 
+
+def _place(
+    ref: _Reference, plan: ScenePlan, size: tuple[int, int], h_target: float
+) -> dict[str, tuple[ReferenceImager, int]]:
+    """Windows centred on the target seen at height ``h_target``."""
+    placed = {}
+    for name, full in ref.full_imagers.items():
+        target = ref.views[name].target or plan.target
+        t_line, t_sample = full.ground_to_image(target[0], target[1], h_target)
+        first_line, first_sample, height, width = _window(
+            ref.views[name], size, float(t_line), float(t_sample)
+        )
+        placed[name] = (tg.window(full, first_line, first_sample, height, width), first_line)
+    return placed
+
+
+def _terrain(
+    run: _Run, bounds: tuple[float, float, float, float], rng: np.random.Generator
+) -> tuple[Any, str]:
+    """The terrain over ``bounds`` (the user's DEM or a seeded procedural preset) and the name
+    the manifest gives it."""
+    from carto.framework.raster.dem import DEM
+    from carto.framework.simulation import terrain as terrain_mod
+
+    options, terrain_name = run.options, run.settings.terrain_name
+    dem_posting = max(2.0 * run.plan.gsd_m, 1.0)
+    if options.dem_path is not None:
+        terrain: Any = terrain_mod.GridTerrain(
+            terrain_mod.terrain_from_dem(DEM.open(options.dem_path), bounds, dem_posting)
+        )
+        return terrain, f"file:{Path(options.dem_path).name}"
+    terrain = terrain_mod.ProceduralTerrain(
+        terrain_name, bounds, dem_posting, int(rng.integers(2**31))
+    )
+    return terrain, terrain_name
+
+
+def _terrain_and_windows(
+    run: _Run, ref: _Reference, h_range: tuple[float, float], rng: np.random.Generator
+) -> tuple[Any, str, dict[str, tuple[ReferenceImager, int]]]:
+    """The terrain (and its manifest name) and the image windows, centred on the target seen
+    at its true height on that terrain (the middle height when views have their own
+    targets)."""
+    plan, options, size = run.plan, run.options, run.settings.size
+    h_mid = 0.5 * sum(h_range)
     # the terrain must cover the windows wherever the target's true height puts them
-    candidates = [place(h) for h in h_range]
+    candidates = [_place(ref, plan, size, h) for h in h_range]
     imagers_all = [im for c in candidates for im, _ in c.values()]
     bounds = tg.footprint_bounds(imagers_all, h_range, margin_m=20 * plan.gsd_m)
-    dem_posting = max(2.0 * plan.gsd_m, 1.0)
-    with _Stage(f"terrain {terrain_name if options.dem_path is None else options.dem_path}", quiet):
-        if options.dem_path is not None:
-            terrain: Any = terrain_mod.GridTerrain(
-                terrain_mod.terrain_from_dem(DEM.open(options.dem_path), bounds, dem_posting)
-            )
-            terrain_name = f"file:{Path(options.dem_path).name}"
-        else:
-            terrain = terrain_mod.ProceduralTerrain(
-                terrain_name, bounds, dem_posting, int(rng_terrain.integers(2**31))
-            )
+    label = run.settings.terrain_name if options.dem_path is None else options.dem_path
+    with _Stage(f"terrain {label}", run.quiet):
+        terrain, terrain_name = _terrain(run, bounds, rng)
     h_target = float(terrain.height(*plan.target))
-    placed = place(h_target if np.isfinite(h_target) else h_mid)
-    if any(v.target is not None for v in views.values()):
-        placed = place(h_mid)  # several targets: centre on the middle height
-    imagers = {name: im for name, (im, _) in placed.items()}
-    with _Stage("true line-scanner models", quiet):
-        true_sensors = {
-            name: tg.truth_scanner(
-                im,
-                cameras[name],
-                tg.truth_trajectory(w, laws[seg_of[name]], tg.image_span(im)),
-                first_line,
-            )
-            for name, (im, first_line) in placed.items()
-        }
-    # the product's line timing: the clock's offset and the nominal period
-    specs = {
+    placed = _place(ref, plan, size, h_target if np.isfinite(h_target) else h_mid)
+    if any(v.target is not None for v in ref.views.values()):
+        placed = _place(ref, plan, size, h_mid)  # several targets: centre on the middle height
+    return terrain, terrain_name, placed
+
+
+def _true_sensors(
+    ref: _Reference, placed: dict[str, tuple[ReferenceImager, int]]
+) -> dict[str, LineScanner]:
+    """The true line-scanner model of every placed window."""
+    return {
+        name: tg.truth_scanner(
+            im,
+            ref.cameras[name],
+            tg.truth_trajectory(ref.world, ref.laws[ref.seg_of[name]], tg.image_span(im)),
+            first_line,
+        )
+        for name, (im, first_line) in placed.items()
+    }
+
+
+def _image_specs(
+    true_sensors: dict[str, LineScanner], views: dict[str, ViewPlan], drawn: dict[str, Any]
+) -> dict[str, ImageSpec]:
+    """The product's images; their line timing: the clock's offset and the nominal period."""
+    return {
         name: ImageSpec(
             name,
             views[name].camera.name,
@@ -345,46 +381,26 @@ def simulate_scene(  # noqa: C901, PLR0915 (issue 32: to split)
         )
         for name, s in true_sensors.items()
     }
-    truth_dir = out / "truth"
-    truth_dir.mkdir(parents=True, exist_ok=True)
-    with _Stage("truth DEM", quiet):
-        h_lo, h_hi, max_slope = scene_tiles.write_truth_dem(
-            truth_dir / "dem.tif", terrain, quiet=quiet
-        )
-    with _Stage("ground texture", quiet):
-        ground = GroundTexture(terrain, 0.5 * plan.gsd_m, int(rng_tex.integers(2**31)))
 
-    # --- control points (before rendering: point targets may mark them)
-    with _Stage("control points", quiet):
-        gcp_rows, check_rows, targets = control_points(
-            true_sensors,
-            terrain,
-            n_gcps,
-            n_check,
-            errors,
-            rng_ctl,
-            plan.control_min_views,
-            exact=imagers,
-        )
-    if options.point_targets and targets[0].size:
-        ground = ground.with_targets(
-            targets[0], targets[1], radius_m=2.5 * plan.gsd_m, contrast=0.8
-        )
-    if plan.blur_sigma_px > 0:
-        ground = ground.blurred(plan.blur_sigma_px * plan.gsd_m / ground.posting_m)
 
-    # --- render, band by band
-    for name, sensor in true_sensors.items():
+def _render_all(
+    run: _Run, scene: _TrueScene, truth: _Truth, rng_noise: np.random.Generator
+) -> None:
+    """Render every view, band by band, into its GeoTIFF (noise from ``rng_noise``)."""
+    from carto.framework.simulation import scene_tiles
+
+    plan, options, quiet = run.plan, run.options, run.quiet
+    for name, sensor in scene.sensors.items():
         with _Stage(
             f"rendered {name} ({sensor.image_shape[1]} x {sensor.image_shape[0]} px)", quiet
         ):
             scene_tiles.render_image(
-                out / specs[name].raster,
+                run.out / scene.specs[name].raster,
                 sensor,
-                terrain,
-                ground,
-                h_range=(h_lo, h_hi),
-                max_slope=max_slope,
+                scene.terrain,
+                truth.ground,
+                h_range=(truth.h_lo_m, truth.h_hi_m),
+                max_slope=truth.max_slope,
                 supersample=options.supersample,
                 band_lines=options.band_lines,
                 band_samples=options.band_samples,
@@ -397,77 +413,195 @@ def simulate_scene(  # noqa: C901, PLR0915 (issue 32: to split)
                 quiet=quiet,
             )
 
-    # --- products
-    with _Stage("ancillary, control, initial DEM and truth", quiet):
-        anc_files = {}
-        for seg, seg_err in zip(plan.segments, drawn["segments"], strict=True):
-            anc = measured_ancillary(
-                plan.platform,
-                w,
-                seg.span_s,
-                seg.attitude,
-                seg_err,
-                {v.camera.name: v.camera for v in seg.views},
-                [specs[v.name] for v in seg.views],
-                ephemeris_noise_m=errors.ephemeris_noise_m,
-            )
-            path = anc.write(out / f"{seg.name}.ancillary.json")
-            for v in seg.views:
-                anc_files[v.name] = path.name
-        write_point_table(out / "gcps.csv", gcp_rows, precision=15)
-        write_point_table(out / "checkpoints.csv", check_rows, precision=15)
-        scene_tiles.write_init_dem(out / "init_dem.tif", terrain, rng_init)
-        models = {}
-        for name, sensor in true_sensors.items():
-            models[name] = sensor.save(truth_dir / f"{name}.model.json").relative_to(out)
-        ortho = scene_tiles.write_true_ortho(
-            truth_dir / "ortho.tif", ground, terrain.bounds_lonlat, plan.gsd_m, quiet=quiet
+
+def _truth_and_ground(run: _Run, terrain: Any, rng_tex: np.random.Generator) -> _Truth:
+    """Write the true DEM (its height range and steepest slope bound the rendering) and make
+    the seeded ground texture."""
+    from carto.framework.simulation import scene_tiles
+    from carto.framework.simulation.texture import GroundTexture
+
+    with _Stage("truth DEM", run.quiet):
+        h_lo, h_hi, max_slope = scene_tiles.write_truth_dem(
+            run.out / "truth" / "dem.tif", terrain, quiet=run.quiet
         )
-        write_json_atomic(
-            truth_dir / "errors.json",
-            {
-                "error_model": errors.as_dict(),
-                "drawn": drawn,
-                "note": ERRORS_NOTE,
-            },
+    with _Stage("ground texture", run.quiet):
+        ground = GroundTexture(terrain, 0.5 * run.plan.gsd_m, int(rng_tex.integers(2**31)))
+    return _Truth(h_lo, h_hi, max_slope, ground)
+
+
+def _marked_ground(
+    ground: Any, plan: ScenePlan, options: SimulationOptions, targets: tuple[Any, ...]
+) -> Any:
+    """The texture with the control points' targets painted (``--point-targets``) and the
+    optics' blur."""
+    if options.point_targets and targets[0].size:
+        ground = ground.with_targets(
+            targets[0], targets[1], radius_m=2.5 * plan.gsd_m, contrast=0.8
         )
-    manifest = {
+    if plan.blur_sigma_px > 0:
+        ground = ground.blurred(plan.blur_sigma_px * plan.gsd_m / ground.posting_m)
+    return ground
+
+
+def _write_ancillary(
+    run: _Run, w: tg.World, drawn: dict[str, Any], specs: dict[str, ImageSpec]
+) -> dict[str, str]:
+    """One ancillary file per segment, as measured (with the drawn errors); its file name by
+    view."""
+    plan, errors = run.plan, run.settings.errors
+    anc_files = {}
+    for seg, seg_err in zip(plan.segments, drawn["segments"], strict=True):
+        anc = measured_ancillary(
+            plan.platform,
+            w,
+            seg.span_s,
+            seg.attitude,
+            seg_err,
+            {v.camera.name: v.camera for v in seg.views},
+            [specs[v.name] for v in seg.views],
+            ephemeris_noise_m=errors.ephemeris_noise_m,
+        )
+        path = anc.write(run.out / f"{seg.name}.ancillary.json")
+        for v in seg.views:
+            anc_files[v.name] = path.name
+    return anc_files
+
+
+def _write_truth(
+    run: _Run, scene: _TrueScene, drawn: dict[str, Any], ground: Any
+) -> tuple[dict[str, Path], Path]:
+    """``truth/``: the true models (their paths relative to ``out``), the true ortho-image
+    and the drawn errors."""
+    from carto.framework.simulation import scene_tiles
+
+    out = run.out
+    truth_dir = out / "truth"
+    models = {}
+    for name, sensor in scene.sensors.items():
+        models[name] = sensor.save(truth_dir / f"{name}.model.json").relative_to(out)
+    ortho = scene_tiles.write_true_ortho(
+        truth_dir / "ortho.tif",
+        ground,
+        scene.terrain.bounds_lonlat,
+        run.plan.gsd_m,
+        quiet=run.quiet,
+    )
+    write_json_atomic(
+        truth_dir / "errors.json",
+        {
+            "error_model": run.settings.errors.as_dict(),
+            "drawn": drawn,
+            "note": ERRORS_NOTE,
+        },
+    )
+    return models, ortho
+
+
+def _manifest(run: _Run, scene: _TrueScene, written: _Written) -> dict[str, Any]:
+    """``scene.json``: what was simulated and where each file of the scene is."""
+    plan, options, settings, specs = run.plan, run.options, run.settings, scene.specs
+    size = settings.size
+    return {
         "format": SCENE_FORMAT,
         "version": SCENE_VERSION,
         "preset": plan.preset,
         "platform": plan.platform,
         "seed": int(options.seed),
         "platform_seed": None if options.platform_seed is None else int(options.platform_seed),
-        "terrain": terrain_name,
+        "terrain": scene.terrain_name,
         "size": [int(size[0]), int(size[1])],
         "errors": options.errors,
-        "error_model": errors.as_dict(),
+        "error_model": settings.errors.as_dict(),
         "epoch_utc": plan.epoch_utc,
         "target": {"lon_deg": plan.target[0], "lat_deg": plan.target[1]},
         "images": {
             n: {
                 "raster": specs[n].raster,
-                "ancillary": anc_files[n],
+                "ancillary": written.anc_files[n],
                 "camera": specs[n].camera,
                 "array": "odd",
-                "truth_model": str(models[n]),
+                "truth_model": str(written.models[n]),
             }
-            for n in true_sensors
+            for n in specs
         },
         "gcps": "gcps.csv",
         "checkpoints": "checkpoints.csv",
         "init_dem": "init_dem.tif",
         "truth": {
             "dem": "truth/dem.tif",
-            "ortho": str(ortho.relative_to(out)),
+            "ortho": str(written.ortho.relative_to(run.out)),
             "errors": "truth/errors.json",
         },
         "vertical_reference": "ellipsoid WGS84",
         "pixel_convention": "first pixel centre at (0.5, 0.5); image coordinates of "
         "control points refer to the odd-array model",
-        "counts": {"gcps": n_gcps, "checkpoints": n_check},
-        "epoch_j2000_s": epoch,
+        "counts": {"gcps": settings.n_gcps, "checkpoints": settings.n_check},
+        "epoch_j2000_s": frames.utc_to_j2000_s(plan.epoch_utc),
     }
+
+
+def simulate_scene(
+    plan: ScenePlan,
+    out_dir: str | os.PathLike[str],
+    options: SimulationOptions = SimulationOptions(),  # noqa: B008 (frozen, immutable)
+    *,
+    quiet: bool = False,
+) -> Path:
+    """Render ``plan`` into the scene folder ``out_dir``; return the path of ``scene.json``.
+
+    The stages (module docstring): settings and error draws, the true geometry, the terrain
+    under the windows, the true models, truth DEM and texture, control points, rendering,
+    then the products and ``truth/``."""
+    from carto.framework.simulation import scene_tiles
+
+    out = Path(out_dir)
+    settings = _settings(plan, options)
+    run = _Run(plan, options, settings, out, quiet)
+    errors, size = settings.errors, settings.size
+    streams = _Streams.from_seed(options.seed)
+    drawn = draw_product_errors(plan, errors, streams.err, streams.full, options.platform_seed)
+    out.mkdir(parents=True, exist_ok=True)
+    _check_size(plan, size)
+
+    # --- true geometry (the reference): full images, then windows centred on the target
+    h_range = _terrain_range(settings.terrain_name, options.dem_path)
+    h_mid = 0.5 * sum(h_range)
+    with _Stage("true orbit and attitude (reference geometry)", quiet):
+        ref = _reference(plan, errors, drawn, h_mid, streams.jit)
+
+    terrain, terrain_name, placed = _terrain_and_windows(run, ref, h_range, streams.terrain)
+    with _Stage("true line-scanner models", quiet):
+        true_sensors = _true_sensors(ref, placed)
+    specs = _image_specs(true_sensors, ref.views, drawn)
+    scene = _TrueScene(terrain, terrain_name, true_sensors, specs)
+    (out / "truth").mkdir(parents=True, exist_ok=True)
+    truth = _truth_and_ground(run, terrain, streams.tex)
+
+    # --- control points (before rendering: point targets may mark them)
+    with _Stage("control points", quiet):
+        gcp_rows, check_rows, targets = control_points(
+            true_sensors,
+            terrain,
+            settings.n_gcps,
+            settings.n_check,
+            errors,
+            streams.ctl,
+            plan.control_min_views,
+            exact={name: im for name, (im, _) in placed.items()},
+        )
+    truth = attrs.evolve(truth, ground=_marked_ground(truth.ground, plan, options, targets))
+
+    # --- render, band by band
+    _render_all(run, scene, truth, streams.noise)
+
+    # --- products
+    with _Stage("ancillary, control, initial DEM and truth", quiet):
+        anc_files = _write_ancillary(run, ref.world, drawn, specs)
+        write_point_table(out / "gcps.csv", gcp_rows, precision=15)
+        write_point_table(out / "checkpoints.csv", check_rows, precision=15)
+        scene_tiles.write_init_dem(out / "init_dem.tif", terrain, streams.init)
+        models, ortho = _write_truth(run, scene, drawn, truth.ground)
+    manifest = _manifest(run, scene, _Written(anc_files, models, ortho))
     return write_json_atomic(out / "scene.json", manifest)
 
 

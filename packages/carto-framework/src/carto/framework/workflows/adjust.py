@@ -9,12 +9,14 @@ the sidecar of ``<image>.tif``), a residual plot (``residuals.png``) and ``repor
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
+import shutil
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import attrs
 import numpy as np
@@ -27,14 +29,11 @@ from carto.framework.adjustment.dem_heights import (
     flat_heights,
     with_dem_heights,
 )
-from carto.framework.adjustment.image_trends import fold_image_trends
 from carto.framework.adjustment.observations import Observations
 from carto.framework.errors import AdjustmentError, InputError
 from carto.framework.files.control_table import read_tie_table
-from carto.framework.files.documents import write_json_atomic
-from carto.framework.files.point_table import write_point_table
 from carto.framework.files.staging import staged_folder
-from carto.framework.geometry.sensor import SensorType
+from carto.framework.geometry.sensor import Sensor, SensorType
 from carto.framework.matching.gcp_transfer import (
     GCP_OFFSET_COLUMNS,
     GCP_OFFSET_SIGMA_PX,
@@ -48,14 +47,20 @@ from carto.framework.workflows.adjust_checks import (
     gcps_rejected,
     poor_adjustment,
 )
+from carto.framework.workflows.adjust_outputs import (
+    RESERVED_OUTPUTS as RESERVED_OUTPUTS,  # the workflow's own outputs (re-exported)
+)
+from carto.framework.workflows.adjust_outputs import Adjustment, AdjustRun, write_outputs
 from carto.framework.workflows.configuration import configuration_files, read_configuration
 from carto.framework.workflows.opening import (
     check_installed,
     open_product,
 )
-from carto.framework.workflows.reporting import jsonable, progress, resolved_settings, write_report
-from carto.framework.workflows.residual_plot import residual_misfit, residual_plot
+from carto.framework.workflows.reporting import progress, resolved_settings
 from carto.framework.workflows.run_record import record_run, utc_now
+
+if TYPE_CHECKING:
+    from carto.framework.raster.dem import DEM
 
 Table = dict[str, NDArray]
 
@@ -95,12 +100,6 @@ def choose_adjuster(requested: str | None, types: Mapping[str, SensorType]) -> s
     raise InputError(
         f"no default adjuster for these images (sensor types {named}); name one with --adjuster"
     )
-
-
-RESERVED_OUTPUTS = frozenset(
-    {"report", "models", "rpc", "residual_plot", "tie_points", "gcp_offsets"}
-)
-"""Names an adjuster's products cannot take (the workflow's own outputs)."""
 
 
 def adjust_product(
@@ -150,10 +149,7 @@ def adjust_product(
     The outputs are written into a staging folder that replaces ``out_dir`` only when all are
     complete (:func:`carto.framework.files.staging.staged_folder`).
     """
-    import shutil
-
     from carto.framework.parallel.engine import open_engine
-    from carto.framework.products.scene import scene_files
 
     check_installed(
         ("adjuster", "--adjuster", adjuster),
@@ -161,20 +157,13 @@ def adjust_product(
         ("matcher", "--matcher", matcher),
     )
     src = Path(source)
-    inputs = [src, *configuration_files(src), *scene_files(src)]
-    if ties not in ("auto", "none"):
-        inputs.append(Path(ties))
-    calibration = (options or {}).get("calibration") or []
-    if isinstance(calibration, str | os.PathLike):  # one file or folder, or a list of them
-        calibration = [calibration]
-    inputs += [Path(c) for c in calibration]
+    inputs = _input_files(src, ties, options)
     with (
         staged_folder(out_dir, "adjust", inputs=inputs) as stage,
         open_engine(workers, scheduler, quiet=quiet) as engine,
     ):
-        work = stage / ".work"
         started = utc_now()
-        try:
+        with _removed_at_end(stage / ".work") as work:
             report = _adjust_into(
                 stage,
                 src,
@@ -190,12 +179,156 @@ def adjust_product(
                 engine=engine,
                 work=work,
             )
-        finally:
-            shutil.rmtree(work, ignore_errors=True)
         return record_run(stage / "report.json", report, inputs, started, "adjust")
 
 
-def _adjust_into(  # noqa: C901, PLR0915 (issue 32: to split)
+@contextlib.contextmanager
+def _removed_at_end(folder: Path) -> Iterator[Path]:
+    """``folder`` (the run's work folder: prepared images), removed when the block ends,
+    however it ends."""
+    try:
+        yield folder
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+def _input_files(src: Path, ties: str, options: Mapping[str, Any] | None) -> list[Path]:
+    """The files a run reads (the staging folder records them): the source, the files its
+    configuration or scene names, a tie point table and the calibration files or folders."""
+    from carto.framework.products.scene import scene_files
+
+    inputs = [src, *configuration_files(src), *scene_files(src)]
+    if ties not in ("auto", "none"):
+        inputs.append(Path(ties))
+    calibration = (options or {}).get("calibration") or []
+    if isinstance(calibration, str | os.PathLike):  # one file or folder, or a list of them
+        calibration = [calibration]
+    inputs += [Path(c) for c in calibration]
+    return inputs
+
+
+@attrs.frozen(eq=False)
+class _WorkflowOptions:
+    """The options the workflow takes for itself out of ``options``; the rest
+    (``adjuster_options``) go to the adjuster."""
+
+    adjuster_options: dict[str, Any]
+    gcp_transfer: str | bool
+    gcp_offset_sigma_px: float
+    tie_heights: str | bool
+    height_sigma_m: float
+    height_offset_sigma_m: float
+
+    @classmethod
+    def take(cls, options: Mapping[str, Any] | None) -> _WorkflowOptions:
+        """The workflow's options out of ``options`` (checked), the rest left to the adjuster."""
+        rest = dict(options or {})
+        gcp_transfer = _auto_flag(rest.pop("gcp_transfer", "auto"), "gcp_transfer")
+        offset_sigma_px = float(rest.pop("gcp_offset_sigma_px", GCP_OFFSET_SIGMA_PX))
+        if not (math.isfinite(offset_sigma_px) and offset_sigma_px > 0):
+            raise InputError(f"gcp_offset_sigma_px must be > 0, got {offset_sigma_px}")
+        tie_heights = _auto_flag(rest.pop("tie_heights", "auto"), "tie_heights")
+        height_sigma_m = float(rest.pop("height_sigma_m", 30.0))
+        height_offset_sigma_m = float(rest.pop("height_offset_sigma_m", 0.0))
+        return cls(
+            rest, gcp_transfer, offset_sigma_px, tie_heights, height_sigma_m, height_offset_sigma_m
+        )
+
+    def settings(self, resolved: Any) -> dict[str, Any]:
+        """Every setting of the run for the report: the adjuster's (``resolved``, defaults
+        included) and the workflow's."""
+        return {
+            "adjuster": resolved_settings(resolved),
+            "gcp_transfer": self.gcp_transfer,
+            "tie_heights": self.tie_heights,
+            "height_sigma_m": self.height_sigma_m,
+            "height_offset_sigma_m": self.height_offset_sigma_m,
+            "gcp_offset_sigma_px": self.gcp_offset_sigma_px,
+        }
+
+
+@attrs.frozen(eq=False)
+class _AdjustInputs:
+    """What a run adjusts: the images' models, the sensor types that opened them, their
+    rasters, the GCPs and checkpoints (long-format tables, None: none), the DEM (None: none)
+    or the constant height of a flat scene (``flat_height_m``), and the matcher's name."""
+
+    sensors: dict[str, Sensor]
+    types: dict[str, SensorType]
+    rasters: dict[str, Path]
+    gcps: Table | None
+    checkpoints: Table | None
+    dem: DEM | None
+    flat_height_m: float | None
+    matcher: str
+
+
+def _open_inputs(
+    src: Path, sensor_type: str | None, trajectory: str | None, matcher: str | None
+) -> _AdjustInputs:
+    """The images, control and DEM of a scene folder or of a JSON configuration."""
+    from carto.framework.products.scene import Scene
+
+    if src.is_dir() or src.name == "scene.json":
+        scene = Scene.open(src)
+        opened = open_product(scene.root, sensor_type, trajectory_model=trajectory)
+        gcps = scene.control("gcps")
+        checkpoints = scene.control("checkpoints")
+        if gcps is not None:
+            check_control(gcps, opened.sensors, "gcps")
+        if checkpoints is not None:
+            check_control(checkpoints, opened.sensors, "checkpoints")
+        rasters = {n: scene.raster(n) for n in scene.image_names}
+        init = scene.manifest.get("init_dem")
+        dem = None
+        if init:
+            from carto.framework.raster.dem import DEM
+
+            dem = DEM.open(scene.path(init))
+        return _AdjustInputs(
+            opened.sensors, opened.types, rasters, gcps, checkpoints, dem, None, matcher or "ncc"
+        )
+    if src.suffix.lower() == ".json":
+        config = read_configuration(src, sensor_type, trajectory)
+        return _AdjustInputs(
+            config.sensors,
+            config.types,
+            config.rasters,
+            config.gcps,
+            None,
+            config.dem,
+            config.flat_height_m,
+            matcher or config.matcher or "ncc",
+        )
+    raise InputError(f"{src}: expected a scene folder or a JSON configuration file")
+
+
+class _PreparedImages:
+    """The images read by windows, stagger-merged once (for the ties and the transfer), on
+    first use."""
+
+    def __init__(self, inputs: _AdjustInputs, work: Path, engine: Any) -> None:
+        self._inputs, self._work, self._engine = inputs, work, engine
+        self._images: dict[str, Any] = {}
+
+    def __call__(self) -> dict[str, Any]:
+        from carto.framework.imaging.preparation import prepared_sources
+
+        if not self._images:
+            inputs = self._inputs
+            self._images.update(
+                prepared_sources(
+                    inputs.rasters,
+                    inputs.sensors,
+                    inputs.dem,
+                    self._work / "prepared",
+                    self._engine,
+                )
+            )
+        return self._images
+
+
+def _adjust_into(
     out: Path,
     src: Path,
     *,
@@ -213,75 +346,80 @@ def _adjust_into(  # noqa: C901, PLR0915 (issue 32: to split)
 ) -> dict[str, Any]:
     """:func:`adjust_product` writing into the folder ``out`` (its staging folder), tasks on
     ``engine``, prepared images in ``work``."""
-    from carto.framework.evaluation.checkpoints import (
-        checkpoint_accuracy,
-        monoplot_accuracy,
-        predicted_checkpoint_sigma,
-    )
-    from carto.framework.products.scene import Scene
-
     t0 = time.perf_counter()
-    options = dict(options or {})
-    gcp_transfer = _auto_flag(options.pop("gcp_transfer", "auto"), "gcp_transfer")
-    offset_sigma_px = float(options.pop("gcp_offset_sigma_px", GCP_OFFSET_SIGMA_PX))
-    if not (math.isfinite(offset_sigma_px) and offset_sigma_px > 0):
-        raise InputError(f"gcp_offset_sigma_px must be > 0, got {offset_sigma_px}")
-    tie_heights_flag = _auto_flag(options.pop("tie_heights", "auto"), "tie_heights")
-    height_sigma_m = float(options.pop("height_sigma_m", 30.0))
-    height_offset_sigma_m = float(options.pop("height_offset_sigma_m", 0.0))
-    checkpoints = None
-    dem = None
-    flat_height_m = None
-    rasters: dict[str, Path] = {}
-    if src.is_dir() or src.name == "scene.json":
-        scene = Scene.open(src)
-        opened = open_product(scene.root, sensor_type, trajectory_model=trajectory)
-        sensors, types = opened.sensors, opened.types
-        gcps = scene.control("gcps")
-        checkpoints = scene.control("checkpoints")
-        if gcps is not None:
-            check_control(gcps, sensors, "gcps")
-        if checkpoints is not None:
-            check_control(checkpoints, sensors, "checkpoints")
-        rasters = {n: scene.raster(n) for n in scene.image_names}
-        init = scene.manifest.get("init_dem")
-        if init:
-            from carto.framework.raster.dem import DEM
-
-            dem = DEM.open(scene.path(init))
-    elif src.suffix.lower() == ".json":
-        config = read_configuration(src, sensor_type, trajectory)
-        sensors, types, rasters, gcps = config.sensors, config.types, config.rasters, config.gcps
-        dem, flat_height_m = config.dem, config.flat_height_m
-        matcher = matcher or config.matcher or "ncc"
-    else:
-        raise InputError(f"{src}: expected a scene folder or a JSON configuration file")
-    matcher = matcher or "ncc"
-    chosen_matcher = get_registry().get("matcher", matcher)
-    name = choose_adjuster(adjuster, types)
+    opts = _WorkflowOptions.take(options)
+    inputs = _open_inputs(src, sensor_type, trajectory, matcher)
+    chosen_matcher = get_registry().get("matcher", inputs.matcher)
+    name = choose_adjuster(adjuster, inputs.types)
     component = get_registry().get("adjuster", name)
-    resolved = component.settings({**options, "dem": None})  # before any work
-    gcps = select_gcps(gcps, n_gcps) if gcps is not None else None
-    n_used = len(set(gcps["id"].tolist())) if gcps is not None else 0
-    early = gcps_off_the_dem(gcps, dem) if gcps is not None and flat_height_m is None else []
+    resolved = component.settings({**opts.adjuster_options, "dem": None})  # before any work
+    gcps = select_gcps(inputs.gcps, n_gcps) if inputs.gcps is not None else None
+    inputs = attrs.evolve(inputs, gcps=gcps)
+    early = (
+        gcps_off_the_dem(gcps, inputs.dem)
+        if gcps is not None and inputs.flat_height_m is None
+        else []
+    )
     if early and not allow_poor:
         raise InputError(f"{src}: {'; '.join(early)} (--allow-poor adjusts anyway)")
-    images: dict[str, Any] = {}
+    prepared = _PreparedImages(inputs, work, engine)
+    tie_table = _tie_table(ties, inputs, chosen_matcher, prepared, engine, quiet)
+    run = AdjustRun(
+        src=src,
+        adjuster=name,
+        matcher=inputs.matcher,
+        trajectory=trajectory,
+        types=inputs.types,
+        sensors=inputs.sensors,
+        gcps=gcps,
+        checkpoints=inputs.checkpoints,
+        tie_table=tie_table,
+        options=opts.adjuster_options,
+        settings=opts.settings(resolved),
+        gcp_offset_sigma_px=opts.gcp_offset_sigma_px,
+    )
+    obs = _observations(inputs, tie_table, opts, run.n_used)
+    transfer = _transfer_status(opts.gcp_transfer, inputs)
+    progress(
+        "adjust",
+        f"adjusting {len(inputs.sensors)} images with {name} ({run.n_used} GCPs, {run.n_ties} "
+        "tie points)",
+        quiet,
+    )
 
-    def prepared() -> dict[str, Any]:
-        """The images read by windows, stagger-merged once (for the ties and the transfer)."""
-        from carto.framework.imaging.preparation import prepared_sources
+    def adjust(observations: Observations) -> AdjustmentResult:
+        """The adjuster run on the run's images and DEM with ``observations``."""
+        return component.adjust(
+            inputs.sensors, observations, dem=inputs.dem, **opts.adjuster_options
+        )
 
-        if not images:
-            images.update(prepared_sources(rasters, sensors, dem, work / "prepared", engine))
-        return images
+    adjusted = _first_adjustment(adjust, obs, ties)
+    if "why_not" not in transfer:
+        adjusted = _with_gcp_transfer(
+            adjusted, adjust, inputs, opts, transfer, chosen_matcher, prepared, quiet
+        )
+    warnings = _adjustment_warnings(early, adjusted, inputs, ties, run.n_ties)
+    if warnings and not allow_poor:
+        raise AdjustmentError(f"{src}: {'; '.join(warnings)} (--allow-poor writes it anyway)")
+    for warning in warnings:
+        progress("adjust", f"warning: {warning}", quiet)
+    return write_outputs(out, run, adjusted, warnings, transfer, t0, engine, quiet)
 
-    # tie points
-    tie_table: Table | None = None
+
+def _tie_table(
+    ties: str,
+    inputs: _AdjustInputs,
+    matcher: Any,
+    prepared: _PreparedImages,
+    engine: Any,
+    quiet: bool,
+) -> Table | None:
+    """The tie points of a run: matched on system-level ortho-images (``"auto"``), none
+    (``"none"``) or read from the CSV file ``ties`` (checked)."""
     if ties == "auto":
         from carto.framework.matching.tiepoints import block_tie_points
 
-        if dem is None:
+        if inputs.dem is None:
             raise InputError(
                 "automatic tie points need a DEM (the scene's init_dem.tif or "
                 '"dem" in the configuration)'
@@ -291,208 +429,141 @@ def _adjust_into(  # noqa: C901, PLR0915 (issue 32: to split)
             f"matching tie points on system-level ortho-images ({engine.description})",
             quiet,
         )
-        tie_table = block_tie_points(
-            prepared(), sensors, dem, matcher=chosen_matcher, engine=engine, prepared=True
+        return block_tie_points(
+            prepared(), inputs.sensors, inputs.dem, matcher=matcher, engine=engine, prepared=True
         )
-    elif ties != "none":
-        tie_table = read_tie_table(ties, images=list(sensors))
-        check_tie_points(tie_table, sensors)
-    n_ties = len(set(tie_table["id"].tolist())) if tie_table is not None else 0
-    obs = Observations.from_tables(gcps, tie_table)
+    if ties != "none":
+        tie_table = read_tie_table(ties, images=list(inputs.sensors))
+        check_tie_points(tie_table, inputs.sensors)
+        return tie_table
+    return None
+
+
+def _observations(
+    inputs: _AdjustInputs, tie_table: Table | None, opts: _WorkflowOptions, n_used: int
+) -> Observations:
+    """The image observations of the GCPs and tie points, with DEM heights on tie points
+    where they help."""
+    obs = Observations.from_tables(inputs.gcps, tie_table)
     # a DEM height on a tie point fixes what tie points cannot: a shift along the stereo
     # parallax looks like a height change, and rays that meet at a small angle (the overlap
     # of adjacent swaths) let the point slide along them. With GCPs, on well intersecting
     # points, it would only pull the block towards the coarse DEM's errors. So by default
     # ("auto"): every tie point without GCPs, else only those seen in an image without GCP
     # or whose rays meet at less than WEAK_INTERSECTION_DEG; True: every one; False: none.
-    tie_heights = flat_heights(tie_heights_flag, flat_height_m, n_used)
-    if dem is not None and tie_table is not None and tie_heights is not False:
+    tie_heights = flat_heights(opts.tie_heights, inputs.flat_height_m, n_used)
+    if inputs.dem is not None and tie_table is not None and tie_heights is not False:
         weak = WEAK_INTERSECTION_DEG if (tie_heights == "auto" and n_used > 0) else None
         obs = with_dem_heights(
-            obs, sensors, dem, height_sigma_m, height_offset_sigma_m, below_angle_deg=weak
+            obs,
+            inputs.sensors,
+            inputs.dem,
+            opts.height_sigma_m,
+            opts.height_offset_sigma_m,
+            below_angle_deg=weak,
         )
+    return obs
+
+
+def _transfer_status(gcp_transfer: str | bool, inputs: _AdjustInputs) -> dict[str, Any]:
+    """What the report says of the GCP transfer before it runs: asked for, and why it will
+    not run (``why_not``; absent: it will)."""
     # GCP transfer: the offset of each hand-measured GCP between images, by matching,
     # carries its stereo parallax at matching precision (see gcp_transfer.gcp_offsets)
     transfer: dict[str, Any] = {"requested": gcp_transfer, "ran": False}
+    gcps = inputs.gcps
     if gcp_transfer is False:
         transfer["why_not"] = "turned off"
     elif gcps is None or not len(gcps["id"]):
         transfer["why_not"] = "no GCP"
-    elif dem is None or any(n not in rasters for n in sensors):
+    elif inputs.dem is None or any(n not in inputs.rasters for n in inputs.sensors):
         transfer["why_not"] = "it needs every image's raster and a DEM"
         if gcp_transfer is True:
             raise InputError(f"gcp_transfer: {transfer['why_not']}")
-    progress(
-        "adjust",
-        f"adjusting {len(sensors)} images with {name} ({n_used} GCPs, {n_ties} tie points)",
-        quiet,
-    )
-    result = component.adjust(sensors, obs, dem=dem, **options)
+    return transfer
+
+
+def _first_adjustment(
+    adjust: Callable[[Observations], AdjustmentResult], obs: Observations, ties: str
+) -> Adjustment:
+    """The adjustment, run again with the automatic tie points' sigma the first run
+    measured when it differs from their a-priori one."""
+    result = adjust(obs)
     tie_sigma = estimated_tie_sigma(obs, result) if ties == "auto" else None
     if tie_sigma is not None:  # the matched tie points' precision, from the data
         obs = tie_sigma.observations
-        result = component.adjust(sensors, obs, dem=dem, **options)
-    first_outliers: list[str] = []  # the first adjustment's, kept out of the second
+        result = adjust(obs)
+    return Adjustment(result, obs, tie_sigma)
+
+
+def _with_gcp_transfer(
+    adjusted: Adjustment,
+    adjust: Callable[[Observations], AdjustmentResult],
+    inputs: _AdjustInputs,
+    opts: _WorkflowOptions,
+    transfer: dict[str, Any],
+    matcher: Any,
+    prepared: _PreparedImages,
+    quiet: bool,
+) -> Adjustment:
+    """The GCPs matched between images and the adjustment again with their offsets
+    (``transfer`` says whether it ran, or why not)."""
+    # matched on chips orthorectified with the adjusted models (the system-level ones
+    # may be hundreds of metres apart), then the adjustment again with the offsets;
+    # GCPs the first adjustment rejected stay out
+    progress("adjust", "matching the GCPs between images (GCP transfer)", quiet)
+    gcps = inputs.gcps
+    rejected = set(adjusted.result.outliers)
+    kept = np.array([g not in rejected for g in gcps["id"]], bool)
     offsets = dropped_offsets = None
-    if "why_not" not in transfer:
-        # matched on chips orthorectified with the adjusted models (the system-level ones
-        # may be hundreds of metres apart), then the adjustment again with the offsets;
-        # GCPs the first adjustment rejected stay out
-        progress("adjust", "matching the GCPs between images (GCP transfer)", quiet)
-        rejected = set(result.outliers)
-        kept = np.array([g not in rejected for g in gcps["id"]], bool)
-        try:
-            offsets, dropped_offsets = gcp_offsets(
-                {k: np.asarray(v)[kept] for k, v in gcps.items()},
-                prepared(),
-                result.sensors,
-                dem,
-                sigma_px=offset_sigma_px,
-                matcher=chosen_matcher,
-                prepared=True,
-            )
-        except InputError as exc:
-            if gcp_transfer is True:
-                raise
-            transfer["why_not"] = str(exc)  # e.g. a raster that does not fit its model
-        if offsets is not None and not offsets["id"].size:
-            transfer["why_not"] = "no GCP could be matched"
-        elif offsets is not None:
-            transfer["ran"] = True
-            obs = obs.with_offsets(
-                *(offsets[c] for c in GCP_OFFSET_COLUMNS if c != "score")  # as with_offsets
-            )
-            if rejected:
-                first_outliers = sorted(rejected)
-                obs = obs.without_points(first_outliers)
-            result = component.adjust(sensors, obs, dem=dem, **options)
-    warnings = early + poor_adjustment(result.sigma0, ties, n_ties, len(sensors))
+    try:
+        offsets, dropped_offsets = gcp_offsets(
+            {k: np.asarray(v)[kept] for k, v in gcps.items()},
+            prepared(),
+            adjusted.result.sensors,
+            inputs.dem,
+            sigma_px=opts.gcp_offset_sigma_px,
+            matcher=matcher,
+            prepared=True,
+        )
+    except InputError as exc:
+        if opts.gcp_transfer is True:
+            raise
+        transfer["why_not"] = str(exc)  # e.g. a raster that does not fit its model
+    adjusted = attrs.evolve(adjusted, offsets=offsets, dropped_offsets=dropped_offsets)
+    if offsets is not None and not offsets["id"].size:
+        transfer["why_not"] = "no GCP could be matched"
+    elif offsets is not None:
+        transfer["ran"] = True
+        obs = adjusted.obs.with_offsets(
+            *(offsets[c] for c in GCP_OFFSET_COLUMNS if c != "score")  # as with_offsets
+        )
+        first_outliers: list[str] = []
+        if rejected:
+            first_outliers = sorted(rejected)
+            obs = obs.without_points(first_outliers)
+        adjusted = attrs.evolve(
+            adjusted, result=adjust(obs), obs=obs, first_outliers=first_outliers
+        )
+    return adjusted
+
+
+def _adjustment_warnings(
+    early: list[str], adjusted: Adjustment, inputs: _AdjustInputs, ties: str, n_ties: int
+) -> list[str]:
+    """What makes an adjustment poor: GCPs off the DEM (``early``), a poor fit, corrections
+    beyond their priors, GCPs not transferred and GCPs rejected."""
+    result = adjusted.result
+    warnings = early + poor_adjustment(result.sigma0, ties, n_ties, len(inputs.sensors))
     warnings += corrections_beyond_priors(result)
-    if offsets is not None:
-        warnings += gcps_not_transferred(int(offsets["id"].size), len(dropped_offsets or ()))
-    if gcps is not None:
-        rejected = {*first_outliers, *result.outliers}
-        warnings += gcps_rejected(sorted({str(v).strip() for v in gcps["id"]}), rejected)
-    if warnings and not allow_poor:
-        raise AdjustmentError(f"{src}: {'; '.join(warnings)} (--allow-poor writes it anyway)")
-    for warning in warnings:
-        progress("adjust", f"warning: {warning}", quiet)
-    # outputs
-    files = _write_models(result, types, out, quiet)
-    for product, document in result.products.items():
-        if product in RESERVED_OUTPUTS or not product.isidentifier():
-            raise InputError(f"adjuster {name}: product name {product!r} is not allowed")
-        if isinstance(document, dict) and document.get("sources") == []:
-            document = document | {"sources": [str(src)]}  # what the adjuster did not know
-        files[product] = write_json_atomic(out / f"{product}.json", jsonable(document)).name
-    misfit = residual_misfit(result)
-    plot = residual_plot(
-        result,
-        out / "residuals.png",
-        f"{name}: {n_used} GCPs, {n_ties} tie points, sigma0 {result.sigma0:.2f}",
-        misfit,
-    )
-    for flag in misfit["flags"]:
-        progress("adjust", f"model misfit: {flag}", quiet)
-    report: dict[str, Any] = {
-        "source": str(Path(src).absolute()),
-        "adjuster": name,
-        "matcher": matcher,
-        # the trajectory model asked for (None: the one each product names)
-        "trajectory_model": trajectory,
-        "options": {
-            k: v
-            for k, v in options.items()
-            if isinstance(v, str | int | float)
-            or (isinstance(v, list) and all(isinstance(x, str) for x in v))
-        },
-        # every setting of the adjuster, defaults included
-        "settings": {
-            "adjuster": resolved_settings(resolved),
-            "gcp_transfer": gcp_transfer,
-            "tie_heights": tie_heights_flag,
-            "height_sigma_m": height_sigma_m,
-            "height_offset_sigma_m": height_offset_sigma_m,
-            "gcp_offset_sigma_px": offset_sigma_px,
-        },
-        "gcps_used": n_used,
-        "tie_points": n_ties,
-        "tie_sigma_px": tie_sigma.record() if tie_sigma is not None else None,
-        "dem_height_constraints": int(obs.height_id.size),
-        "sigma0": result.sigma0,
-        # sigma0 in pixels: the a-posteriori sigma of one image measurement
-        "sigma0_px": result.sigma0 * float(np.sqrt(np.mean(obs.sigma_px**2)))
-        if obs.sigma_px.size
-        else None,
-        "outliers": list(dict.fromkeys([*first_outliers, *result.outliers])),
-        "warnings": warnings,
-        "converged": result.converged,
-        "iterations": result.iterations,
-        "adjustment": result.summary(),
-        "misfit": misfit,
-        "files": {**files, "residual_plot": plot.name},
-        "seconds": round(time.perf_counter() - t0, 1),
-        "workers": engine.workers,
-        "engine": engine.description,
-    }
-    if checkpoints is not None and len(checkpoints["id"]):
-        report["checkpoints_per_image"] = monoplot_accuracy(result.sensors, checkpoints)
-        acc = checkpoint_accuracy(result.sensors, checkpoints)
-        pred = predicted_checkpoint_sigma(result, checkpoints)
-        before = checkpoint_accuracy(sensors, checkpoints)
-        report["checkpoints"] = {
-            k: acc[k]
-            for k in (
-                "count",
-                "rmse_along_m",
-                "rmse_across_m",
-                "rmse_planimetric_m",
-                "rmse_height_m",
-            )
-        } | {
-            "predicted_sigma_planimetric_m": pred["predicted_sigma_planimetric_m"],
-            "predicted_sigma_height_m": pred["predicted_sigma_height_m"],
-        }
-        report["checkpoints_before"] = {
-            k: before[k]
-            for k in (
-                "count",
-                "rmse_along_m",
-                "rmse_across_m",
-                "rmse_planimetric_m",
-                "rmse_height_m",
-            )
-        }
-    if gcps is not None and gcps["id"].size:  # the datum of a later relative orientation
-        write_point_table(out / "gcps.csv", gcps)
-        report["files"]["gcps"] = "gcps.csv"
-    if tie_table is not None:  # with the sigma they were adjusted with (reused: the same)
-        if tie_sigma is not None and "sigma_px" in tie_table:
-            scale = tie_sigma.estimated_px / tie_sigma.a_priori_px
-            tie_table = {**tie_table, "sigma_px": np.asarray(tie_table["sigma_px"]) * scale}
-        write_point_table(out / "tie_points.csv", tie_table)
-        report["files"]["tie_points"] = "tie_points.csv"
-    report["gcp_transfer"] = transfer
-    if offsets is not None:
-        res = result.offset_residuals
-        used = np.isfinite(res["d_line"]) if res else np.zeros(0, bool)
-        report["gcp_offsets"] = {
-            "count": int(offsets["id"].size),
-            "used": int(used.sum()),
-            "sigma_px": offset_sigma_px,
-            # per coordinate, as sigma_px
-            "residual_rms_px": float(
-                np.sqrt(np.mean(np.r_[res["d_line"][used], res["d_sample"][used]] ** 2))
-            )
-            if used.any()
-            else None,
-            "not_kept": dropped_offsets,
-        }
-        if offsets["id"].size:
-            write_point_table(out / "gcp_offsets.csv", offsets)
-            report["files"]["gcp_offsets"] = "gcp_offsets.csv"
-    write_report(out / "report.json", report)
-    return report
+    if adjusted.offsets is not None:
+        warnings += gcps_not_transferred(
+            int(adjusted.offsets["id"].size), len(adjusted.dropped_offsets or ())
+        )
+    if inputs.gcps is not None:
+        rejected = {*adjusted.first_outliers, *result.outliers}
+        warnings += gcps_rejected(sorted({str(v).strip() for v in inputs.gcps["id"]}), rejected)
+    return warnings
 
 
 @attrs.frozen(eq=False)
@@ -538,32 +609,3 @@ def _auto_flag(value: Any, name: str) -> str | bool:
     if isinstance(value, bool) or value == "auto":
         return value
     raise InputError(f"{name} must be 'auto', true or false, got {value!r}")
-
-
-def _write_models(
-    result: AdjustmentResult, types: Mapping[str, SensorType], out: Path, quiet: bool
-) -> dict[str, Any]:
-    """Every adjusted sensor saved by the sensor type that opened it; the images whose type
-    cannot save one are listed (``not_saved``) and named on stderr."""
-    files: dict[str, Any] = {"models": {}, "rpc": {}, "not_saved": {}}
-    h_range = _height_range(result)
-    # image trends (:mod:`carto.framework.adjustment.image_trends`) into the models' polynomials
-    for name, sensor in fold_image_trends(result.sensors).items():
-        try:
-            written = types[name].save(sensor, out, name, h_range_m=h_range)
-        except NotImplementedError as exc:
-            files["not_saved"][name] = str(exc)
-            progress("adjust", f"image {name}: adjusted model not written: {exc}", quiet)
-            continue
-        if "model" in written:
-            files["models"][name] = written["model"]
-        if "rpc" in written:
-            files["rpc"][name] = written["rpc"]
-    return files
-
-
-def _height_range(result: AdjustmentResult) -> tuple[float, float]:
-    h = np.array([p[2] for p in result.points.values()]) if result.points else np.array([0.0])
-    lo, hi = float(np.nanmin(h)), float(np.nanmax(h))
-    pad = max(200.0, 0.5 * (hi - lo))
-    return lo - pad, hi + pad

@@ -22,8 +22,8 @@ import numpy as np
 from carto.framework.adjustment.relative_orientation import RelativeOrientationSettings
 from carto.framework.errors import InputError, UsageError
 from carto.framework.files.documents import write_json_atomic
-from carto.framework.files.staging import require_complete_output, staged_folder
-from carto.framework.geometry.sensor import Sensor, SensorType
+from carto.framework.files.staging import staged_folder
+from carto.framework.geometry.sensor import SensorType
 from carto.framework.plugins.registry import get_registry
 from carto.framework.products.scene import scene_files
 from carto.framework.products.stac import ITEM_FILE, dem_item
@@ -39,21 +39,20 @@ from carto.framework.workflows.dem_checks import (
 from carto.framework.workflows.dem_datum import (
     auto_coregisters,
     coregistered,
-    datum_gcps,
     resolve_coregister,
 )
 from carto.framework.workflows.dem_options import check_names, check_options
 from carto.framework.workflows.geographic_output import geographic_output
-from carto.framework.workflows.opening import (
-    check_model_of_image,
-    open_options,
-    open_sensor,
-    sensor_type_for,
-)
-from carto.framework.workflows.pair_checks import checked_pair
 from carto.framework.workflows.reporting import progress, resolved_settings, write_report
 from carto.framework.workflows.resumable import fingerprint, open_work, settle_work
 from carto.framework.workflows.run_record import record_run, utc_now
+from carto.framework.workflows.stereo_pair import (
+    OrientedPair,
+    StereoInputs,
+    StereoPair,
+    open_pair,
+    oriented_pair,
+)
 
 __all__ = [
     "StereoInputs",
@@ -62,161 +61,6 @@ __all__ = [
     "dem_product",
     "open_pair",
 ]
-
-
-def _model_beside(image: Path) -> Path:
-    """The model file of an image: a sidecar ``.geom``/``_RPC.TXT``/``.RPB`` if there is
-    one, else the image itself (RPC tags in a GeoTIFF)."""
-    for candidate in (
-        image.with_suffix(".geom"),
-        image.with_name(image.stem + "_RPC.TXT"),
-        image.with_suffix(".RPB"),
-    ):
-        if candidate.is_file():
-            return candidate
-    return image
-
-
-def _adjusted(models: Path | None, name: str, sensor: Sensor) -> Sensor:
-    """The adjusted model of image ``name`` from a ``carto adjust`` output folder, if any."""
-    if models is None:
-        return sensor
-    for candidate in (models / f"{name}.model.json", models / f"{name}_RPC.TXT"):
-        if candidate.is_file():
-            return open_sensor(candidate)
-    raise InputError(f"{models}: no adjusted model for image {name!r} ({name}.model.json)")
-
-
-@attrs.frozen
-class StereoInputs:
-    """Where the stereo pair of a DEM run comes from.
-
-    Attributes:
-        source: a scene folder (``carto simulate``); or None and ``left``/``right``.
-        left, right: image files (rasters) when there is no scene.
-        left_model, right_model: their model files (default: found beside each image).
-        sensor_type: force a sensor type for the models (``rpc`` ...).
-        models: a ``carto adjust`` output folder with adjusted models of the images.
-        pair: for a scene, the two image names (default: its first two, the one closer to
-            nadir as left).
-    """
-
-    source: str | os.PathLike[str] | None = None
-    left: str | os.PathLike[str] | None = None
-    right: str | os.PathLike[str] | None = None
-    left_model: str | os.PathLike[str] | None = None
-    right_model: str | os.PathLike[str] | None = None
-    sensor_type: str | None = None
-    models: str | os.PathLike[str] | None = None
-    pair: Sequence[str] | None = None
-
-    def __attrs_post_init__(self) -> None:
-        loose = {
-            "--left": self.left,
-            "--right": self.right,
-            "--left-model": self.left_model,
-            "--right-model": self.right_model,
-        }
-        given = [name for name, value in loose.items() if value is not None]
-        if self.source is not None and given:
-            raise UsageError(
-                f"a scene folder ({self.source}) and {', '.join(given)} exclude each other: "
-                "give the scene (with --pair to choose its images) or two images"
-            )
-        if self.source is None and self.pair is not None:
-            raise UsageError("--pair chooses two images of a scene folder: give the scene")
-
-
-@attrs.frozen(eq=False)
-class StereoPair:
-    """The stereo pair of a DEM run (left first).
-
-    Attributes:
-        rasters: image name -> raster file.
-        sensors: image name -> model (adjusted when a ``carto adjust`` folder was given).
-        types: the sensor types that opened the images (they name the default generator).
-        init_dem: the scene's initial DEM (``None`` for loose images).
-    """
-
-    rasters: dict[str, Path]
-    sensors: dict[str, Sensor]
-    types: tuple[SensorType, ...]
-    init_dem: DEM | None
-
-
-def open_pair(inputs: StereoInputs) -> StereoPair:
-    """The stereo pair to process (see :class:`StereoInputs`). A sensor is fitted to the
-    raster it comes with (:meth:`~carto.framework.geometry.sensor.Sensor.for_raster`: e.g. a
-    crop's pixel offset applied to a full-scene RPC)."""
-
-    source, pair, sensor_type = inputs.source, inputs.pair, inputs.sensor_type
-    models_dir = (
-        require_complete_output(inputs.models, "adjust") if inputs.models is not None else None
-    )
-    if source is not None:
-        from carto.framework.products.scene import Scene
-        from carto.framework.workflows.opening import check_models_of_scene, open_product
-
-        if Path(source).is_file() and Path(source).name != "scene.json":
-            raise UsageError(
-                f"{source}: not a scene folder; carto dem takes a scene (carto simulate) or "
-                "two images with --left/--right (their models beside them or with "
-                "--left-model/--right-model, e.g. the _RPC.TXT a carto adjust wrote)"
-            )
-        scene = Scene.open(source)
-        if models_dir is not None:
-            check_models_of_scene(models_dir, scene.root)
-        product = open_product(scene.root, sensor_type)
-        sensors = product.sensors
-        names = list(pair) if pair else list(sensors)[:2]
-        if len(names) != 2 or any(n not in sensors for n in names):
-            raise UsageError(
-                f"{source}: --pair must name two of the images {', '.join(sensors)}, got "
-                f"{' '.join(names)}"
-            )
-        if names[0] == names[1]:
-            raise UsageError(f"--pair {names[0]} {names[1]}: a stereo pair needs two images")
-        if len(sensors) < 2:
-            raise InputError(f"{source}: a DEM needs two images, the scene has {len(sensors)}")
-        if not pair:
-            names.sort(key=lambda n: _off_nadir_deg(sensors[n]))
-        chosen = {n: _adjusted(models_dir, n, sensors[n]) for n in names}
-        init = scene.manifest.get("init_dem")
-        dem = DEM.open(scene.path(init)) if init else None
-        types = tuple(product.types[n] for n in names)
-        return StereoPair({n: scene.raster(n) for n in names}, chosen, types, dem)
-    if inputs.left is None or inputs.right is None:
-        raise InputError("dem: give a scene folder, or both --left and --right images")
-    rasters: dict[str, Path] = {}
-    sensors = {}
-    types = []
-    for key, image, model in (
-        ("left", inputs.left, inputs.left_model),
-        ("right", inputs.right, inputs.right_model),
-    ):
-        path = Path(image)
-        if not path.is_file():
-            raise InputError(f"{path}: no such image")
-        model_path = Path(model) if model else _model_beside(path)
-        chosen_type = sensor_type_for(model_path, sensor_type, "file")
-        sensor = chosen_type.open(model_path, **open_options()).for_raster(path)
-        check_model_of_image(path, model_path, sensor)
-        sensors[key] = _adjusted(models_dir, key, sensor)
-        rasters[key] = path
-        types.append(chosen_type)
-    return StereoPair(rasters, sensors, tuple(types), None)
-
-
-def _off_nadir_deg(sensor: Sensor) -> float:
-    """Off-nadir angle of the line of sight at the image centre, degrees."""
-    from carto.framework.geometry import frames
-
-    n_l, n_s = sensor.image_shape
-    lon, lat = sensor.image_to_ground(n_l / 2, n_s / 2, 0.0)
-    lo2, la2 = sensor.image_to_ground(n_l / 2, n_s / 2, 1000.0)
-    d = frames.geodetic_to_ecef(lo2, la2, 1000.0) - frames.geodetic_to_ecef(lon, lat, 0.0)
-    up = frames.ellipsoid_normal(lon, lat)
-    return float(np.degrees(np.arccos(np.clip(np.dot(np.ravel(d), up) / np.linalg.norm(d), -1, 1))))
 
 
 def _radiometry(path: str | os.PathLike[str]) -> Any:
@@ -338,76 +182,113 @@ def dem_product(
     :func:`~carto.framework.workflows.dem_datum.coregistered`; a move beyond
     ``coregister_accuracy_m`` is a warning).
     """
-    from carto.framework.parallel.engine import open_engine
-
     settings = dict(options or {})
     geographic = geographic_output(settings)  # a lon/lat grid: warped after the generator
     check_options(settings)
     check_names(generator, matcher)
-    try:
-        ro_settings = RelativeOrientationSettings(mode=relative_orientation)
-    except InputError as exc:
-        raise UsageError(str(exc)) from None
-    coregister = resolve_coregister(coregister)
-    if not (np.isfinite(coregister_accuracy_m) and coregister_accuracy_m > 0):
-        raise UsageError(f"--coregister-accuracy must be > 0 m, got {coregister_accuracy_m:g}")
-    if vertical not in ("ellipsoid", "geoid"):
-        raise UsageError(f"--vertical must be 'ellipsoid' or 'geoid', got {vertical!r}")
-    if vertical == "geoid" and geoid is None:
-        raise UsageError("--vertical geoid needs the geoid grid: --geoid GTX")
+    ro_settings, coregister = _checked_datum(
+        relative_orientation, coregister, coregister_accuracy_m, vertical, geoid
+    )
     if "workers" in settings:  # the earlier form of the argument
         workers = int(settings.pop("workers"))
-    sources = [
-        inputs.source,
-        inputs.left,
-        inputs.right,
-        inputs.left_model,
-        inputs.right_model,
-        inputs.models,
-        init_dem,
-        geoid,
-        reference,
-        None if str(coregister) in ("auto", "none") else coregister,
-        *(scene_files(inputs.source) if inputs.source is not None else []),
-    ]
-    facts = {
-        "generator": generator,
-        "matcher": matcher,
-        "init_height_m": init_height_m,
-        "pair": list(inputs.pair) if inputs.pair else None,
-        "sensor_type": inputs.sensor_type,
-        "settings": {k: str(v) for k, v in sorted(settings.items())},
-        "allow_poor": allow_poor,
-        "vertical": vertical,
-        "relative_orientation": relative_orientation,
-        "coregister": str(coregister),
-        "coregister_accuracy_m": coregister_accuracy_m,
-    }
+    run = _DemRun(
+        inputs=inputs,
+        init_dem=init_dem,
+        geoid=geoid,
+        init_height_m=init_height_m,
+        generator=generator,
+        matcher=matcher,
+        reference=reference,
+        vertical=vertical,
+        settings=settings,
+        allow_poor=allow_poor,
+        relative_orientation=relative_orientation,
+        ro_settings=ro_settings,
+        coregister=coregister,
+        coregister_accuracy_m=coregister_accuracy_m,
+    )
+    return _staged_run(out_dir, run, geographic, workers, scheduler, resume, quiet)
+
+
+@attrs.frozen(eq=False)
+class _DemRun:
+    """What a DEM run was asked, checked (the arguments of :func:`dem_product`; ``settings``:
+    the generator's options, ``ro_settings``: the relative orientation's, ``coregister``:
+    what :func:`~carto.framework.workflows.dem_datum.resolve_coregister` made of it)."""
+
+    inputs: StereoInputs
+    init_dem: str | os.PathLike[str] | None
+    geoid: str | os.PathLike[str] | None
+    init_height_m: float | None
+    generator: str | None
+    matcher: str
+    reference: str | os.PathLike[str] | None
+    vertical: str
+    settings: dict[str, Any]
+    allow_poor: bool
+    relative_orientation: str
+    ro_settings: RelativeOrientationSettings
+    coregister: str | Path
+    coregister_accuracy_m: float
+
+    def sources(self) -> list[Any]:
+        """The files the run reads (None where one is not given): they fingerprint its work
+        folder and the staging folder records them."""
+        inputs, coregister = self.inputs, self.coregister
+        return [
+            inputs.source,
+            inputs.left,
+            inputs.right,
+            inputs.left_model,
+            inputs.right_model,
+            inputs.models,
+            self.init_dem,
+            self.geoid,
+            self.reference,
+            None if str(coregister) in ("auto", "none") else coregister,
+            *(scene_files(inputs.source) if inputs.source is not None else []),
+        ]
+
+    def facts(self) -> dict[str, Any]:
+        """The run's arguments beside its files, for the work folder's fingerprint."""
+        return {
+            "generator": self.generator,
+            "matcher": self.matcher,
+            "init_height_m": self.init_height_m,
+            "pair": list(self.inputs.pair) if self.inputs.pair else None,
+            "sensor_type": self.inputs.sensor_type,
+            "settings": {k: str(v) for k, v in sorted(self.settings.items())},
+            "allow_poor": self.allow_poor,
+            "vertical": self.vertical,
+            "relative_orientation": self.relative_orientation,
+            "coregister": str(self.coregister),
+            "coregister_accuracy_m": self.coregister_accuracy_m,
+        }
+
+
+def _staged_run(
+    out_dir: str | os.PathLike[str],
+    run: _DemRun,
+    geographic: Any,
+    workers: int | None,
+    scheduler: str | None,
+    resume: bool,
+    quiet: bool,
+) -> dict[str, Any]:
+    """The run in a staging folder that replaces ``out_dir`` when complete, its
+    intermediate files in a work folder (kept when the run fails or is interrupted,
+    continued with ``resume``), tiles on an engine of ``workers`` or at ``scheduler``; the
+    outputs warped to a lon/lat grid by ``geographic`` (None: not); the report."""
+    from carto.framework.parallel.engine import open_engine
+
+    sources = run.sources()
     work: Path | None = None
     started = utc_now()
     try:
         with staged_folder(out_dir, "dem", inputs=sources) as stage:
-            work = open_work(out_dir, fingerprint(sources, facts), resume, quiet)
+            work = open_work(out_dir, fingerprint(sources, run.facts()), resume, quiet)
             with open_engine(workers, scheduler, quiet=quiet) as engine:
-                report = _dem_into(
-                    stage,
-                    inputs,
-                    init_dem=init_dem,
-                    geoid=geoid,
-                    init_height_m=init_height_m,
-                    generator=generator,
-                    matcher=matcher,
-                    reference=reference,
-                    vertical=vertical,
-                    settings=settings,
-                    quiet=quiet,
-                    allow_poor=allow_poor,
-                    engine=engine,
-                    work=work,
-                    ro_settings=ro_settings,
-                    coregister=coregister,
-                    coregister_accuracy_m=coregister_accuracy_m,
-                )
+                report = _dem_into(stage, run, quiet=quiet, engine=engine, work=work)
             if geographic is not None:
                 report = geographic.apply(stage, report)
             report = record_run(stage / "report.json", report, sources, started, "dem")
@@ -421,36 +302,39 @@ def dem_product(
     return report
 
 
-def _dem_into(
-    out: Path,
-    inputs: StereoInputs,
-    *,
-    init_dem: str | os.PathLike[str] | None,
-    geoid: str | os.PathLike[str] | None,
-    init_height_m: float | None,
-    generator: str | None,
-    matcher: str,
-    reference: str | os.PathLike[str] | None,
-    vertical: str,
-    settings: dict[str, Any],
-    quiet: bool,
-    allow_poor: bool,
-    engine: Any,
-    work: Path,
-    ro_settings: RelativeOrientationSettings,
-    coregister: str | Path,
+def _checked_datum(
+    relative_orientation: str,
+    coregister: str | os.PathLike[str] | None,
     coregister_accuracy_m: float,
-) -> dict[str, Any]:
+    vertical: str,
+    geoid: str | os.PathLike[str] | None,
+) -> tuple[RelativeOrientationSettings, str | Path]:
+    """The relative orientation's settings and the co-registration's choice
+    (:func:`~carto.framework.workflows.dem_datum.resolve_coregister`) of a run, its datum
+    arguments checked (a :class:`UsageError` for a bad one)."""
+    try:
+        ro_settings = RelativeOrientationSettings(mode=relative_orientation)
+    except InputError as exc:
+        raise UsageError(str(exc)) from None
+    choice = resolve_coregister(coregister)
+    if not (np.isfinite(coregister_accuracy_m) and coregister_accuracy_m > 0):
+        raise UsageError(f"--coregister-accuracy must be > 0 m, got {coregister_accuracy_m:g}")
+    if vertical not in ("ellipsoid", "geoid"):
+        raise UsageError(f"--vertical must be 'ellipsoid' or 'geoid', got {vertical!r}")
+    if vertical == "geoid" and geoid is None:
+        raise UsageError("--vertical geoid needs the geoid grid: --geoid GTX")
+    return ro_settings, choice
+
+
+def _dem_into(out: Path, run: _DemRun, *, quiet: bool, engine: Any, work: Path) -> dict[str, Any]:
     """:func:`dem_product` writing into ``out`` (its staging folder), tiles on ``engine``,
     intermediate files in ``work``."""
-    from carto.framework.adjustment.relative_orientation import relative_orientation
-
     t0 = time.perf_counter()
+    inputs = run.inputs
     pair = open_pair(inputs)
-    rasters, sensors, scene_dem = pair.rasters, pair.sensors, pair.init_dem
-    generator = choose_dem_generator(generator, pair.types)
+    generator = choose_dem_generator(run.generator, pair.types)
     component = get_registry().get("dem-generator", generator)
-    resolved = component.settings({k: v for k, v in settings.items() if v is not None})
+    resolved = component.settings({k: v for k, v in run.settings.items() if v is not None})
     if inputs.source is not None and inputs.models is None:
         progress(
             "dem",
@@ -458,24 +342,77 @@ def _dem_into(
             "adjust output folder for a DEM of the adjusted accuracy",
             quiet,
         )
-    start = initial_dem(init_dem, geoid, init_height_m, scene_dem)
-    names = list(sensors)
-    images = _prepared_images(rasters, sensors, start, work, engine)
-    checked, warnings = checked_pair(
-        images, [sensors[n] for n in names], start, allow_poor=allow_poor
+    start = initial_dem(run.init_dem, run.geoid, run.init_height_m, pair.init_dem)
+    oriented = oriented_pair(
+        pair, start, inputs.models, run.ro_settings, run.init_height_m is not None,
+        run.allow_poor, engine, work, quiet,
+    )  # fmt: skip
+    product = _generated(component, generator, oriented, run, engine, work, quiet)
+    warnings = oriented.warnings + _product_warnings(product, start, oriented.control)
+    if warnings and not run.allow_poor:
+        raise InputError(f"dem: {'; '.join(warnings)} (--allow-poor writes it anyway)")
+    for warning in warnings:
+        progress("dem", f"warning: {warning}", False)  # warnings print under --quiet too
+    geoid_grid = Geoid.open(run.geoid) if run.geoid else None
+    dem, coregistration = coregistered(
+        product.dem,
+        run.coregister,
+        start=start,
+        auto=auto_coregisters(inputs.models, run.init_height_m is not None),
+        geoid=geoid_grid,
+        accuracy_m=run.coregister_accuracy_m,
+        say=lambda line: progress("dem", line, quiet),
     )
-    control = datum_gcps(inputs.models, names)
-    oriented = relative_orientation(
-        dict(zip(names, images, strict=True)),
-        sensors,
-        start,
-        ro_settings,
-        gcps=control,
-        constant_dem=init_height_m is not None,
-        engine=engine,
-        progress=lambda line: progress("dem", line, quiet),
-    )
-    sensors = {**sensors, names[0]: oriented.left or sensors[names[0]], names[1]: oriented.right}
+    if coregistration and coregistration.get("warning"):
+        warnings.append(coregistration["warning"])
+    for warning in _unstated_vertical(run.init_dem):
+        warnings.append(warning)
+        progress("dem", f"warning: {warning}", False)
+    written = dem.to_geoid(geoid_grid) if run.vertical == "geoid" else dem
+    vertical_reference = vertical_tag(written.vertical)
+    rasters = {n: oriented.rasters[n] for n in oriented.names}
+    files = _write_rasters(out, written, product, rasters, generator)
+    del written
+    from carto.framework.raster.quicklook import hillshade_png
+
+    files["hillshade"] = hillshade_png(out / "dem.tif", out / "dem_hillshade.png", "DEM").name
+    report: dict[str, Any] = {
+        "generator": generator,
+        "matcher": run.matcher,
+        "images": {n: str(r) for n, r in rasters.items()},
+        "settings": {
+            **{k: v for k, v in run.settings.items() if isinstance(v, str | int | float)},
+            "generator": resolved_settings(resolved),
+            "relative_orientation": resolved_settings(run.ro_settings),
+        },
+        "workers": engine.workers,
+        "engine": engine.description,
+        **_product_record(product, oriented, coregistration, vertical_reference),
+        "warnings": warnings,
+        "iterations": product.iteration_dicts(),
+        "files": files,
+    }
+    _add_extras(report, product, generator)
+    if run.reference is not None:
+        _compare_with_reference(out, report, dem, run.reference, geoid_grid)
+    report["seconds"] = time.perf_counter() - t0
+    write_report(out / "report.json", report)
+    return report
+
+
+def _generated(
+    component: Any,
+    generator: str,
+    pair: OrientedPair,
+    run: _DemRun,
+    engine: Any,
+    work: Path,
+    quiet: bool,
+) -> Any:
+    """The generator's product of the pair (checked), the engine's workers' memory
+    released."""
+    matcher, settings = run.matcher, run.settings
+    names = pair.names
     chosen_matcher = get_registry().get("matcher", matcher)
     posting = settings.get("posting_m")
     progress(
@@ -487,73 +424,60 @@ def _dem_into(
     )
     progress("dem", f"tiles on {engine.description}", quiet)
     product = component.generate(
-        images,
-        [sensors[n] for n in names],
-        init_dem=start,
+        pair.images,
+        [pair.sensors[n] for n in names],
+        init_dem=pair.start,
         matcher=chosen_matcher,
         progress=lambda line: progress("dem", line, quiet),
         scheduler=engine,
         work_dir=work / "generator",
-        keep_failed_tiles=allow_poor,
+        keep_failed_tiles=run.allow_poor,
         **settings,
     )
     release = getattr(engine, "release", None)
     if release is not None:  # the workers' memory back before the outputs are written
         release()
     _check_product(product, generator, len(names))
-    warnings += poor_dem(product) + departs_from_start(product.dem, start)
+    return product
+
+
+def _product_warnings(product: Any, start: DEM, control: dict[str, Any] | None) -> list[str]:
+    """What makes a DEM poor (:mod:`~carto.framework.workflows.dem_checks`) and its failed
+    tiles."""
+    warnings = poor_dem(product) + departs_from_start(product.dem, start)
     warnings += mismatched(product) + off_the_gcps(product.dem, control)
     if product.failed_tiles:
         warnings.append(
             f"{len(product.failed_tiles)} tiles failed and have no heights "
             f"({product.failed_tiles[0]})"
         )
-    if warnings and not allow_poor:
-        raise InputError(f"dem: {'; '.join(warnings)} (--allow-poor writes it anyway)")
-    for warning in warnings:
-        progress("dem", f"warning: {warning}", False)  # warnings print under --quiet too
-    geoid_grid = Geoid.open(geoid) if geoid else None
-    dem, coregistration = coregistered(
-        product.dem,
-        coregister,
-        start=start,
-        auto=auto_coregisters(inputs.models, init_height_m is not None),
-        geoid=geoid_grid,
-        accuracy_m=coregister_accuracy_m,
-        say=lambda line: progress("dem", line, quiet),
-    )
-    if coregistration and coregistration.get("warning"):
-        warnings.append(coregistration["warning"])
-    if init_dem is not None and not states_vertical(init_dem):
-        warnings.append(
-            f"the starting DEM {init_dem} does not say what its heights are above (no "
-            "vertical CRS or VERTICAL_REFERENCE tag): read as heights above the WGS84 "
-            "ellipsoid; if they are above the geoid (SRTM, Copernicus), tag it (gdal_edit.py "
-            "-mo VERTICAL_REFERENCE=geoid:EGM96) and give --geoid"
-        )
-        progress("dem", f"warning: {warnings[-1]}", False)
-    written = dem.to_geoid(geoid_grid) if vertical == "geoid" else dem
-    vertical_reference = vertical_tag(written.vertical)
-    files = _write_rasters(out, written, product, {n: rasters[n] for n in names}, generator)
-    del written
-    from carto.framework.raster.quicklook import difference_png, hillshade_png
+    return warnings
 
-    files["hillshade"] = hillshade_png(out / "dem.tif", out / "dem_hillshade.png", "DEM").name
-    report: dict[str, Any] = {
-        "generator": generator,
-        "matcher": matcher,
-        "images": {n: str(rasters[n]) for n in names},
-        "settings": {
-            **{k: v for k, v in settings.items() if isinstance(v, str | int | float)},
-            "generator": resolved_settings(resolved),
-            "relative_orientation": resolved_settings(ro_settings),
-        },
-        "workers": engine.workers,
-        "engine": engine.description,
+
+def _unstated_vertical(init_dem: str | os.PathLike[str] | None) -> list[str]:
+    """A warning for a starting DEM file that does not say what its heights are above."""
+    if init_dem is None or states_vertical(init_dem):
+        return []
+    return [
+        f"the starting DEM {init_dem} does not say what its heights are above (no "
+        "vertical CRS or VERTICAL_REFERENCE tag): read as heights above the WGS84 "
+        "ellipsoid; if they are above the geoid (SRTM, Copernicus), tag it (gdal_edit.py "
+        "-mo VERTICAL_REFERENCE=geoid:EGM96) and give --geoid"
+    ]
+
+
+def _product_record(
+    product: Any,
+    pair: OrientedPair,
+    coregistration: dict[str, Any] | None,
+    vertical_reference: str,
+) -> dict[str, Any]:
+    """What ``report.json`` says of the product, the pair and the datum (in its order)."""
+    return {
         "failed_tiles": list(product.failed_tiles),
-        "initial_dem": start.name,
-        "pair_check": checked.as_dict(),
-        "relative_orientation": oriented.record,
+        "initial_dem": pair.start.name,
+        "pair_check": pair.checked.as_dict(),
+        "relative_orientation": pair.orientation,
         "coregistration": coregistration,
         "dem_grid": {
             "crs": product.dem_grid.crs.to_string(),
@@ -562,72 +486,42 @@ def _dem_into(
         },
         "ortho_resolution_m": product.ortho_grid.resolution[0],
         "vertical_reference": vertical_reference,
-        "quality_bands": [layer.name for layer in product.quality if layer.grid == "dem"],
-        "matching_bands": [layer.name for layer in product.quality if layer.grid == "ortho"],
-        "quality_layers": {
-            layer.name: {
-                "file": f"{'quality' if layer.grid == 'dem' else 'matching'}"
-                f"{LAYER_FILES[layer.kind][0]}.tif",
-                "kind": layer.kind,
-                "description": layer.description,
-            }
-            for layer in product.quality
-        },
+        **_quality_record(product),
         "converged": product.converged,
         "matched_fraction": product.matched_fraction,
-        "warnings": warnings,
-        "iterations": product.iteration_dicts(),
-        "files": files,
     }
+
+
+def _add_extras(report: dict[str, Any], product: Any, generator: str) -> None:
+    """The generator's extra report fields into ``report`` (refused where they collide)."""
     clash = sorted(set(product.extras) & set(report))
     if clash:
         raise InputError(
             f"DEM generator {generator!r}: extras {', '.join(clash)} collide with report fields"
         )
     report.update(product.extras)
-    if reference is not None:
-        from carto.framework.evaluation.dem_accuracy import dem_accuracy_by_blocks
-
-        comparison = dem_accuracy_by_blocks(dem, reference, geoid=geoid_grid)
-        report["accuracy"] = comparison.report
-        files["difference"] = difference_png(
-            comparison.preview,
-            out / "dem_difference.png",
-            f"DEM - {Path(reference).name}",
-            figures=comparison.report,
-        ).name
-    report["seconds"] = time.perf_counter() - t0
-    write_report(out / "report.json", report)
-    return report
 
 
-def _prepared_images(
-    rasters: Mapping[str, Path],
-    sensors: Mapping[str, Sensor],
-    start: DEM,
-    work: Path,
-    engine: Any,
-) -> list[Any]:
-    """Each image read by windows, checked and prepared (staggered arrays merged) in
-    ``work``, in the order of ``sensors``."""
-    from carto.framework.imaging.preparation import prepare_image
-    from carto.framework.raster.image_source import RasterImage, check_image_source
+def _compare_with_reference(
+    out: Path,
+    report: dict[str, Any],
+    dem: DEM,
+    reference: str | os.PathLike[str],
+    geoid: Geoid | None,
+) -> None:
+    """The DEM's accuracy against ``reference`` into ``report`` and its difference map into
+    ``out`` (named in ``report["files"]``)."""
+    from carto.framework.evaluation.dem_accuracy import dem_accuracy_by_blocks
+    from carto.framework.raster.quicklook import difference_png
 
-    images = []
-    for n, sensor in sensors.items():
-        source = RasterImage.open(rasters[n])
-        check_image_source(source, str(rasters[n]))
-        images.append(
-            prepare_image(
-                source,
-                sensor,
-                start,
-                work / "prepared" / n,
-                engine,
-                desc=f"merge staggered arrays of {n}",
-            )
-        )
-    return images
+    comparison = dem_accuracy_by_blocks(dem, reference, geoid=geoid)
+    report["accuracy"] = comparison.report
+    report["files"]["difference"] = difference_png(
+        comparison.preview,
+        out / "dem_difference.png",
+        f"DEM - {Path(reference).name}",
+        figures=comparison.report,
+    ).name
 
 
 def _check_product(product: Any, generator: str, n_images: int) -> None:
@@ -695,6 +589,25 @@ def _write_rasters(
                 overview_resampling="nearest",
             ).name
     return files
+
+
+def _quality_record(product: Any) -> dict[str, Any]:
+    """What ``report.json`` says of a product's quality layers: the bands on the DEM grid
+    (``quality_bands``) and on the ortho grid (``matching_bands``), and per layer its file,
+    kind and description (``quality_layers``)."""
+    return {
+        "quality_bands": [layer.name for layer in product.quality if layer.grid == "dem"],
+        "matching_bands": [layer.name for layer in product.quality if layer.grid == "ortho"],
+        "quality_layers": {
+            layer.name: {
+                "file": f"{'quality' if layer.grid == 'dem' else 'matching'}"
+                f"{LAYER_FILES[layer.kind][0]}.tif",
+                "kind": layer.kind,
+                "description": layer.description,
+            }
+            for layer in product.quality
+        },
+    }
 
 
 LAYER_FILES = {

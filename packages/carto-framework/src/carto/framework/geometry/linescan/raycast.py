@@ -19,7 +19,7 @@ tells beforehand).
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import numba
 import numpy as np
@@ -28,6 +28,11 @@ from numpy.typing import NDArray
 from carto.framework.errors import InputError
 from carto.framework.geometry import frames
 from carto.framework.geometry.light_path import SOURCE_DIRECTION_STEPS
+from carto.framework.geometry.linescan.solver import (
+    interp_node,
+    interp_rotation,
+    lagrange_weights,
+)
 
 if TYPE_CHECKING:  # the model whose table the kernels read
     from carto.framework.geometry.linescan.scanner import LineScanner
@@ -118,6 +123,214 @@ def ray_point(
     )
 
 
+class GeoGrid(NamedTuple):
+    """A north-up EPSG:4326 grid as the kernels read it: ``values[i, j]`` has its pixel centre
+    at ``(x0_deg + (j + 0.5) dx_deg, y0_deg + (i + 0.5) dy_deg)`` (``dy_deg`` < 0)."""
+
+    values: NDArray
+    x0_deg: float
+    dx_deg: float
+    y0_deg: float
+    dy_deg: float
+
+
+class DemGrid(NamedTuple):
+    """A DEM of ellipsoidal heights (a :class:`GeoGrid` of ``heights``) and the bounds of the
+    ray search over it: rays start at ``h_top_m``, end at ``h_bottom_m`` and step safely for
+    slopes up to ``max_slope`` (rise/run). Flat, not holding a :class:`GeoGrid`: numba's
+    parallel loops take tuples of arrays, not nested ones."""
+
+    heights: NDArray
+    x0_deg: float
+    dx_deg: float
+    y0_deg: float
+    dy_deg: float
+    h_top_m: float
+    h_bottom_m: float
+    max_slope: float
+
+
+class CameraStates(NamedTuple):
+    """What the kernels need to turn (line, detector sample) into a line of sight (the keys
+    of :func:`sensor_arrays`): the line timing nodes (``line_nodes`` -> ``t_nodes``, s), the
+    exact camera-state table at times ``node0 + k spacing`` (s; ECEF positions ``pos`` in m,
+    ECEF -> camera rotations ``rot``, velocities over c ``beta``, and the Earth's angular
+    velocity over c ``omega_c`` in rad/m) and the camera's look-angle polynomials ``tan_x``,
+    ``tan_y`` in the sample normalised by ``half`` (half the detector count)."""
+
+    line_nodes: NDArray
+    t_nodes: NDArray
+    node0: float
+    spacing: float
+    pos: NDArray
+    rot: NDArray
+    beta: NDArray
+    omega_c: NDArray
+    tan_x: NDArray
+    tan_y: NDArray
+    half: float
+
+
+class _RayQuadratic(NamedTuple):
+    """A ray's geodetic coordinates as quadratics in ``tau = (d - d0_m) / span_m`` between
+    the search heights (``d``: metres along the ray): ``lon_deg = lon0 + tau (lon1 + tau
+    lon2)``, the same for ``lat_deg`` and ``h_m``. ``d0_m`` is NaN for a ray that misses."""
+
+    d0_m: float
+    span_m: float
+    lon0: float
+    lon1: float
+    lon2: float
+    lat0: float
+    lat1: float
+    lat2: float
+    h0: float
+    h1: float
+    h2: float
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _terrain_height(dem: DemGrid, lon_deg: float, lat_deg: float) -> float:  # pragma: no cover
+    """:func:`grid_bilinear` of the DEM's heights (m)."""
+    return grid_bilinear(
+        dem.heights, dem.x0_deg, dem.dx_deg, dem.y0_deg, dem.dy_deg, lon_deg, lat_deg
+    )
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _geodetic_along(
+    ray: tuple[float, float, float, float, float, float], omega_c: NDArray, d: float
+) -> tuple[float, float, float]:  # pragma: no cover - compiled
+    """(lon_deg, lat_deg, h_m) of :func:`ray_point` at ``d`` metres along ``ray`` (origin,
+    unit direction)."""
+    return geodetic(*ray_point(ray[0], ray[1], ray[2], ray[3], ray[4], ray[5], omega_c, d))
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _ray_quadratic(
+    ray: tuple[float, float, float, float, float, float],
+    omega_c: NDArray,
+    h_top: float,
+    h_bottom: float,
+) -> _RayQuadratic:  # pragma: no cover - compiled
+    """The quadratic model of the ray between the heights ``h_top`` and ``h_bottom``, fitted
+    on three exact points (error below a centimetre over kilometres); ``d0_m`` NaN when the
+    ray misses either height or does not descend through them."""
+    d0 = start_distance(ray[0], ray[1], ray[2], ray[3], ray[4], ray[5], h_top)
+    d2 = start_distance(ray[0], ray[1], ray[2], ray[3], ray[4], ray[5], h_bottom)
+    if not (np.isfinite(d0) and np.isfinite(d2)) or d2 <= d0:
+        nan = np.nan
+        return _RayQuadratic(nan, nan, nan, nan, nan, nan, nan, nan, nan, nan, nan)
+    d1 = 0.5 * (d0 + d2)
+    lo0, la0, h0 = _geodetic_along(ray, omega_c, d0)
+    lo1, la1, h1 = _geodetic_along(ray, omega_c, d1)
+    lo2, la2, h2 = _geodetic_along(ray, omega_c, d2)
+    # quadratic in tau = (d - d0) / span through tau = 0, 0.5, 1
+    return _RayQuadratic(
+        d0,
+        d2 - d0,
+        lo0,
+        4.0 * lo1 - 3.0 * lo0 - lo2,
+        2.0 * (lo0 + lo2) - 4.0 * lo1,
+        la0,
+        4.0 * la1 - 3.0 * la0 - la2,
+        2.0 * (la0 + la2) - 4.0 * la1,
+        h0,
+        4.0 * h1 - 3.0 * h0 - h2,
+        2.0 * (h0 + h2) - 4.0 * h1,
+    )
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _quadratic_at(
+    q: _RayQuadratic, d: float
+) -> tuple[float, float, float, float]:  # pragma: no cover - compiled
+    """``(tau, lon_deg, lat_deg, h_m)`` of the quadratic model ``d`` metres along the ray."""
+    tau = (d - q.d0_m) / q.span_m
+    lon = q.lon0 + tau * (q.lon1 + tau * q.lon2)
+    lat = q.lat0 + tau * (q.lat1 + tau * q.lat2)
+    h = q.h0 + tau * (q.h1 + tau * q.h2)
+    return tau, lon, lat, h
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _safe_steps(q: _RayQuadratic, dem: DemGrid) -> tuple[float, float]:  # pragma: no cover
+    """Safe steps along the quadratic model from the top height until the ray is within 1e-3
+    m of the terrain: ``(d, c)``, the distance along the ray (m) and the height it loses per
+    metre there; ``d`` NaN when the ray leaves the DEM, does not descend or takes
+    :data:`MAX_STEPS` steps."""
+    d = q.d0_m
+    for _ in range(MAX_STEPS):
+        tau, lon, lat, h = _quadratic_at(q, d)
+        ground = _terrain_height(dem, lon, lat)
+        if not np.isfinite(ground):
+            return np.nan, np.nan
+        gap = h - ground
+        c = -(q.h1 + 2.0 * tau * q.h2) / q.span_m  # height lost per metre along the ray
+        if c <= 1e-6:
+            return np.nan, np.nan  # the ray does not descend
+        if abs(gap) < 1e-3:
+            return d, c
+        s = math.sqrt(max(1.0 - c * c, 0.0))
+        d += gap / (c + s * dem.max_slope)
+    return np.nan, np.nan
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _closure_rate(
+    q: _RayQuadratic, dem: DemGrid, d: float, c: float
+) -> float:  # pragma: no cover - compiled
+    """Rate (m/m) at which the ray closes on the terrain at ``d`` by the quadratic model (a
+    5 cm difference); the safe-step rate for the descent ``c`` where that is not positive."""
+    eps = 0.05
+    _, lon_e, lat_e, h_e = _quadratic_at(q, d + eps)
+    g_e = _terrain_height(dem, lon_e, lat_e)
+    _, lon_0, lat_0, h_0 = _quadratic_at(q, d)
+    g_0 = _terrain_height(dem, lon_0, lat_0)
+    rate = ((h_0 - g_0) - (h_e - g_e)) / eps
+    if not np.isfinite(rate) or rate <= 1e-9:
+        rate = c + math.sqrt(max(1.0 - c * c, 0.0)) * dem.max_slope
+    return rate
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _exact_refinement(
+    ray: tuple[float, float, float, float, float, float],
+    omega_c: NDArray,
+    q: _RayQuadratic,
+    dem: DemGrid,
+    d: float,
+    c: float,
+) -> tuple[float, float, float]:  # pragma: no cover - compiled
+    """(lon_deg, lat_deg, h_m) within :data:`HEIGHT_TOLERANCE_M` of the terrain, from ``d``
+    metres along the ray: Newton steps on the exact geodetic conversion with the closure
+    rate of the quadratic model; NaN when the ray leaves the DEM or does not converge."""
+    for _ in range(6):
+        lon, lat, h = _geodetic_along(ray, omega_c, d)
+        ground = _terrain_height(dem, lon, lat)
+        if not np.isfinite(ground):
+            return np.nan, np.nan, np.nan
+        gap = h - ground
+        if abs(gap) < HEIGHT_TOLERANCE_M:
+            return lon, lat, h
+        d += gap / _closure_rate(q, dem, d, c)
+    return np.nan, np.nan, np.nan
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def trace_dem(
+    ray: tuple[float, float, float, float, float, float], omega_c: NDArray, dem: DemGrid
+) -> tuple[float, float, float]:  # pragma: no cover - compiled
+    """:func:`ray_dem` of a ray ``(px, py, pz, ux, uy, uz)`` and a :class:`DemGrid`."""
+    q = _ray_quadratic(ray, omega_c, dem.h_top_m, dem.h_bottom_m)
+    if np.isnan(q.d0_m):
+        return np.nan, np.nan, np.nan
+    d, c = _safe_steps(q, dem)
+    if np.isnan(d):
+        return np.nan, np.nan, np.nan
+    return _exact_refinement(ray, omega_c, q, dem, d, c)
+
+
 @numba.njit(cache=True, nogil=True)
 def ray_dem(
     px: float,
@@ -144,63 +357,8 @@ def ray_dem(
     centimetre over kilometres), which makes the safe steps cheap; the last steps use the exact
     geodetic conversion.
     """
-    d0 = start_distance(px, py, pz, ux, uy, uz, h_top)
-    d2 = start_distance(px, py, pz, ux, uy, uz, h_bottom)
-    if not (np.isfinite(d0) and np.isfinite(d2)) or d2 <= d0:
-        return np.nan, np.nan, np.nan
-    d1 = 0.5 * (d0 + d2)
-    lo0, la0, h0 = geodetic(*ray_point(px, py, pz, ux, uy, uz, omega_c, d0))
-    lo1, la1, h1 = geodetic(*ray_point(px, py, pz, ux, uy, uz, omega_c, d1))
-    lo2, la2, h2 = geodetic(*ray_point(px, py, pz, ux, uy, uz, omega_c, d2))
-    span = d2 - d0
-    # quadratic in tau = (d - d0) / span through tau = 0, 0.5, 1
-    alo, blo = 4.0 * lo1 - 3.0 * lo0 - lo2, 2.0 * (lo0 + lo2) - 4.0 * lo1
-    ala, bla = 4.0 * la1 - 3.0 * la0 - la2, 2.0 * (la0 + la2) - 4.0 * la1
-    ah, bh = 4.0 * h1 - 3.0 * h0 - h2, 2.0 * (h0 + h2) - 4.0 * h1
-    d = d0
-    for _ in range(MAX_STEPS):
-        tau = (d - d0) / span
-        lon = lo0 + tau * (alo + tau * blo)
-        lat = la0 + tau * (ala + tau * bla)
-        h = h0 + tau * (ah + tau * bh)
-        ground = grid_bilinear(dem, x0, dx, y0, dy, lon, lat)
-        if not np.isfinite(ground):
-            return np.nan, np.nan, np.nan
-        gap = h - ground
-        c = -(ah + 2.0 * tau * bh) / span  # height lost per metre along the ray
-        if c <= 1e-6:
-            return np.nan, np.nan, np.nan  # the ray does not descend
-        if abs(gap) < 1e-3:
-            break
-        s = math.sqrt(max(1.0 - c * c, 0.0))
-        d += gap / (c + s * max_slope)
-    else:
-        return np.nan, np.nan, np.nan
-    # exact refinement: Newton steps with the closure rate of the quadratic model
-    for _ in range(6):
-        lon, lat, h = geodetic(*ray_point(px, py, pz, ux, uy, uz, omega_c, d))
-        ground = grid_bilinear(dem, x0, dx, y0, dy, lon, lat)
-        if not np.isfinite(ground):
-            return np.nan, np.nan, np.nan
-        gap = h - ground
-        if abs(gap) < HEIGHT_TOLERANCE_M:
-            return lon, lat, h
-        eps = 0.05
-        tau = (d + eps - d0) / span
-        g_e = grid_bilinear(
-            dem, x0, dx, y0, dy, lo0 + tau * (alo + tau * blo), la0 + tau * (ala + tau * bla)
-        )
-        h_e = h0 + tau * (ah + tau * bh)
-        tau = (d - d0) / span
-        g_0 = grid_bilinear(
-            dem, x0, dx, y0, dy, lo0 + tau * (alo + tau * blo), la0 + tau * (ala + tau * bla)
-        )
-        h_0 = h0 + tau * (ah + tau * bh)
-        rate = ((h_0 - g_0) - (h_e - g_e)) / eps
-        if not np.isfinite(rate) or rate <= 1e-9:
-            rate = c + math.sqrt(max(1.0 - c * c, 0.0)) * max_slope
-        d += gap / rate
-    return np.nan, np.nan, np.nan
+    grid = DemGrid(dem, x0, dx, y0, dy, h_top, h_bottom, max_slope)
+    return trace_dem((px, py, pz, ux, uy, uz), omega_c, grid)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -213,35 +371,12 @@ def interp_time(line: float, line_nodes: NDArray, t_nodes: NDArray) -> float:  #
     return t_nodes[i] + (line - line_nodes[i]) * slope
 
 
-@numba.njit(cache=True, nogil=True)
-def camera_ray(
-    t: float,
-    det_sample: float,
-    stagger: float,
-    node0: float,
-    spacing: float,
-    pos: NDArray,
-    rot: NDArray,
-    beta: NDArray,
-    tan_x: NDArray,
-    tan_y: NDArray,
-    half: float,
-    out: NDArray,
-) -> bool:  # pragma: no cover - compiled
-    """Fill out[0:3] with the perspective centre and out[3:6] with the unit direction the
-    received light came from (the look vector corrected for aberration by ``beta``, the
-    table's velocity over c: ``u - beta + (u . beta) u`` refined as
-    :func:`~carto.framework.geometry.light_path.source_direction` does)."""
-    nk = pos.shape[0]
-    q = (t - node0) / spacing
-    k = math.floor(q)
-    if k < 1 or k > nk - 3:
-        return False
-    f = q - k
-    w0 = -f * (f - 1.0) * (f - 2.0) / 6.0
-    w1 = (f + 1.0) * (f - 1.0) * (f - 2.0) / 2.0
-    w2 = -(f + 1.0) * f * (f - 2.0) / 2.0
-    w3 = (f + 1.0) * f * (f - 1.0) / 6.0
+@numba.njit(cache=True, nogil=True, inline="always")
+def _look_vector(
+    det_sample: float, stagger: float, tan_x: NDArray, tan_y: NDArray, half: float
+) -> tuple[float, float, float]:  # pragma: no cover - compiled
+    """Unit look vector in the camera frame of a (fractional) detector sample, its
+    along-track tangent offset by ``stagger``."""
     u = (det_sample - half) / half
     cx = 0.0
     for m in range(tan_x.shape[0] - 1, -1, -1):
@@ -251,35 +386,16 @@ def camera_ray(
         cy = cy * u + tan_y[m]
     cx += stagger
     norm = math.sqrt(cx * cx + cy * cy + 1.0)
-    v0, v1, v2 = cx / norm, cy / norm, 1.0 / norm
-    for i in range(3):
-        out[i] = w0 * pos[k - 1, i] + w1 * pos[k, i] + w2 * pos[k + 1, i] + w3 * pos[k + 2, i]
-        # rot is ecef -> camera: the look vector in ECEF is rot^T v
-        r0 = (
-            w0 * rot[k - 1, 0, i]
-            + w1 * rot[k, 0, i]
-            + w2 * rot[k + 1, 0, i]
-            + w3 * rot[k + 2, 0, i]
-        )
-        r1 = (
-            w0 * rot[k - 1, 1, i]
-            + w1 * rot[k, 1, i]
-            + w2 * rot[k + 1, 1, i]
-            + w3 * rot[k + 2, 1, i]
-        )
-        r2 = (
-            w0 * rot[k - 1, 2, i]
-            + w1 * rot[k, 2, i]
-            + w2 * rot[k + 1, 2, i]
-            + w3 * rot[k + 2, 2, i]
-        )
-        out[3 + i] = r0 * v0 + r1 * v1 + r2 * v2
-    n = math.sqrt(out[3] ** 2 + out[4] ** 2 + out[5] ** 2)
+    return cx / norm, cy / norm, 1.0 / norm
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _source_direction(out: NDArray, b: NDArray) -> None:  # pragma: no cover - compiled
+    """Turn the unit look vector ``out[3:6]`` into the unit direction the received light came
+    from, for the velocity over c ``b``: ``u - beta + (u . beta) u`` refined as
+    :func:`~carto.framework.geometry.light_path.source_direction` does."""
     ub = 0.0
-    b = np.empty(3)
     for i in range(3):
-        out[3 + i] /= n
-        b[i] = w0 * beta[k - 1, i] + w1 * beta[k, i] + w2 * beta[k + 1, i] + w3 * beta[k + 2, i]
         ub += out[3 + i] * b[i]
     u = out[3:6].copy()
     n = 0.0
@@ -305,62 +421,90 @@ def camera_ray(
         n = math.sqrt(n)
         for i in range(3):
             out[3 + i] /= n
-    return True
 
 
-@numba.njit(parallel=True, cache=True, nogil=True)
-def _locate_kernel(
-    lines: NDArray,
-    det_samples: NDArray,
-    staggers: NDArray,
-    line_nodes: NDArray,
-    t_nodes: NDArray,
+@numba.njit(cache=True, nogil=True)
+def camera_ray(
+    t: float,
+    det_sample: float,
+    stagger: float,
     node0: float,
     spacing: float,
     pos: NDArray,
     rot: NDArray,
     beta: NDArray,
-    omega_c: NDArray,
     tan_x: NDArray,
     tan_y: NDArray,
     half: float,
-    dem: NDArray,
-    x0: float,
-    dx: float,
-    y0: float,
-    dy: float,
-    h_top: float,
-    h_bottom: float,
-    max_slope: float,
+    out: NDArray,
+) -> bool:  # pragma: no cover - compiled
+    """Fill out[0:3] with the perspective centre and out[3:6] with the unit direction the
+    received light came from (the look vector corrected for aberration by ``beta``, the
+    table's velocity over c: ``u - beta + (u . beta) u`` refined as
+    :func:`~carto.framework.geometry.light_path.source_direction` does)."""
+    k, w0, w1, w2, w3 = lagrange_weights(t, node0, spacing, pos.shape[0])
+    if k < 0:
+        return False
+    v0, v1, v2 = _look_vector(det_sample, stagger, tan_x, tan_y, half)
+    for i in range(3):
+        out[i] = interp_node(pos, k, w0, w1, w2, w3, i)
+        # rot is ecef -> camera: the look vector in ECEF is rot^T v
+        r0 = interp_rotation(rot, k, w0, w1, w2, w3, 0, i)
+        r1 = interp_rotation(rot, k, w0, w1, w2, w3, 1, i)
+        r2 = interp_rotation(rot, k, w0, w1, w2, w3, 2, i)
+        out[3 + i] = r0 * v0 + r1 * v1 + r2 * v2
+    n = math.sqrt(out[3] ** 2 + out[4] ** 2 + out[5] ** 2)
+    b = np.empty(3)
+    for i in range(3):
+        out[3 + i] /= n
+        b[i] = interp_node(beta, k, w0, w1, w2, w3, i)
+    _source_direction(out, b)
+    return True
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def trace_pixel(
+    t: float,
+    det_sample: float,
+    stagger: float,
+    cam: CameraStates,
+    dem: DemGrid,
+    ray: NDArray,
+) -> tuple[float, float, float]:  # pragma: no cover - compiled
+    """Ground point ``(lon_deg, lat_deg, h_m)`` a (fractional) detector sample sees at time
+    ``t``: :func:`camera_ray` then :func:`trace_dem`; NaN where the table has no state or the
+    ray leaves the DEM. ``ray`` is scratch space, ``(6,)``."""
+    if not camera_ray(
+        t,
+        det_sample,
+        stagger,
+        cam.node0,
+        cam.spacing,
+        cam.pos,
+        cam.rot,
+        cam.beta,
+        cam.tan_x,
+        cam.tan_y,
+        cam.half,
+        ray,
+    ):
+        return np.nan, np.nan, np.nan
+    return trace_dem((ray[0], ray[1], ray[2], ray[3], ray[4], ray[5]), cam.omega_c, dem)
+
+
+@numba.njit(parallel=True, cache=True, nogil=True)
+def _locate_kernel(
+    lines: NDArray, det_samples: NDArray, staggers: NDArray, cam: CameraStates, dem: DemGrid
 ) -> NDArray:  # pragma: no cover - compiled
     n = lines.shape[0]
     out = np.full((n, 3), np.nan)
     for i in numba.prange(n):
         ray = np.empty(6)
-        t = interp_time(lines[i], line_nodes, t_nodes)
-        if camera_ray(
-            t, det_samples[i], staggers[i], node0, spacing, pos, rot, beta, tan_x, tan_y, half, ray
-        ):
-            lon, lat, h = ray_dem(
-                ray[0],
-                ray[1],
-                ray[2],
-                ray[3],
-                ray[4],
-                ray[5],
-                dem,
-                x0,
-                dx,
-                y0,
-                dy,
-                h_top,
-                h_bottom,
-                max_slope,
-                omega_c,
-            )
-            out[i, 0] = lon
-            out[i, 1] = lat
-            out[i, 2] = h
+        t = interp_time(lines[i], cam.line_nodes, cam.t_nodes)
+        lon, lat, h = trace_pixel(t, det_samples[i], staggers[i], cam, dem, ray)
+        out[i, 0] = lon
+        out[i, 1] = lat
+        out[i, 2] = h
     return out
 
 
@@ -418,6 +562,33 @@ def sensor_arrays(sensor: LineScanner) -> dict[str, object]:
     }
 
 
+def camera_states(sensor: LineScanner) -> CameraStates:
+    """:func:`sensor_arrays` as the kernels take them."""
+    return CameraStates(**sensor_arrays(sensor))
+
+
+def geo_grid(values: NDArray, transform: object, crs: object, what: str) -> GeoGrid:
+    """:func:`geographic_grid` as the kernels take it (or InputError)."""
+    grid, x0, dx, y0, dy = geographic_grid(values, transform, crs, what)
+    return GeoGrid(grid, float(x0), float(dx), float(y0), float(dy))
+
+
+def dem_grid(
+    dem: object, h_range: tuple[float, float] | None = None, max_slope: float | None = None
+) -> DemGrid:
+    """The DEM (``heights``, ``transform``, ``crs``; a north-up EPSG:4326 grid, or
+    InputError) as the kernels search it: between the heights ``h_range`` (default the DEM's
+    own lowest and highest) widened by 1 m, stepping safely for slopes up to ``max_slope``
+    (default :func:`max_terrain_slope` of the DEM)."""
+    grid = geo_grid(dem.heights, dem.transform, dem.crs, "DEM")
+    if h_range is None:
+        h_range = (float(np.nanmin(grid.values)), float(np.nanmax(grid.values)))
+    if max_slope is None:
+        lat_c = grid.y0_deg + grid.dy_deg * grid.values.shape[0] / 2
+        max_slope = max_terrain_slope(grid.values, grid.dx_deg, grid.dy_deg, lat_c)
+    return DemGrid(*grid, float(h_range[1]) + 1.0, float(h_range[0]) - 1.0, float(max_slope))
+
+
 def locate_pixels(
     sensor: LineScanner, line: NDArray, sample: NDArray, dem: object
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -426,34 +597,11 @@ def locate_pixels(
     Same result as :meth:`Sensor.locate_on_dem` (to 1e-4 m in height), computed in compiled
     code; NaN where the ray leaves the DEM.
     """
-    grid, x0, dx, y0, dy = geographic_grid(dem.heights, dem.transform, dem.crs, "DEM")
+    grid = dem_grid(dem)
     line = np.ascontiguousarray(np.ravel(line), float)
     sample = np.ascontiguousarray(np.ravel(sample), float)
-    arr = sensor_arrays(sensor)
-    lat_c = y0 + dy * grid.shape[0] / 2
     out = _locate_kernel(
-        line,
-        sample + sensor.first_sample,
-        np.zeros_like(line),
-        arr["line_nodes"],
-        arr["t_nodes"],
-        arr["node0"],
-        arr["spacing"],
-        arr["pos"],
-        arr["rot"],
-        arr["beta"],
-        arr["omega_c"],
-        arr["tan_x"],
-        arr["tan_y"],
-        arr["half"],
-        grid,
-        x0,
-        dx,
-        y0,
-        dy,
-        float(np.nanmax(grid)) + 1.0,
-        float(np.nanmin(grid)) - 1.0,
-        max_terrain_slope(grid, dx, dy, lat_c),
+        line, sample + sensor.first_sample, np.zeros_like(line), camera_states(sensor), grid
     )
     return out[:, 0], out[:, 1], out[:, 2]
 

@@ -31,7 +31,6 @@ constant period, piecewise linear for asynchronous imaging).
 
 from __future__ import annotations
 
-import math
 import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -59,10 +58,13 @@ from carto.framework.geometry.light_path import (
     received_ground_point,
     source_direction,
 )
+from carto.framework.geometry.linescan.linearization import (
+    linearization_point,
+    parameter_jacobian,
+)
 from carto.framework.geometry.linescan.solver import (
     FirstGuess,
     LineTable,
-    camera_vectors,
     solve_lines,
     tabulated_lines,
 )
@@ -244,77 +246,9 @@ class LineScanner(Sensor):
         names = list(names)
         line, sample, _ = self.project(lon, lat, h)
         ok = np.isfinite(line) & np.isfinite(sample)
-        li = np.where(ok, line, 0.5 * self.n_lines)
-        sa = np.where(ok, sample, 0.5 * self.n_samples)
-        x = frames.geodetic_to_ecef(lon, lat, h)
-        t = self.timing.time(li)
-        p_e, r_b2e, axes = self.trajectory.evaluate_with_axes(t)
-        _, df_dx, v, _ = self._collinearity(li, sa, x, (p_e, r_b2e @ self.camera.camera_to_body()))
-        # dF/d(line, sample): (N, 2, 2); F is smooth along the line: a forward difference,
-        # with the camera state interpolated in the projection's table
-        jac = np.empty((lon.size, 2, 2))
-        step = 0.5
-        table = self._table
-        v_step = camera_vectors(
-            np.ascontiguousarray(x),
-            np.ascontiguousarray(self.timing.time(li + step)),
-            table.node0,
-            table.spacing,
-            table.position,
-            table.rotation,
-            table.beta,
-            table.omega_c,
-        )
-        jac[:, 0, 0] = (v_step[:, 0] / v_step[:, 2] - v[:, 0] / v[:, 2]) / step
-        jac[:, 1, 0] = (v_step[:, 1] / v_step[:, 2] - v[:, 1] / v[:, 2]) / step
-        tx_p, ty_p = self.camera.tan_psi(sa + self.first_sample + step)
-        tx_m, ty_m = self.camera.tan_psi(sa + self.first_sample - step)
-        jac[:, 0, 1] = -(tx_p - tx_m) / (2 * step)
-        jac[:, 1, 1] = -(ty_p - ty_m) / (2 * step)
-        det = jac[:, 0, 0] * jac[:, 1, 1] - jac[:, 0, 1] * jac[:, 1, 0]
-        inv = (
-            np.stack(
-                [
-                    np.stack([jac[:, 1, 1], -jac[:, 0, 1]], -1),
-                    np.stack([-jac[:, 1, 0], jac[:, 0, 0]], -1),
-                ],
-                axis=1,
-            )
-            / det[:, None, None]
-        )
-        a_ground = -inv @ (df_dx @ np.swapaxes(frames.enu_basis(lon, lat), -1, -2))
-        # dF/dp at the fixed image point
-        a_param = np.empty((lon.size, 2, len(names)))
-        if names:
-            params = {p.name: p for p in self.parameters}
-            prefix = self.trajectory.prefix
-            base: dict[str, tuple[str, int]] = {}
-            for name in names:
-                rest = name[len(prefix) :] if name.startswith(prefix) else ""
-                group, _, power = rest.rpartition(".c")
-                if rest and power.isdigit() and group.split(".")[0] in ("attitude", "position"):
-                    base[name] = (group, int(power))
-            tau = (t - self.trajectory.t_mid_s) / self.trajectory.t_half_s
-            differenced: dict[str, FloatArray] = {}
-            for k, name in enumerate(names):
-                group, power = base.get(name, (name, 0))
-                if group not in differenced:
-                    kind, _, axis = group.partition(".")
-                    if name in base and kind == "attitude":
-                        # dR/d angle = [w]x R: dv = -R^T (w x (X - P)), dF = dF/dX (X - P) x w
-                        w = axes[:, ("roll", "pitch", "yaw").index(axis)]
-                        df = np.einsum("nij,nj->ni", df_dx, np.cross(x - p_e, w))
-                    else:
-                        target = f"{prefix}{group}.c0" if name in base else name
-                        p = params[target]
-                        d = 1e-3 * p.sigma if math.isfinite(p.sigma) else 1e-6
-                        plus = self.with_parameters({target: p.value + d})
-                        minus = self.with_parameters({target: p.value - d})
-                        df = (
-                            plus._collinearity(li, sa, x)[0] - minus._collinearity(li, sa, x)[0]
-                        ) / (2 * d)
-                    differenced[group] = -np.einsum("nij,nj->ni", inv, df)
-                a_param[:, :, k] = differenced[group] * (tau**power)[:, None]
+        point = linearization_point(self, lon, lat, h, line, sample, ok)
+        a_ground = -point.inv @ (point.df_dx @ np.swapaxes(frames.enu_basis(lon, lat), -1, -2))
+        a_param = parameter_jacobian(self, point, names)
         bad = ~ok
         a_ground[bad] = np.nan
         a_param[bad] = np.nan

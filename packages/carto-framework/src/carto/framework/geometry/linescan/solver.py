@@ -13,7 +13,7 @@ gives camera-frame vectors from the same table (for the partials of
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numba
 import numpy as np
@@ -98,7 +98,8 @@ class FirstGuess:
         self.coeffs = np.linalg.lstsq(a, ll.ravel()[ok], rcond=None)[0]
 
     def __call__(self, lon: FloatArray, lat: FloatArray, h: FloatArray) -> FloatArray:
-        return _eval_guess(lon, lat, h, self.offset, self.scale, self.coeffs)
+        fn = _for_size(lon.shape[0], _eval_guess_parallel, _eval_guess_serial)
+        return fn(lon, lat, h, self.offset, self.scale, self.coeffs)
 
 
 def _eval_guess_py(
@@ -200,78 +201,106 @@ def _sample_from_tan_y(coeffs: FloatArray, t: float, half: float) -> float:  # p
     return u * half + half
 
 
-@numba.njit(cache=True, nogil=True)
+class TableStates(NamedTuple):
+    """A :class:`LineTable` as the kernels read it: camera states at times ``node0 +
+    k spacing`` (s): ECEF positions ``pos`` (m, ``(K, 3)``), ECEF -> camera rotations ``rot``
+    (``(K, 3, 3)``), velocities over c ``beta`` (``(K, 3)``) and the Earth's angular velocity
+    over c ``omega_c`` (rad/m)."""
+
+    node0: float
+    spacing: float
+    pos: FloatArray
+    rot: FloatArray
+    beta: FloatArray
+    omega_c: FloatArray
+
+
+class FocalPlane(NamedTuple):
+    """The detector line as ground -> image reads it: ``tan psi_x`` and ``tan psi_y``
+    polynomials (``tan_x``, ``tan_y``) of the sample normalised by ``half`` (half the detector
+    count), ``tan psi_x`` offset by ``stagger``."""
+
+    tan_x: FloatArray
+    tan_y: FloatArray
+    stagger: float
+    half: float
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def lagrange_weights(
+    t: float, node0: float, spacing: float, n_nodes: int
+) -> tuple[int, float, float, float, float]:  # pragma: no cover - compiled
+    """``(k, w0, w1, w2, w3)``: the 4-point Lagrange weights of the table nodes ``k - 1``,
+    ``k``, ``k + 1``, ``k + 2`` at time ``t`` (nodes at ``node0 + k spacing``, local
+    coordinate in [0, 1)); ``k`` is -1 where the table has no four nodes around ``t``."""
+    q = (t - node0) / spacing
+    k = math.floor(q)
+    if k < 1 or k > n_nodes - 3:
+        return -1, 0.0, 0.0, 0.0, 0.0
+    f = q - k
+    w0 = -f * (f - 1.0) * (f - 2.0) / 6.0
+    w1 = (f + 1.0) * (f - 1.0) * (f - 2.0) / 2.0
+    w2 = -(f + 1.0) * f * (f - 2.0) / 2.0
+    w3 = (f + 1.0) * f * (f - 1.0) / 6.0
+    return k, w0, w1, w2, w3
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def interp_node(
+    table: FloatArray, k: int, w0: float, w1: float, w2: float, w3: float, i: int
+) -> float:  # pragma: no cover - compiled
+    """Component ``i`` of a ``(K, 3)`` table row interpolated with :func:`lagrange_weights`."""
+    return w0 * table[k - 1, i] + w1 * table[k, i] + w2 * table[k + 1, i] + w3 * table[k + 2, i]
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def interp_rotation(
+    rot: FloatArray, k: int, w0: float, w1: float, w2: float, w3: float, r: int, i: int
+) -> float:  # pragma: no cover - compiled
+    """Element ``(r, i)`` of the ``(K, 3, 3)`` rotations interpolated like
+    :func:`interp_node`."""
+    return w0 * rot[k - 1, r, i] + w1 * rot[k, r, i] + w2 * rot[k + 1, r, i] + w3 * rot[k + 2, r, i]
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
 def _focal_offset(
-    x: FloatArray,
-    t_s: float,
-    node0: float,
-    spacing: float,
-    pos: FloatArray,
-    rot: FloatArray,
-    beta: FloatArray,
-    omega_c: FloatArray,
-    tan_x: FloatArray,
-    tan_y: FloatArray,
-    stagger: float,
-    half: float,
-    v: FloatArray,
+    x: FloatArray, t_s: float, table: TableStates, focal: FocalPlane, v: FloatArray
 ) -> float:  # pragma: no cover - compiled
     """Interpolate the camera state at time ``t_s``; fill ``v`` (camera frame: the direction
     the camera sees ``x`` in, after light time and aberration, scaled by the distance);
     return f."""
-    nk = pos.shape[0]
-    q = (t_s - node0) / spacing
-    k = int(np.floor(q))
-    if k < 1 or k > nk - 3:
-        return np.nan
-    t = q - k
     # 4-point Lagrange weights for nodes k-1, k, k+1, k+2 at local coordinate t in [0, 1)
-    w0 = -t * (t - 1.0) * (t - 2.0) / 6.0
-    w1 = (t + 1.0) * (t - 1.0) * (t - 2.0) / 2.0
-    w2 = -(t + 1.0) * t * (t - 2.0) / 2.0
-    w3 = (t + 1.0) * t * (t - 1.0) / 6.0
-    d0 = x[0] - (w0 * pos[k - 1, 0] + w1 * pos[k, 0] + w2 * pos[k + 1, 0] + w3 * pos[k + 2, 0])
-    d1 = x[1] - (w0 * pos[k - 1, 1] + w1 * pos[k, 1] + w2 * pos[k + 1, 1] + w3 * pos[k + 2, 1])
-    d2 = x[2] - (w0 * pos[k - 1, 2] + w1 * pos[k, 2] + w2 * pos[k + 1, 2] + w3 * pos[k + 2, 2])
+    k, w0, w1, w2, w3 = lagrange_weights(t_s, table.node0, table.spacing, table.pos.shape[0])
+    if k < 0:
+        return np.nan
+    pos, beta, omega_c = table.pos, table.beta, table.omega_c
+    d0 = x[0] - interp_node(pos, k, w0, w1, w2, w3, 0)
+    d1 = x[1] - interp_node(pos, k, w0, w1, w2, w3, 1)
+    d2 = x[2] - interp_node(pos, k, w0, w1, w2, w3, 2)
     # light time: the point where it was when the light left, X - (omega/c x X) |X - P|
     dist = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
     d0 -= (omega_c[1] * x[2] - omega_c[2] * x[1]) * dist
     d1 -= (omega_c[2] * x[0] - omega_c[0] * x[2]) * dist
     d2 -= (omega_c[0] * x[1] - omega_c[1] * x[0]) * dist
     # aberration: seen at n + beta - (n . beta) n (n = d / |d|), kept at length |d|
-    b0 = w0 * beta[k - 1, 0] + w1 * beta[k, 0] + w2 * beta[k + 1, 0] + w3 * beta[k + 2, 0]
-    b1 = w0 * beta[k - 1, 1] + w1 * beta[k, 1] + w2 * beta[k + 1, 1] + w3 * beta[k + 2, 1]
-    b2 = w0 * beta[k - 1, 2] + w1 * beta[k, 2] + w2 * beta[k + 1, 2] + w3 * beta[k + 2, 2]
+    b0 = interp_node(beta, k, w0, w1, w2, w3, 0)
+    b1 = interp_node(beta, k, w0, w1, w2, w3, 1)
+    b2 = interp_node(beta, k, w0, w1, w2, w3, 2)
     dist = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
     nb = (d0 * b0 + d1 * b1 + d2 * b2) / dist
     d0, d1, d2 = d0 + dist * b0 - nb * d0, d1 + dist * b1 - nb * d1, d2 + dist * b2 - nb * d2
     for i in range(3):
-        r0 = (
-            w0 * rot[k - 1, i, 0]
-            + w1 * rot[k, i, 0]
-            + w2 * rot[k + 1, i, 0]
-            + w3 * rot[k + 2, i, 0]
-        )
-        r1 = (
-            w0 * rot[k - 1, i, 1]
-            + w1 * rot[k, i, 1]
-            + w2 * rot[k + 1, i, 1]
-            + w3 * rot[k + 2, i, 1]
-        )
-        r2 = (
-            w0 * rot[k - 1, i, 2]
-            + w1 * rot[k, i, 2]
-            + w2 * rot[k + 1, i, 2]
-            + w3 * rot[k + 2, i, 2]
-        )
+        r0 = interp_rotation(table.rot, k, w0, w1, w2, w3, i, 0)
+        r1 = interp_rotation(table.rot, k, w0, w1, w2, w3, i, 1)
+        r2 = interp_rotation(table.rot, k, w0, w1, w2, w3, i, 2)
         v[i] = r0 * d0 + r1 * d1 + r2 * d2
     if v[2] <= 0.0:
         return np.nan
-    if tan_x.shape[0] == 1:
-        target = tan_x[0] + stagger
+    if focal.tan_x.shape[0] == 1:
+        target = focal.tan_x[0] + focal.stagger
     else:
-        s = _sample_from_tan_y(tan_y, v[1] / v[2], half)
-        target = _polyval(tan_x, (s - half) / half) + stagger
+        s = _sample_from_tan_y(focal.tan_y, v[1] / v[2], focal.half)
+        target = _polyval(focal.tan_x, (s - focal.half) / focal.half) + focal.stagger
     return v[0] / v[2] - target
 
 
@@ -290,26 +319,18 @@ def camera_vectors(
     as the table says) at times ``t_s`` from the table, ``(N, 3)``; NaN outside the table."""
     out = np.full((x.shape[0], 3), np.nan)
     one = np.zeros(1)
+    table = TableStates(node0, spacing, pos, rot, beta, omega_c)
+    focal = FocalPlane(one, one, 0.0, 1.0)
     for i in range(x.shape[0]):
-        _focal_offset(
-            x[i], t_s[i], node0, spacing, pos, rot, beta, omega_c, one, one, 0.0, 1.0, out[i]
-        )
+        _focal_offset(x[i], t_s[i], table, focal, out[i])
     return out
 
 
 def _solve_lines_py(
     x: FloatArray,
     guess: FloatArray,
-    node0: float,
-    spacing: float,
-    pos: FloatArray,
-    rot: FloatArray,
-    beta: FloatArray,
-    omega_c: FloatArray,
-    tan_x: FloatArray,
-    tan_y: FloatArray,
-    stagger: float,
-    half: float,
+    table: TableStates,
+    focal: FocalPlane,
     tol: float,
     max_iter: int,
 ) -> tuple[FloatArray, FloatArray]:  # pragma: no cover - compiled
@@ -323,17 +344,13 @@ def _solve_lines_py(
         v = np.empty(3)
         xi = x[i]
         l0 = guess[i]
-        f0 = _focal_offset(
-            xi, l0, node0, spacing, pos, rot, beta, omega_c, tan_x, tan_y, stagger, half, v
-        )
+        f0 = _focal_offset(xi, l0, table, focal, v)
         if not np.isfinite(f0):
             continue
-        l1 = l0 + 0.5 * spacing
+        l1 = l0 + 0.5 * table.spacing
         converged = False
         for _ in range(max_iter):
-            f1 = _focal_offset(
-                xi, l1, node0, spacing, pos, rot, beta, omega_c, tan_x, tan_y, stagger, half, v
-            )
+            f1 = _focal_offset(xi, l1, table, focal, v)
             if not np.isfinite(f1):
                 break
             if f1 == f0:  # stagnation at the rounding floor of f (~1e-15)
@@ -346,12 +363,10 @@ def _solve_lines_py(
                 converged = True
                 break
         if converged:
-            f1 = _focal_offset(
-                xi, l1, node0, spacing, pos, rot, beta, omega_c, tan_x, tan_y, stagger, half, v
-            )
+            f1 = _focal_offset(xi, l1, table, focal, v)
             if np.isfinite(f1):
                 out_line[i] = l1
-                out_sample[i] = _sample_from_tan_y(tan_y, v[1] / v[2], half)
+                out_sample[i] = _sample_from_tan_y(focal.tan_y, v[1] / v[2], focal.half)
     return out_line, out_sample
 
 
@@ -363,18 +378,16 @@ _solve_lines_parallel = numba.njit(parallel=True, cache=True, nogil=True)(_solve
 _solve_lines_serial = numba.njit(cache=True, nogil=True)(_solve_lines_py)
 
 
-def _eval_guess(
-    lon: FloatArray,
-    lat: FloatArray,
-    h: FloatArray,
-    offset: FloatArray,
-    scale: FloatArray,
-    c: FloatArray,
-) -> FloatArray:
-    fn = _eval_guess_parallel if lon.shape[0] >= PARALLEL_MIN_POINTS else _eval_guess_serial
-    return fn(lon, lat, h, offset, scale, c)
+def _for_size(n_points: int, parallel: Any, serial: Any) -> Any:
+    """The parallel kernel from :data:`PARALLEL_MIN_POINTS` points on, else the serial one."""
+    return parallel if n_points >= PARALLEL_MIN_POINTS else serial
 
 
 def solve_lines(x: FloatArray, *args: Any) -> tuple[FloatArray, FloatArray]:
-    fn = _solve_lines_parallel if x.shape[0] >= PARALLEL_MIN_POINTS else _solve_lines_serial
-    return fn(x, *args)
+    """Imaging times and detector samples of the ECEF points ``x`` (NaN where the secant
+    iteration fails); ``args``: the first-guess times, the table (``node0, spacing, pos, rot,
+    beta, omega_c``), the focal plane (``tan_x, tan_y, stagger, half``), the tolerance (s)
+    and the iterations at most."""
+    guess, table, focal, (tol, max_iter) = args[0], args[1:7], args[7:11], args[11:]
+    fn = _for_size(x.shape[0], _solve_lines_parallel, _solve_lines_serial)
+    return fn(x, guess, TableStates(*table), FocalPlane(*focal), tol, max_iter)

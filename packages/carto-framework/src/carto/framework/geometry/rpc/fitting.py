@@ -221,58 +221,21 @@ def fit_rpc(
         InputError: degenerate ranges or grids, too few valid projections, or a vanishing
             fitted denominator.
     """
-    h0, h1 = _range(h_range, "h_range")
-    if lon_range is None or lat_range is None:
-        fp_lon, fp_lat = footprint(sensor, (h0, h1), margin=0.02)
-        lon_range = fp_lon if lon_range is None else lon_range
-        lat_range = fp_lat if lat_range is None else lat_range
-    lon_r = _range(lon_range, "lon_range", -360.0, 360.0)
-    lat_r = _range(lat_range, "lat_range", -90.0, 90.0)
-    ranges = (lon_r, lat_r, (h0, h1))
-    dims = tuple(int(v) for v in grid)
-    if len(dims) != 3 or min(dims) < 2:
-        raise InputError(f"fit_rpc: grid must be three node counts >= 2, got {tuple(grid)}")
-    if not (math.isfinite(regularisation) and regularisation >= 0):
-        raise InputError(f"fit_rpc: regularisation must be >= 0, got {regularisation}")
-    if regularisation == 0 and min(dims) < 4:
-        raise InputError(
-            f"fit_rpc: grid {dims} cannot determine a cubic without regularisation "
-            "(need >= 4 nodes per axis, or regularisation > 0)"
-        )
-    cdims = tuple(int(v) for v in (check_grid or [max(1, d - 1) for d in dims]))
-    if len(cdims) != 3 or min(cdims) < 1:
-        raise InputError(f"fit_rpc: check_grid must be three counts >= 1, got {check_grid}")
-
+    domain = _fit_domain(sensor, h_range, lon_range, lat_range, grid, check_grid, regularisation)
     nl, ns = sensor.image_shape
     image_norm = (nl / 2.0 - 0.5, nl / 2.0, ns / 2.0 - 0.5, ns / 2.0)  # native offsets, scales
     ground_norm = (
-        tuple((r[0] + r[1]) / 2.0 for r in ranges),
-        tuple((r[1] - r[0]) / 2.0 for r in ranges),
+        tuple((r[0] + r[1]) / 2.0 for r in domain.ranges),
+        tuple((r[1] - r[0]) / 2.0 for r in domain.ranges),
     )
-
-    lon, lat, h = _grid(ranges, dims, offset=False)
-    line, samp = (np.asarray(a, dtype=float).ravel() for a in sensor.ground_to_image(lon, lat, h))
-    ok = np.isfinite(line) & np.isfinite(samp)
-    if ok.sum() < 39:
-        raise InputError(
-            f"fit_rpc: only {int(ok.sum())} of {ok.size} grid points project into the sensor "
-            "(need >= 39); check the ranges"
-        )
-    lon, lat, h, line, samp = lon[ok], lat[ok], h[ok], line[ok], samp[ok]
+    lon, lat, h, line, samp = _fit_points(sensor, domain)
     norm = [(v - o) / s for v, o, s in zip((lon, lat, h), *ground_norm, strict=True)]
     terms = np.empty((20, lon.size))
     monomials(norm[0], norm[1], norm[2], terms)
     target_l = (line - 0.5 - image_norm[0]) / image_norm[1]
     target_s = (samp - 0.5 - image_norm[2]) / image_norm[3]
-    ln, ld, it_l = _solve_rational(terms, target_l, regularisation, max_iterations)
-    sn, sd, it_s = _solve_rational(terms, target_s, regularisation, max_iterations)
-    # the points that do not project (beyond the image) do not constrain the denominators:
-    # one may vanish in a corner of the domain, which no RPC reader accepts; a cubic
-    # polynomial (denominator 1) has no pole and fits a smooth sensor as well
-    if not _pole_free(ld):
-        ln, ld = _solve_polynomial(terms, target_l, regularisation)
-    if not _pole_free(sd):
-        sn, sd = _solve_polynomial(terms, target_s, regularisation)
+    ln, ld, it_l = _fit_rational(terms, target_l, regularisation, max_iterations)
+    sn, sd, it_s = _fit_rational(terms, target_s, regularisation, max_iterations)
     rpc = RPCCoefficients(
         line_off=image_norm[0],
         samp_off=image_norm[2],
@@ -286,30 +249,153 @@ def fit_rpc(
         height_scale=ground_norm[1][2],
         coefficients=[ln, ld, sn, sd],
     )
+    fit = _image_errors(sensor, rpc, lon, lat, h, line, samp)
+    check = _image_errors(sensor, rpc, *_grid(domain.ranges, domain.check_dims, offset=True))
+    return rpc, _fit_report(domain, fit, check, max(it_l, it_s), regularisation)
 
-    def errors(lo, la, hh, li=None, sa=None):
-        if li is None:
-            li, sa = (np.asarray(a, float).ravel() for a in sensor.ground_to_image(lo, la, hh))
-        good = np.isfinite(li) & np.isfinite(sa)
-        fl, fs = rpc.project(lo[good], la[good], hh[good])
-        err = np.hypot(fl - li[good], fs - sa[good])
-        if err.size == 0:
-            return 0, math.nan, math.nan
-        return err.size, float(np.sqrt(np.mean(err**2))), float(np.max(err))
 
-    n_fit, fit_rms, fit_max = errors(lon, lat, h, line, samp)
-    n_check, check_rms, check_max = errors(*_grid(ranges, cdims, offset=True))
-    report = FitReport(
-        n_fit=n_fit,
-        n_check=n_check,
-        fit_rms_px=fit_rms,
-        fit_max_px=fit_max,
-        check_rms_px=check_rms,
-        check_max_px=check_max,
-        iterations=max(it_l, it_s),
+@attrs.frozen
+class _FitDomain:
+    """The validated ground domain and grids of a fit.
+
+    Attributes:
+        lon_range, lat_range, h_range: ``(min, max)`` in degrees, degrees and metres.
+        dims: fit grid nodes per axis (lon, lat, h).
+        check_dims: check points per axis (cell centres).
+    """
+
+    lon_range: tuple[float, float]
+    lat_range: tuple[float, float]
+    h_range: tuple[float, float]
+    dims: tuple[int, ...]
+    check_dims: tuple[int, ...]
+
+    @property
+    def ranges(self) -> tuple[tuple[float, float], ...]:
+        """``(lon_range, lat_range, h_range)``."""
+        return (self.lon_range, self.lat_range, self.h_range)
+
+
+def _fit_domain(
+    sensor: Sensor,
+    h_range: Sequence[float],
+    lon_range: Sequence[float] | None,
+    lat_range: Sequence[float] | None,
+    grid: Sequence[int],
+    check_grid: Sequence[int] | None,
+    regularisation: float,
+) -> _FitDomain:
+    """The arguments of :func:`fit_rpc` checked (InputError), with the default ranges."""
+    h0, h1 = _range(h_range, "h_range")
+    if lon_range is None or lat_range is None:
+        fp_lon, fp_lat = footprint(sensor, (h0, h1), margin=0.02)
+        lon_range = fp_lon if lon_range is None else lon_range
+        lat_range = fp_lat if lat_range is None else lat_range
+    lon_r = _range(lon_range, "lon_range", -360.0, 360.0)
+    lat_r = _range(lat_range, "lat_range", -90.0, 90.0)
+    dims, cdims = _grid_dims(grid, check_grid, regularisation)
+    return _FitDomain(lon_r, lat_r, (h0, h1), dims, cdims)
+
+
+def _grid_dims(
+    grid: Sequence[int], check_grid: Sequence[int] | None, regularisation: float
+) -> tuple[tuple[int, ...], tuple[int, ...]]:
+    """The fit and check grid counts per axis, checked (InputError) with the
+    regularisation that must determine a cubic on the fit grid."""
+    dims = tuple(int(v) for v in grid)
+    if len(dims) != 3 or min(dims) < 2:
+        raise InputError(f"fit_rpc: grid must be three node counts >= 2, got {tuple(grid)}")
+    if not (math.isfinite(regularisation) and regularisation >= 0):
+        raise InputError(f"fit_rpc: regularisation must be >= 0, got {regularisation}")
+    if regularisation == 0 and min(dims) < 4:
+        raise InputError(
+            f"fit_rpc: grid {dims} cannot determine a cubic without regularisation "
+            "(need >= 4 nodes per axis, or regularisation > 0)"
+        )
+    cdims = tuple(int(v) for v in (check_grid or [max(1, d - 1) for d in dims]))
+    if len(cdims) != 3 or min(cdims) < 1:
+        raise InputError(f"fit_rpc: check_grid must be three counts >= 1, got {check_grid}")
+    return dims, cdims
+
+
+def _fit_points(sensor: Sensor, domain: _FitDomain) -> tuple[FloatArray, ...]:
+    """``(lon, lat, h, line, sample)`` of the fit grid nodes the sensor projects (InputError
+    for fewer than the 39 unknowns of a rational function)."""
+    lon, lat, h = _grid(domain.ranges, domain.dims, offset=False)
+    line, samp = (np.asarray(a, dtype=float).ravel() for a in sensor.ground_to_image(lon, lat, h))
+    ok = np.isfinite(line) & np.isfinite(samp)
+    if ok.sum() < 39:
+        raise InputError(
+            f"fit_rpc: only {int(ok.sum())} of {ok.size} grid points project into the sensor "
+            "(need >= 39); check the ranges"
+        )
+    return lon[ok], lat[ok], h[ok], line[ok], samp[ok]
+
+
+def _fit_rational(
+    terms: FloatArray, target: FloatArray, regularisation: float, max_iterations: int
+) -> tuple[FloatArray, FloatArray, int]:
+    """``(numerator, denominator, iterations)`` of one image coordinate: the rational
+    function of :func:`_solve_rational`, or a cubic polynomial where its denominator is not
+    :func:`_pole_free`."""
+    num, den, iterations = _solve_rational(terms, target, regularisation, max_iterations)
+    # the points that do not project (beyond the image) do not constrain the denominators:
+    # one may vanish in a corner of the domain, which no RPC reader accepts; a cubic
+    # polynomial (denominator 1) has no pole and fits a smooth sensor as well
+    if not _pole_free(den):
+        num, den = _solve_polynomial(terms, target, regularisation)
+    return num, den, iterations
+
+
+@attrs.frozen
+class _ImageErrors:
+    """Image errors (Euclidean, px) of an RPC against its sensor at ``n`` points: RMS and
+    largest (NaN without points)."""
+
+    n: int
+    rms_px: float
+    max_px: float
+
+
+def _image_errors(
+    sensor: Sensor,
+    rpc: RPCCoefficients,
+    lon: FloatArray,
+    lat: FloatArray,
+    h: FloatArray,
+    line: FloatArray | None = None,
+    samp: FloatArray | None = None,
+) -> _ImageErrors:
+    """RPC minus sensor at ground points, the sensor's ``(line, samp)`` projected unless
+    given; points the sensor does not project are left out."""
+    if line is None:
+        line, samp = (np.asarray(a, float).ravel() for a in sensor.ground_to_image(lon, lat, h))
+    good = np.isfinite(line) & np.isfinite(samp)
+    fl, fs = rpc.project(lon[good], lat[good], h[good])
+    err = np.hypot(fl - line[good], fs - samp[good])
+    if err.size == 0:
+        return _ImageErrors(0, math.nan, math.nan)
+    return _ImageErrors(err.size, float(np.sqrt(np.mean(err**2))), float(np.max(err)))
+
+
+def _fit_report(
+    domain: _FitDomain,
+    fit: _ImageErrors,
+    check: _ImageErrors,
+    iterations: int,
+    regularisation: float,
+) -> FitReport:
+    """The :class:`FitReport` of a fit over ``domain``."""
+    return FitReport(
+        n_fit=fit.n,
+        n_check=check.n,
+        fit_rms_px=fit.rms_px,
+        fit_max_px=fit.max_px,
+        check_rms_px=check.rms_px,
+        check_max_px=check.max_px,
+        iterations=iterations,
         regularisation=float(regularisation),
-        lon_range=lon_r,
-        lat_range=lat_r,
-        h_range=(h0, h1),
+        lon_range=domain.lon_range,
+        lat_range=domain.lat_range,
+        h_range=domain.h_range,
     )
-    return rpc, report

@@ -1,0 +1,270 @@
+"""Multi-view DEMs (issue 33): simulated Cartosat-2 triplets through ``carto dem``'s
+multi-view path with the true models, each pair's DEM against the fused one. Prints one JSON
+document (kept in ``benchmarks/results/dem_multiview.json``) and draws
+``benchmarks/results/dem_multiview.png``.
+
+Per terrain (``mixed``, ``hilly``, ``urban``) and seed: a fore/nadir/aft triplet is simulated,
+then :func:`~carto.framework.workflows.multiview_dem.multiview_dem_product` runs its three
+pairs (true models, no relative orientation or co-registration: the figures measure the
+matching and the fusion, not an orientation) and fuses them. Against the true DEM (bilinear
+at the fused grid's nodes):
+
+* NMAD and median of every pair and of the fused DEM, on all of each one's measured nodes and
+  on the nodes all of them measured (``common``);
+* completeness: the share of the fused grid's nodes inside the truth that each pair measured
+  (not filled), and that at least one pair measured (fused);
+* time: each pair's ``seconds`` and the whole run's, and their ratio to the mean pair.
+
+Stereo paint-brush sets (3 swaths, each fore and aft; ``--paintbrush-seeds``): the same
+multi-view run; the median step at the seams between the swaths' own fore/aft pairs' DEMs,
+and the fused DEM's NMAD.
+
+Targets (issue 33): fused NMAD <= 0.75 x the best pair's; completeness >= the best pair's + 5
+points in urban; a triplet <= 3.5 x a single pair's time; paint-brush median seam step <= 0.3
+m. A simulated scene renders through the models it tests with errors of their own form: these
+figures are a best case.
+
+Usage::
+
+    .venv/bin/python benchmarks/dem_multiview.py                       # 2 seeds x 3 terrains
+    .venv/bin/python benchmarks/dem_multiview.py --seeds 0 --terrains urban --size 600
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+RESULT = ROOT / "benchmarks" / "results" / "dem_multiview.json"
+TARGETS = {
+    "fused_over_best_nmad": 0.75,
+    "urban_completeness_gain_points": 5.0,
+    "cost_ratio": 3.5,
+    "paintbrush_median_seam_step_m": 0.3,
+}
+
+
+def _nmad(v: np.ndarray) -> float:
+    return float(1.4826 * np.median(np.abs(v - np.median(v)))) if v.size else float("nan")
+
+
+def _on_grid(grid_path: Path, path: Path, resampling: str) -> np.ndarray:
+    import rasterio
+    from rasterio.warp import Resampling, reproject
+
+    with rasterio.open(grid_path) as g, rasterio.open(path) as src:
+        out = np.full(g.shape, np.nan)
+        reproject(
+            rasterio.band(src, 1),
+            out,
+            dst_transform=g.transform,
+            dst_crs=g.crs,
+            src_nodata=np.nan if src.nodata is None else src.nodata,
+            dst_nodata=np.nan,
+            resampling=Resampling[resampling],
+        )
+    return out
+
+
+def _measured(folder: Path, grid_path: Path) -> np.ndarray:
+    filled = _on_grid(grid_path, folder / "quality_flags.tif", "nearest")
+    return ~(filled >= 0.5)
+
+
+def evaluate(out: Path, truth: Path, report: dict[str, Any]) -> dict[str, Any]:
+    """Pairs and fused DEM of one run against the truth (see the module docstring)."""
+    grid = out / "dem.tif"
+    truth_h = _on_grid(grid, truth, "bilinear")
+    domain = np.isfinite(truth_h)
+    errors, measured = {}, {}
+    for pair in report["pairs"]:
+        if pair["status"] != "done":
+            continue
+        folder = out / pair["folder"]
+        name = f"{pair['left']}/{pair['right']}"
+        errors[name] = _on_grid(grid, folder / "dem.tif", "nearest") - truth_h
+        measured[name] = _measured(folder, grid) & np.isfinite(errors[name])
+    errors["fused"] = _on_grid(grid, grid, "nearest") - truth_h
+    measured["fused"] = _measured(out, grid) & np.isfinite(errors["fused"])
+    common = np.logical_and.reduce(list(measured.values())) & domain
+    figures = {}
+    for name, e in errors.items():
+        m = measured[name] & domain
+        figures[name] = {
+            "nmad_m": round(_nmad(e[m]), 4),
+            "median_m": round(float(np.median(e[m])), 4),
+            "nmad_common_m": round(_nmad(e[common]), 4),
+            "completeness": round(float(m.sum() / domain.sum()), 4),
+        }
+    pairs = [v for k, v in figures.items() if k != "fused"]
+    best = min(p["nmad_common_m"] for p in pairs)
+    return {
+        "by_dem": figures,
+        "fused_over_best_nmad_common": round(figures["fused"]["nmad_common_m"] / best, 3),
+        "fused_over_best_nmad": round(
+            figures["fused"]["nmad_m"] / min(p["nmad_m"] for p in pairs), 3
+        ),
+        "completeness_gain_points": round(
+            100 * (figures["fused"]["completeness"] - max(p["completeness"] for p in pairs)), 2
+        ),
+        "common_nodes": int(common.sum()),
+    }
+
+
+def _simulated_run(
+    preset: str, terrain: str, seed: int, size: int, posting_m: float, folder: Path
+) -> tuple[Path, dict[str, Any], float]:
+    """Simulate ``preset`` into ``folder/scene`` and run the multi-view ``carto dem`` on it
+    with the true models into ``folder/dem``: (scene, report, wall seconds)."""
+    from carto.framework import get_registry
+    from carto.framework.simulation.plan import SimulationOptions
+    from carto.framework.workflows.multiview_dem import MultiViewRequest, multiview_dem_product
+
+    scene = folder / "scene"
+    get_registry().get("scene-preset", preset).simulate(
+        scene, SimulationOptions(seed=seed, size=(size, size), terrain=terrain), quiet=True
+    )
+    request = MultiViewRequest(folder / "dem", scene, models=scene / "truth", keep_pairs=True)
+    started = time.perf_counter()
+    report = multiview_dem_product(
+        request,
+        options={"posting_m": posting_m},
+        relative_orientation="none",
+        coregister="none",
+        quiet=True,
+    )
+    return scene, report, time.perf_counter() - started
+
+
+def run_case(terrain: str, seed: int, size: int, posting_m: float, work: Path) -> dict[str, Any]:
+    folder = work / f"{terrain}-{seed}"
+    scene, report, wall = _simulated_run(
+        "cartosat2-triplet", terrain, seed, size, posting_m, folder
+    )
+    pair_seconds = []
+    for pair in report["pairs"]:
+        if pair["status"] == "done":
+            sub = json.loads((folder / "dem" / pair["folder"] / "report.json").read_text())
+            pair_seconds.append(float(sub["seconds"]))
+    result = evaluate(folder / "dem", scene / "truth" / "dem.tif", report)
+    result["seconds"] = {
+        "total": round(wall, 1),
+        "pairs": [round(s, 1) for s in pair_seconds],
+        "cost_ratio": round(wall / float(np.mean(pair_seconds)), 2) if pair_seconds else None,
+    }
+    result["pairs"] = report["pairs"]
+    return result
+
+
+def run_paintbrush(seed: int, size: int, posting_m: float, work: Path) -> dict[str, Any]:
+    """A stereo paint-brush set (3 swaths, each fore and aft) through the multi-view
+    ``carto dem``: the steps at the seams of the swaths' own fore/aft pairs and the fused
+    DEM against the truth."""
+    folder = work / f"paintbrush-{seed}"
+    scene, report, wall = _simulated_run(
+        "cartosat2-paintbrush-stereo", "hilly", seed, size, posting_m, folder
+    )
+    own = {
+        f"swath{k}_{a}/swath{k}_{b}"
+        for k in (1, 2, 3)
+        for a, b in (("fore", "aft"), ("aft", "fore"))
+    }
+    seams = [s for s in report["seams"] if s["first"] in own and s["second"] in own]
+    result = evaluate(folder / "dem", scene / "truth" / "dem.tif", report)
+    return {
+        "fused": result["by_dem"]["fused"],
+        "seams": seams,
+        "median_abs_seam_step_m": float(np.median([abs(s["median_step_m"]) for s in seams])),
+        "pairs": [f"{p['left']}/{p['right']}" for p in report["pairs"]],
+        "seconds": round(wall, 1),
+    }
+
+
+def _plot(results: dict[str, Any], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    cases = list(results)
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4.5))
+    for ax, key, label in (
+        (axes[0], "nmad_common_m", "NMAD on the nodes every DEM measured, m"),
+        (axes[1], "completeness", "share of the nodes measured"),
+    ):
+        names = list(results[cases[0]]["by_dem"])
+        width = 0.8 / len(names)
+        for k, name in enumerate(names):
+            values = [results[c]["by_dem"].get(name, {}).get(key, np.nan) for c in cases]
+            ax.bar(np.arange(len(cases)) + k * width, values, width, label=name)
+        ax.set_xticks(np.arange(len(cases)) + 0.4 - width / 2, cases, rotation=30, ha="right")
+        ax.set_ylabel(label)
+    axes[0].legend(fontsize=8)
+    fig.suptitle("Cartosat-2 triplets, true models (simulated: a best case)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1])
+    parser.add_argument("--terrains", nargs="+", default=["mixed", "hilly", "urban"])
+    parser.add_argument("--size", type=int, default=800)
+    parser.add_argument("--posting", type=float, default=2.0)
+    parser.add_argument("--paintbrush-seeds", type=int, nargs="*", default=[0, 1])
+    parser.add_argument("--out", type=Path, default=RESULT)
+    args = parser.parse_args(argv)
+    results = {}
+    with tempfile.TemporaryDirectory(prefix="carto-mv-") as tmp:
+        for terrain in args.terrains:
+            for seed in args.seeds:
+                key = f"{terrain}-{seed}"
+                results[key] = run_case(terrain, seed, args.size, args.posting, Path(tmp))
+                print(key, json.dumps(results[key]["by_dem"]["fused"]), file=sys.stderr)
+        paintbrush = {
+            f"paintbrush-{seed}": run_paintbrush(seed, args.size, args.posting, Path(tmp))
+            for seed in args.paintbrush_seeds
+        }
+    summary = {
+        "fused_over_best_nmad_common_median": float(
+            np.median([r["fused_over_best_nmad_common"] for r in results.values()])
+        ),
+        "urban_completeness_gain_points": [
+            r["completeness_gain_points"] for k, r in results.items() if k.startswith("urban")
+        ],
+        "cost_ratio_median": float(
+            np.median([r["seconds"]["cost_ratio"] for r in results.values()])
+        ),
+    }
+    if paintbrush:
+        summary["paintbrush_median_abs_seam_step_m"] = [
+            p["median_abs_seam_step_m"] for p in paintbrush.values()
+        ]
+    document = {
+        "benchmark": "dem_multiview",
+        "date": datetime.date.today().isoformat(),
+        "settings": vars(args) | {"out": str(args.out)},
+        "targets": TARGETS,
+        "summary": summary,
+        "cases": results,
+        "paintbrush": paintbrush,
+        "note": "simulated triplets with the true models: a best case",
+    }
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(document, indent=1, default=str) + "\n")
+    _plot(results, args.out.with_suffix(".png"))
+    print(json.dumps(document, indent=1, default=str))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

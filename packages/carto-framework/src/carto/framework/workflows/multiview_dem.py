@@ -1,0 +1,562 @@
+"""``carto dem`` on three or more images: every useful pair through the DEM generator, then
+one DEM fused node by node, and one ortho-image per image on it.
+
+Pairs. Given explicitly (``--pairs A:B,B:C``), or every two of the images (a scene's images,
+all of them by default when it has three or more, or ``--images A B C``) whose
+
+- footprints overlap by at least :data:`MIN_OVERLAP` of the smaller one, and
+- base-to-height ratio is at least :data:`MIN_B_OVER_H` (2 tan of half the angle between
+  the two lines of sight at the common footprint's centre: a narrower pair measures heights
+  with an error too large to help the others), and at least
+  :data:`MIN_SHARE_OF_BEST_B_OVER_H` of the best candidate's.
+
+For a Cartosat-2 triplet that is fore/nadir, nadir/aft and fore/aft (B/H about 0.5, 0.5 and
+1.0). A pair named explicitly that fails either test is an error; an automatic one is left
+out, with its figures in ``report.json``. Each pair's left image is the one closer to nadir,
+as for one pair.
+
+Each pair runs as ``carto dem --pair`` does (tiles, workers, relative orientation, checks) into
+``pairs/LEFT_RIGHT`` of the output; a pair that fails is reported and left out, and the others
+still fuse. Fusion (:func:`~carto.framework.merging.fusion.fuse_heights`) weights each pair's
+height by its predicted sigma (the generator's ``sigma_m`` layer; 1 m for a generator without
+one), rejects outliers against the weighted median, and ignores filled nodes where another
+pair measured. It runs tile by tile over the pairs' DEM files: memory depends on the tile,
+not on the scene. ``--keep-pairs`` keeps the pairs' folders.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import attrs
+import numpy as np
+
+from carto.framework.errors import CartoError, InputError, UsageError
+from carto.framework.geometry.sensor import Sensor
+from carto.framework.merging.fusion import FusionSettings
+
+__all__ = [
+    "MIN_B_OVER_H",
+    "MIN_OVERLAP",
+    "PairChoice",
+    "choose_pairs",
+    "pair_geometry",
+    "parse_pairs",
+]
+
+MIN_B_OVER_H = 0.05
+"""Pairs with a smaller base-to-height ratio are not used (their height error is more than
+ten times their matching error in pixels of the ground sampling)."""
+MIN_OVERLAP = 0.2
+"""Pairs whose footprints share less than this share of the smaller one are not used."""
+MIN_SHARE_OF_BEST_B_OVER_H = 0.25
+"""An automatic pair whose B/H is under this share of the best candidate's is not used: its
+heights would have over four times the error (e.g. the neighbouring swaths' fore views of a
+stereo paint-brush set, B/H 0.09 beside their own fore/aft pairs' 1.1)."""
+
+
+@attrs.frozen
+class PairChoice:
+    """A candidate pair and its geometry: ``left`` (closer to nadir), ``right``, their
+    base-to-height ratio and the share of the smaller footprint both images see."""
+
+    left: str
+    right: str
+    b_over_h: float
+    overlap: float
+
+    @property
+    def usable(self) -> bool:
+        return self.b_over_h >= MIN_B_OVER_H and self.overlap >= MIN_OVERLAP
+
+    @property
+    def folder(self) -> str:
+        return f"{self.left}_{self.right}"
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "left": self.left,
+            "right": self.right,
+            "b_over_h": round(self.b_over_h, 4),
+            "overlap": round(self.overlap, 4),
+        }
+
+
+def _ecef(lon: Any, lat: Any, h: Any) -> np.ndarray:
+    from carto.framework.geometry import frames
+
+    return np.asarray(frames.geodetic_to_ecef(lon, lat, h), np.float64)
+
+
+def _sight(sensor: Sensor, lon: float, lat: float, h_m: float) -> np.ndarray | None:
+    """Unit line of sight (ground to sensor, ECEF) of ``sensor`` at a ground point, or None
+    when the point is outside its image."""
+    line, sample = sensor.ground_to_image(np.array([lon]), np.array([lat]), np.array([h_m]))
+    n_l, n_s = sensor.image_shape
+    if not (np.isfinite(line[0]) and 0 <= line[0] <= n_l and 0 <= sample[0] <= n_s):
+        return None
+    lo2, la2 = sensor.image_to_ground(line, sample, np.array([h_m + 1000.0]))
+    d = _ecef(lo2, la2, h_m + 1000.0) - _ecef(lon, lat, h_m)
+    d = np.ravel(d)
+    return d / np.linalg.norm(d)
+
+
+def _footprint_points(sensor: Sensor, h_m: float, n: int = 17) -> tuple[np.ndarray, np.ndarray]:
+    n_l, n_s = sensor.image_shape
+    lines, samples = np.meshgrid(np.linspace(0, n_l, n), np.linspace(0, n_s, n), indexing="ij")
+    h = np.full(lines.size, h_m)
+    lon, lat = sensor.image_to_ground(lines.ravel(), samples.ravel(), h)
+    return np.asarray(lon), np.asarray(lat)
+
+
+def _inside(sensor: Sensor, lon: np.ndarray, lat: np.ndarray, h_m: float) -> np.ndarray:
+    line, sample = sensor.ground_to_image(lon, lat, np.full(lon.shape, h_m))
+    n_l, n_s = sensor.image_shape
+    with np.errstate(invalid="ignore"):
+        return (line >= 0) & (line <= n_l) & (sample >= 0) & (sample <= n_s)
+
+
+def pair_geometry(
+    sensors: Mapping[str, Sensor], first: str, second: str, h_m: float = 0.0
+) -> PairChoice:
+    """The pair of ``first`` and ``second``: left the one closer to nadir, B/H and overlap
+    (see the module docstring); B/H 0 where the footprints share no point."""
+    a, b = sensors[first], sensors[second]
+    lon_a, lat_a = _footprint_points(a, h_m)
+    lon_b, lat_b = _footprint_points(b, h_m)
+    overlap = max(
+        min(
+            float(_inside(b, lon_a, lat_a, h_m).mean()), float(_inside(a, lon_b, lat_b, h_m).mean())
+        ),
+        0.0,
+    )
+    both = _inside(b, lon_a, lat_a, h_m)
+    b_over_h = 0.0
+    off_nadir = {first: 0.0, second: 0.0}
+    if both.any():
+        lon, lat = float(np.mean(lon_a[both])), float(np.mean(lat_a[both]))
+        sight = {n: _sight(sensors[n], lon, lat, h_m) for n in (first, second)}
+        if all(s is not None for s in sight.values()):
+            from carto.framework.geometry import frames
+
+            angle = math.acos(float(np.clip(np.dot(sight[first], sight[second]), -1.0, 1.0)))
+            b_over_h = 2.0 * math.tan(angle / 2.0)
+            up = np.ravel(frames.ellipsoid_normal(lon, lat))
+            off_nadir = {
+                n: math.acos(float(np.clip(np.dot(s, up), -1, 1))) for n, s in sight.items()
+            }
+    left, right = sorted((first, second), key=lambda n: off_nadir[n])
+    return PairChoice(left, right, b_over_h, overlap)
+
+
+def parse_pairs(text: str) -> tuple[tuple[str, str], ...]:
+    """``"A:B,B:C"`` as ``(("A", "B"), ("B", "C"))``.
+
+    Raises:
+        UsageError: an item that is not two different names joined by ``:``.
+    """
+    pairs = []
+    for item in text.split(","):
+        names = item.strip().split(":")
+        if len(names) != 2 or not all(names) or names[0] == names[1]:
+            raise UsageError(f"--pairs {text!r}: {item!r} is not two images joined by ':'")
+        pairs.append((names[0], names[1]))
+    if len(set(frozenset(p) for p in pairs)) < len(pairs):
+        raise UsageError(f"--pairs {text!r}: a pair is given twice")
+    return tuple(pairs)
+
+
+def choose_pairs(
+    sensors: Mapping[str, Sensor],
+    *,
+    images: Sequence[str] | None = None,
+    pairs: Sequence[tuple[str, str]] | None = None,
+    h_m: float = 0.0,
+) -> tuple[tuple[PairChoice, ...], tuple[PairChoice, ...]]:
+    """The pairs to run and those left out (see the module docstring).
+
+    Raises:
+        UsageError: an image that is not one of ``sensors``; fewer than two images.
+        InputError: an explicit pair that does not overlap or has too small a B/H; no
+            usable pair among the images.
+    """
+    known = ", ".join(sensors)
+    named = [n for p in pairs for n in p] if pairs else list(images or sensors)
+    for name in named:
+        if name not in sensors:
+            raise UsageError(f"image {name!r} is not in the scene (its images: {known})")
+    if pairs:
+        chosen = tuple(pair_geometry(sensors, a, b, h_m) for a, b in pairs)
+        for p in chosen:
+            _check_explicit(p)
+        return chosen, ()
+    if len(set(named)) < 2:
+        raise UsageError(f"a DEM needs two images or more, got {', '.join(named) or 'none'}")
+    candidates = [pair_geometry(sensors, a, b, h_m) for a, b in itertools.combinations(named, 2)]
+    best = max((p.b_over_h for p in candidates if p.usable), default=0.0)
+    used = tuple(
+        p for p in candidates if p.usable and p.b_over_h >= MIN_SHARE_OF_BEST_B_OVER_H * best
+    )
+    if not used:
+        figures = "; ".join(
+            f"{p.left}/{p.right}: B/H {p.b_over_h:.3f}, overlap {p.overlap:.0%}" for p in candidates
+        )
+        raise InputError(f"no usable stereo pair among {', '.join(named)} ({figures})")
+    return used, tuple(p for p in candidates if p not in used)
+
+
+def _check_explicit(p: PairChoice) -> None:
+    if p.overlap < MIN_OVERLAP:
+        raise InputError(
+            f"pair {p.left}:{p.right}: the images overlap by {p.overlap:.0%} of the smaller "
+            f"footprint (at least {MIN_OVERLAP:.0%} needed)"
+        )
+    if p.b_over_h < MIN_B_OVER_H:
+        raise InputError(
+            f"pair {p.left}:{p.right}: B/H {p.b_over_h:.3f} is below {MIN_B_OVER_H} (the lines of "
+            "sight are nearly parallel: heights would be too poor)"
+        )
+
+
+@attrs.frozen
+class MultiViewRequest:
+    """A multi-view ``carto dem`` run.
+
+    Attributes:
+        out_dir: the output folder.
+        source: the scene folder.
+        models: a ``carto adjust`` output with adjusted models (None: the scene's).
+        sensor_type: force a sensor type for the models.
+        images: the images to pair (None: all of the scene's).
+        pairs: explicit pairs (then ``images`` is not used).
+        keep_pairs: keep each pair's DEM folder under ``pairs/``.
+        fusion: how the pairs' heights are fused.
+        tile_px: side of the fusion's tiles, DEM posts.
+    """
+
+    out_dir: Path = attrs.field(converter=Path)
+    source: Path = attrs.field(converter=Path)
+    models: Path | None = attrs.field(default=None, converter=attrs.converters.optional(Path))
+    sensor_type: str | None = None
+    images: tuple[str, ...] | None = None
+    pairs: tuple[tuple[str, str], ...] | None = None
+    keep_pairs: bool = False
+    fusion: FusionSettings = attrs.field(factory=FusionSettings)
+    tile_px: int = 1024
+
+    def __attrs_post_init__(self) -> None:
+        if self.images is not None and self.pairs is not None:
+            raise UsageError("--images and --pairs exclude each other: give one")
+
+
+def failed_pair_record(pair: PairChoice, exc: CartoError) -> dict[str, Any]:
+    """What ``report.json`` says of a pair that failed."""
+    return {**pair.as_dict(), "status": "failed", "error": str(exc).splitlines()[0]}
+
+
+def pair_record(pair: PairChoice, report: Mapping[str, Any], kept: bool) -> dict[str, Any]:
+    """What ``report.json`` says of a pair that ran: its geometry and its DEM's figures."""
+    accuracy = report.get("accuracy") or {}
+    overall = accuracy.get("overall", accuracy) if isinstance(accuracy, Mapping) else {}
+    return {
+        **pair.as_dict(),
+        "status": "done",
+        "folder": f"pairs/{pair.folder}" if kept else None,
+        "matched_fraction": report.get("matched_fraction"),
+        "completeness": report.get("completeness"),
+        "nmad_m": overall.get("nmad_m"),
+        "median_m": overall.get("median_m"),
+    }
+
+
+def isfinite_or_none(value: Any) -> float | None:
+    return float(value) if value is not None and math.isfinite(float(value)) else None
+
+
+# ----------------------------------------------------------------------------- the run
+def _scene_sensors(request: MultiViewRequest) -> tuple[dict[str, Sensor], float]:
+    """The scene's models (the adjusted ones when a ``carto adjust`` folder is given) and
+    the median height of its starting DEM (0 without one), where pairs are judged."""
+    from carto.framework.files.staging import require_complete_output
+    from carto.framework.products.scene import Scene
+    from carto.framework.raster.dem import DEM
+    from carto.framework.workflows.opening import open_product, open_sensor
+
+    if not (request.source / "scene.json").is_file():
+        raise UsageError(
+            f"{request.source}: not a scene folder; several images are given as a scene "
+            "(carto simulate or a product folder) with --images or --pairs"
+        )
+    scene = Scene.open(request.source)
+    sensors = dict(open_product(scene.root, request.sensor_type).sensors)
+    if request.models is not None:
+        models = require_complete_output(request.models, "adjust")
+        for name in sensors:
+            for candidate in (models / f"{name}.model.json", models / f"{name}_RPC.TXT"):
+                if candidate.is_file():
+                    sensors[name] = open_sensor(candidate)
+                    break
+    init = scene.manifest.get("init_dem")
+    h_m = float(np.nanmedian(DEM.open(scene.path(init)).heights)) if init else 0.0
+    return sensors, h_m
+
+
+def multiview_dem_product(request: MultiViewRequest, **dem_options: Any) -> dict[str, Any]:
+    """Run ``carto dem`` on three or more images (see the module docstring); ``dem_options``
+    are those of :func:`~carto.framework.workflows.dem.dem_product` (each pair gets them)."""
+    from carto.framework.files.staging import staged_folder
+    from carto.framework.workflows.run_record import record_run, utc_now
+
+    quiet = bool(dem_options.get("quiet", False))
+    sensors, h_m = _scene_sensors(request)
+    if dem_options.get("init_height_m") is not None:
+        h_m = float(dem_options["init_height_m"])
+    pairs, left_out = choose_pairs(sensors, images=request.images, pairs=request.pairs, h_m=h_m)
+    started = utc_now()
+    inputs = [
+        request.source,
+        request.models,
+        dem_options.get("init_dem"),
+        dem_options.get("geoid"),
+        dem_options.get("reference"),
+    ]
+    with staged_folder(request.out_dir, "dem", inputs=[p for p in inputs if p]) as stage:
+        records, done = _run_pairs(stage, request, pairs, dem_options, quiet)
+        report = _fused_into(stage, request, done, dem_options, quiet)
+        report["pairs"] = records
+        report["pairs_left_out"] = [p.as_dict() for p in left_out]
+        if not request.keep_pairs:
+            import shutil
+
+            shutil.rmtree(stage / "pairs", ignore_errors=True)
+        report = record_run(stage / "report.json", report, [p for p in inputs if p], started, "dem")
+    return report
+
+
+def _run_pairs(
+    stage: Path,
+    request: MultiViewRequest,
+    pairs: Sequence[PairChoice],
+    dem_options: Mapping[str, Any],
+    quiet: bool,
+) -> tuple[list[dict[str, Any]], list[tuple[PairChoice, Path]]]:
+    from carto.framework.workflows.dem import dem_product
+    from carto.framework.workflows.reporting import progress
+    from carto.framework.workflows.stereo_pair import StereoInputs
+
+    records, done = [], []
+    for k, pair in enumerate(pairs, 1):
+        progress(
+            "dem",
+            f"pair {k}/{len(pairs)}: {pair.left} / {pair.right} (B/H {pair.b_over_h:.2f})",
+            quiet,
+        )
+        folder = stage / "pairs" / pair.folder
+        inputs = StereoInputs(
+            source=request.source,
+            models=request.models,
+            sensor_type=request.sensor_type,
+            pair=(pair.left, pair.right),
+        )
+        try:
+            report = dem_product(folder, inputs, **{**dem_options, "resume": False})
+        except CartoError as exc:
+            progress("dem", f"pair {pair.left} / {pair.right} failed: {exc}", quiet)
+            records.append(failed_pair_record(pair, exc))
+            continue
+        records.append(pair_record(pair, report, request.keep_pairs))
+        done.append((pair, folder))
+    if not done:
+        causes = "; ".join(f"{r['left']}/{r['right']}: {r['error']}" for r in records)
+        raise InputError(f"dem: every pair failed ({causes})")
+    return records, done
+
+
+def _fused_into(
+    stage: Path,
+    request: MultiViewRequest,
+    done: Sequence[tuple[PairChoice, Path]],
+    dem_options: Mapping[str, Any],
+    quiet: bool,
+) -> dict[str, Any]:
+    from carto.framework.merging.fused_files import fuse_dem_folders
+    from carto.framework.workflows.reporting import progress
+
+    folders = [folder for _, folder in done]
+    progress("dem", f"fusing {len(folders)} pair DEM(s)", quiet)
+    fusion = fuse_dem_folders(folders, stage, request.fusion, tile_px=request.tile_px)
+    files = {
+        "dem": "dem.tif",
+        "quality": "quality.tif",
+        "quality_counts": "quality_counts.tif",
+        "quality_flags": "quality_flags.tif",
+    }
+    files.update(_orthos_on_fused(stage, request, done, quiet))
+    report: dict[str, Any] = {
+        "generator": "fusion",
+        "images": sorted({n for pair, _ in done for n in (pair.left, pair.right)}),
+        "fusion": {**attrs.asdict(request.fusion), **fusion},
+        "quality_layers": {
+            "sigma_m": {
+                "file": "quality.tif",
+                "kind": "measure",
+                "description": "predicted standard deviation of the fused height, m",
+            },
+            "spread_m": {
+                "file": "quality.tif",
+                "kind": "measure",
+                "description": "max - min of the pairs' heights kept, m",
+            },
+            "pairs": {
+                "file": "quality_counts.tif",
+                "kind": "count",
+                "description": "pairs whose measured height was kept",
+            },
+            "filled": {
+                "file": "quality_flags.tif",
+                "kind": "flag",
+                "description": "1: no pair measured the node, 0: measured",
+            },
+        },
+        "vertical_reference": fusion["vertical_reference"],
+    }
+    report["seams"] = _pair_steps(done)
+    files.update(_evaluated(stage, report, dem_options))
+    report["files"] = files
+    return report
+
+
+def _pair_steps(done: Sequence[tuple[PairChoice, Path]]) -> list[dict[str, Any]]:
+    """The vertical step between every two pairs' DEMs where they overlap (median and NMAD
+    of ``second - first``): the seams of neighbouring swaths, the agreement of a triplet's
+    pairs."""
+    from carto.framework.merging.grid import union_grid
+    from carto.framework.merging.mosaic import MosaicSettings, seam_steps
+    from carto.framework.merging.sources import open_sources
+
+    sources = open_sources([folder / "dem.tif" for _, folder in done])
+    steps = seam_steps(sources, union_grid(sources), MosaicSettings())
+    names = [f"{pair.left}/{pair.right}" for pair, _ in done]
+    return [
+        {
+            "first": names[step.first],
+            "second": names[step.second],
+            "median_step_m": round(step.median_m, 4),
+            "nmad_m": round(step.nmad_m, 4),
+            "nodes": step.pixels,
+        }
+        for step in steps
+    ]
+
+
+def _evaluated(
+    stage: Path, report: dict[str, Any], dem_options: Mapping[str, Any]
+) -> dict[str, str]:
+    from carto.framework.raster.quicklook import hillshade_png
+
+    files = {"hillshade": hillshade_png(stage / "dem.tif", stage / "dem_hillshade.png", "DEM").name}
+    reference = dem_options.get("reference")
+    if reference is not None:
+        from carto.framework.evaluation.dem_accuracy import dem_accuracy_by_blocks
+
+        comparison = dem_accuracy_by_blocks(
+            stage / "dem.tif", reference, geoid=dem_options.get("geoid")
+        )
+        report["accuracy"] = comparison.report
+    return files
+
+
+def _orthos_on_fused(
+    stage: Path, request: MultiViewRequest, done: Sequence[tuple[PairChoice, Path]], quiet: bool
+) -> dict[str, str]:
+    """One ortho-image per image on the fused DEM, at the pairs' ortho posting, written
+    from tiles orthorectified one by one (memory of a tile, not of the scene)."""
+    import shutil
+
+    from carto.framework.imaging.ortho import write_ortho
+    from carto.framework.imaging.preparation import prepared_sources
+    from carto.framework.raster.dem import DEM
+    from carto.framework.workflows.reporting import progress
+    from carto.framework.workflows.stereo_pair import StereoInputs, open_pair
+
+    dem = DEM.open(stage / "dem.tif")
+    sensors: dict[str, Sensor] = {}
+    rasters: dict[str, Path] = {}
+    for pair, _ in done:
+        opened = open_pair(
+            StereoInputs(
+                source=request.source,
+                models=request.models,
+                sensor_type=request.sensor_type,
+                pair=(pair.left, pair.right),
+            )
+        )
+        sensors.update(opened.sensors)
+        rasters.update(opened.rasters)
+    grid = _ortho_grid(dem, done[0][1] / "ortho_left.tif")
+    work = stage / "work"
+    sources = prepared_sources(rasters, sensors, dem, folder=work / "prepared")
+    files = {}
+    for name in sorted(sensors):
+        progress("dem", f"ortho-image of {name} on the fused DEM", quiet)
+        layer = _tiled_ortho(sources[name], sensors[name], grid, dem, work / "ortho" / name)
+        files[f"ortho_{name}"] = write_ortho(
+            stage / f"ortho_{name}.tif",
+            layer,
+            grid,
+            out_dtype=_dtype_of(rasters[name]),
+            tags={"CARTO_PRODUCT": "ortho", "CARTO_IMAGE": name},
+        ).name
+    shutil.rmtree(work, ignore_errors=True)
+    return files
+
+
+def _ortho_grid(dem: Any, pair_ortho: Path) -> Any:
+    """The fused DEM's extent at the posting of a pair's ortho-image."""
+    import rasterio
+    from affine import Affine
+
+    from carto.framework.imaging.ortho_grid import OrthoGrid
+
+    with rasterio.open(pair_ortho) as ds:
+        step = abs(ds.transform.a)
+    t = dem.transform
+    rows = math.ceil(dem.shape[0] * abs(t.e) / step - 1e-9)
+    cols = math.ceil(dem.shape[1] * abs(t.a) / step - 1e-9)
+    return OrthoGrid(dem.crs, Affine(step, 0.0, t.c, 0.0, -step, t.f), (rows, cols))
+
+
+ORTHO_TILE_PX = 2048
+"""Side of the tiles an ortho-image on the fused DEM is made of, pixels."""
+
+
+def _tiled_ortho(source: Any, sensor: Sensor, grid: Any, dem: Any, folder: Path) -> Any:
+    from carto.framework.imaging.ortho import orthorectify
+    from carto.framework.raster.tiled_layer import TiledLayer, TilePiece, piece_path
+
+    folder.mkdir(parents=True, exist_ok=True)
+    rows, cols = grid.shape
+    pieces = []
+    for r0 in range(0, rows, ORTHO_TILE_PX):
+        for c0 in range(0, cols, ORTHO_TILE_PX):
+            n_r, n_c = min(ORTHO_TILE_PX, rows - r0), min(ORTHO_TILE_PX, cols - c0)
+            values = orthorectify(source, sensor, grid.window(r0, c0, n_r, n_c), dem)
+            path = piece_path(folder, r0, c0)
+            np.savez(path, ortho=values)
+            pieces.append(TilePiece(path, "ortho", r0, c0, (n_r, n_c)))
+    return TiledLayer.of(grid.shape, pieces)
+
+
+def _dtype_of(path: Path) -> Any:
+    import warnings
+
+    import rasterio
+
+    with warnings.catch_warnings():  # a raw image has no georeferencing: nothing to say
+        warnings.simplefilter("ignore", rasterio.errors.NotGeoreferencedWarning)
+        with rasterio.open(path) as ds:
+            return np.dtype(ds.dtypes[0])

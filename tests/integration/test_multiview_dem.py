@@ -1,0 +1,168 @@
+"""``carto dem`` on a triplet: every pair through the generator, one fused DEM checked
+against the simulator's truth DEM (true models: the DEM's error is the matching's), a pair
+that fails left out, and the bad input of issue 33 refused in one line."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import rasterio
+
+from carto.framework.errors import InputError, UsageError
+from carto.framework.workflows import multiview_dem
+from carto.framework.workflows.multiview_dem import (
+    MultiViewRequest,
+    PairChoice,
+    multiview_dem_product,
+    parse_pairs,
+)
+
+from ..scenes import on_grid
+
+OPTIONS = {
+    "options": {"posting_m": 5.0},
+    "relative_orientation": "none",
+    "coregister": "none",
+    "workers": 1,
+    "quiet": True,
+}
+
+
+def _errors_on(grid_path, path, truth_path):
+    """``path`` minus the truth, both on the grid of ``grid_path``."""
+    return on_grid(grid_path, path) - on_grid(grid_path, truth_path, "bilinear")
+
+
+def _nmad(x):
+    return 1.4826 * np.median(np.abs(x - np.median(x)))
+
+
+@pytest.fixture(scope="module")
+def fused(triplet, tmp_path_factory, carto_exe):
+    """``carto dem`` on the triplet as a user runs it: no --pair, so every pair."""
+    import subprocess
+
+    out = tmp_path_factory.mktemp("mv") / "dem"
+    truth = triplet.root / "truth"
+    done = subprocess.run(
+        [
+            carto_exe,
+            "dem",
+            str(triplet.root),
+            "--models",
+            str(truth),
+            "--keep-pairs",
+            "--posting",
+            "5",
+            "--workers",
+            "1",
+            "--relative-orientation",
+            "none",
+            "--coregister",
+            "none",
+            "--reference",
+            str(truth / "dem.tif"),
+            "-q",
+            "--out",
+            str(out),
+        ],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert done.returncode == 0, done.stderr
+    assert "pair fore/aft (B/H 1.09): NMAD" in done.stdout
+    assert "fused " in done.stdout
+    return out, json.loads((out / "report.json").read_text()), truth / "dem.tif"
+
+
+def test_a_triplet_makes_three_pairs_and_fuses_them(fused):
+    out, report, truth = fused
+    assert sorted((p["left"], p["right"]) for p in report["pairs"]) == [
+        ("fore", "aft"),
+        ("nadir", "aft"),
+        ("nadir", "fore"),
+    ]
+    assert all(p["status"] == "done" for p in report["pairs"])
+    assert report["format"] == "carto-dem-report"
+    assert report["accuracy"]["nmad_m"] < 0.5
+    errors = {
+        p["folder"]: _errors_on(out / "dem.tif", out / p["folder"] / "dem.tif", truth)
+        for p in report["pairs"]
+    }
+    fused_err = _errors_on(out / "dem.tif", out / "dem.tif", truth)
+    common = np.logical_and.reduce([np.isfinite(e) for e in [*errors.values(), fused_err]])
+    best = min(_nmad(e[common]) for e in errors.values())
+    assert _nmad(fused_err[common]) <= 1.05 * best
+    assert np.isfinite(fused_err).sum() >= max(np.isfinite(e).sum() for e in errors.values())
+    with rasterio.open(out / "quality_counts.tif") as ds:
+        assert ds.descriptions == ("pairs",)
+        assert ds.read(1, masked=True).max() == 3
+    for name in ("fore", "nadir", "aft"):
+        with rasterio.open(out / f"ortho_{name}.tif") as ds:
+            assert ds.tags()["CARTO_IMAGE"] == name
+            assert ds.read(1, masked=True).count() > 0.3 * ds.width * ds.height
+
+
+def test_a_pair_that_fails_is_reported_and_the_others_fuse(triplet, tmp_path, monkeypatch):
+    from carto.framework.workflows import dem as dem_workflow
+
+    real = dem_workflow.dem_product
+
+    def failing(out_dir, inputs, **kwargs):
+        if tuple(inputs.pair) == ("fore", "aft"):
+            raise InputError("dem: 0.1 % of the nodes matched")
+        return real(out_dir, inputs, **kwargs)
+
+    monkeypatch.setattr(dem_workflow, "dem_product", failing)
+    request = MultiViewRequest(
+        tmp_path / "dem",
+        triplet.root,
+        models=triplet.root / "truth",
+        pairs=(("fore", "aft"), ("nadir", "aft")),
+    )
+    report = multiview_dem_product(request, **OPTIONS)
+    status = {(p["left"], p["right"]): p["status"] for p in report["pairs"]}
+    assert status == {("fore", "aft"): "failed", ("nadir", "aft"): "done"}
+    assert "0.1 % of the nodes" in report["pairs"][0]["error"]
+    assert (tmp_path / "dem" / "dem.tif").is_file()
+    assert not (tmp_path / "dem" / "pairs").exists()
+
+
+def test_bad_input_is_refused_in_one_line(triplet, tmp_path):
+    with pytest.raises(UsageError, match="two images or more"):
+        multiview_dem_product(
+            MultiViewRequest(tmp_path / "a", triplet.root, images=("fore",)), **OPTIONS
+        )
+    with pytest.raises(UsageError, match="not in the scene"):
+        multiview_dem_product(
+            MultiViewRequest(tmp_path / "a", triplet.root, images=("fore", "side")), **OPTIONS
+        )
+    # the system-level models (no adjustment) put fore some 600 m off: too little overlap
+    with pytest.raises(InputError, match="overlap by"):
+        multiview_dem_product(
+            MultiViewRequest(tmp_path / "a", triplet.root, pairs=(("fore", "aft"),)), **OPTIONS
+        )
+    assert not (tmp_path / "a").exists()
+    with pytest.raises(InputError, match=r"B/H 0\.020 is below"):
+        multiview_dem._check_explicit(PairChoice("a", "b", 0.02, 0.9))
+    with pytest.raises(UsageError, match="not two images"):
+        parse_pairs("fore:aft,nadir")
+    with pytest.raises(UsageError, match="given twice"):
+        parse_pairs("fore:aft,aft:fore")
+
+
+def test_the_command_line_refuses_mixed_choices(triplet, tmp_path, run_carto):
+    out = str(tmp_path / "x")
+    for args, cause in (
+        (["--images", "fore"], "two images or more"),
+        (["--pair", "fore", "aft", "--images", "fore", "aft"], "--pair excluded"),
+        (["--pairs", "fore"], "not two images joined"),
+        (["--pair", "fore", "aft", "--keep-pairs"], "--keep-pairs is for three"),
+    ):
+        done = run_carto(["dem", str(triplet.root), *args, "--out", out], with_test_plugins=False)
+        assert done.returncode == 2, (args, done.stderr)
+        assert cause in done.stderr
+        assert len(done.stderr.strip().splitlines()) == 1
