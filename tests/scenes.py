@@ -35,3 +35,13 @@ def on_grid(grid_path: Path, path: Path, resampling: str = "nearest"):
             resampling=Resampling[resampling],
         )
     return values
+
+
+def true_model_dem(scene: Path, out: Path, *extra: str) -> list[str]:
+    """The arguments of ``carto dem`` on a simulated ``scene`` with its true models, in one
+    process, without relative orientation or co-registration (the DEM's error is then the
+    matching's), quiet, into ``out``; ``extra`` before them."""
+    return [
+        "dem", str(scene), "--models", str(scene / "truth"), *extra, "--workers", "1",
+        "--relative-orientation", "none", "--coregister", "none", "-q", "--out", str(out),
+    ]  # fmt: skip

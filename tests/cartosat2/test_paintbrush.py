@@ -5,7 +5,7 @@ independent checkpoints (truth from the simulator)."""
 from __future__ import annotations
 
 from carto.framework.workflows.adjust import adjust_product
-from tests.scenes import on_grid, simulate
+from tests.scenes import on_grid, simulate, true_model_dem
 
 
 def test_paintbrush_block_with_two_gcps_fixes_every_swath(tmp_path):
@@ -42,25 +42,7 @@ def test_a_stereo_paintbrush_set_makes_one_dem_without_seams(tmp_path, run_carto
     )
     truth = scene / "truth"
     out = tmp_path / "dem"
-    done = run_carto(
-        [
-            "dem",
-            str(scene),
-            "--models",
-            str(truth),
-            "--posting",
-            "2",
-            "--workers",
-            "1",
-            "--relative-orientation",
-            "none",
-            "--coregister",
-            "none",
-            "-q",
-            "--out",
-            str(out),
-        ]
-    )
+    done = run_carto(true_model_dem(scene, out, "--posting", "2"))
     assert done.returncode == 0, done.stderr
     report = json.loads((out / "report.json").read_text())
     pairs = {frozenset((p["left"], p["right"])): p for p in report["pairs"]}

@@ -19,7 +19,7 @@ from carto.framework.workflows.multiview_dem import (
     parse_pairs,
 )
 
-from ..scenes import on_grid
+from ..scenes import on_grid, true_model_dem
 
 OPTIONS = {
     "options": {"posting_m": 5.0},
@@ -166,3 +166,33 @@ def test_the_command_line_refuses_mixed_choices(triplet, tmp_path, run_carto):
         assert done.returncode == 2, (args, done.stderr)
         assert cause in done.stderr
         assert len(done.stderr.strip().splitlines()) == 1
+
+
+def test_a_third_party_generator_that_only_does_pairs_is_paired_and_fused(
+    triplet, tmp_path, run_carto
+):
+    """``example-start`` (tests/plugins) takes two images and gives no sigma_m or filled
+    layer: the framework runs it per pair and fuses with equal weights."""
+    out = tmp_path / "dem"
+    done = run_carto(
+        true_model_dem(
+            triplet.root,
+            out,
+            "--generator",
+            "example-start",
+            "--pairs",
+            "nadir:aft,nadir:fore",
+            "--posting",
+            "10",
+            "--allow-poor",
+        )
+    )
+    assert done.returncode == 0, done.stderr
+    report = json.loads((out / "report.json").read_text())
+    assert [p["status"] for p in report["pairs"]] == ["done", "done"]
+    # the starting DEM twice, equal weights: the fused DEM is the starting DEM
+    fused = on_grid(out / "dem.tif", out / "dem.tif")
+    start = on_grid(out / "dem.tif", triplet.root / "init_dem.tif", "bilinear")
+    has = np.isfinite(fused) & np.isfinite(start)
+    assert has.sum() > 100
+    assert np.abs(fused[has] - start[has]).max() < 0.5

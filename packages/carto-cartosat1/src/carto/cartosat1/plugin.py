@@ -19,9 +19,9 @@ if TYPE_CHECKING:  # the hooks import what they return: loading a plugin stays c
 
 @hookimpl
 def carto_scene_presets() -> Sequence[ScenePreset]:
-    from carto.cartosat1.presets import Cartosat1PairPreset
+    from carto.cartosat1.presets import Cartosat1PairPreset, Cartosat1StripPreset
 
-    return [Cartosat1PairPreset()]
+    return [Cartosat1PairPreset(), Cartosat1StripPreset()]
 
 
 @hookimpl

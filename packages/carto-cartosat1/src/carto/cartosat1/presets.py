@@ -1,4 +1,5 @@
-"""Simulator scene preset ``cartosat1-pair``: a Cartosat-1 Fore/Aft stereo pair.
+"""Simulator scene presets ``cartosat1-pair`` (a Cartosat-1 Fore/Aft stereo pair) and
+``cartosat1-strip`` (consecutive pairs along one pass over one truth DEM).
 
 The platform flies a sun-synchronous orbit at 618 km (descending node at 10:30 local time),
 yaw-steered with zero roll and pitch; Fore (+26 deg) and Aft (-5 deg) image the target about
@@ -6,6 +7,9 @@ yaw-steered with zero roll and pitch; Fore (+26 deg) and Aft (-5 deg) image the 
 """
 
 from __future__ import annotations
+
+import attrs
+import numpy as np
 
 from carto.cartosat1 import constants as c
 from carto.framework.sdk.presets import (
@@ -19,7 +23,7 @@ from carto.framework.sdk.presets import (
     YawSteering,
     acquisition,
 )
-from carto.framework.sdk.sensors import CameraSpec
+from carto.framework.sdk.sensors import CameraSpec, frames, orbit
 
 DEFAULT_TARGET = (77.95, 30.30)
 """Near Dehradun, India: hilly terrain as in the paper's test sites."""
@@ -71,6 +75,55 @@ def cartosat1_pair_plan(
     )
 
 
+STRIP_SCENES = 3
+"""Scenes of a ``cartosat1-strip``."""
+STRIP_OVERLAP = 0.1
+"""Share of a scene's lines its successor repeats."""
+
+
+def cartosat1_strip_plan(
+    lines: int,
+    n_scenes: int = STRIP_SCENES,
+    target: tuple[float, float] = DEFAULT_TARGET,
+    date: str = DEFAULT_DATE,
+) -> ScenePlan:
+    """``n_scenes`` consecutive Fore/Aft pairs of ``lines`` lines each along one pass
+    (``fore1``, ``aft1``, ``fore2`` ...: scene 1 first in time), overlapping by
+    :data:`STRIP_OVERLAP`, from one body trajectory over one truth DEM."""
+    pair = cartosat1_pair_plan(target, date)
+    (body,) = pair.segments
+    ground_step_m = lines * pair.gsd_m * (1.0 - STRIP_OVERLAP)
+    _, epoch, elements = acquisition.sun_synchronous_overpass(
+        target[0], target[1], date, c.ORBIT_ALTITUDE_M
+    )
+    along = _ground_track(epoch, elements, target)
+    centre = frames.geodetic_to_ecef(target[0], target[1], 0.0)
+    views = []
+    for k in range(n_scenes):
+        offset = (k - (n_scenes - 1) / 2.0) * ground_step_m
+        lon, lat, _ = frames.ecef_to_geodetic(centre + offset * along)
+        for view in body.views:
+            views.append(
+                attrs.evolve(view, name=f"{view.name}{k + 1}", target=(float(lon), float(lat)))
+            )
+    reach_s = n_scenes * ground_step_m / 6500.0  # ground speed about 6.5-7 km/s
+    segment = attrs.evolve(
+        body, span_s=(body.span_s[0] - reach_s, body.span_s[1] + reach_s), views=tuple(views)
+    )
+    return attrs.evolve(pair, preset="cartosat1-strip", segments=(segment,), control_min_views=2)
+
+
+def _ground_track(
+    epoch: float, elements: orbit.OrbitElements, target: tuple[float, float]
+) -> np.ndarray:
+    """The unit ground direction of the satellite's motion at ``target`` (ECEF)."""
+    p0, v0 = orbit.elements_to_state(elements)
+    _, v_ecef = frames.eci_to_ecef(epoch, p0, v0)
+    up = frames.ellipsoid_normal(*target)
+    along = np.ravel(v_ecef) - np.dot(np.ravel(v_ecef), up) * up
+    return along / np.linalg.norm(along)
+
+
 class Cartosat1PairPreset(ScenePreset):
     """Cartosat-1 Fore/Aft stereo pair from one pass (tied cameras, one body trajectory)."""
 
@@ -100,3 +153,17 @@ class Cartosat1PairPreset(ScenePreset):
 
     def plan(self, options: SimulationOptions) -> ScenePlan:
         return cartosat1_pair_plan()
+
+
+class Cartosat1StripPreset(ScenePreset):
+    """Cartosat-1 strip: consecutive Fore/Aft pairs along one pass over one truth DEM."""
+
+    name = "cartosat1-strip"
+    description = (
+        f"Cartosat-1 strip: {STRIP_SCENES} consecutive Fore/Aft pairs of one pass, "
+        f"{STRIP_OVERLAP:.0%} overlap"
+    )
+
+    def plan(self, options: SimulationOptions) -> ScenePlan:
+        lines = (options.size or (2000, 2000))[1]
+        return cartosat1_strip_plan(lines)

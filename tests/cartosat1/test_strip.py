@@ -1,0 +1,50 @@
+"""The ``cartosat1-strip`` preset: consecutive Fore/Aft pairs of one pass over one truth DEM,
+made into one DEM by ``carto dem`` (each scene's pair, and the pairs across the scenes'
+overlaps), without steps where the scenes meet (true models: the DEM's error is the
+matching's)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from carto.cartosat1.presets import STRIP_OVERLAP
+from carto.framework.products.scene import Scene
+from tests.scenes import on_grid, simulate, true_model_dem
+
+
+@pytest.fixture(scope="module")
+def strip(tmp_path_factory):
+    return simulate("cartosat1-strip", tmp_path_factory.mktemp("strip"), seed=4, size=(400, 500))
+
+
+def test_scenes_follow_each_other_along_the_pass(strip):
+    scene = Scene.open(strip)
+    assert scene.image_names == ["fore1", "aft1", "fore2", "aft2", "fore3", "aft3"]
+    truth = scene.truth_sensors()
+    # the middle of scene 1's last lines is seen again in scene 2's first lines
+    lines = truth["fore1"].image_shape[0]
+    lon, lat = truth["fore1"].image_to_ground(lines * (1 - STRIP_OVERLAP / 2), 200.0, 500.0)
+    line, _ = truth["fore2"].ground_to_image(lon, lat, 500.0)
+    assert 0 < float(line) < lines * STRIP_OVERLAP
+
+
+def test_a_strip_makes_one_dem_without_steps_between_scenes(strip, tmp_path, run_carto):
+    out = tmp_path / "dem"
+    done = run_carto(true_model_dem(strip, out, "--posting", "10"))
+    assert done.returncode == 0, done.stderr
+    report = json.loads((out / "report.json").read_text())
+    done_pairs = {frozenset((p["left"], p["right"])) for p in report["pairs"]}
+    for k in (1, 2, 3):
+        assert frozenset((f"fore{k}", f"aft{k}")) in done_pairs
+    own = {f"aft{k}/fore{k}" for k in (1, 2, 3)} | {f"fore{k}/aft{k}" for k in (1, 2, 3)}
+    seams = [s for s in report["seams"] if {s["first"], s["second"]} <= own]
+    assert len(seams) >= 2
+    assert all(abs(s["median_step_m"]) <= 0.3 for s in seams)
+    error = on_grid(out / "dem.tif", out / "dem.tif") - on_grid(
+        out / "dem.tif", strip / "truth" / "dem.tif", "bilinear"
+    )
+    has = np.isfinite(error)
+    assert 1.4826 * np.median(np.abs(error[has] - np.median(error[has]))) < 0.5
