@@ -145,7 +145,7 @@ def _simulated_run(
 
 
 def _multiview(
-    scene: Path, models: Path, out: Path, posting_m: float
+    scene: Path, models: Path, out: Path, posting_m: float, orientation: str = "none"
 ) -> tuple[dict[str, Any], float]:
     from carto.framework.workflows.multiview_dem import MultiViewRequest, multiview_dem_product
 
@@ -154,7 +154,7 @@ def _multiview(
     report = multiview_dem_product(
         request,
         options={"posting_m": posting_m},
-        relative_orientation="none",
+        relative_orientation=orientation,
         coregister="none",
         quiet=True,
     )
@@ -173,19 +173,24 @@ def run_adjusted(
     scene, true_report, _ = _simulated_run(
         "cartosat2-triplet", terrain, seed, size, posting_m, folder, errors="full"
     )
-    adjust_product(scene, folder / "adjusted", n_gcps=2, quiet=True)
-    adjusted_report, _ = _multiview(scene, folder / "adjusted", folder / "dem-adjusted", posting_m)
+    # --errors full draws some errors beyond the products' stated a-priori sigmas, which
+    # carto adjust flags (issue 31): the DEM is what is measured here
+    adjust_product(scene, folder / "adjusted", n_gcps=2, quiet=True, allow_poor=True)
     truth = scene / "truth" / "dem.tif"
     true_fused = evaluate(folder / "dem", truth, true_report)["by_dem"]["fused"]
-    adjusted = evaluate(folder / "dem-adjusted", truth, adjusted_report)
-    return {
-        "true_models": true_fused,
-        "adjusted": adjusted["by_dem"]["fused"],
-        "adjusted_pairs": {k: v for k, v in adjusted["by_dem"].items() if k != "fused"},
-        "adjusted_over_true_nmad": round(
-            adjusted["by_dem"]["fused"]["nmad_m"] / true_fused["nmad_m"], 3
-        ),
-    }
+    result: dict[str, Any] = {"true_models": true_fused}
+    for orientation in ("none", "auto"):  # auto: carto dem's default relative orientation
+        out = folder / f"dem-adjusted-{orientation}"
+        report, _ = _multiview(scene, folder / "adjusted", out, posting_m, orientation)
+        adjusted = evaluate(out, truth, report)
+        result[f"adjusted_ro_{orientation}"] = {
+            "fused": adjusted["by_dem"]["fused"],
+            "pairs": {k: v for k, v in adjusted["by_dem"].items() if k != "fused"},
+            "over_true_nmad": round(
+                adjusted["by_dem"]["fused"]["nmad_m"] / true_fused["nmad_m"], 3
+            ),
+        }
+    return result
 
 
 def run_case(terrain: str, seed: int, size: int, posting_m: float, work: Path) -> dict[str, Any]:
@@ -309,9 +314,10 @@ def main(argv: list[str] | None = None) -> int:
             np.median([r["seconds"]["cost_ratio"] for r in results.values()])
         )
     if adjusted:
-        summary["adjusted_over_true_nmad"] = [
-            a["adjusted_over_true_nmad"] for a in adjusted.values()
-        ]
+        summary["adjusted_over_true_nmad"] = {
+            ro: [a[f"adjusted_ro_{ro}"]["over_true_nmad"] for a in adjusted.values()]
+            for ro in ("none", "auto")
+        }
     if strip:
         summary["strip_median_abs_seam_step_m"] = [
             p["median_abs_seam_step_m"] for p in strip.values()

@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import argparse
 
-import numpy as np
-
 from carto.framework.cli.common import examples, formatter
 
 
@@ -27,6 +25,8 @@ def _transform_points(
     out = {k: v for k, v in table.items() if k not in outputs}
     out[outputs[0]], out[outputs[1]] = first, second
     write_point_table(args.out, out, precision=17)
+    import numpy as np
+
     failed = int(np.count_nonzero(~np.isfinite(first)))
     verb, note = (
         ("projected", "outside the image or not converged")
