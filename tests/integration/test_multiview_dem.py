@@ -87,6 +87,10 @@ def test_a_triplet_makes_three_pairs_and_fuses_them(fused):
     ]
     assert all(p["status"] == "done" for p in report["pairs"])
     assert report["format"] == "carto-dem-report"
+    # the pairs aligned on the widest one (true models: steps of millimetres)
+    assert report["pair_offsets_m"]["fore/aft"] == 0.0
+    assert max(abs(v) for v in report["pair_offsets_m"].values()) < 0.05
+    assert all(abs(s["median_step_after_m"]) < 0.01 for s in report["seams"])
     assert report["accuracy"]["nmad_m"] < 0.5
     errors = {
         p["folder"]: _errors_on(out / "dem.tif", out / p["folder"] / "dem.tif", truth)

@@ -139,3 +139,13 @@ def test_heights_and_images_are_not_joined(tmp_path):
         check_together(open_sources([a, img]))
     with pytest.raises(InputError, match="no such file"):
         open_sources([tmp_path / "missing.tif"])
+
+
+def test_step_offsets_hold_the_source_asked_for():
+    from carto.framework.merging.mosaic import SeamStep
+
+    steps = [SeamStep(0, 1, 1.5, 0.1, 1000), SeamStep(1, 2, -2.0, 0.1, 1000)]
+    np.testing.assert_allclose(step_offsets(steps, 3), [0.0, -1.5, 0.5], atol=1e-6)
+    np.testing.assert_allclose(step_offsets(steps, 3, held=2), [-0.5, -2.0, 0.0], atol=1e-6)
+    # a source joined to none keeps its height
+    np.testing.assert_allclose(step_offsets(steps[:1], 3, held=1), [1.5, 0.0, 0.0], atol=1e-6)

@@ -88,8 +88,21 @@ def triplet_plan(
         _segment(name, epoch, t, aim0, along)
         for name, t in zip(("fore", "nadir", "aft"), TRIPLET_TIMES_S, strict=True)
     )
+    return _scene_plan("cartosat2-triplet", epoch_utc, elements, target, segments)
+
+
+def _scene_plan(
+    preset: str,
+    epoch_utc: str,
+    elements: object,
+    target: tuple[float, float],
+    segments: tuple[SegmentPlan, ...],
+    control_min_views: int | None = None,
+) -> ScenePlan:
+    """A Cartosat-2 scene plan: agile, 0.8 m, hilly 2000 x 2000 px by default, 2 GCPs."""
+    extra = {} if control_min_views is None else {"control_min_views": control_min_views}
     return ScenePlan(
-        preset="cartosat2-triplet",
+        preset=preset,
         platform="Cartosat-2",
         epoch_utc=epoch_utc,
         elements=elements,
@@ -101,6 +114,7 @@ def triplet_plan(
         default_size=(2000, 2000),
         default_gcps=2,
         default_checkpoints=50,
+        **extra,
     )
 
 
@@ -139,20 +153,13 @@ def paintbrush_plan(
         for name, t_view in views:
             t_c = t_view + rank * STEREO_SPACING_S
             segments.append(_segment(f"swath{i + 1}_{name}", epoch, t_c, aim, along, centre))
-    return ScenePlan(
-        preset="cartosat2-paintbrush-stereo" if views else "cartosat2-paintbrush",
+    return _scene_plan(
+        "cartosat2-paintbrush-stereo" if views else "cartosat2-paintbrush",
+        epoch_utc,
+        elements,
+        target,
+        tuple(sorted(segments, key=lambda seg: seg.span_s[0])),
         control_min_views=2 if views else 1,
-        platform="Cartosat-2",
-        epoch_utc=epoch_utc,
-        elements=elements,
-        target=target,
-        segments=tuple(sorted(segments, key=lambda seg: seg.span_s[0])),
-        gsd_m=GSD_M,
-        agile=True,
-        default_terrain="hilly",
-        default_size=(2000, 2000),
-        default_gcps=2,
-        default_checkpoints=50,
     )
 
 

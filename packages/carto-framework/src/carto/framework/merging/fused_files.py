@@ -86,11 +86,15 @@ def _feathered(sigma: np.ndarray, has: np.ndarray, feather_posts: int) -> np.nda
 
 
 def _window_stack(
-    pairs: Sequence[PairLayers], grid: MosaicGrid, window: GridWindow, feather_posts: int
+    pairs: Sequence[PairLayers],
+    grid: MosaicGrid,
+    window: GridWindow,
+    feather_posts: int,
+    offsets_m: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     heights, sigmas, measured = [], [], []
-    for pair in pairs:
-        h = read_window(pair.dem, grid, window)
+    for pair, offset in zip(pairs, offsets_m, strict=True):
+        h = read_window(pair.dem, grid, window) + offset
         if pair.sigma is not None:
             s = read_window(pair.sigma[0], grid, window, band=pair.sigma[1])
         else:
@@ -148,10 +152,12 @@ def fuse_dem_folders(
     settings: FusionSettings,
     *,
     tile_px: int = 1024,
+    offsets_m: Sequence[float] | None = None,
     advance: Callable[[], None] | None = None,
 ) -> dict[str, Any]:
-    """Fuse the pairs' DEM folders into ``out`` (see the module docstring); returns the
-    fused DEM's figures for the report (grid size, share of nodes by number of pairs)."""
+    """Fuse the pairs' DEM folders into ``out`` (see the module docstring), each pair's
+    heights plus its ``offsets_m`` (default 0: see :func:`pair_offsets`); returns the fused
+    DEM's figures for the report (grid size, share of nodes by number of pairs)."""
     import contextlib
 
     from carto.framework.raster.cog import cog_writer
@@ -160,6 +166,7 @@ def fuse_dem_folders(
     check_together([p.dem for p in pairs])
     grid = union_grid([p.dem for p in pairs])
     vertical = pairs[0].dem.vertical
+    offsets = np.zeros(len(pairs)) if offsets_m is None else np.asarray(offsets_m, float)
     tally = np.zeros(len(pairs) + 2, np.int64)  # nodes by pairs kept; last: filled
     with contextlib.ExitStack() as stack:
         writers = _Writers(
@@ -195,7 +202,7 @@ def fuse_dem_folders(
         )
         for window in grid.windows(tile_px):
             outer = window.grown(settings.feather_posts, grid.height, grid.width)
-            stack = _window_stack(pairs, grid, outer, settings.feather_posts)
+            stack = _window_stack(pairs, grid, outer, settings.feather_posts, offsets)
             fused = _cropped(fuse_heights(*stack, settings), window.inner(outer))
             writers.write(window, fused)
             _count(tally, fused)

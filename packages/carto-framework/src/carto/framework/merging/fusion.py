@@ -47,11 +47,16 @@ class FusionSettings:
             weight grows from almost 0 to 1 (its sigma is divided by the square root of the
             ramp), so that where pairs of neighbouring swaths or scenes meet the DEM passes
             from one to the other without a seam (0: no feathering).
+        align_pairs: before fusing, cancel the constant step between the pairs' DEMs
+            (measured where they overlap), holding the pair of the widest base: pairs
+            whose left images differ can stand on datums a few metres apart when the
+            models are not those of one block adjustment.
     """
 
     k_sigma: float = attrs.field(default=3.0)
     sigma_floor_m: float = attrs.field(default=0.05)
     feather_posts: int = attrs.field(default=16)
+    align_pairs: bool = True
 
     @k_sigma.validator
     def _check_k(self, _attr: object, value: float) -> None:

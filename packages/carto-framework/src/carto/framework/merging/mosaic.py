@@ -184,10 +184,11 @@ def seam_windows(sources: Sequence[RasterSource], grid: MosaicGrid, tile_px: int
     return sum(len(box.tiles(tile_px)) for box in _overlaps(sources, grid).values())
 
 
-def step_offsets(steps: Sequence[SeamStep], n_sources: int) -> FloatArray:
+def step_offsets(steps: Sequence[SeamStep], n_sources: int, held: int | None = None) -> FloatArray:
     """One height offset per source (m, added to it) that cancels the seams' steps in the
-    least squares sense, each step weighted by the square root of its pixels; the first
-    source of every group of sources joined by seams is held at 0."""
+    least squares sense, each step weighted by the square root of its pixels; ``held`` (or,
+    in a group of sources joined by seams without it, the group's first source) is held
+    at 0."""
     offsets = np.zeros(n_sources)
     if not steps:
         return offsets
@@ -201,7 +202,7 @@ def step_offsets(steps: Sequence[SeamStep], n_sources: int) -> FloatArray:
         rhs.append(-weight * step.median_m)
     for group in groups:  # the group's first source held
         row = np.zeros(n_sources)
-        row[min(group)] = 1e6
+        row[held if held in group else min(group)] = 1e6
         rows.append(row)
         rhs.append(0.0)
     solution, *_ = np.linalg.lstsq(np.array(rows), np.array(rhs), rcond=None)

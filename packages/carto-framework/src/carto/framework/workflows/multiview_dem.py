@@ -384,11 +384,21 @@ def _fused_into(
     quiet: bool,
 ) -> dict[str, Any]:
     from carto.framework.merging.fused_files import fuse_dem_folders
+    from carto.framework.merging.mosaic import step_offsets
     from carto.framework.workflows.reporting import progress
 
     folders = [folder for _, folder in done]
+    steps = _pair_steps(done)
+    best = max(range(len(done)), key=lambda k: done[k][0].b_over_h)
+    offsets = (
+        step_offsets(steps, len(done), held=best)
+        if request.fusion.align_pairs
+        else np.zeros(len(done))
+    )
     progress("dem", f"fusing {len(folders)} pair DEM(s)", quiet)
-    fusion = fuse_dem_folders(folders, stage, request.fusion, tile_px=request.tile_px)
+    fusion = fuse_dem_folders(
+        folders, stage, request.fusion, tile_px=request.tile_px, offsets_m=offsets
+    )
     files = {
         "dem": "dem.tif",
         "quality": "quality.tif",
@@ -424,13 +434,27 @@ def _fused_into(
         },
         "vertical_reference": fusion["vertical_reference"],
     }
-    report["seams"] = _pair_steps(done)
+    names = [f"{pair.left}/{pair.right}" for pair, _ in done]
+    report["pair_offsets_m"] = {n: round(float(o), 4) for n, o in zip(names, offsets, strict=True)}
+    report["seams"] = [
+        {
+            "first": names[step.first],
+            "second": names[step.second],
+            "median_step_m": round(step.median_m, 4),
+            "nmad_m": round(step.nmad_m, 4),
+            "nodes": step.pixels,
+            "median_step_after_m": round(
+                step.median_m + offsets[step.second] - offsets[step.first], 4
+            ),
+        }
+        for step in steps
+    ]
     files.update(_evaluated(stage, report, dem_options))
     report["files"] = files
     return report
 
 
-def _pair_steps(done: Sequence[tuple[PairChoice, Path]]) -> list[dict[str, Any]]:
+def _pair_steps(done: Sequence[tuple[PairChoice, Path]]) -> list[Any]:
     """The vertical step between every two pairs' DEMs where they overlap (median and NMAD
     of ``second - first``): the seams of neighbouring swaths, the agreement of a triplet's
     pairs."""
@@ -439,18 +463,7 @@ def _pair_steps(done: Sequence[tuple[PairChoice, Path]]) -> list[dict[str, Any]]
     from carto.framework.merging.sources import open_sources
 
     sources = open_sources([folder / "dem.tif" for _, folder in done])
-    steps = seam_steps(sources, union_grid(sources), MosaicSettings())
-    names = [f"{pair.left}/{pair.right}" for pair, _ in done]
-    return [
-        {
-            "first": names[step.first],
-            "second": names[step.second],
-            "median_step_m": round(step.median_m, 4),
-            "nmad_m": round(step.nmad_m, 4),
-            "nodes": step.pixels,
-        }
-        for step in steps
-    ]
+    return seam_steps(sources, union_grid(sources), MosaicSettings())
 
 
 def _evaluated(
