@@ -31,7 +31,11 @@ def cmd_mosaic(args: argparse.Namespace) -> int:
         f"{grid['height']} px -> {args.out}/{report['files']['mosaic']}"
     )
     for seam in report["seams"]:
-        after = f", {seam['median_step_after_m']:+.3f} m after alignment" if args.align else ""
+        after = (
+            f", {round(seam['median_step_after_m'], 3) + 0.0:+.3f} m after alignment"
+            if args.align
+            else ""
+        )
         print(
             f"  seam {seam['first']} | {seam['second']}: median step "
             f"{seam['median_step_m']:+.3f} m (NMAD {seam['nmad_m']:.3f} m, "
