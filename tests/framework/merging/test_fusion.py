@@ -109,3 +109,11 @@ def test_bad_shapes_are_refused(h, s):
 def test_bad_settings_are_refused():
     with pytest.raises(InputError, match="k_sigma"):
         FusionSettings(k_sigma=0)
+
+
+def test_a_filled_height_without_sigma_is_used_when_no_other_pair_has_one():
+    h = np.array([[[np.nan]], [[7.0]]])
+    s = np.array([[[0.3]], [[np.nan]]])
+    fused = fuse_heights(h, s, np.zeros(h.shape, bool))
+    assert fused.height_m[0, 0] == 7.0
+    assert fused.filled[0, 0]

@@ -9,7 +9,6 @@ yaw-steered with zero roll and pitch; Fore (+26 deg) and Aft (-5 deg) image the 
 from __future__ import annotations
 
 import attrs
-import numpy as np
 
 from carto.cartosat1 import constants as c
 from carto.framework.sdk.presets import (
@@ -23,7 +22,7 @@ from carto.framework.sdk.presets import (
     YawSteering,
     acquisition,
 )
-from carto.framework.sdk.sensors import CameraSpec, frames, orbit
+from carto.framework.sdk.sensors import CameraSpec, frames
 
 DEFAULT_TARGET = (77.95, 30.30)
 """Near Dehradun, India: hilly terrain as in the paper's test sites."""
@@ -96,7 +95,7 @@ def cartosat1_strip_plan(
     _, epoch, elements = acquisition.sun_synchronous_overpass(
         target[0], target[1], date, c.ORBIT_ALTITUDE_M
     )
-    along = _ground_track(epoch, elements, target)
+    _, along, _ = acquisition.ground_directions(epoch, elements, *target)
     centre = frames.geodetic_to_ecef(target[0], target[1], 0.0)
     views = []
     for k in range(n_scenes):
@@ -111,17 +110,6 @@ def cartosat1_strip_plan(
         body, span_s=(body.span_s[0] - reach_s, body.span_s[1] + reach_s), views=tuple(views)
     )
     return attrs.evolve(pair, preset="cartosat1-strip", segments=(segment,), control_min_views=2)
-
-
-def _ground_track(
-    epoch: float, elements: orbit.OrbitElements, target: tuple[float, float]
-) -> np.ndarray:
-    """The unit ground direction of the satellite's motion at ``target`` (ECEF)."""
-    p0, v0 = orbit.elements_to_state(elements)
-    _, v_ecef = frames.eci_to_ecef(epoch, p0, v0)
-    up = frames.ellipsoid_normal(*target)
-    along = np.ravel(v_ecef) - np.dot(np.ravel(v_ecef), up) * up
-    return along / np.linalg.norm(along)
 
 
 class Cartosat1PairPreset(ScenePreset):

@@ -22,7 +22,7 @@ from carto.framework.sdk.presets import (
     ViewPlan,
     acquisition,
 )
-from carto.framework.sdk.sensors import CameraSpec, frames, orbit
+from carto.framework.sdk.sensors import CameraSpec, frames
 
 DEFAULT_TARGET = (77.95, 30.30)
 DEFAULT_DATE = "2026-03-01"
@@ -45,12 +45,7 @@ def _geometry(target: tuple[float, float], date: str):
         lon, lat, date, c.ORBIT_ALTITUDE_M
     )
     # ground directions at the target: along the ground track (scan) and across it (left)
-    p0, v0 = orbit.elements_to_state(elements)
-    _, v_ecef = frames.eci_to_ecef(epoch, p0, v0)
-    up = frames.ellipsoid_normal(lon, lat)
-    along = v_ecef - np.dot(v_ecef, up) * up
-    along /= np.linalg.norm(along)
-    left = np.cross(up, along)
+    up, along, left = acquisition.ground_directions(epoch, elements, lon, lat)
     return epoch_utc, epoch, elements, up, along, left
 
 
@@ -100,7 +95,6 @@ def _scene_plan(
     control_min_views: int | None = None,
 ) -> ScenePlan:
     """A Cartosat-2 scene plan: agile, 0.8 m, hilly 2000 x 2000 px by default, 2 GCPs."""
-    extra = {} if control_min_views is None else {"control_min_views": control_min_views}
     return ScenePlan(
         preset=preset,
         platform="Cartosat-2",
@@ -114,7 +108,7 @@ def _scene_plan(
         default_size=(2000, 2000),
         default_gcps=2,
         default_checkpoints=50,
-        **extra,
+        control_min_views=control_min_views,
     )
 
 

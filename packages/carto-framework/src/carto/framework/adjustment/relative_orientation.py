@@ -277,10 +277,9 @@ def relative_orientation(
         left_corrected = with_platform_jitter(left, platform, fit.platform_hz, fit.platform_rad)
         right_jittered = with_platform_jitter(right, platform, fit.platform_hz, fit.platform_rad)
     corrected = LineCorrected(right_jittered, basis, fit.coefficients)
-    kept = obs.subset(keep)
     record.update(_fit_record(obs, keep, basis, fit, _line_rate_hz(right)))
     if progress is not None:
-        progress(_progress_message(names, kind, datum, kept, record, basis, fit))
+        progress(_progress_message(names, kind, datum, int(keep.sum()), record, basis, fit))
     return RelativeOrientation(corrected, record, left_corrected)
 
 
@@ -354,7 +353,7 @@ def _progress_message(
     names: tuple[str, ...],
     kind: str,
     datum: str,
-    kept: Observations,
+    n_kept: int,
     record: dict[str, Any],
     basis: LineBasis,
     fit: Fit,
@@ -363,7 +362,7 @@ def _progress_message(
     the across-base parallax and along-base correction it found."""
     return (
         f"relative orientation of {names[1]} to {names[0]} ({kind}, datum {datum}, "
-        f"{kept.line.size} points): across-base parallax "
+        f"{n_kept} points): across-base parallax "
         f"{record['before']['median_across_base_px']:+.3f} -> "
         f"{record['after']['median_across_base_px']:+.3f} px, along-base correction "
         f"{record['correction_height_m']['min']:+.2f} .. "

@@ -132,20 +132,6 @@ class _Writers:
         self.flags.write(flags, 1, window=w)
 
 
-def _profile(grid: MosaicGrid, count: int, dtype: str, nodata: float) -> dict[str, Any]:
-    from rasterio.crs import CRS as RioCRS
-
-    return {
-        "width": grid.width,
-        "height": grid.height,
-        "count": count,
-        "dtype": dtype,
-        "crs": RioCRS.from_wkt(grid.crs_wkt),
-        "transform": grid.transform,
-        "nodata": nodata,
-    }
-
-
 def fuse_dem_folders(
     folders: Sequence[Path],
     out: Path,
@@ -173,20 +159,20 @@ def fuse_dem_folders(
             stack.enter_context(
                 cog_writer(
                     out / "dem.tif",
-                    _profile(grid, 1, "float32", np.nan),
+                    grid.profile(1, "float32", np.nan),
                     what="DEM",
                     vertical=vertical,
                 )
             ),
             stack.enter_context(
                 cog_writer(
-                    out / "quality.tif", _profile(grid, 2, "float32", np.nan), what="quality layers"
+                    out / "quality.tif", grid.profile(2, "float32", np.nan), what="quality layers"
                 )
             ),
             stack.enter_context(
                 cog_writer(
                     out / "quality_counts.tif",
-                    _profile(grid, 1, "uint16", 65535),
+                    grid.profile(1, "uint16", 65535),
                     overview_resampling="nearest",
                     what="quality counts",
                 )
@@ -194,7 +180,7 @@ def fuse_dem_folders(
             stack.enter_context(
                 cog_writer(
                     out / "quality_flags.tif",
-                    _profile(grid, 1, "uint8", 255),
+                    grid.profile(1, "uint8", 255),
                     overview_resampling="nearest",
                     what="quality flags",
                 )

@@ -156,11 +156,10 @@ def _filled_heights(h: FloatArray, s: FloatArray) -> FloatArray:
     """At every node, the height of the pair with the smallest sigma that has one (any
     pair's height where no sigma is known)."""
     has = np.isfinite(h)
-    key = np.where(has & np.isfinite(s), s, np.where(has, np.inf, np.nan))
-    key = np.where(np.isnan(key), np.inf, key)
+    # no height: never chosen; a height without a sigma: after every one with a sigma
+    key = np.where(has, np.where(np.isfinite(s), s, np.finfo(np.float64).max), np.inf)
     best = np.argmin(key, axis=0)
-    best_h = np.take_along_axis(h, best[None], axis=0)[0]
-    return np.where(has.any(axis=0), best_h, np.nan)
+    return np.take_along_axis(h, best[None], axis=0)[0]
 
 
 def _weighted_mean(

@@ -12,6 +12,7 @@ never on the strip's length.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 from typing import Any
@@ -24,7 +25,7 @@ from numpy.typing import NDArray
 from carto.framework.errors import InputError
 from carto.framework.merging.sources import RasterSource
 
-__all__ = ["GridWindow", "MosaicGrid", "read_window", "union_grid"]
+__all__ = ["GridWindow", "MosaicGrid", "bounds_in", "read_window", "same_crs", "union_grid"]
 
 FloatArray = NDArray[np.float64]
 
@@ -72,6 +73,20 @@ class MosaicGrid:
     width: int
     height: int
 
+    def profile(self, count: int, dtype: str, nodata: float | None) -> dict[str, Any]:
+        """The rasterio creation profile of a raster of ``count`` bands on this grid."""
+        from rasterio.crs import CRS as RioCRS
+
+        return {
+            "width": self.width,
+            "height": self.height,
+            "count": count,
+            "dtype": dtype,
+            "crs": RioCRS.from_wkt(self.crs_wkt),
+            "transform": self.transform,
+            "nodata": nodata,
+        }
+
     def windows(self, tile_px: int) -> list[GridWindow]:
         """The grid cut into tiles of ``tile_px`` (smaller at the right and bottom)."""
         return GridWindow(0, 0, self.height, self.width).tiles(tile_px)
@@ -111,33 +126,52 @@ def union_grid(
     return MosaicGrid(crs_wkt, Affine(step, 0.0, xmin, 0.0, -step, ymax), width, height)
 
 
+@functools.lru_cache(maxsize=64)
+def same_crs(a_wkt: str, b_wkt: str) -> bool:
+    """Whether two CRSs (WKT) are the same (PROJ's comparison, cached: tile loops ask it
+    for every window)."""
+    import pyproj
+
+    return a_wkt == b_wkt or pyproj.CRS.from_wkt(a_wkt).equals(pyproj.CRS.from_wkt(b_wkt))
+
+
+def bounds_in(source: RasterSource, crs_wkt: str) -> tuple[float, ...]:
+    """A source's bounds (xmin, ymin, xmax, ymax) in ``crs_wkt``."""
+    if same_crs(source.crs_wkt, crs_wkt):
+        return source.bounds
+    from rasterio.crs import CRS as RioCRS
+    from rasterio.warp import transform_bounds
+
+    src, dst = RioCRS.from_wkt(source.crs_wkt), RioCRS.from_wkt(crs_wkt)
+    return tuple(transform_bounds(src, dst, *source.bounds, densify_pts=21))
+
+
 def _in_crs(source: RasterSource, crs_wkt: str) -> tuple[tuple[float, ...], float]:
     """A source's bounds and posting in ``crs_wkt``."""
-    import pyproj
-    from rasterio.crs import CRS as RioCRS
-    from rasterio.warp import calculate_default_transform, transform_bounds
-
-    if pyproj.CRS.from_wkt(source.crs_wkt).equals(pyproj.CRS.from_wkt(crs_wkt)):
+    if same_crs(source.crs_wkt, crs_wkt):
         return source.bounds, min(source.resolution)
-    src, dst = RioCRS.from_wkt(source.crs_wkt), RioCRS.from_wkt(crs_wkt)
-    bounds = transform_bounds(src, dst, *source.bounds, densify_pts=21)
+    from rasterio.crs import CRS as RioCRS
+    from rasterio.warp import calculate_default_transform
+
     transform, _, _ = calculate_default_transform(
-        src, dst, source.width, source.height, *source.bounds
+        RioCRS.from_wkt(source.crs_wkt),
+        RioCRS.from_wkt(crs_wkt),
+        source.width,
+        source.height,
+        *source.bounds,
     )
-    return tuple(bounds), min(abs(transform.a), abs(transform.e))
+    return bounds_in(source, crs_wkt), min(abs(transform.a), abs(transform.e))
 
 
 def _aligned(source: RasterSource, grid: MosaicGrid) -> tuple[int, int] | None:
     """The grid pixel of the source's corner when the source sits on the grid's pixels."""
-    import pyproj
-
     s, g = source.transform, grid.transform
     if not (math.isclose(s.a, g.a, rel_tol=1e-9) and math.isclose(s.e, g.e, rel_tol=1e-9)):
         return None
     col, row = (~g) @ (s.c, s.f)
     if abs(col - round(col)) > 1e-6 or abs(row - round(row)) > 1e-6:
         return None
-    if not pyproj.CRS.from_wkt(source.crs_wkt).equals(pyproj.CRS.from_wkt(grid.crs_wkt)):
+    if not same_crs(source.crs_wkt, grid.crs_wkt):
         return None
     return round(row), round(col)
 
@@ -186,13 +220,14 @@ def _read_aligned(ds: Any, band: int, corner: tuple[int, int], window: GridWindo
 def _read_warped(
     ds: Any, band: int, grid: MosaicGrid, window: GridWindow, resampling: str
 ) -> FloatArray:
+    import rasterio
     from rasterio.crs import CRS as RioCRS
     from rasterio.warp import Resampling, reproject
 
     out = np.full((window.n_rows, window.n_cols), np.nan, np.float64)
     transform = grid.transform @ Affine.translation(window.col0, window.row0)
     reproject(
-        source=rasterio_band(ds, band),
+        source=rasterio.band(ds, band),
         destination=out,
         src_nodata=ds.nodata if ds.nodata is not None else np.nan,
         dst_transform=transform,
@@ -201,13 +236,6 @@ def _read_warped(
         resampling=Resampling[resampling],
     )
     return out
-
-
-def rasterio_band(ds: Any, band: int) -> Any:
-    """``rasterio.band`` of an open dataset (the warper reads only what it needs)."""
-    import rasterio
-
-    return rasterio.band(ds, band)
 
 
 def _undulation(grid: MosaicGrid, window: GridWindow, geoid: Any) -> FloatArray:

@@ -29,7 +29,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from carto.framework.errors import InputError
-from carto.framework.merging.grid import GridWindow, MosaicGrid, read_window
+from carto.framework.merging.grid import GridWindow, MosaicGrid, bounds_in, read_window
 from carto.framework.merging.sources import RasterSource
 
 __all__ = [
@@ -124,9 +124,14 @@ def blend_window(values: Sequence[FloatArray], feather_px: int) -> tuple[FloatAr
         return np.where(weight > 0, total / weight, np.nan), count
 
 
+def _footprints(sources: Sequence[RasterSource], grid: MosaicGrid) -> list[GridWindow | None]:
+    """Each source's pixel box on the grid (None: outside it)."""
+    return [grid.pixel_box(bounds_in(s, grid.crs_wkt)) for s in sources]
+
+
 def _overlaps(sources: Sequence[RasterSource], grid: MosaicGrid) -> dict[tuple[int, int], Any]:
     """Every two sources whose footprints on the grid meet: their common pixel box."""
-    boxes = [grid.pixel_box(_bounds_in(s, grid)) for s in sources]
+    boxes = _footprints(sources, grid)
     pairs = {}
     for i, j in itertools.combinations(range(len(sources)), 2):
         a, b = boxes[i], boxes[j]
@@ -138,17 +143,6 @@ def _overlaps(sources: Sequence[RasterSource], grid: MosaicGrid) -> dict[tuple[i
         if r1 > r0 and c1 > c0:
             pairs[(i, j)] = GridWindow(r0, c0, r1 - r0, c1 - c0)
     return pairs
-
-
-def _bounds_in(source: RasterSource, grid: MosaicGrid) -> tuple[float, ...]:
-    import pyproj
-    from rasterio.crs import CRS as RioCRS
-    from rasterio.warp import transform_bounds
-
-    if pyproj.CRS.from_wkt(source.crs_wkt).equals(pyproj.CRS.from_wkt(grid.crs_wkt)):
-        return source.bounds
-    src, dst = RioCRS.from_wkt(source.crs_wkt), RioCRS.from_wkt(grid.crs_wkt)
-    return tuple(transform_bounds(src, dst, *source.bounds, densify_pts=21))
 
 
 def seam_steps(
@@ -254,14 +248,17 @@ def write_mosaic(
     from carto.framework.raster.cog import cog_writer
 
     offsets = np.zeros(len(sources)) if offsets_m is None else np.asarray(offsets_m, float)
-    profile = _profile(grid, sources[0].count)
+    profile = grid.profile(sources[0].count, "float32", float("nan"))
+    boxes = _footprints(sources, grid)
     descriptions = sources[0].descriptions
     with cog_writer(path, profile, what="mosaic", vertical=vertical) as dst:
         counts_writer = _counts_writer(counts_path, grid)
         with counts_writer as counts_dst:
             for window in grid.windows(settings.tile_px):
                 for band in range(1, sources[0].count + 1):
-                    blended, count = _tile(sources, grid, window, band, settings, offsets, geoid)
+                    blended, count = _tile(
+                        sources, boxes, grid, window, band, settings, offsets, geoid
+                    )
                     dst.write(blended.astype(np.float32), band, window=_rio(window))
                     if counts_dst is not None and band == 1:
                         counts_dst.write(count.astype(np.uint16), 1, window=_rio(window))
@@ -274,6 +271,7 @@ def write_mosaic(
 
 def _tile(
     sources: Sequence[RasterSource],
+    boxes: Sequence[GridWindow | None],
     grid: MosaicGrid,
     window: GridWindow,
     band: int,
@@ -285,8 +283,7 @@ def _tile(
     outer = window.grown(settings.feather_px, grid.height, grid.width)
     inner = window.inner(outer)
     values = []
-    for source, offset in zip(sources, offsets, strict=True):
-        box = grid.pixel_box(_bounds_in(source, grid))
+    for source, box, offset in zip(sources, boxes, offsets, strict=True):
         if box is None or not _meets(box, outer):
             continue
         v = read_window(source, grid, outer, band=band, resampling=settings.resampling, geoid=geoid)
@@ -307,20 +304,6 @@ def _meets(a: GridWindow, b: GridWindow) -> bool:
     )
 
 
-def _profile(grid: MosaicGrid, count: int) -> dict[str, Any]:
-    from rasterio.crs import CRS as RioCRS
-
-    return {
-        "width": grid.width,
-        "height": grid.height,
-        "count": count,
-        "dtype": "float32",
-        "crs": RioCRS.from_wkt(grid.crs_wkt),
-        "transform": grid.transform,
-        "nodata": float("nan"),
-    }
-
-
 def _counts_writer(path: str | Path | None, grid: MosaicGrid) -> Any:
     import contextlib
 
@@ -328,7 +311,7 @@ def _counts_writer(path: str | Path | None, grid: MosaicGrid) -> Any:
 
     if path is None:
         return contextlib.nullcontext(None)
-    profile = {**_profile(grid, 1), "dtype": "uint16", "nodata": None}
+    profile = grid.profile(1, "uint16", None)
     return cog_writer(path, profile, overview_resampling="nearest", what="mosaic counts")
 
 

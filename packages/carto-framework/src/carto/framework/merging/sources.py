@@ -77,7 +77,7 @@ def _open_one(path: Path) -> RasterSource:
     import rasterio
     from rasterio.errors import RasterioError
 
-    from carto.framework.raster.dem_file import states_vertical, vertical_of
+    from carto.framework.raster.dem_file import dataset_states_vertical, vertical_of
     from carto.framework.raster.gdal_errors import gdal_cause
     from carto.framework.raster.vertical_reference import split_vertical
 
@@ -90,7 +90,7 @@ def _open_one(path: Path) -> RasterSource:
             if ds.transform.b != 0 or ds.transform.d != 0:
                 raise InputError(f"{path}: a rotated grid (field transform) cannot be joined")
             horizontal, file_vertical = split_vertical(pyproj.CRS.from_user_input(ds.crs))
-            heights = states_vertical(path) or _is_heights(ds)
+            heights = dataset_states_vertical(ds) or _is_heights(ds)
             vertical = vertical_of(ds, None, file_vertical, path) if heights else None
             return RasterSource(
                 path=path,

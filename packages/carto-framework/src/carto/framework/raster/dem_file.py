@@ -49,15 +49,19 @@ def states_vertical(path: str | os.PathLike[str]) -> bool:
     vertical part of a compound CRS, or an SRTM tile, whose heights are EGM96's): one that
     does not is read as ellipsoidal (the Carto convention), which a geoid-height DEM saved
     as a plain GeoTIFF is not (tens of metres off)."""
-    import pyproj
     import rasterio
 
     with rasterio.open(path) as ds:
-        if ds.tags().get(VERTICAL_TAG) or ds.driver == "SRTMHGT":
-            return True
-        return (
-            ds.crs is not None and split_vertical(pyproj.CRS.from_user_input(ds.crs))[1] is not None
-        )
+        return dataset_states_vertical(ds)
+
+
+def dataset_states_vertical(ds: Any) -> bool:
+    """:func:`states_vertical` of an open rasterio dataset."""
+    import pyproj
+
+    if ds.tags().get(VERTICAL_TAG) or ds.driver == "SRTMHGT":
+        return True
+    return ds.crs is not None and split_vertical(pyproj.CRS.from_user_input(ds.crs))[1] is not None
 
 
 def check_dem_file(ds: Any, band: int | None, path: Path) -> int:

@@ -94,6 +94,21 @@ def sun_synchronous_overpass(
     return epoch_utc, epoch, elements
 
 
+def ground_directions(
+    epoch_j2000_s: float, elements: orbit.OrbitElements, lon_deg: float, lat_deg: float
+) -> tuple[NDArray, NDArray, NDArray]:
+    """Unit ECEF directions at a ground point, for an orbit at its epoch: ``up`` (the
+    ellipsoid normal), ``along`` (the satellite's motion projected on the horizontal plane:
+    the ground track) and ``left`` (across it)."""
+    p0, v0 = orbit.elements_to_state(elements)
+    _, v_ecef = frames.eci_to_ecef(epoch_j2000_s, p0, v0)
+    v_ecef = np.ravel(v_ecef)
+    up = frames.ellipsoid_normal(lon_deg, lat_deg)
+    along = v_ecef - np.dot(v_ecef, up) * up
+    along /= np.linalg.norm(along)
+    return up, along, np.cross(up, along)
+
+
 def attitude_from_law(dt_s: ArrayLike, law: AttitudeLaw) -> AttitudeSamples:
     """Attitude samples (body -> orbit quaternions) from a ``(roll, pitch, yaw)(dt)`` law."""
     t = np.asarray(dt_s, dtype=np.float64)

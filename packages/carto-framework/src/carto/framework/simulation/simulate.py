@@ -339,11 +339,12 @@ def _terrain_and_windows(
     label = run.settings.terrain_name if options.dem_path is None else options.dem_path
     with _Stage(f"terrain {label}", run.quiet):
         terrain, terrain_name = _terrain(run, bounds, rng)
-    h_target = float(terrain.height(*plan.target))
-    placed = _place(ref, plan, size, h_target if np.isfinite(h_target) else h_mid)
     if any(v.target is not None for v in ref.views.values()):
-        placed = _place(ref, plan, size, h_mid)  # several targets: centre on the middle height
-    return terrain, terrain_name, placed
+        h_place = h_mid  # several targets: centre on the middle height
+    else:
+        h_target = float(terrain.height(*plan.target))
+        h_place = h_target if np.isfinite(h_target) else h_mid
+    return terrain, terrain_name, _place(ref, plan, size, h_place)
 
 
 def _true_sensors(

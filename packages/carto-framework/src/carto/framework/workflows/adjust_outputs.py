@@ -16,6 +16,7 @@ from numpy.typing import NDArray
 
 from carto.framework.adjustment.base import AdjustmentResult
 from carto.framework.adjustment.image_trends import fold_image_trends
+from carto.framework.adjustment.misfit import residual_lines
 from carto.framework.adjustment.observations import Observations
 from carto.framework.errors import InputError
 from carto.framework.files.documents import write_json_atomic
@@ -110,12 +111,14 @@ def write_outputs(
     result, name = adjusted.result, run.adjuster
     files = _write_models(result, run.types, out, quiet)
     files.update(_write_products(result, name, run.src, out))
-    misfit = residual_misfit(result)
+    lines = residual_lines(result)  # one projection of every observation, used twice
+    misfit = residual_misfit(result, lines)
     plot = residual_plot(
         result,
         out / "residuals.png",
         f"{name}: {run.n_used} GCPs, {run.n_ties} tie points, sigma0 {result.sigma0:.2f}",
         misfit,
+        lines,
     )
     for flag in misfit["flags"]:
         progress("adjust", f"model misfit: {flag}", quiet)

@@ -63,7 +63,7 @@ __all__ = [
 ]
 
 
-def _radiometry(path: str | os.PathLike[str]) -> Any:
+def radiometry(path: str | os.PathLike[str]) -> Any:
     """The dtype of an input image's first band: the ortho-image is written in it (an
     integer image: rounded, nodata 0)."""
     import warnings
@@ -562,7 +562,7 @@ def _write_rasters(
             out / f"ortho_{side}.tif",
             ortho,
             product.ortho_grid,
-            out_dtype=_radiometry(rasters[name]),
+            out_dtype=radiometry(rasters[name]),
             tags={"CARTO_PRODUCT": "ortho", "CARTO_IMAGE": name},
         ).name
     for key, on, grid in (

@@ -261,30 +261,35 @@ def failed_pair_record(pair: PairChoice, exc: CartoError) -> dict[str, Any]:
 def pair_record(pair: PairChoice, report: Mapping[str, Any], kept: bool) -> dict[str, Any]:
     """What ``report.json`` says of a pair that ran: its geometry and its DEM's figures."""
     accuracy = report.get("accuracy") or {}
-    overall = accuracy.get("overall", accuracy) if isinstance(accuracy, Mapping) else {}
     return {
         **pair.as_dict(),
         "status": "done",
         "folder": f"pairs/{pair.folder}" if kept else None,
         "matched_fraction": report.get("matched_fraction"),
         "completeness": report.get("completeness"),
-        "nmad_m": overall.get("nmad_m"),
-        "median_m": overall.get("median_m"),
+        "nmad_m": accuracy.get("nmad_m"),
+        "median_m": accuracy.get("median_m"),
     }
 
 
-def isfinite_or_none(value: Any) -> float | None:
-    return float(value) if value is not None and math.isfinite(float(value)) else None
-
-
 # ----------------------------------------------------------------------------- the run
-def _scene_sensors(request: MultiViewRequest) -> tuple[dict[str, Sensor], float]:
-    """The scene's models (the adjusted ones when a ``carto adjust`` folder is given) and
-    the median height of its starting DEM (0 without one), where pairs are judged."""
+@attrs.frozen(eq=False)
+class _SceneViews:
+    """The scene's images: their models (the adjusted ones when a ``carto adjust`` folder
+    is given), their raster files, and the median height of the starting DEM (0 without
+    one), where pairs are judged."""
+
+    sensors: dict[str, Sensor]
+    rasters: dict[str, Path]
+    h_m: float
+
+
+def _scene_views(request: MultiViewRequest) -> _SceneViews:
     from carto.framework.files.staging import require_complete_output
     from carto.framework.products.scene import Scene
     from carto.framework.raster.dem import DEM
-    from carto.framework.workflows.opening import open_product, open_sensor
+    from carto.framework.workflows.opening import open_product
+    from carto.framework.workflows.stereo_pair import adjusted_model
 
     if not (request.source / "scene.json").is_file():
         raise UsageError(
@@ -292,17 +297,14 @@ def _scene_sensors(request: MultiViewRequest) -> tuple[dict[str, Sensor], float]
             "(carto simulate or a product folder) with --images or --pairs"
         )
     scene = Scene.open(request.source)
-    sensors = dict(open_product(scene.root, request.sensor_type).sensors)
-    if request.models is not None:
-        models = require_complete_output(request.models, "adjust")
-        for name in sensors:
-            for candidate in (models / f"{name}.model.json", models / f"{name}_RPC.TXT"):
-                if candidate.is_file():
-                    sensors[name] = open_sensor(candidate)
-                    break
+    models = None if request.models is None else require_complete_output(request.models, "adjust")
+    sensors = {
+        name: adjusted_model(models, name, sensor)
+        for name, sensor in open_product(scene.root, request.sensor_type).sensors.items()
+    }
     init = scene.manifest.get("init_dem")
     h_m = float(np.nanmedian(DEM.open(scene.path(init)).heights)) if init else 0.0
-    return sensors, h_m
+    return _SceneViews(sensors, {n: scene.raster(n) for n in sensors}, h_m)
 
 
 def multiview_dem_product(request: MultiViewRequest, **dem_options: Any) -> dict[str, Any]:
@@ -312,10 +314,12 @@ def multiview_dem_product(request: MultiViewRequest, **dem_options: Any) -> dict
     from carto.framework.workflows.run_record import record_run, utc_now
 
     quiet = bool(dem_options.get("quiet", False))
-    sensors, h_m = _scene_sensors(request)
-    if dem_options.get("init_height_m") is not None:
-        h_m = float(dem_options["init_height_m"])
-    pairs, left_out = choose_pairs(sensors, images=request.images, pairs=request.pairs, h_m=h_m)
+    views = _scene_views(request)
+    h_m = dem_options.get("init_height_m")
+    h_m = views.h_m if h_m is None else float(h_m)
+    pairs, left_out = choose_pairs(
+        views.sensors, images=request.images, pairs=request.pairs, h_m=h_m
+    )
     started = utc_now()
     inputs = [
         request.source,
@@ -326,7 +330,7 @@ def multiview_dem_product(request: MultiViewRequest, **dem_options: Any) -> dict
     ]
     with staged_folder(request.out_dir, "dem", inputs=[p for p in inputs if p]) as stage:
         records, done = _run_pairs(stage, request, pairs, dem_options, quiet)
-        report = _fused_into(stage, request, done, dem_options, quiet)
+        report = _fused_into(stage, request, views, done, dem_options, quiet)
         report["pairs"] = records
         report["pairs_left_out"] = [p.as_dict() for p in left_out]
         if not request.keep_pairs:
@@ -379,6 +383,7 @@ def _run_pairs(
 def _fused_into(
     stage: Path,
     request: MultiViewRequest,
+    views: _SceneViews,
     done: Sequence[tuple[PairChoice, Path]],
     dem_options: Mapping[str, Any],
     quiet: bool,
@@ -405,7 +410,7 @@ def _fused_into(
         "quality_counts": "quality_counts.tif",
         "quality_flags": "quality_flags.tif",
     }
-    files.update(_orthos_on_fused(stage, request, done, quiet))
+    files.update(_orthos_on_fused(stage, views, done, quiet))
     report: dict[str, Any] = {
         "generator": "fusion",
         "images": sorted({n for pair, _ in done for n in (pair.left, pair.right)}),
@@ -484,44 +489,35 @@ def _evaluated(
 
 
 def _orthos_on_fused(
-    stage: Path, request: MultiViewRequest, done: Sequence[tuple[PairChoice, Path]], quiet: bool
+    stage: Path, views: _SceneViews, done: Sequence[tuple[PairChoice, Path]], quiet: bool
 ) -> dict[str, str]:
-    """One ortho-image per image on the fused DEM, at the pairs' ortho posting, written
-    from tiles orthorectified one by one (memory of a tile, not of the scene)."""
+    """One ortho-image per image of the pairs on the fused DEM, at the pairs' ortho
+    posting, written from tiles orthorectified one by one (memory of a tile, not of the
+    scene)."""
     import shutil
 
     from carto.framework.imaging.ortho import write_ortho
     from carto.framework.imaging.preparation import prepared_sources
     from carto.framework.raster.dem import DEM
+    from carto.framework.workflows.dem import radiometry
     from carto.framework.workflows.reporting import progress
-    from carto.framework.workflows.stereo_pair import StereoInputs, open_pair
 
     dem = DEM.open(stage / "dem.tif")
-    sensors: dict[str, Sensor] = {}
-    rasters: dict[str, Path] = {}
-    for pair, _ in done:
-        opened = open_pair(
-            StereoInputs(
-                source=request.source,
-                models=request.models,
-                sensor_type=request.sensor_type,
-                pair=(pair.left, pair.right),
-            )
-        )
-        sensors.update(opened.sensors)
-        rasters.update(opened.rasters)
+    names = sorted({n for pair, _ in done for n in (pair.left, pair.right)})
+    sensors = {n: views.sensors[n] for n in names}
+    rasters = {n: views.rasters[n] for n in names}
     grid = _ortho_grid(dem, done[0][1] / "ortho_left.tif")
     work = stage / "work"
     sources = prepared_sources(rasters, sensors, dem, folder=work / "prepared")
     files = {}
-    for name in sorted(sensors):
+    for name in names:
         progress("dem", f"ortho-image of {name} on the fused DEM", quiet)
         layer = _tiled_ortho(sources[name], sensors[name], grid, dem, work / "ortho" / name)
         files[f"ortho_{name}"] = write_ortho(
             stage / f"ortho_{name}.tif",
             layer,
             grid,
-            out_dtype=_dtype_of(rasters[name]),
+            out_dtype=radiometry(rasters[name]),
             tags={"CARTO_PRODUCT": "ortho", "CARTO_IMAGE": name},
         ).name
     shutil.rmtree(work, ignore_errors=True)
@@ -562,14 +558,3 @@ def _tiled_ortho(source: Any, sensor: Sensor, grid: Any, dem: Any, folder: Path)
             np.savez(path, ortho=values)
             pieces.append(TilePiece(path, "ortho", r0, c0, (n_r, n_c)))
     return TiledLayer.of(grid.shape, pieces)
-
-
-def _dtype_of(path: Path) -> Any:
-    import warnings
-
-    import rasterio
-
-    with warnings.catch_warnings():  # a raw image has no georeferencing: nothing to say
-        warnings.simplefilter("ignore", rasterio.errors.NotGeoreferencedWarning)
-        with rasterio.open(path) as ds:
-            return np.dtype(ds.dtypes[0])

@@ -13,11 +13,12 @@ from carto.framework.adjustment.base import AdjustmentResult
 from carto.framework.adjustment.misfit import misfit_report, residual_lines
 
 
-def residual_misfit(result: AdjustmentResult) -> dict[str, Any]:
-    """:func:`~carto.framework.adjustment.misfit.misfit_report` of an adjustment."""
+def residual_misfit(result: AdjustmentResult, lines: np.ndarray | None = None) -> dict[str, Any]:
+    """:func:`~carto.framework.adjustment.misfit.misfit_report` of an adjustment (``lines``:
+    its :func:`~carto.framework.adjustment.misfit.residual_lines`, when known)."""
     return misfit_report(
         result.image_residuals,
-        residual_lines(result),
+        residual_lines(result) if lines is None else lines,
         result.sigma0,
         result.redundancy,
         result.variance_components,
@@ -25,11 +26,16 @@ def residual_misfit(result: AdjustmentResult) -> dict[str, Any]:
 
 
 def residual_plot(
-    result: AdjustmentResult, path: Path, title: str, misfit: dict[str, Any] | None = None
+    result: AdjustmentResult,
+    path: Path,
+    title: str,
+    misfit: dict[str, Any] | None = None,
+    lines: np.ndarray | None = None,
 ) -> Path:
     """Image residual vectors per image (scaled) and GCP ground residuals, and below them each
     image's residuals against the line with the misfit checks' verdicts
-    (:func:`residual_misfit`), as a PNG."""
+    (:func:`residual_misfit`), as a PNG. ``misfit`` and ``lines`` (the observations' image
+    lines) are computed here unless given: each costs a projection of every observation."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -38,12 +44,13 @@ def residual_plot(
     from carto.framework.files.atomic import atomic_output
 
     images = list(result.sensors)
-    misfit = residual_misfit(result) if misfit is None else misfit
+    lines = residual_lines(result) if lines is None else lines
+    misfit = residual_misfit(result, lines) if misfit is None else misfit
     fig, grid = plt.subplots(
         2, len(images) + 1, figsize=(4.2 * (len(images) + 1), 7.6), squeeze=False
     )
     axes = grid[0]
-    _plot_residuals_along_lines(grid[1], result, misfit)
+    _plot_residuals_along_lines(grid[1], result, misfit, lines)
     _write_sigma0_verdict(grid[1][-1], misfit)
     for ax, name in zip(axes, images, strict=False):
         _plot_residual_vectors(ax, result, name)
@@ -57,12 +64,11 @@ def residual_plot(
 
 
 def _plot_residuals_along_lines(
-    axes: Any, result: AdjustmentResult, misfit: dict[str, Any]
+    axes: Any, result: AdjustmentResult, misfit: dict[str, Any], lines_all: np.ndarray
 ) -> None:
     """Each image's line and sample residuals against the image line (one axis per image,
     in the order of ``result.sensors``), titled by the misfit checks' verdicts on it."""
     res = result.image_residuals
-    lines_all = residual_lines(result)
     for ax, name in zip(axes, list(result.sensors), strict=False):
         m = (res["image"] == name) & np.isfinite(res["d_line"]) & np.isfinite(lines_all)
         ax.plot(lines_all[m], res["d_line"][m], ".", ms=2, alpha=0.5, label="line")

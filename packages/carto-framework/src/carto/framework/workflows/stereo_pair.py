@@ -43,7 +43,7 @@ def _model_beside(image: Path) -> Path:
     return image
 
 
-def _adjusted(models: Path | None, name: str, sensor: Sensor) -> Sensor:
+def adjusted_model(models: Path | None, name: str, sensor: Sensor) -> Sensor:
     """The adjusted model of image ``name`` from a ``carto adjust`` output folder, if any."""
     if models is None:
         return sensor
@@ -146,7 +146,7 @@ def open_pair(inputs: StereoInputs) -> StereoPair:
             raise InputError(f"{source}: a DEM needs two images, the scene has {len(sensors)}")
         if not pair:
             names.sort(key=lambda n: _off_nadir_deg(sensors[n]))
-        chosen = {n: _adjusted(models_dir, n, sensors[n]) for n in names}
+        chosen = {n: adjusted_model(models_dir, n, sensors[n]) for n in names}
         init = scene.manifest.get("init_dem")
         dem = DEM.open(scene.path(init)) if init else None
         types = tuple(product.types[n] for n in names)
@@ -167,7 +167,7 @@ def open_pair(inputs: StereoInputs) -> StereoPair:
         chosen_type = sensor_type_for(model_path, sensor_type, "file")
         sensor = chosen_type.open(model_path, **open_options()).for_raster(path)
         check_model_of_image(path, model_path, sensor)
-        sensors[key] = _adjusted(models_dir, key, sensor)
+        sensors[key] = adjusted_model(models_dir, key, sensor)
         rasters[key] = path
         types.append(chosen_type)
     return StereoPair(rasters, sensors, tuple(types), None)
@@ -230,7 +230,11 @@ def oriented_pair(
 
     sensors = pair.sensors
     names = list(sensors)
-    images = _prepared_images(pair, start, work, engine)
+    from carto.framework.imaging.preparation import prepared_sources
+
+    # read by windows, checked and prepared (staggered arrays merged) in the work folder
+    prepared = prepared_sources(pair.rasters, pair.sensors, start, work / "prepared", engine)
+    images = [prepared[n] for n in pair.sensors]
     checked, warnings = checked_pair(
         images, [sensors[n] for n in names], start, allow_poor=allow_poor
     )
@@ -249,27 +253,3 @@ def oriented_pair(
     return OrientedPair(
         names, pair.rasters, sensors, images, start, checked, warnings, control, oriented.record
     )
-
-
-def _prepared_images(pair: StereoPair, start: DEM, work: Path, engine: Any) -> list[Any]:
-    """Each image of the pair read by windows, checked and prepared (staggered arrays
-    merged) in ``work``, in the order of its sensors."""
-    from carto.framework.imaging.preparation import prepare_image
-    from carto.framework.raster.image_source import RasterImage, check_image_source
-
-    rasters = pair.rasters
-    images = []
-    for n, sensor in pair.sensors.items():
-        source = RasterImage.open(rasters[n])
-        check_image_source(source, str(rasters[n]))
-        images.append(
-            prepare_image(
-                source,
-                sensor,
-                start,
-                work / "prepared" / n,
-                engine,
-                desc=f"merge staggered arrays of {n}",
-            )
-        )
-    return images

@@ -43,7 +43,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from carto.framework.arrays import as_float_arrays
 from carto.framework.errors import InputError
-from carto.framework.geometry.frames import WGS84_A_M, WGS84_E2
+from carto.framework.geometry import frames
 from carto.framework.geometry.rpc.model import RPCCoefficients
 from carto.framework.geometry.rpc.readers import read_rpc_and_shape, sniff_rpc_format
 from carto.framework.geometry.sensor import (
@@ -423,10 +423,8 @@ class RPCSensor(Sensor):
         metres, ``(N, 2, 3)`` (px/m)."""
         lon, lat, h = (a.ravel() for a in as_float_arrays(lon_deg, lat_deg, h_m))
         _, _, jac = self._rpc.project_with_partials(lon, lat, h)
-        phi = np.radians(lat)
-        w = np.sqrt(1.0 - WGS84_E2 * np.sin(phi) ** 2)
-        m_per_deg_lat = np.radians(WGS84_A_M * (1 - WGS84_E2) / w**3 + h)
-        m_per_deg_lon = np.radians((WGS84_A_M / w + h) * np.cos(phi))
+        m_per_rad_lon, m_per_rad_lat = frames.metres_per_radian(lat, h)
+        m_per_deg_lon, m_per_deg_lat = np.radians(m_per_rad_lon), np.radians(m_per_rad_lat)
         jac[:, :, 0] /= m_per_deg_lon[:, None]
         jac[:, :, 1] /= m_per_deg_lat[:, None]
         if not self._identity:
