@@ -80,6 +80,11 @@ def test_ray_dem_is_trace_dem_with_loose_arguments(cartosat1_pair):
     p, u = sensor.ray(np.array([500.5]), np.array([700.5]))
     ray = (*p[0], *u[0])
     omega_c = np.asarray(sensor._table.omega_c, float)
-    loose = ray_dem(*ray, grid.heights, *grid[1:5], *grid[5:], omega_c)
-    assert loose == trace_dem(ray, omega_c, grid)
+    loose = ray_dem(*ray, grid.heights, *grid[1:5], *grid[5:8], omega_c)
+    # loose arguments carry no local slope bounds: the same steps as a grid without them
+    assert loose == trace_dem(ray, omega_c, grid._replace(slopes=np.empty((0, 0)), cell_m=0.0))
     assert loose[2] == pytest.approx(120.0, abs=1e-4)
+    # the local bounds take other steps to the same point
+    local = trace_dem(ray, omega_c, grid)
+    assert local[2] == pytest.approx(120.0, abs=1e-4)
+    np.testing.assert_allclose(local[:2], loose[:2], atol=1e-8)

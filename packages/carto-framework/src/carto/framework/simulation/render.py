@@ -22,6 +22,7 @@ simulator generates them so; :func:`locate_pixels` and :func:`render_reflectance
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numba
@@ -30,19 +31,29 @@ from numpy.typing import NDArray
 
 from carto.framework.errors import InputError
 from carto.framework.geometry.linescan.raycast import (
+    RAY_SIZE,
+    STATE_SIZE,
+    CameraStates,
+    camera_states,
+    interp_time,
+    line_state,
+    quadratic_table,
+    state_ray,
+)
+from carto.framework.geometry.linescan.scanner import LineScanner
+from carto.framework.geometry.linescan.terrain_intersection import (
     HEIGHT_TOLERANCE_M,
     MAX_STEPS,
-    CameraStates,
+    QUADRATIC_STEP,
     DemGrid,
     GeoGrid,
-    camera_states,
     dem_grid,
     geo_grid,
     grid_bilinear,
-    interp_time,
-    trace_pixel,
+    interpolated_quadratic,
+    ray_quadratic,
+    trace_quadratic,
 )
-from carto.framework.geometry.linescan.scanner import LineScanner
 
 FloatArray = NDArray[np.float64]
 
@@ -63,50 +74,102 @@ class _RenderWindow(NamedTuple):
     supersample: int
 
 
+class _SublineScratch(NamedTuple):
+    """Per-row scratch space of :func:`_render_kernel`: the camera state of the sub-line
+    (:data:`STATE_SIZE`), one ray (:data:`RAY_SIZE`), the quadratic models of the node rays
+    of the even and the odd detectors (:func:`quadratic_table`), and the sums and counts of
+    texture values per window column."""
+
+    state: NDArray
+    ray: NDArray
+    even: NDArray
+    odd: NDArray
+    acc: NDArray
+    count: NDArray
+
+
 @numba.njit(cache=True, nogil=True, inline="always")
-def _render_pixel(
-    window: _RenderWindow,
+def _ray_of(
+    s: float,
+    stagger: float,
+    table: NDArray,
+    n_nodes: int,
+    first: float,
     cam: CameraStates,
     dem: DemGrid,
-    tex: GeoGrid,
-    i: int,
-    j: int,
-    ray: NDArray,
-) -> float:  # pragma: no cover - compiled
-    """Mean texture value of the sub-pixel rays of window pixel ``(i, j)``; NaN unless every
-    ray meets the DEM and the texture. ``ray`` is scratch space, ``(6,)``."""
+    w: _SublineScratch,
+) -> tuple[float, float, float]:  # pragma: no cover - compiled
+    """Ground point of the ray of detector sample ``s``: its quadratic model interpolated
+    from the sub-line's ``table`` (exact where a node ray misses), then the exact ray."""
+    state_ray(s, stagger, cam, w.state, w.ray)
+    ray = (w.ray[0], w.ray[1], w.ray[2], w.ray[3], w.ray[4], w.ray[5])
+    q = interpolated_quadratic(table, n_nodes, first, s)
+    if np.isnan(q.d0_m + q.span_m + q.lon2 + q.lat2 + q.h2):
+        q = ray_quadratic(ray, cam.omega_c, dem.h_top_m, dem.h_bottom_m)
+    return trace_quadratic(ray, cam.omega_c, q, dem)
+
+
+@numba.njit(cache=True, nogil=True)  # not inlined: numba 0.68's parallel loop then loses
+def _render_subline(  # the writes to arrays passed in a tuple
+    window: _RenderWindow, cam: CameraStates, dem: DemGrid, tex: GeoGrid, w: _SublineScratch
+) -> None:  # pragma: no cover - compiled
+    """Add the texture values of one sub-line's rays (camera state ``w.state``,
+    :func:`line_state`) to ``w.acc`` and their number to ``w.count``, per window column:
+    ``supersample`` rays per pixel across; rays that miss the DEM or the texture add
+    nothing."""
     supersample = window.supersample
     inv = 1.0 / supersample
-    k = window.first_sample + j
-    stagger = window.stagger_tan if (k % 2) == 1 else 0.0
-    acc = 0.0
-    count = 0
-    for a in range(supersample):
-        line = window.line0 + i + (a + 0.5) * inv
-        t = interp_time(line, cam.line_nodes, cam.t_nodes)
+    first = window.first_sample + 0.5 * inv
+    n_nodes = w.even.shape[0]
+    quadratic_table(first, n_nodes, 0.0, cam, dem, w.state, w.ray, w.even)
+    quadratic_table(first, n_nodes, window.stagger_tan, cam, dem, w.state, w.ray, w.odd)
+    for j in range(window.n_cols):
+        k = window.first_sample + j
+        is_odd = (k % 2) == 1
+        stagger = window.stagger_tan if is_odd else 0.0
         for b in range(supersample):
             s = k + (b + 0.5) * inv
-            lon, lat, _h = trace_pixel(t, s, stagger, cam, dem, ray)
+            if is_odd:
+                lon, lat, _h = _ray_of(s, stagger, w.odd, n_nodes, first, cam, dem, w)
+            else:
+                lon, lat, _h = _ray_of(s, stagger, w.even, n_nodes, first, cam, dem, w)
             if not np.isfinite(lon):
                 continue
             v = grid_bilinear(tex.values, tex.x0_deg, tex.dx_deg, tex.y0_deg, tex.dy_deg, lon, lat)
             if np.isfinite(v):
-                acc += v
-                count += 1
-    if count == supersample * supersample:
-        return acc / count
-    return np.nan
+                w.acc[j] += v
+                w.count[j] += 1
 
 
 @numba.njit(parallel=True, cache=True, nogil=True)
 def _render_kernel(
     window: _RenderWindow, cam: CameraStates, dem: DemGrid, tex: GeoGrid
 ) -> NDArray:  # pragma: no cover - compiled
+    """Mean texture value of the ``supersample x supersample`` sub-pixel rays of every window
+    pixel; NaN unless every ray meets the DEM and the texture. The camera state is
+    interpolated once per sub-line, shared by the line's detectors, and so are the exact
+    quadratic models of every :data:`QUADRATIC_STEP`-th ray."""
     image = np.full((window.n_lines, window.n_cols), np.nan, dtype=np.float32)
+    supersample = window.supersample
+    inv = 1.0 / supersample
+    n_nodes = math.ceil((window.n_cols - inv) / QUADRATIC_STEP) + 2
     for i in numba.prange(window.n_lines):
-        ray = np.empty(6)
+        state = np.empty(STATE_SIZE)
+        ray = np.empty(RAY_SIZE)
+        even = np.empty((n_nodes, 11))
+        odd = np.empty((n_nodes, 11))
+        acc = np.zeros(window.n_cols)
+        count = np.zeros(window.n_cols, np.int64)
+        for a in range(supersample):
+            line = window.line0 + i + (a + 0.5) * inv
+            t = interp_time(line, cam.line_nodes, cam.t_nodes)
+            if line_state(t, cam, state):
+                _render_subline(
+                    window, cam, dem, tex, _SublineScratch(state, ray, even, odd, acc, count)
+                )
         for j in range(window.n_cols):
-            image[i, j] = _render_pixel(window, cam, dem, tex, i, j, ray)
+            if count[j] == supersample * supersample:
+                image[i, j] = acc[j] / count[j]
     return image
 
 
