@@ -67,3 +67,16 @@ def test_unknown_ray_directions_give_no_height(setting):
         blind, np.array([3]), np.array([4]), heights[3:4, 4], x_n + 1.0, y_n, heights[3:4, 4]
     )
     assert np.isnan(h).all()
+
+
+def test_directions_on_a_block_of_nodes_are_the_pointwise_bilinear_ones():
+    # an irregular last lattice step (the grid's last node), clamping beyond the lattice
+    rows = np.r_[np.arange(0, 100, 32), 99]
+    cols = np.r_[np.arange(0, 70, 32), 69]
+    t_xy = np.random.default_rng(3).normal(size=(2, 2, rows.size, cols.size))
+    rays = RayField(None, rows, cols, t_xy)
+    block = rays.on_nodes(slice(10, 100), slice(0, 70))
+    rr, cc = np.meshgrid(np.arange(10, 100), np.arange(70), indexing="ij")
+    np.testing.assert_allclose(block, rays.at(rr, cc), rtol=0, atol=1e-12)
+    # at a lattice node, the node's own direction
+    np.testing.assert_allclose(block[..., 54, 32], t_xy[..., 2, 1], atol=1e-12)

@@ -315,6 +315,40 @@ def test_geoid_bilinear_and_wrap_around(shared_data: Path):
     assert np.isfinite(geoid.undulation([0.0, 10.0], [90.0, -90.0])).all()
 
 
+def test_geoid_on_a_lonlat_grid_is_the_pointwise_undulation(shared_data: Path):
+    geoid = Geoid.open(shared_data / GTX)
+    # across the antimeridian (wrap-around) and over a pole's row
+    for lon0, lat0 in ((179.3, 10.2), (55.6, -21.1), (-10.0, 89.9)):
+        lon = lon0 + 0.013 * np.arange(90)
+        lat = lat0 - 0.011 * np.arange(7)
+        grid = geoid.undulation_grid(lon, lat)
+        lon2, lat2 = np.meshgrid(lon, lat)
+        np.testing.assert_allclose(grid, geoid.undulation(lon2, lat2), rtol=0, atol=1e-9)
+    # a DEM on a lon/lat grid converts separably, a projected one point by point: the same
+    dem = DEM.from_array(np.full((40, 60), 10.0), GEO_TRANSFORM, "EPSG:4326", vertical=EGM96)
+    np.testing.assert_allclose(
+        dem.to_ellipsoid(geoid).heights - 10.0,
+        geoid.undulation(*dem.node_lonlat()),
+        rtol=0,
+        atol=1e-9,
+    )
+
+
+def test_separable_bilinear_sampling_equals_the_pointwise_one():
+    from carto.framework.raster.grid_sampling import bilinear_sample, bilinear_sample_grid
+
+    grid = np.random.default_rng(4).normal(size=(9, 12))
+    grid[6, 3] = np.nan  # only its neighbours are NaN
+    row = np.r_[-0.5, 0.0, np.linspace(0.2, 7.9, 25), 8.0, 8.5]
+    col = np.r_[-1.0, np.linspace(0.0, 11.0, 31), 11.2]
+    for g in (grid, np.nan_to_num(grid), grid[:1], grid[:, :1]):
+        expected = bilinear_sample(g, *np.meshgrid(row, col, indexing="ij"))
+        got = bilinear_sample_grid(g, row, col)
+        np.testing.assert_array_equal(np.isnan(got), np.isnan(expected))
+        np.testing.assert_allclose(got, expected, rtol=0, atol=1e-12)
+    assert got.shape == (row.size, col.size)
+
+
 def test_geoid_bad_files(tmp_path: Path):
     with pytest.raises(InputError, match="no such file"):
         Geoid.open(tmp_path / "missing.gtx")

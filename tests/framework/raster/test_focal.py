@@ -38,3 +38,24 @@ def test_errors_and_empty():
         focal_nanmedian(np.zeros(5))
     with pytest.raises(InputError, match="radius"):
         focal_nanmedian(np.zeros((3, 3)), -1)
+
+
+@pytest.mark.parametrize("sigma", [0.4, 1.0, 3.0, 27.0])
+@pytest.mark.parametrize("shape", [(60, 45), (3, 50), (1, 7), (40, 1)])
+def test_gaussian_equals_scipy_with_nearest_edges(sigma, shape):
+    from scipy import ndimage
+
+    from carto.framework.raster.focal import gaussian_nearest
+
+    values = np.random.default_rng(5).normal(size=shape)
+    expected = ndimage.gaussian_filter(values, sigma, mode="nearest")
+    np.testing.assert_allclose(gaussian_nearest(values, sigma), expected, rtol=0, atol=1e-12)
+
+
+def test_gaussian_refuses_bad_arguments():
+    from carto.framework.raster.focal import gaussian_nearest
+
+    with pytest.raises(InputError, match="2-D"):
+        gaussian_nearest(np.zeros(5), 1.0)
+    with pytest.raises(InputError, match="sigma"):
+        gaussian_nearest(np.zeros((5, 5)), 0.0)

@@ -112,8 +112,7 @@ def node_heights(
         # the rays' directions of the node a pixel lies in (they turn by micro-radians
         # across a node)
         nr, nc = pr // k, pc // k
-        band_r, band_c = np.meshgrid(np.arange(a, b), np.arange(n_c), indexing="ij")
-        at_nodes = rays.at(band_r, band_c)
+        at_nodes = rays.on_nodes(slice(a, b), slice(0, n_c))
         directions = at_nodes[:, :, nr - a, nc]
         x_p, y_p, h_p = intersect_offsets(
             rays, fr, fc, h_pix, x_m, y_m, h_match, directions=directions

@@ -10,7 +10,7 @@ from collections.abc import Iterator
 import numpy as np
 from numpy.typing import NDArray
 
-from carto.framework.sdk.dem import focal_nanmedian
+from carto.framework.sdk.dem import focal_nanmedian, gaussian_nearest
 from carto.ior.settings import IORSettings
 
 __all__ = ["BAND_ROWS", "regularise"]
@@ -50,8 +50,6 @@ def regularise(
     that smooths the noise and fills the holes from their neighbours, with wider Gaussians
     (3 and 9 sigma) where the narrow one has no support (nodes far from any match keep their
     height). Returns the new heights and the inliers."""
-    from scipy import ndimage
-
     n_rows = heights.shape[0]
     valid_any = False
     # pass 1: residuals against the local median (float32: the outlier test needs no more)
@@ -75,15 +73,15 @@ def regularise(
             inlier = np.abs(resid[wide]) <= limit  # False at NaN
         dh = new_height[wide] - heights[wide]
         dh[~inlier] = 0.0
-        num = ndimage.gaussian_filter(dh, sigma, mode="nearest")
-        den = ndimage.gaussian_filter(inlier.astype(np.float64), sigma, mode="nearest")
+        num = gaussian_nearest(dh, sigma)
+        den = gaussian_nearest(inlier.astype(np.float64), sigma)
         for factor in _FILL_FACTORS:
             missing = den < 0.05
             if not missing.any():
                 break
             wider = factor * sigma
-            num = np.where(missing, ndimage.gaussian_filter(num, wider, mode="nearest"), num)
-            den = np.where(missing, ndimage.gaussian_filter(den, wider, mode="nearest"), den)
+            num = np.where(missing, gaussian_nearest(num, wider), num)
+            den = np.where(missing, gaussian_nearest(den, wider), den)
         with np.errstate(invalid="ignore", divide="ignore"):
             update = np.where(den > 1e-3, num / den, 0.0)
         out[rows] = heights[rows] + update[inner]

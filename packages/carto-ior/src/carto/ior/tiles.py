@@ -304,8 +304,7 @@ def _predicted_sigma(
     """Per node of the window, the predicted height standard deviation, m
     (:func:`~carto.ior.height_precision.node_sigma_m`)."""
     # the predicted precision: the matching's bound, checked across the base; local B/H
-    node_r, node_c = np.meshgrid(np.arange(w.shape[0]), np.arange(w.shape[1]), indexing="ij")
-    t = rays.at(node_r, node_c)
+    t = rays.on_nodes(slice(0, w.shape[0]), slice(0, w.shape[1]))
     bh = np.hypot(t[0, 0] - t[1, 0], t[0, 1] - t[1, 1])
     sigma, _ = node_sigma_m(
         ortho[0],

@@ -49,7 +49,11 @@ from carto.framework.files.paths import existing_file
 from carto.framework.raster.dem_file import MIN_DEM_POSTS as MIN_DEM_POSTS
 from carto.framework.raster.dem_file import check_dem_file, vertical_of
 from carto.framework.raster.gdal_errors import gdal_cause
-from carto.framework.raster.grid_sampling import EDGE_TOL_PX, bilinear_sample
+from carto.framework.raster.grid_sampling import (
+    EDGE_TOL_PX,
+    bilinear_sample,
+    bilinear_sample_grid,
+)
 from carto.framework.raster.vertical_reference import (
     EGM96 as EGM96,
 )
@@ -263,6 +267,19 @@ class Geoid:
         col = inv.a * lon + inv.b * lat + inv.c - 0.5
         row = inv.d * lon + inv.e * lat + inv.f - 0.5
         return bilinear_sample(self._padded, row, col)
+
+    def undulation_grid(self, lon_deg: ArrayLike, lat_deg: ArrayLike) -> FloatArray:
+        """:meth:`undulation` at every pair of ``lat_deg`` (1-D, rows) and ``lon_deg`` (1-D,
+        columns) of a lon/lat grid: ``(len(lat_deg), len(lon_deg))``, computed separably."""
+        lon, lat = (np.asarray(v, np.float64).ravel() for v in (lon_deg, lat_deg))
+        inv = ~self.transform
+        if inv.b or inv.d:  # a rotated geoid grid: point by point
+            return self.undulation(*np.meshgrid(lon, lat))
+        if self._global:
+            lon = _wrap_lon(lon, self.transform.c + 0.5 * self.transform.a)
+        col = inv.a * lon + inv.c - 0.5
+        row = inv.e * lat + inv.f - 0.5
+        return bilinear_sample_grid(self._padded, row, col)
 
 
 # ----------------------------------------------------------------------------- DEM
@@ -599,14 +616,19 @@ class DEM:
         """The geoid undulation at every node; InputError where it misses a valid node."""
         if not isinstance(geoid, Geoid):
             geoid = Geoid.open(geoid)
-        lon, lat = self.node_lonlat()
-        undulation = geoid.undulation(lon, lat)
+        t = self.transform
+        if self._native_lonlat and not (t.b or t.d):  # lon by column, lat by row
+            lon_1d = t.a * (np.arange(self.shape[1]) + 0.5) + t.c
+            lat_1d = t.e * (np.arange(self.shape[0]) + 0.5) + t.f
+            undulation = geoid.undulation_grid(lon_1d, lat_1d)
+        else:
+            undulation = geoid.undulation(*self.node_lonlat())
         uncovered = np.isfinite(self.heights) & ~np.isfinite(undulation)
         if uncovered.any():
+            lon, lat = (v[uncovered][0] for v in self.node_lonlat())
             raise InputError(
                 f"geoid {geoid.source} does not cover DEM {self.name} at "
-                f"{int(uncovered.sum())} nodes (e.g. lon {lon[uncovered][0]:.6f}, "
-                f"lat {lat[uncovered][0]:.6f})"
+                f"{int(uncovered.sum())} nodes (e.g. lon {lon:.6f}, lat {lat:.6f})"
             )
         return undulation
 

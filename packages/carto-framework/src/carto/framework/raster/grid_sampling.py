@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["EDGE_TOL_PX", "bilinear_sample", "cubic_sample"]
+__all__ = ["EDGE_TOL_PX", "bilinear_sample", "bilinear_sample_grid", "cubic_sample"]
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -82,3 +82,41 @@ def bilinear_sample(grid: FloatArray, row: FloatArray, col: FloatArray) -> Float
     bottom = v10 * (1.0 - fc) + v11 * fc
     out = top * (1.0 - fr) + bottom * fr
     return np.where(inside, out, np.nan)
+
+
+def _axis_weights(
+    inside: BoolArray, first: NDArray[np.intp], frac: FloatArray, lo: int, size: int, step: int
+) -> FloatArray:
+    """``(len(first), size)``: the linear weights of the nodes ``lo .. lo + size - 1`` of one
+    axis (cell ``first``, fraction ``frac``; ``step`` 0 on an axis of one node)."""
+    w = np.zeros((first.size, size))
+    n = np.flatnonzero(inside)
+    np.add.at(w, (n, first[n] - lo), 1.0 - frac[n])
+    np.add.at(w, (n, first[n] + step - lo), frac[n])
+    return w
+
+
+def bilinear_sample_grid(grid: FloatArray, row: FloatArray, col: FloatArray) -> FloatArray:
+    """:func:`bilinear_sample` at every pair of the fractional indices ``row`` (1-D) and
+    ``col`` (1-D): ``(len(row), len(col))``, as two small matrix products over the block of
+    ``grid`` they reach (bilinear interpolation is separable), equal to rounding. NaN where
+    a row or a column is outside the grid and, as there, next to a NaN node."""
+    row = np.asarray(row, np.float64).ravel()
+    col = np.asarray(col, np.float64).ravel()
+    n_rows, n_cols = grid.shape
+    in_r, r0, _, fr, _ = _cells(grid.shape, row, np.zeros_like(row))
+    in_c, _, c0, _, fc = _cells(grid.shape, np.zeros_like(col), col)
+    out = np.full((row.size, col.size), np.nan)
+    if not (in_r.any() and in_c.any()):
+        return out
+    dr, dc = (1 if n_rows > 1 else 0), (1 if n_cols > 1 else 0)
+    lo_r, hi_r = int(r0[in_r].min()), int(r0[in_r].max()) + dr
+    lo_c, hi_c = int(c0[in_c].min()), int(c0[in_c].max()) + dc
+    block = np.asarray(grid[lo_r : hi_r + 1, lo_c : hi_c + 1], np.float64)
+    if not np.isfinite(block).all():  # NaN nodes: only their neighbours are NaN
+        rr, cc = np.meshgrid(row, col, indexing="ij")
+        return bilinear_sample(grid, rr, cc)
+    wr = _axis_weights(in_r, r0, fr, lo_r, block.shape[0], dr)
+    wc = _axis_weights(in_c, c0, fc, lo_c, block.shape[1], dc)
+    out[np.ix_(in_r, in_c)] = (wr @ block @ wc.T)[np.ix_(in_r, in_c)]
+    return out
