@@ -35,63 +35,161 @@ _OFFSET = 1 << 24  # makes zone indices non-negative seeds
 
 
 # ----------------------------------------------------------------------------- parcels
-@numba.njit(parallel=True, cache=True, nogil=True)
-def _nearest_two(
-    r0: int,
-    c0: int,
-    n_rows: int,
-    n_cols: int,
+_BLOCK = (16, 32)  # pixel rows and columns of a block sharing one candidate search
+_SERIAL_PX = 65_536  # windows smaller than this are computed on one thread
+
+
+@numba.njit(cache=True, nogil=True)
+def _runs(
+    first: int, n: int, posting: float, bucket: float, size: int
+) -> NDArray:  # pragma: no cover - compiled
+    """Starts (and the end) of the runs of at most ``size`` consecutive pixels from ``first``
+    whose centres fall in the same bucket."""
+    out = np.empty(n + 1, np.int64)
+    count, prev, run = 0, -(1 << 62), 0
+    for i in range(n):
+        b = math.floor((first + i + 0.5) * posting / bucket)
+        if b != prev or run == size:
+            out[count] = i
+            count += 1
+            prev, run = b, 0
+        run += 1
+    out[count] = n
+    return out[: count + 1]
+
+
+@numba.njit(cache=True, nogil=True)
+def _candidates(
+    box: tuple[float, float, float, float],
+    cell: tuple[int, int],
+    pts: tuple[NDArray, NDArray, NDArray],
+    grid: tuple[int, int, int, int],
+    cand: NDArray,
+) -> int:  # pragma: no cover - compiled
+    """The points of the 3 x 3 buckets around ``cell`` (own bucket first, then the others row
+    by row: the order of the pixel search) that can be the nearest or the second nearest to
+    a pixel centre in ``box = (xa, xb, ya, yb)``, in that order into ``cand``; their count.
+    A point is dropped when its distance to the box exceeds the second smallest distance of
+    a point to its farthest corner (plus a margin far larger than rounding): two other points
+    are then nearer to every pixel of the box."""
+    xa, xb, ya, yb = box
+    px, py, start = pts
+    nbx, nby = grid[2], grid[3]
+    n = 0
+    lo1, lo2 = np.inf, np.inf
+    for step in range(9):
+        s = step - 1 if step < 5 else step  # 0-8 but the centre (4): the neighbours in rows
+        u, v = (cell[0], cell[1]) if step == 0 else (cell[0] - 1 + s // 3, cell[1] - 1 + s % 3)
+        if u < 0 or u >= nby or v < 0 or v >= nbx:
+            continue
+        for k in range(start[u * nbx + v], start[u * nbx + v + 1]):
+            fx, fy = max(abs(px[k] - xa), abs(px[k] - xb)), max(abs(py[k] - ya), abs(py[k] - yb))
+            d = fx * fx + fy * fy
+            if d < lo1:
+                lo1, lo2 = d, lo1
+            elif d < lo2:
+                lo2 = d
+            cand[n] = k
+            n += 1
+    limit = lo2 * (1.0 + 1e-9) + 1e-6
+    kept = 0
+    for m in range(n):
+        k = cand[m]
+        ex, ey = max(xa - px[k], 0.0, px[k] - xb), max(ya - py[k], 0.0, py[k] - yb)
+        if ex * ex + ey * ey <= limit:
+            cand[kept] = k
+            kept += 1
+    return kept
+
+
+@numba.njit(cache=True, nogil=True)
+def _parcel_block(
+    first: tuple[int, int],
+    block: tuple[int, int, int, int],
     posting: float,
-    px: NDArray,
-    py: NDArray,
-    start: NDArray,
-    bx0: int,
-    by0: int,
-    nbx: int,
-    nby: int,
-    bucket: float,
-) -> tuple[NDArray, NDArray]:  # pragma: no cover - compiled
-    """Index of the nearest point and half the gap to the second nearest, per pixel."""
-    nearest = np.full((n_rows, n_cols), -1, np.int64)
-    gap = np.full((n_rows, n_cols), np.inf, np.float32)
-    for i in numba.prange(n_rows):
-        y = (r0 + i + 0.5) * posting
-        by = math.floor(y / bucket) - by0
-        for j in range(n_cols):
-            x = (c0 + j + 0.5) * posting
-            bx = math.floor(x / bucket) - bx0
-            q1 = np.inf
-            q2 = np.inf
-            k1 = -1
-            # the pixel's own bucket first, then the neighbours that can hold a nearer point
-            for step in range(9):
-                if step == 0:
-                    u, v = by, bx
-                else:
-                    u = by - 1 + (step - 1) // 3 if step < 5 else by - 1 + step // 3
-                    v = bx - 1 + (step - 1) % 3 if step < 5 else bx - 1 + step % 3
-                    if u < 0 or u >= nby or v < 0 or v >= nbx:
-                        continue
-                    ex = max((bx0 + v) * bucket - x, 0.0, x - (bx0 + v + 1) * bucket)
-                    ey = max((by0 + u) * bucket - y, 0.0, y - (by0 + u + 1) * bucket)
-                    if ex * ex + ey * ey >= q2:
-                        continue
-                if u < 0 or u >= nby or v < 0 or v >= nbx:
-                    continue
-                b = u * nbx + v
-                for k in range(start[b], start[b + 1]):
-                    dx = px[k] - x
-                    dy = py[k] - y
-                    q = dx * dx + dy * dy
-                    if q < q1:
-                        q2 = q1
-                        q1 = q
-                        k1 = k
-                    elif q < q2:
-                        q2 = q
-            nearest[i, j] = k1
-            gap[i, j] = 0.5 * (math.sqrt(q2) - math.sqrt(q1))
-    return nearest, gap
+    pts: tuple[NDArray, NDArray, NDArray],
+    cand: NDArray,
+    n_cand: int,
+    levels: NDArray,
+    out: tuple[NDArray, NDArray],
+) -> None:  # pragma: no cover - compiled
+    """Nearest point (its level into ``out[0]``) and boundary coverage (``out[1]``) of the
+    pixels ``block = (i0, i1, j0, j1)`` among the candidates, visited in order for every
+    pixel (the updates of a search over all the points of the 3 x 3 buckets)."""
+    i0, i1, j0, j1 = block
+    px, py = pts[0], pts[1]
+    q1s, q2s, k1s = np.empty(j1 - j0), np.empty(j1 - j0), np.empty(j1 - j0, np.int64)
+    one, inv = np.float32(1.0), np.float32(1.0 / posting)
+    for i in range(i0, i1):
+        y = (first[0] + i + 0.5) * posting
+        q1s[:] = np.inf
+        q2s[:] = np.inf
+        k1s[:] = levels.size - 1  # no point (never within the scene): 0.26
+        for m in range(n_cand):
+            k = cand[m]
+            dy = py[k] - y
+            for j in range(j1 - j0):
+                dx = px[k] - (first[1] + j0 + j + 0.5) * posting
+                q = dx * dx + dy * dy
+                a, b = q1s[j], q2s[j]
+                q2s[j] = a if q < a else (q if q < b else b)
+                q1s[j] = q if q < a else a
+                k1s[j] = k if q < a else k1s[j]
+        land, outline = out[0][i, j0:j1], out[1][i, j0:j1]
+        for j in range(j1 - j0):  # separate loops: vectorised
+            land[j] = levels[k1s[j]]
+        for j in range(j1 - j0):  # half the gap to the second nearest
+            q1s[j] = 0.5 * (math.sqrt(q2s[j]) - math.sqrt(q1s[j]))
+        for j in range(j1 - j0):
+            o = one - np.float32(q1s[j]) * inv
+            outline[j] = np.float32(0.0) if o < 0.0 else (one if o > 1.0 else o)
+
+
+@numba.njit(cache=True, nogil=True)
+def _parcel_rows(
+    first: tuple[int, int],
+    spans: tuple[NDArray, NDArray],
+    span_range: tuple[int, int],
+    posting: float,
+    pts: tuple[NDArray, NDArray, NDArray],
+    grid: tuple[int, int, int, int],
+    levels: NDArray,
+    out: tuple[NDArray, NDArray],
+) -> None:  # pragma: no cover - compiled
+    """The blocks of the row runs ``span_range`` of ``spans = (row runs, column runs)``."""
+    start = pts[2]
+    most = 0
+    for b in range(start.size - 1):
+        most = max(most, start[b + 1] - start[b])
+    cand = np.empty(9 * most, np.int64)
+    bx0, by0 = grid[0], grid[1]
+    rows, cols = spans
+    for s in range(span_range[0], span_range[1]):
+        ya = (first[0] + rows[s] + 0.5) * posting
+        yb = (first[0] + rows[s + 1] - 1 + 0.5) * posting
+        for t in range(cols.size - 1):
+            xa = (first[1] + cols[t] + 0.5) * posting
+            xb = (first[1] + cols[t + 1] - 1 + 0.5) * posting
+            cell = (math.floor(ya / _BUCKET_M) - by0, math.floor(xa / _BUCKET_M) - bx0)
+            n = _candidates((xa, xb, ya, yb), cell, pts, grid, cand)
+            block = (rows[s], rows[s + 1], cols[t], cols[t + 1])
+            _parcel_block(first, block, posting, pts, cand, n, levels, out)
+
+
+@numba.njit(parallel=True, cache=True, nogil=True)
+def _parcel_chunks(
+    first: tuple[int, int],
+    spans: tuple[NDArray, NDArray],
+    posting: float,
+    pts: tuple[NDArray, NDArray, NDArray],
+    grid: tuple[int, int, int, int],
+    levels: NDArray,
+    out: tuple[NDArray, NDArray],
+) -> None:  # pragma: no cover - compiled
+    """:func:`_parcel_rows` by chunks of 4 row runs, one thread each."""
+    n_runs = spans[0].size - 1
+    for c in numba.prange(-(-n_runs // 4)):
+        _parcel_rows(first, spans, (4 * c, min(4 * c + 4, n_runs)), posting, pts, grid, levels, out)
 
 
 class Parcels:
@@ -183,14 +281,23 @@ class Parcels:
         )
         order = np.argsort(ids, kind="stable")
         start = np.searchsorted(ids[order], np.arange(nbx * nby + 1)).astype(np.int64)
-        px = np.ascontiguousarray(points[order, 0])
-        py = np.ascontiguousarray(points[order, 1])
-        nearest, gap = _nearest_two(
-            r0, c0, r1 - r0, c1 - c0, p, px, py, start, bx0, by0, nbx, nby, _BUCKET_M
+        pts = (
+            np.ascontiguousarray(points[order, 0]),
+            np.ascontiguousarray(points[order, 1]),
+            start,
         )
         levels = np.append(np.round(brightness[order] * 100.0) / 100.0, 0.26).astype(np.float32)
-        land = levels[nearest]  # -1 (no point: never within the scene) -> 0.26
-        outline = np.clip(np.float32(1.0) - gap * np.float32(1.0 / p), 0.0, 1.0)
+        spans = (
+            _runs(r0, r1 - r0, p, _BUCKET_M, _BLOCK[0]),
+            _runs(c0, c1 - c0, p, _BUCKET_M, _BLOCK[1]),
+        )
+        land = np.empty((r1 - r0, c1 - c0), np.float32)
+        outline = np.empty((r1 - r0, c1 - c0), np.float32)
+        args = ((r0, c0), spans, p, pts, (bx0, by0, nbx, nby), levels, (land, outline))
+        if land.size >= _SERIAL_PX:
+            _parcel_chunks(*args)
+        else:
+            _parcel_rows(args[0], spans, (0, spans[0].size - 1), *args[2:])
         return land, outline
 
 

@@ -288,11 +288,29 @@ def write_init_dem(path: Path, terrain: Any, rng: np.random.Generator) -> Path:
     return init.write(path)
 
 
+def _block_bounds(
+    to_lonlat: Any, grid: tuple[float, float, float], block: tuple[int, int, int, int]
+) -> Bounds:
+    """Lon/lat bounds of the outline (17 x 9 points) of the pixels ``block = (r0, r1, c0,
+    c1)`` of a UTM grid ``(x0, y1, gsd_m)`` (its west and north edges and pixel size)."""
+    x0, y1, gsd_m = grid
+    r0, r1, c0, c1 = block
+    ex = x0 + gsd_m * np.linspace(c0, c1, 17)
+    ey = y1 - gsd_m * np.linspace(r0, r1, 9)
+    px = np.concatenate([ex, ex, np.full(ey.size, ex[0]), np.full(ey.size, ex[-1])])
+    py = np.concatenate([np.full(ex.size, ey[0]), np.full(ex.size, ey[-1]), ey, ey])
+    lon, lat = to_lonlat.transform(px, py)
+    return float(np.min(lon)), float(np.min(lat)), float(np.max(lon)), float(np.max(lat))
+
+
 def write_true_ortho(
     path: Path, ground: Any, bounds: Bounds, gsd_m: float, *, quiet: bool = False
 ) -> Path:
     """The texture (reflectance) resampled (average) to a UTM grid at the GSD over
-    ``bounds``, by strips of rows, each from the texture window under it."""
+    ``bounds``, by strips of rows, each from the texture window under it; GDAL warps and
+    compresses on every core (the same pixels and bytes as on one)."""
+    import os
+
     import pyproj
     from affine import Affine
     from rasterio.warp import Resampling, reproject
@@ -315,9 +333,18 @@ def write_true_ortho(
         "CARTO_CONTENT": "true ground reflectance (no terrain shading "
         "beyond the texture's), ortho on truth",
     }
+    threads = os.cpu_count() or 1
     with (
         raster_writer(
-            path, ny, nx, "float32", crs=wkt, transform=dst_transform, nodata=np.nan, tags=tags
+            path,
+            ny,
+            nx,
+            "float32",
+            crs=wkt,
+            transform=dst_transform,
+            nodata=np.nan,
+            tags=tags,
+            num_threads=str(threads),
         ) as dst,
         stage_bar(len(strips), "true ortho", quiet=quiet, unit="strip") as bar,
     ):
@@ -326,17 +353,7 @@ def write_true_ortho(
             data = np.full((r1 - r0, nx), np.nan, np.float32)
             for c0 in range(0, nx, ORTHO_BLOCK_COLS):
                 c1 = min(c0 + ORTHO_BLOCK_COLS, nx)
-                ex = x0 + gsd_m * np.linspace(c0, c1, 17)
-                ey = y1 - gsd_m * np.linspace(r0, r1, 9)
-                px = np.concatenate([ex, ex, np.full(ey.size, ex[0]), np.full(ey.size, ex[-1])])
-                py = np.concatenate([np.full(ex.size, ey[0]), np.full(ex.size, ey[-1]), ey, ey])
-                lon, lat = to_lonlat.transform(px, py)
-                bounds = (
-                    float(np.min(lon)),
-                    float(np.min(lat)),
-                    float(np.max(lon)),
-                    float(np.max(lat)),
-                )
+                bounds = _block_bounds(to_lonlat, (x0, y1, gsd_m), (r0, r1, c0, c1))
                 win = grid_window(ground.transform, ground.shape, bounds, 4)
                 if win is None:
                     continue
@@ -352,6 +369,7 @@ def write_true_ortho(
                     resampling=Resampling.average,
                     src_nodata=np.nan,
                     dst_nodata=np.nan,
+                    num_threads=threads,
                 )
                 data[:, c0:c1] = block
             dst.write(data, 1, window=_window(r0, r1, 0, nx))
