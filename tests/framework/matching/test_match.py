@@ -504,3 +504,30 @@ def test_forstner_and_coarse_shift_bad_inputs_raise_input_error():
         with pytest.raises(InputError) as info:
             case()
         assert "\n" not in str(info.value)
+
+
+@pytest.mark.parametrize(("template", "search"), [(15, 3), (11, 6), (7, 1)])
+def test_compiled_correlation_surfaces_are_opencvs(template, search):
+    import cv2
+
+    from carto.framework.matching.ncc import _ncc_surfaces
+
+    rng = np.random.default_rng(template + search)
+    left = (rng.normal(size=(120, 130)) * 50 + 400).astype(np.float32)
+    right = np.roll(left, (2, -1), (0, 1)) + rng.normal(0, 2, left.shape).astype(np.float32)
+    right[60:90, 60:90] = 7.0  # flat windows: OpenCV's 0
+    size = 2 * (template // 2 + search) + 1
+    t0 = rng.integers(0, 120 - size, (40, 2))
+    t0[:4] = (60, 60)
+    s0 = t0 + rng.integers(0, 2 * search + 1, (40, 2)) - search
+    s0 = np.clip(s0, 0, 120 - size)
+    got = _ncc_surfaces(left, right, t0, s0, template, size)
+    for k in range(len(t0)):
+        (a, b), (r, c) = t0[k], s0[k]
+        expected = cv2.matchTemplate(
+            right[r : r + size, c : c + size],
+            left[a : a + template, b : b + template],
+            cv2.TM_CCOEFF_NORMED,
+        )
+        np.testing.assert_allclose(got[k], expected, atol=2e-3)  # OpenCV sums in float32
+        assert got[k].argmax() == expected.argmax() or np.ptp(expected) < 1e-3
