@@ -160,7 +160,6 @@ def correlate_points(
     nan_right: NDArray[np.integer] | None,
 ) -> Found:
     """The correlation of :func:`match_ncc` on prepared inputs, one row per input point."""
-    import cv2
 
     n = points.shape[0]
     right_pts = np.full((n, 2), np.nan)
@@ -192,22 +191,7 @@ def correlate_points(
     textured = spread > _FLAT_STD * np.maximum(level, 1.0)
     idx, templates = idx[textured], templates[textured]
     n_off = 2 * search + 1
-    if n_off <= _COMPILED_MAX_OFFSETS:  # one compiled pass over every point
-        surface = _ncc_surfaces(
-            np.ascontiguousarray(left, np.float32),
-            np.ascontiguousarray(right, np.float32),
-            np.ascontiguousarray(t0[idx]),
-            np.ascontiguousarray(s0[idx]),
-            template,
-            size,
-        )
-    else:  # wide searches: OpenCV's matchTemplate, one call per point
-        surface = np.empty((idx.size, n_off, n_off), np.float32)
-        for k, (i, tmpl) in enumerate(zip(idx, templates, strict=True)):
-            r, c = s0[i]
-            surface[k] = cv2.matchTemplate(
-                right[r : r + size, c : c + size], tmpl, cv2.TM_CCOEFF_NORMED
-            )
+    surface = _surfaces(left, right, t0[idx], s0[idx], templates, size)
     surface[np.isnan(surface)] = -1.0
     flat = surface.reshape(idx.size, -1)
     peak = flat.argmax(axis=1)
@@ -228,6 +212,38 @@ def correlate_points(
     right_pts[idx] = points[idx] + offset
     scores[idx] = best
     return Found(right_pts, scores)
+
+
+def _surfaces(
+    left: NDArray[np.float32],
+    right: NDArray[np.float32],
+    t0: NDArray[np.intp],
+    s0: NDArray[np.intp],
+    templates: NDArray[np.float32],
+    size: int,
+) -> NDArray[np.float32]:
+    """The correlation surfaces ``(n, n_off, n_off)`` of the templates at ``t0`` over the
+    search windows at ``s0``: one compiled pass for narrow searches, OpenCV's
+    ``matchTemplate`` per point for wide ones (:data:`_COMPILED_MAX_OFFSETS`)."""
+    import cv2
+
+    template = templates.shape[-1]
+    n_off = size - template + 1
+    if n_off <= _COMPILED_MAX_OFFSETS:
+        return _ncc_surfaces(
+            np.ascontiguousarray(left, np.float32),
+            np.ascontiguousarray(right, np.float32),
+            np.ascontiguousarray(t0),
+            np.ascontiguousarray(s0),
+            template,
+            size,
+        )
+    surface = np.empty((len(t0), n_off, n_off), np.float32)
+    for k, ((r, c), tmpl) in enumerate(zip(s0, templates, strict=True)):
+        surface[k] = cv2.matchTemplate(
+            right[r : r + size, c : c + size], tmpl, cv2.TM_CCOEFF_NORMED
+        )
+    return surface
 
 
 _COMPILED_MAX_OFFSETS = 13
