@@ -125,14 +125,12 @@ def _render_subline(  # the writes to arrays passed in a tuple
     quadratic_table(first, n_nodes, window.stagger_tan, cam, dem, w.state, w.ray, w.odd)
     for j in range(window.n_cols):
         k = window.first_sample + j
-        is_odd = (k % 2) == 1
-        stagger = window.stagger_tan if is_odd else 0.0
+        odd = (k % 2) == 1
+        stagger = window.stagger_tan if odd else 0.0
+        table = w.odd if odd else w.even
         for b in range(supersample):
             s = k + (b + 0.5) * inv
-            if is_odd:
-                lon, lat, _h = _ray_of(s, stagger, w.odd, n_nodes, first, cam, dem, w)
-            else:
-                lon, lat, _h = _ray_of(s, stagger, w.even, n_nodes, first, cam, dem, w)
+            lon, lat, _h = _ray_of(s, stagger, table, n_nodes, first, cam, dem, w)
             if not np.isfinite(lon):
                 continue
             v = grid_bilinear(tex.values, tex.x0_deg, tex.dx_deg, tex.y0_deg, tex.dy_deg, lon, lat)

@@ -71,7 +71,6 @@ __all__ = [
     "ray_dem",
     "sensor_arrays",
     "state_ray",
-    "state_trace",
     "trace_dem",
     "trace_pixel",
 ]
@@ -207,22 +206,6 @@ def state_ray(
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def state_trace(
-    det_sample: float,
-    stagger: float,
-    cam: CameraStates,
-    dem: DemGrid,
-    state: NDArray,
-    ray: NDArray,
-) -> tuple[float, float, float]:  # pragma: no cover - compiled
-    """Ground point ``(lon_deg, lat_deg, h_m)`` a (fractional) detector sample of the line
-    whose :func:`line_state` is ``state`` sees: :func:`state_ray` then :func:`trace_dem`;
-    NaN where the ray leaves the DEM. ``ray`` is scratch space (:data:`RAY_SIZE`)."""
-    state_ray(det_sample, stagger, cam, state, ray)
-    return trace_dem((ray[0], ray[1], ray[2], ray[3], ray[4], ray[5]), cam.omega_c, dem)
-
-
-@numba.njit(cache=True, nogil=True, inline="always")
 def trace_pixel(
     t: float,
     det_sample: float,
@@ -233,12 +216,13 @@ def trace_pixel(
     ray: NDArray,
 ) -> tuple[float, float, float]:  # pragma: no cover - compiled
     """Ground point ``(lon_deg, lat_deg, h_m)`` a (fractional) detector sample sees at time
-    ``t``: :func:`line_state` then :func:`state_trace`; NaN where the table has no state or
-    the ray leaves the DEM. ``state`` and ``ray`` are scratch space (:data:`STATE_SIZE`,
-    :data:`RAY_SIZE`)."""
+    ``t``: :func:`line_state`, :func:`state_ray` then :func:`trace_dem`; NaN where the table
+    has no state or the ray leaves the DEM. ``state`` and ``ray`` are scratch space
+    (:data:`STATE_SIZE`, :data:`RAY_SIZE`)."""
     if not line_state(t, cam, state):
         return np.nan, np.nan, np.nan
-    return state_trace(det_sample, stagger, cam, dem, state, ray)
+    state_ray(det_sample, stagger, cam, state, ray)
+    return trace_dem((ray[0], ray[1], ray[2], ray[3], ray[4], ray[5]), cam.omega_c, dem)
 
 
 @numba.njit(cache=True, nogil=True)
