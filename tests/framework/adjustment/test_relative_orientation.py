@@ -256,3 +256,28 @@ def test_settings_are_checked():
         ro.RelativeOrientationSettings(mode="bogus")
     with pytest.raises(Exception, match="knot_lines"):
         ro.RelativeOrientationSettings(knot_lines=0)
+
+
+@pytest.mark.parametrize(("datum", "platform_jitter"), [("dem", False), ("models", True)])
+def test_the_fit_in_chunks_is_the_fit_in_one_piece(synthetic, monkeypatch, datum, platform_jitter):
+    """The normal equations summed over chunks of points (bounded memory on a whole scene)
+    give the fit of one piece: the same coefficients, DEM offset, noise and rows kept, with
+    jitter frequencies, the platform's terms and the models' datum condition."""
+    aft, fore, _, table, start, _ = synthetic
+    platform = po.platform_of(aft, fore) if platform_jitter else None
+    obs = po.ties_to_observations(table, ("aft", "fore"), aft, fore, start, platform)
+    settings = ro.RelativeOrientationSettings(knot_lines=3000.0, platform_jitter=platform_jitter)
+    results = []
+    for rows in (obs.line.size + 1, 251):  # one piece, then chunks (not a divisor)
+        monkeypatch.setattr(pc, "FIT_CHUNK_ROWS", rows)
+        results.append(ro.estimate_correction(obs, 12000, "line", datum, settings))
+    (b1, f1, k1), (b2, f2, k2) = results
+    assert obs.line.size > 3 * 251
+    assert b1.frequencies == b2.frequencies
+    assert f1.platform_hz == f2.platform_hz
+    np.testing.assert_array_equal(k1, k2)
+    np.testing.assert_allclose(f2.coefficients, f1.coefficients, rtol=1e-8, atol=1e-10)
+    assert f2.dem_offset_m == pytest.approx(f1.dem_offset_m, rel=1e-8, abs=1e-10)
+    assert f2.noise.sigma_m == pytest.approx(f1.noise.sigma_m, rel=1e-8)
+    if platform_jitter:
+        np.testing.assert_allclose(f2.platform_rad, f1.platform_rad, rtol=1e-7, atol=1e-14)

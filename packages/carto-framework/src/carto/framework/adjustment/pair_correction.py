@@ -61,6 +61,11 @@ class RelativeOrientationSettings:
         mode: one of :data:`MODES`.
         tie_spacing_px: grid spacing of the tie points, ortho pixels at the images' ground
             sampling (line-varying corrections; a shift takes :data:`SHIFT_SPACING_PX`).
+        max_tie_points: the tie-point grid is widened beyond ``tie_spacing_px`` so that
+            about this many points cover the left image (a whole 12000 x 12000 pair at 8 px
+            made 1.9 M points and took 170 s to match; 250 000 points leave thousands per
+            knot interval, where the starting DEM's correlated errors, not their number,
+            bound the along-base shape).
         knot_lines: knot spacing of the line-varying correction's spline, lines (slow
             wander; a spline as fine as the DEM's own band errors would copy them).
         max_frequencies: most jitter frequencies taken from the residuals.
@@ -77,6 +82,7 @@ class RelativeOrientationSettings:
 
     mode: str = attrs.field(default="auto", validator=_check_mode)
     tie_spacing_px: float = attrs.field(default=8.0, validator=_check_positive)
+    max_tie_points: int = attrs.field(default=250_000, converter=int, validator=_check_positive)
     knot_lines: float = attrs.field(default=256.0, validator=_check_positive)
     max_frequencies: int = attrs.field(default=8, converter=int)
     dem_offset_sigma_m: float = attrs.field(default=4.0, validator=_check_positive)
@@ -230,37 +236,17 @@ def _fit(
     across the base, with the priors of :func:`_priors`; ``platform_hz``: the platform's
     jitter frequencies (:func:`platform_design`). Returns the variance components of its
     residuals too."""
-    u, v, norm = base_axes(obs.parallax)
-    s_along, s_across = obs.sigmas(noise)
-    b = _seen_design(basis, obs)
     n_b = basis.size
     i_h = 2 * n_b  # the DEM offset, then the platform's jitter
-    s_p = platform_design(obs, platform_hz)  # (N, 2, n_l)
-    n_l = s_p.shape[2]
-    n_p = 2 * n_b + 1 + n_l
+    n_l = 6 * len(platform_hz)
+    u, v, norm = base_axes(obs.parallax)
     expand = _expansion(basis, u[0].copy(), n_l)
     p_offset = offset_parallax(obs)
-
-    def rows(axis: FloatArray, scale: FloatArray) -> tuple[FloatArray, FloatArray]:
-        a = np.zeros((obs.line.size, n_p))
-        a[:, :n_b] = b * axis[:, 0:1]
-        a[:, n_b : 2 * n_b] = b * axis[:, 1:2]
-        a[:, i_h] = np.where(obs.on_dem, axis @ p_offset, 0.0)
-        a[:, i_h + 1 :] = np.einsum("im,imk->ik", axis, s_p)
-        y = np.einsum("ij,ij->i", axis, obs.residual)
-        return a / scale[:, None], y / scale
-
-    a_al, y_al = rows(u, s_along)
-    a_ac, y_ac = rows(v, s_across)
-    design = np.vstack([a_al, a_ac]) @ expand
-    target = np.concatenate([y_al, y_ac])
-    normal = design.T @ design
-    rhs = design.T @ target
+    axes_uv = (u[0].copy(), v[0].copy())
+    normal, rhs, cond = _normal_equations(
+        obs, basis, noise, (platform_hz, p_offset), axes_uv, expand
+    )
     if datum == "models":  # the along-base correction has zero mean over the points
-        cond = np.zeros(n_p)
-        cond[:n_b] = (b * u[:, 0:1]).mean(axis=0)
-        cond[n_b : 2 * n_b] = (b * u[:, 1:2]).mean(axis=0)
-        cond = cond @ expand
         normal += np.outer(cond, cond) / DATUM_SIGMA_PX**2
     # the DEM offset's prior is the DEM's absolute accuracy (free when the models hold the
     # datum)
@@ -296,6 +282,54 @@ def _fit(
     new = Noise(s_m, max(s_h, 0.05))
     new = attrs.evolve(new, band_factor=_band_factor(obs, along, new))
     return attrs.evolve(fit, noise=new)
+
+
+FIT_CHUNK_ROWS = 65536
+"""Tie points whose design rows :func:`_normal_equations` holds at once: the normal
+equations are summed chunk by chunk, so a fit's memory does not grow with the points (a
+whole 12000 x 12000 pair, 1.9 M points, took 9 GB in one piece)."""
+
+
+def _normal_equations(
+    obs: Observations,
+    basis: LineBasis,
+    noise: Noise,
+    terms: tuple[tuple[float, ...], FloatArray],
+    axes_uv: tuple[FloatArray, FloatArray],
+    expand: FloatArray,
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """``(normal, rhs, cond)`` of :func:`_fit`'s rows, whitened along and across the base
+    (``axes_uv``: its two directions, :func:`~carto.framework.adjustment.pair_observations.
+    base_axes`), in the estimated parameters (``expand``: :func:`_expansion`), summed over
+    chunks of :data:`FIT_CHUNK_ROWS` points; ``terms``: the platform's jitter frequencies
+    and the DEM offset's parallax (:func:`offset_parallax`); ``cond``: the mean along-base
+    correction's row (the models' datum)."""
+    platform_hz, p_offset = terms
+    n_b = basis.size
+    n_p = expand.shape[0]
+    normal = np.zeros((expand.shape[1],) * 2)
+    rhs = np.zeros(expand.shape[1])
+    cond = np.zeros(n_p)
+    spl = _seconds_per_line(obs) if platform_hz else None
+    for start in range(0, obs.line.size, FIT_CHUNK_ROWS):
+        part = obs.subset(slice(start, start + FIT_CHUNK_ROWS))
+        u, v = (np.broadcast_to(d, part.parallax.shape) for d in axes_uv)
+        s_along, s_across = part.sigmas(noise)
+        b = _seen_design(basis, part)
+        s_p = platform_design(part, platform_hz, spl)  # (n, 2, n_l)
+        for axis, scale in ((u, s_along), (v, s_across)):
+            a = np.empty((part.line.size, n_p))
+            a[:, :n_b] = b * axis[:, 0:1]
+            a[:, n_b : 2 * n_b] = b * axis[:, 1:2]
+            a[:, 2 * n_b] = np.where(part.on_dem, axis @ p_offset, 0.0)
+            a[:, 2 * n_b + 1 :] = np.einsum("im,imk->ik", axis, s_p)
+            y = np.einsum("ij,ij->i", axis, part.residual) / scale
+            design = (a / scale[:, None]) @ expand
+            normal += design.T @ design
+            rhs += design.T @ y
+        cond[:n_b] += (b * u[:, 0:1]).sum(axis=0)
+        cond[n_b : 2 * n_b] += (b * u[:, 1:2]).sum(axis=0)
+    return normal, rhs, (cond / max(obs.line.size, 1)) @ expand
 
 
 def offset_parallax(obs: Observations) -> FloatArray:
@@ -376,8 +410,7 @@ def estimate_correction(
     if kind == "line" and basis.n_spline > 1:
         delta, record = _along_shape(obs.subset(keep), basis, fit)
         if delta is not None:  # the rest refitted under the shape
-            b, _ = basis.design(obs.line)
-            less = attrs.evolve(obs, residual=obs.residual - b @ delta.T)
+            less = attrs.evolve(obs, residual=obs.residual - basis.evaluate(obs.line, delta)[0])
             fit = _fit(less.subset(keep), basis, fit.noise, datum, settings, bound, hz, p_bound)
             fit = attrs.evolve(fit, coefficients=fit.coefficients + delta)
         fit = attrs.evolve(fit, along_shape=record)
@@ -658,12 +691,19 @@ def has_platform(obs: Observations) -> bool:
 def correction_px(obs: Observations, basis: LineBasis, fit: Fit) -> FloatArray:
     """``(N, 2)``: what ``fit`` explains of each row's right residual, pixels: the right
     correction, the DEM offset's parallax and the platform's jitter, as the tie points see
-    them (:func:`_seen_design`, :func:`platform_design`)."""
-    b = _seen_design(basis, obs)
-    model = b @ fit.coefficients.T
+    them (:func:`_seen_design`, :func:`platform_design`; neither is formed for all rows)."""
+    coefficients = np.array(fit.coefficients, np.float64)
+    if basis.frequencies and obs.window_lines > 0:  # the sinusoids as the windows see them
+        gain = window_gain(np.asarray(basis.frequencies), obs.window_lines)
+        coefficients[:, (basis.n_spline or 1) :] *= np.repeat(gain, 2)[None, :]
+    model, _ = basis.evaluate(obs.line, coefficients)
     model = model + np.where(obs.on_dem, fit.dem_offset_m, 0.0)[:, None] * fit.offset_parallax
     if fit.platform_rad is not None and fit.platform_rad.size:
-        model = model + platform_design(obs, fit.platform_hz) @ fit.platform_rad.ravel()
+        spl = _seconds_per_line(obs)
+        for start in range(0, obs.line.size, FIT_CHUNK_ROWS):
+            part = slice(start, start + FIT_CHUNK_ROWS)
+            design = platform_design(obs.subset(part), fit.platform_hz, spl)
+            model[part] += design @ fit.platform_rad.ravel()
     return model
 
 

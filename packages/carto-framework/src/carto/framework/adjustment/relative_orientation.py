@@ -93,6 +93,7 @@ fit repeated.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from typing import Any
 
@@ -256,6 +257,7 @@ def relative_orientation(
     if kind == "none":
         return RelativeOrientation(right, {**record, "applied": False})
     spacing = settings.tie_spacing_px if kind == "line" else SHIFT_SPACING_PX
+    spacing = max(spacing, math.sqrt(math.prod(left.image_shape) / settings.max_tie_points))
     table = _match_ties(images, sensors, dem, spacing, engine)
     platform = platform_of(left, right) if kind == "line" and settings.platform_jitter else None
     obs = ties_to_observations(table, names, left, right, dem, platform, TIE_TEMPLATE_PX)
@@ -315,8 +317,7 @@ def _fit_record(
     before and after it, the noise and datum found, and the correction along the base
     (pixels and what it does to heights) over every point; ``rate``: the right image's
     lines per second (jitter frequencies in Hz), None when it is no line scanner."""
-    b, _ = basis.design(obs.line)
-    model = b @ fit.coefficients.T
+    model, _ = basis.evaluate(obs.line, fit.coefficients)
     kept = obs.subset(keep)
     u, _, norm = base_axes(obs.parallax)
     along_shift = np.einsum("ij,ij->i", u, model)
