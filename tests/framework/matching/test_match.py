@@ -10,7 +10,7 @@ from scipy import ndimage
 from scipy.spatial import cKDTree
 
 from carto.framework.errors import InputError
-from carto.framework.matching.base import Matcher, Matches
+from carto.framework.matching.base import Matcher, Matches, MatchSettings
 from carto.framework.matching.candidates import grid_points
 from carto.framework.matching.forstner import forstner_measures, forstner_points, spread_order
 from carto.framework.matching.ncc import match_bidirectional, match_ncc
@@ -204,7 +204,7 @@ def test_guesses_and_pyramid_reach_large_offsets():
     assert len(guided) > 0.6 * len(points)
     np.testing.assert_allclose(offsets(guided), np.broadcast_to(shift, (len(guided), 2)), atol=0.1)
     # four levels reach 11 * (1 + 2 + 4 + 8) = 165 px without a guess
-    pyr = pyramid_match(left, right, points, levels=4, subpixel="lsm")
+    pyr = pyramid_match(left, right, points, MatchSettings(levels=4, subpixel="lsm"))
     assert len(pyr) > 0.6 * len(points)
     np.testing.assert_allclose(offsets(pyr), np.broadcast_to(shift, (len(pyr), 2)), atol=0.1)
 
@@ -249,7 +249,7 @@ def test_bad_inputs_raise_input_error():
         lambda: match_ncc(image[None], image, points),
         lambda: match_ncc(image.astype(complex), image, points),
         lambda: match_bidirectional(image, image, points, tolerance=0.0),
-        lambda: pyramid_match(image, image, points, levels=0),
+        lambda: pyramid_match(image, image, points, MatchSettings(subpixel="gaussian")),
         lambda: global_shift(image[:4], image),
         lambda: grid_points((100, 100), 0.5),
         lambda: NCCMatcher(template=4),
@@ -475,7 +475,9 @@ def test_coarse_shift_finds_shifts_as_large_as_the_images_between_nan_bordered_o
     points = points[
         np.isfinite(left[(points[:, 0] - 0.5).astype(int), (points[:, 1] - 0.5).astype(int)])
     ]
-    m = pyramid_match(left, right, points, guess_offsets=(d_line, d_sample), subpixel="lsm")
+    m = pyramid_match(
+        left, right, points, MatchSettings(subpixel="lsm"), guess_offsets=(d_line, d_sample)
+    )
     assert len(m) > 50
     np.testing.assert_allclose(offsets(m), np.broadcast_to(shift, (len(m), 2)), atol=0.05)
     assert coarse_shift(left, np.full((100, 100), np.nan)) == (0.0, 0.0, 0.0)

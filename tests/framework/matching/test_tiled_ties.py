@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from carto.framework.matching.candidates import (
+    CandidateOptions,
     candidate_cells,
     candidate_points,
     frame_cells,
@@ -57,7 +58,8 @@ def test_window_candidates_are_the_candidates_of_the_whole_image(method):
         (r0, r1), (c0, c1) = cell_bounds(cell_range, img.shape, cells)
         w0, v0 = max(0, r0 - margin), max(0, c0 - margin)
         window = img[w0 : r1 + margin, v0 : c1 + margin]
-        pts = window_candidates(window, spacing, (w0, v0), img.shape, cell_range, method=method)
+        options = CandidateOptions(method)
+        pts = window_candidates(window, spacing, (w0, v0), img.shape, cell_range, options)
         pts = pts + np.array([w0, v0])
         cell = frame_cells(pts, img.shape, cells)
         (a, b), (c, d) = cell_range

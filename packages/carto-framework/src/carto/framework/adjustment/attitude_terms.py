@@ -15,8 +15,8 @@ partials are the innermost line scanner's.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
-from typing import Any
+from collections.abc import Callable, Mapping
+from typing import Any, Self
 
 import attrs
 import numpy as np
@@ -25,7 +25,13 @@ from numpy.typing import ArrayLike, NDArray
 from carto.framework.arrays import as_float_arrays
 from carto.framework.errors import InputError
 from carto.framework.geometry.linescan.scanner import LineScanner
-from carto.framework.geometry.sensor import Parameter, Sensor, replace_parameters
+from carto.framework.geometry.sensor import (
+    Linearization,
+    Parameter,
+    ParameterChanges,
+    Sensor,
+    SensorWrapper,
+)
 
 FloatArray = NDArray[np.float64]
 
@@ -73,13 +79,12 @@ def map_layers(
 
 
 @attrs.frozen(eq=False)
-class AttitudeTermsCorrected(Sensor):
+class AttitudeTermsCorrected(SensorWrapper):
     """A line scanner (or another wrapper) plus attitude terms ``terms`` (radians, axis-major:
     ``3 x n_basis`` coefficients of :meth:`_basis`). Subclasses define the basis and may add
     parameters of their own (:meth:`_extra_parameters`, their partials
     :meth:`_extra_partials`)."""
 
-    base: Sensor
     terms: tuple[Parameter, ...]
 
     def __attrs_post_init__(self) -> None:
@@ -109,52 +114,20 @@ class AttitudeTermsCorrected(Sensor):
         return scanner
 
     @property
-    def name(self) -> str:
-        return self.base.name
-
-    @property
-    def image_shape(self) -> tuple[int, int]:
-        return self.base.image_shape
-
-    @property
     def parameters(self) -> tuple[Parameter, ...]:
         extra = tuple(p for group in self._extra_parameters().values() for p in group)
         return self.base.parameters + self.terms + extra
 
-    def with_parameters(
-        self,
-        values: Mapping[str, float] | None = None,
-        free: Mapping[str, bool] | None = None,
-        sigmas: Mapping[str, float] | None = None,
-    ) -> AttitudeTermsCorrected:
+    def with_changes(self, changes: ParameterChanges) -> Self:
         groups = {"terms": self.terms, **self._extra_parameters()}
         owned = {field: {p.name for p in params} for field, params in groups.items()}
-        mine = set().union(*owned.values())
-
-        def part(mapping: Mapping[str, Any] | None, keys: set[str] | None) -> Any:
-            if mapping is None:
-                return None
-            if keys is None:  # the base's
-                return {k: v for k, v in mapping.items() if k not in mine}
-            return {k: v for k, v in mapping.items() if k in keys}
-
         updated = {
-            field: replace_parameters(
-                params,
-                part(values, owned[field]),
-                part(free, owned[field]),
-                part(sigmas, owned[field]),
-            )
+            field: changes.only(owned[field]).apply(params)
             for field, params in groups.items()
             if params
         }
-        return attrs.evolve(
-            self,
-            base=self.base.with_parameters(
-                part(values, None), part(free, None), part(sigmas, None)
-            ),
-            **updated,
-        )
+        mine = set().union(*owned.values())
+        return attrs.evolve(self, base=changes.without(mine).applied_to(self.base), **updated)
 
     # ------------------------------------------------------------------ the correction
     def _c0_names(self) -> list[str]:
@@ -176,21 +149,14 @@ class AttitudeTermsCorrected(Sensor):
         coeffs = np.array([p.value for p in self.terms]).reshape(3, -1)
         return self._basis(t.ravel()).reshape(*t.shape, -1) @ coeffs.T
 
-    def linearize(
-        self,
-        lon_deg: ArrayLike,
-        lat_deg: ArrayLike,
-        h_m: ArrayLike,
-        names: Sequence[str] | None = None,
-    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-        if names is None:
-            names = [p.name for p in self.parameters if p.free]
-        names = list(names)
+    def _linearize(
+        self, lon: FloatArray, lat: FloatArray, h: FloatArray, names: list[str]
+    ) -> Linearization:
         own = [p.name for p in self.terms]
         extra = {p.name for group in self._extra_parameters().values() for p in group}
         base_names = [n for n in names if n not in own and n not in extra]
         line, sample, a_ground, a_base, a_c0, basis, tau = self._linearize_base(
-            lon_deg, lat_deg, h_m, base_names
+            lon, lat, h, base_names
         )
         shift = self._shift(a_c0, basis)
         a_param = np.empty((line.size, 2, len(names)))
@@ -240,16 +206,14 @@ class AttitudeTermsCorrected(Sensor):
             return self.base.project(lon_deg, lat_deg, h_m)
         lon, lat, h = as_float_arrays(lon_deg, lat_deg, h_m)
         shape = lon.shape
-        line, sample, _, _ = self.linearize(lon.ravel(), lat.ravel(), h.ravel(), [])
-        n_l, n_s = self.image_shape
-        inside = (line >= 0) & (line <= n_l) & (sample >= 0) & (sample <= n_s)
+        line, sample, _, _ = self.linearize(lon, lat, h, [])
+        inside = self.in_image(line, sample)
         return line.reshape(shape), sample.reshape(shape), inside.reshape(shape)
 
     def ground_to_image(
         self, lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike
     ) -> tuple[FloatArray, FloatArray]:
-        line, sample, inside = self.project(lon_deg, lat_deg, h_m)
-        return np.where(inside, line, np.nan), np.where(inside, sample, np.nan)
+        return self._projection_in_image(lon_deg, lat_deg, h_m)
 
     def image_to_ground(
         self, line: ArrayLike, sample: ArrayLike, h_m: ArrayLike

@@ -46,7 +46,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from carto.framework.errors import InputError
 from carto.framework.geometry import frames
-from carto.framework.geometry.sensor import Parameter, replace_parameters
+from carto.framework.geometry.sensor import Adjustable, Parameter, fields_as_json
 
 FloatArray = NDArray[np.float64]
 ArrayName = Literal["single", "odd", "even"]
@@ -60,7 +60,7 @@ def _tuple_of_floats(value: Any) -> tuple[float, ...]:
 
 
 @attrs.frozen(eq=False)
-class Camera:
+class Camera(Adjustable):
     """A linear-array camera (one array of a staggered pair, or a single array).
 
     Attributes:
@@ -241,17 +241,6 @@ class Camera:
         """The same camera describing the ``"odd"`` or ``"even"`` array (or ``"single"``)."""
         return attrs.evolve(self, array=array)
 
-    def with_parameters(
-        self,
-        values: Mapping[str, float] | None = None,
-        free: Mapping[str, bool] | None = None,
-        sigmas: Mapping[str, float] | None = None,
-    ) -> Camera:
-        """A new camera with some alignment-correction values / flags / sigmas replaced."""
-        return attrs.evolve(
-            self, parameters=replace_parameters(self.parameters, values, free, sigmas)
-        )
-
     def with_interior_parameters(self, sigmas: Mapping[str, float]) -> Camera:
         """The camera with free interior corrections (``scale``, ``line_offset``,
         ``centre_offset``: keys of ``sigmas``, their a-priori sigmas), starting at 0; kinds it
@@ -369,19 +358,7 @@ class Camera:
 
     # ------------------------------------------------------------------ serialisation
     def to_dict(self) -> dict[str, Any]:
-        return {
-            "name": self.name,
-            "n_samples": self.n_samples,
-            "tan_psi_x_coeffs": list(self.tan_psi_x_coeffs),
-            "tan_psi_y_coeffs": list(self.tan_psi_y_coeffs),
-            "stagger_tan": self.stagger_tan,
-            "array": self.array,
-            "mounting_rpy_rad": list(self.mounting_rpy_rad),
-            "alignment_rpy_rad": list(self.alignment_rpy_rad),
-            "parameters": [attrs.asdict(p) for p in self.parameters],
-            "focal_length_m": self.focal_length_m,
-            "pitch_m": self.pitch_m,
-        }
+        return fields_as_json(self)
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> Camera:

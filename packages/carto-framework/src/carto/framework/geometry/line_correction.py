@@ -20,7 +20,7 @@ adjustable through it.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 
 import attrs
 import numpy as np
@@ -28,7 +28,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from carto.framework.arrays import as_float_arrays
 from carto.framework.errors import InputError
-from carto.framework.geometry.sensor import Parameter, Sensor
+from carto.framework.geometry.sensor import Linearization, Sensor, SensorWrapper
 
 FloatArray = NDArray[np.float64]
 
@@ -166,7 +166,7 @@ def _coefficients(value: ArrayLike) -> FloatArray:
 
 
 @attrs.frozen(eq=False)
-class LineCorrected(Sensor):
+class LineCorrected(SensorWrapper):
     """``base`` with an image-space correction varying with the line (module docstring).
 
     Attributes:
@@ -176,7 +176,6 @@ class LineCorrected(Sensor):
             sample shifts', pixels.
     """
 
-    base: Sensor
     basis: LineBasis
     coefficients: FloatArray = attrs.field(converter=_coefficients)
 
@@ -199,28 +198,8 @@ class LineCorrected(Sensor):
 
     # ------------------------------------------------------------------ Sensor data
     @property
-    def name(self) -> str:
-        return str(getattr(self.base, "name", ""))
-
-    @property
-    def image_shape(self) -> tuple[int, int]:
-        return self.base.image_shape
-
-    @property
     def ray_heights_m(self) -> tuple[float, float]:
         return self.base.ray_heights_m
-
-    @property
-    def parameters(self) -> tuple[Parameter, ...]:
-        return self.base.parameters
-
-    def with_parameters(
-        self,
-        values: Mapping[str, float] | None = None,
-        free: Mapping[str, bool] | None = None,
-        sigmas: Mapping[str, float] | None = None,
-    ) -> LineCorrected:
-        return attrs.evolve(self, base=self.base.with_parameters(values, free, sigmas))
 
     def for_raster(self, raster: object) -> Sensor:  # type: ignore[override]
         return self
@@ -243,9 +222,7 @@ class LineCorrected(Sensor):
         line, sample = np.asarray(line, np.float64), np.asarray(sample, np.float64)
         d_line, d_sample = self.shift(line)
         line, sample = line + d_line, sample + d_sample
-        n_l, n_s = self.image_shape
-        inside = (line >= 0) & (line <= n_l) & (sample >= 0) & (sample <= n_s)
-        return line, sample, inside
+        return line, sample, self.in_image(line, sample)
 
     def ground_to_image(
         self, lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike
@@ -270,14 +247,10 @@ class LineCorrected(Sensor):
         d_line, d_sample = self.shift(base_line)
         return self.base.image_to_ground(line - d_line, sample - d_sample, h)
 
-    def linearize(
-        self,
-        lon_deg: ArrayLike,
-        lat_deg: ArrayLike,
-        h_m: ArrayLike,
-        names: Sequence[str] | None = None,
-    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-        line, sample, a_ground, a_param = self.base.linearize(lon_deg, lat_deg, h_m, names)
+    def _linearize(
+        self, lon: FloatArray, lat: FloatArray, h: FloatArray, names: list[str]
+    ) -> Linearization:
+        line, sample, a_ground, a_param = self.base.linearize(lon, lat, h, names)
         shift, slope = self._shift_and_slope(line)
         # d(line + s(line)) = (1 + s'(line)) d line; the sample shift follows the line too
         chain = np.stack(

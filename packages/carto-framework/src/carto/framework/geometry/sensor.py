@@ -15,9 +15,9 @@ from __future__ import annotations
 
 import abc
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Collection, Container, Mapping, Sequence
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Self, TypeVar
 
 import attrs
 import numpy as np
@@ -28,6 +28,10 @@ from carto.framework.component import Component
 from carto.framework.errors import InputError
 
 FloatArray = NDArray[np.float64]
+
+Linearization = tuple[FloatArray, FloatArray, FloatArray, FloatArray]
+"""What :meth:`Sensor.linearize` returns: ``(line (N,), sample (N,), ground partials
+(N, 2, 3), parameter partials (N, 2, P))``."""
 
 
 @attrs.frozen
@@ -58,6 +62,18 @@ class Parameter:
             raise InputError(f"parameter {self.name}: sigma must be > 0, got {sigma}")
 
 
+def fields_as_json(instance: Any, exclude: Collection[str] = ()) -> dict[str, Any]:
+    """The fields of an attrs ``instance`` but those named in ``exclude``, in their order, as
+    JSON-ready data: attrs values (a :class:`Parameter`, a line timing) as dicts of all their
+    fields, tuples as lists."""
+
+    def lists(_instance: Any, _field: attrs.Attribute | None, value: Any) -> Any:
+        return list(value) if isinstance(value, tuple) else value
+
+    skip = [field for field in attrs.fields(type(instance)) if field.name in exclude]
+    return attrs.asdict(instance, filter=attrs.filters.exclude(*skip), value_serializer=lists)
+
+
 def replace_parameters(
     parameters: Sequence[Parameter],
     values: Mapping[str, float] | None = None,
@@ -65,32 +81,110 @@ def replace_parameters(
     sigmas: Mapping[str, float] | None = None,
 ) -> tuple[Parameter, ...]:
     """``parameters`` with some values, free flags or sigmas replaced (unknown names raise)."""
-    by_name = {p.name: p for p in parameters}
-    for mapping in (values, free, sigmas):
-        unknown = sorted(set(mapping or {}) - set(by_name))
+    return ParameterChanges(values, free, sigmas).apply(parameters)
+
+
+@attrs.frozen
+class ParameterChanges:
+    """The arguments of :meth:`Adjustable.with_parameters` as one value: new values, free
+    flags and sigmas by parameter name (``None``: none of that kind)."""
+
+    values: Mapping[str, float] | None = None
+    free: Mapping[str, bool] | None = None
+    sigmas: Mapping[str, float] | None = None
+
+    def unknown(self, known: Collection[str]) -> list[str]:
+        """The names outside ``known`` of the first of values, free flags and sigmas that has
+        any, sorted (empty: every name is known)."""
+        for mapping in (self.values, self.free, self.sigmas):
+            unknown = sorted(set(mapping or {}) - set(known))
+            if unknown:
+                return unknown
+        return []
+
+    def only(self, names: Container[str]) -> ParameterChanges:
+        """The changes of the parameters ``names``."""
+        return self._filtered(lambda name: name in names)
+
+    def without(self, names: Container[str]) -> ParameterChanges:
+        """The changes of the parameters other than ``names``."""
+        return self._filtered(lambda name: name not in names)
+
+    def _filtered(self, keep: Callable[[str], bool]) -> ParameterChanges:
+        def part(mapping: Mapping[str, Any] | None) -> dict[str, Any] | None:
+            return None if mapping is None else {k: v for k, v in mapping.items() if keep(k)}
+
+        return ParameterChanges(part(self.values), part(self.free), part(self.sigmas))
+
+    def apply(self, parameters: Sequence[Parameter]) -> tuple[Parameter, ...]:
+        """``parameters`` with these changes (unknown names raise
+        :class:`~carto.framework.errors.InputError`)."""
+        by_name = {p.name: p for p in parameters}
+        unknown = self.unknown(by_name)
         if unknown:
             raise InputError(
                 f"unknown sensor parameter(s) {', '.join(unknown)}; "
                 f"the model has: {', '.join(by_name) or 'none'}"
             )
-    out = []
-    for p in parameters:
-        changes: dict[str, object] = {}
-        if values and p.name in values:
-            changes["value"] = float(values[p.name])
-        if free and p.name in free:
-            changes["free"] = bool(free[p.name])
-        if sigmas and p.name in sigmas:
-            changes["sigma"] = float(sigmas[p.name])
-        out.append(attrs.evolve(p, **changes) if changes else p)
-    return tuple(out)
+        out = []
+        for p in parameters:
+            changes: dict[str, object] = {}
+            if self.values and p.name in self.values:
+                changes["value"] = float(self.values[p.name])
+            if self.free and p.name in self.free:
+                changes["free"] = bool(self.free[p.name])
+            if self.sigmas and p.name in self.sigmas:
+                changes["sigma"] = float(self.sigmas[p.name])
+            out.append(attrs.evolve(p, **changes) if changes else p)
+        return tuple(out)
+
+    def applied_to(self, target: AdjustableT) -> AdjustableT:
+        """``target.with_parameters(...)`` with these changes (through the public method, which
+        a sensor of a plugin may override instead of :meth:`Adjustable.with_changes`)."""
+        return target.with_parameters(self.values, self.free, self.sigmas)
+
+
+class Adjustable:
+    """Something with adjustable :class:`Parameter` s (``parameters``) that makes copies of
+    itself with some of them replaced: sensors, cameras, trajectories. Subclasses implement
+    :meth:`with_changes`; the default replaces an attrs field ``parameters``."""
+
+    __slots__ = ()
+
+    parameters: tuple[Parameter, ...]
+
+    def with_parameters(
+        self,
+        values: Mapping[str, float] | None = None,
+        free: Mapping[str, bool] | None = None,
+        sigmas: Mapping[str, float] | None = None,
+    ) -> Self:
+        """A new object with some parameter values, free flags or sigmas replaced.
+
+        Sensors, cameras and trajectories are immutable: this never changes ``self``. Unknown
+        names raise :class:`~carto.framework.errors.InputError`.
+        """
+        return self.with_changes(ParameterChanges(values, free, sigmas))
+
+    def with_changes(self, changes: ParameterChanges) -> Self:
+        """:meth:`with_parameters` with its arguments as one value."""
+        return attrs.evolve(self, parameters=changes.apply(self.parameters))  # type: ignore[misc]
+
+
+AdjustableT = TypeVar("AdjustableT", bound=Adjustable)
+
+
+def flat_float_arrays(*values: ArrayLike) -> tuple[FloatArray, ...]:
+    """The arguments broadcast together as flat float64 arrays (the points of
+    :meth:`Sensor.linearize` and the partials)."""
+    return tuple(a.ravel() for a in as_float_arrays(*values))
 
 
 RAY_HEIGHTS_M = (-500.0, 9000.0)
 """The default heights of a line of sight's two points (they bracket every terrain)."""
 
 
-class Sensor(abc.ABC):
+class Sensor(Adjustable, abc.ABC):
     """The geometric model of one image: ground <-> image.
 
     Implementations: the rigorous line scanner and the RPC model in the framework, and any sensor
@@ -147,6 +241,14 @@ class Sensor(abc.ABC):
         line, sample = self.ground_to_image(lon_deg, lat_deg, h_m)
         return line, sample, np.isfinite(line) & np.isfinite(sample)
 
+    def _projection_in_image(
+        self, lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike
+    ) -> tuple[FloatArray, FloatArray]:
+        """:meth:`project` with NaN outside the image: the :meth:`ground_to_image` of models
+        whose :meth:`project` extrapolates beyond the image."""
+        line, sample, inside = self.project(lon_deg, lat_deg, h_m)
+        return np.where(inside, line, np.nan), np.where(inside, sample, np.nan)
+
     def locate_on_dem(
         self, line: ArrayLike, sample: ArrayLike, dem: Any, **options: Any
     ) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -200,22 +302,18 @@ class Sensor(abc.ABC):
         """The adjustable parameters, in a fixed order (none by default)."""
         return ()
 
-    def with_parameters(
-        self,
-        values: Mapping[str, float] | None = None,
-        free: Mapping[str, bool] | None = None,
-        sigmas: Mapping[str, float] | None = None,
-    ) -> Sensor:
-        """A new sensor with some parameter values, free flags or sigmas replaced.
-
-        Sensors are immutable: this never changes ``self``. Unknown names raise
-        :class:`~carto.framework.errors.InputError`. The base implementation supports models
-        without parameters only.
-        """
-        replace_parameters(self.parameters, values, free, sigmas)  # validates names
+    def with_changes(self, changes: ParameterChanges) -> Self:
+        """A new sensor with some parameter values, free flags or sigmas replaced (see
+        :meth:`with_parameters`). The base implementation supports models without
+        parameters only."""
+        changes.apply(self.parameters)  # validates names
         if self.parameters:  # pragma: no cover - subclasses with parameters override this
             raise NotImplementedError(f"{type(self).__name__} must implement with_parameters")
         return self
+
+    def _parameter_names(self, names: Sequence[str] | None = None) -> list[str]:
+        """``names`` as a list; the free parameters' names when ``None``."""
+        return [p.name for p in self.parameters if p.free] if names is None else list(names)
 
     def parameter_partials(
         self,
@@ -226,14 +324,19 @@ class Sensor(abc.ABC):
     ) -> FloatArray:
         """Partial derivatives of ``(line, sample)`` w.r.t. parameters, shape ``(N, 2, P)``.
 
-        ``names`` defaults to the free parameters. The base implementation takes central
-        differences with a step of ``1e-3`` sigma (or of ``1e-6`` for parameters without a
-        prior); models override it with analytic derivatives where they are cheap.
+        ``names`` defaults to the free parameters. Models implement
+        :meth:`_parameter_partials`, of flat arrays and a list of names.
         """
-        lon, lat, h = (a.ravel() for a in as_float_arrays(lon_deg, lat_deg, h_m))
+        lon, lat, h = flat_float_arrays(lon_deg, lat_deg, h_m)
+        return self._parameter_partials(lon, lat, h, self._parameter_names(names))
+
+    def _parameter_partials(
+        self, lon: FloatArray, lat: FloatArray, h: FloatArray, names: list[str]
+    ) -> FloatArray:
+        """:meth:`parameter_partials` by central differences with a step of ``1e-3`` sigma
+        (or of ``1e-6`` for parameters without a prior); models override it with analytic
+        derivatives where they are cheap."""
         params = {p.name: p for p in self.parameters}
-        if names is None:
-            names = [p.name for p in self.parameters if p.free]
         out = np.empty((lon.size, 2, len(names)))
         for k, name in enumerate(names):
             p = params[name]
@@ -250,7 +353,7 @@ class Sensor(abc.ABC):
         The ground displacements are east, north and up in metres at each point (a local
         tangent frame, well scaled for adjustment). Central differences of 1 m by default.
         """
-        lon, lat, h = (a.ravel() for a in as_float_arrays(lon_deg, lat_deg, h_m))
+        lon, lat, h = flat_float_arrays(lon_deg, lat_deg, h_m)
         from carto.framework.geometry.frames import metres_per_radian
 
         m_per_rad_lon, m_per_rad_lat = metres_per_radian(lat, h)
@@ -273,19 +376,55 @@ class Sensor(abc.ABC):
         lat_deg: ArrayLike,
         h_m: ArrayLike,
         names: Sequence[str] | None = None,
-    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    ) -> Linearization:
         """Everything an adjustment needs at ground points, in one call:
         ``(line (N,), sample (N,), ground partials (N, 2, 3), parameter partials (N, 2, P))``
         (see :meth:`project`, :meth:`ground_partials`, :meth:`parameter_partials`; ``names``
-        defaults to the free parameters). Models override it to share the work between the
-        three (one projection instead of many)."""
-        lon, lat, h = (a.ravel() for a in as_float_arrays(lon_deg, lat_deg, h_m))
+        defaults to the free parameters). Models override :meth:`_linearize`, of flat arrays
+        and a list of names, to share the work between the three (one projection instead of
+        many)."""
+        lon, lat, h = flat_float_arrays(lon_deg, lat_deg, h_m)
+        return self._linearize(lon, lat, h, self._parameter_names(names))
+
+    def _linearize(
+        self, lon: FloatArray, lat: FloatArray, h: FloatArray, names: list[str]
+    ) -> Linearization:
+        """:meth:`linearize` from :meth:`project`, :meth:`ground_partials` and
+        :meth:`parameter_partials`."""
         line, sample, _ = self.project(lon, lat, h)
-        names = [p.name for p in self.parameters if p.free] if names is None else list(names)
         a_param = (
             self.parameter_partials(lon, lat, h, names) if names else np.zeros((lon.size, 2, 0))
         )
         return line, sample, self.ground_partials(lon, lat, h), a_param
+
+    def in_image(self, line: FloatArray, sample: FloatArray) -> NDArray[np.bool_]:
+        """Where image points are within the image: ``0 <= line <= n_lines`` and
+        ``0 <= sample <= n_samples`` (False for NaN)."""
+        n_l, n_s = self.image_shape
+        return (line >= 0) & (line <= n_l) & (sample >= 0) & (sample <= n_s)
+
+
+@attrs.frozen(eq=False)
+class SensorWrapper(Sensor):
+    """A sensor made of another, ``base``: the image (name, shape) and the parameters are the
+    base's unless a subclass says otherwise; parameter changes go to the base."""
+
+    base: Sensor
+
+    @property
+    def name(self) -> str:
+        return str(getattr(self.base, "name", ""))
+
+    @property
+    def image_shape(self) -> tuple[int, int]:
+        return self.base.image_shape
+
+    @property
+    def parameters(self) -> tuple[Parameter, ...]:
+        return self.base.parameters
+
+    def with_changes(self, changes: ParameterChanges) -> Self:
+        return attrs.evolve(self, base=changes.applied_to(self.base))
 
 
 class SensorType(Component):

@@ -34,7 +34,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from carto.framework.errors import InputError
 from carto.framework.geometry import frames
-from carto.framework.geometry.sensor import Parameter, replace_parameters
+from carto.framework.geometry.sensor import Adjustable, Parameter
 from carto.framework.geometry.time_series import (
     BUILTIN_KINDS,
     BuiltinSeries,
@@ -86,7 +86,7 @@ class FitReport:
 
 # ------------------------------------------------------------------------ the trajectory
 @attrs.frozen(eq=False)
-class Trajectory:
+class Trajectory(Adjustable):
     """Position and attitude of a platform as continuous functions of time, with corrections.
 
     Build it with :meth:`from_samples`. Immutable: :meth:`with_parameters` returns a new one.
@@ -212,16 +212,6 @@ class Trajectory:
         )
 
     # ---------------------------------------------------------------- parameters
-    def with_parameters(
-        self,
-        values: dict[str, float] | None = None,
-        free: dict[str, bool] | None = None,
-        sigmas: dict[str, float] | None = None,
-    ) -> Trajectory:
-        """A new trajectory with some correction values / free flags / sigmas replaced."""
-        params = replace_parameters(self.parameters, values, free, sigmas)
-        return attrs.evolve(self, parameters=params)
-
     def with_correction_orders(
         self, attitude: int | None = None, position: int | None = None
     ) -> Trajectory:

@@ -16,7 +16,9 @@ Points are ``(N, 2)`` arrays of continuous ``(line, sample)``, the centre of the
 from __future__ import annotations
 
 import math
+from typing import Any
 
+import attrs
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -70,6 +72,36 @@ def _finite_at(image: NDArray[np.float32], points: NDArray[np.float64]) -> NDArr
     return np.isfinite(image[index[:, 0], index[:, 1]])
 
 
+@attrs.frozen
+class CandidateOptions:
+    """How :func:`candidate_points` and :func:`window_candidates` choose their points.
+
+    Attributes:
+        method: ``"forstner"`` or ``"grid"`` (:data:`CANDIDATE_METHODS`).
+        per_cell: Forstner points kept per cell.
+        window, min_roundness, weight_quantile: the operator's box, smallest roundness and
+            weight quantile (:func:`~carto.framework.matching.forstner.forstner_points`).
+    """
+
+    method: str = "forstner"
+    per_cell: int = 2
+    window: int = 5
+    min_roundness: float = 0.5
+    weight_quantile: float = 0.5
+
+    def operator_points(self, image: NDArray, **cells: Any) -> NDArray[np.float64]:
+        """:func:`~carto.framework.matching.forstner.forstner_points` of ``image`` with these
+        options (suppression radius ``window``, least-squares corner location); ``cells``:
+        its ``grid_cells`` and ``per_cell``, if any."""
+        return forstner_points(
+            image,
+            window=self.window,
+            min_roundness=self.min_roundness,
+            weight_quantile=self.weight_quantile,
+            **cells,
+        )
+
+
 def _checked(image: ArrayLike, method: str, spacing_px: float) -> tuple[NDArray, float]:
     """The image (:func:`~carto.framework.matching.inputs.as_image`) and the spacing, refused
     unless the method is one of :data:`CANDIDATE_METHODS` and the spacing at least 4 px."""
@@ -110,14 +142,8 @@ def candidate_points(
         return points[_finite_at(img, points)]
     cells = candidate_cells(img.shape, spacing)
     size = np.array([img.shape[0] / cells[0], img.shape[1] / cells[1]])
-    points = forstner_points(
-        img,
-        window=window,
-        min_roundness=min_roundness,
-        weight_quantile=weight_quantile,
-        grid_cells=cells,
-        per_cell=per_cell,
-    )
+    options = CandidateOptions(method, per_cell, window, min_roundness, weight_quantile)
+    points = options.operator_points(img, grid_cells=cells, per_cell=options.per_cell)
     occupied = np.zeros(cells, bool)
     index = np.minimum((points // size).astype(np.intp), np.array(cells) - 1)
     occupied[index[:, 0], index[:, 1]] = True
@@ -158,22 +184,17 @@ def window_candidates(
     offset: tuple[int, int],
     frame_shape: tuple[int, int],
     cell_range: tuple[tuple[int, int], tuple[int, int]],
-    *,
-    method: str = "forstner",
-    per_cell: int = 2,
-    window: int = 5,
-    min_roundness: float = 0.5,
-    weight_quantile: float = 0.5,
+    options: CandidateOptions = CandidateOptions(),
 ) -> NDArray[np.float64]:
     """:func:`candidate_points` of one window of a larger frame (a tile of a whole scene's
-    ortho grid): ``image`` is the window at ``offset`` (row, col) of a frame of
-    ``frame_shape``, divided into the frame's cells of about ``spacing_px``
+    ortho grid), chosen as ``options`` say: ``image`` is the window at ``offset`` (row, col)
+    of a frame of ``frame_shape``, divided into the frame's cells of about ``spacing_px``
     (:func:`candidate_cells`); only the cells ``cell_range = ((row0, row1), (col0, col1))``
     get candidates (the tile's own: tiles with disjoint cell ranges give disjoint candidates).
     The window must reach beyond those cells by the operator's border (``window + 2``) for
     the result to equal :func:`candidate_points` on the whole frame; the Forstner weight
     quantile is the window's. Positions in the window's pixels (first pixel centre 0.5)."""
-    img, spacing = _checked(image, method, spacing_px)
+    img, spacing = _checked(image, options.method, spacing_px)
     frame = (int(frame_shape[0]), int(frame_shape[1]))
     cells = candidate_cells(frame, spacing)
     off = np.asarray(offset, np.float64)
@@ -184,18 +205,16 @@ def window_candidates(
         ok &= (local[:, 0] < img.shape[0]) & (local[:, 1] < img.shape[1])
         return ok
 
-    if method == "grid":
+    if options.method == "grid":
         points = grid_points(frame, spacing, margin=2 * spacing / 3)
         points = points[in_cell_range(points, frame, cells, cell_range)] - off
         points = points[in_window(points)]
         return points[_finite_at(img, points)]
-    found = forstner_points(  # all points, best first
-        img, window=window, min_roundness=min_roundness, weight_quantile=weight_quantile
-    )
-    glob = found + off
+    glob = options.operator_points(img) + off  # all points, best first
     mine = in_cell_range(glob, frame, cells, cell_range)
     glob = glob[mine]
-    order = spread_order(glob, -np.arange(glob.shape[0], dtype=np.float64), frame, cells, per_cell)
+    weight = -np.arange(glob.shape[0], dtype=np.float64)
+    order = spread_order(glob, weight, frame, cells, options.per_cell)
     points = glob[order]
     occupied = np.zeros((r1 - r0, c1 - c0), bool)
     cell = frame_cells(points, frame, cells)

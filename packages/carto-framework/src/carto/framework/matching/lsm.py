@@ -11,9 +11,9 @@ image, resampled by (Keys) cubic convolution:
   parallel over the points), giving the displacement at the point itself where it varies across
   the template, e.g. with relief parallax between views.
 
-Points where the refinement fails keep the offset they started from. Templates are given by
-their top-left 0-based pixel index ``t0`` in the left image; offsets are ``right - left`` in
-pixels (the conventions of :mod:`~carto.framework.matching.ncc`).
+Points where the refinement fails keep the offset they started from. Templates
+(:class:`Templates`) are given by their top-left 0-based pixel index ``t0`` in the left image;
+offsets are ``right - left`` in pixels (the conventions of :mod:`~carto.framework.matching.ncc`).
 
 Accuracy (measured, ``tests/framework/test_match.py``): 0.011 px RMS on exact sub-pixel
 translations of a multi-scale texture (the 3-point fits of the peak: 0.04-0.06 px), 0.022 px in
@@ -27,6 +27,7 @@ Speed: :func:`~carto.framework.matching.ncc.match_ncc` with least-squares matchi
 
 from __future__ import annotations
 
+import attrs
 import numba
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
@@ -49,13 +50,25 @@ def _keys_weights(fraction: NDArray[np.float64]) -> NDArray[np.float64]:
     )
 
 
+@attrs.frozen(eq=False)
+class Templates:
+    """The templates of a left image that least-squares matching refines, and the right image
+    they are matched in.
+
+    Attributes:
+        left, right: the images (float32; NaN = no data).
+        t0: ``(M, 2)`` top-left 0-based pixel index of each template in ``left``.
+        size: the templates' side, pixels.
+    """
+
+    left: NDArray[np.float32]
+    right: NDArray[np.float32]
+    t0: NDArray[np.intp]
+    size: int
+
+
 def lsm_refine(
-    left: NDArray[np.float32],
-    right: NDArray[np.float32],
-    t0: NDArray[np.intp],
-    offset: NDArray[np.float64],
-    template: int,
-    iterations: int = 6,
+    templates: Templates, offset: NDArray[np.float64], iterations: int = 6
 ) -> NDArray[np.float64]:
     """Least-squares matching (translation, gain and offset) from ``offset``.
 
@@ -66,23 +79,20 @@ def lsm_refine(
     that diverge (moving more than a pixel from ``offset``) or become singular keep ``offset``.
     """
     out = offset.copy()
-    for start in range(0, t0.shape[0], _LSM_CHUNK):  # chunks keep the work arrays in cache
+    for start in range(0, templates.t0.shape[0], _LSM_CHUNK):  # chunks keep the work in cache
         chunk = slice(start, start + _LSM_CHUNK)
-        out[chunk] = _lsm_chunk(left, right, t0[chunk], offset[chunk], template, iterations)
+        part = attrs.evolve(templates, t0=templates.t0[chunk])
+        out[chunk] = _lsm_chunk(part, offset[chunk], iterations)
     return out
 
 
 def _lsm_chunk(
-    left: NDArray[np.float32],
-    right: NDArray[np.float32],
-    t0: NDArray[np.intp],
-    offset: NDArray[np.float64],
-    template: int,
-    iterations: int,
+    templates: Templates, offset: NDArray[np.float64], iterations: int
 ) -> NDArray[np.float64]:
+    left, right, t0 = templates.left, templates.right, templates.t0
     m = t0.shape[0]
     out = offset.copy()
-    t = template
+    t = templates.size
     size = t + 5
     d = offset.copy()
     gain = np.ones(m)
@@ -142,11 +152,8 @@ def _lsm_chunk(
 
 
 def lsm_affine_refine(
-    left: NDArray[np.float32],
-    right: NDArray[np.float32],
-    t0: NDArray[np.intp],
+    templates: Templates,
     offset: NDArray[np.float64],
-    template: int,
     points: NDArray[np.float64],
     iterations: int = 12,
 ) -> NDArray[np.float64]:
@@ -164,18 +171,18 @@ def lsm_affine_refine(
     of more than 2 pixels from ``offset``, ``|A|`` entries beyond 0.6, a singular system,
     a negative gain) keep ``offset``. Compiled (numba), parallel over the points.
     """
-    n = t0.shape[0]
+    n = templates.t0.shape[0]
     if n == 0:
         return offset.copy()
     result = np.empty((n, 2))
     good = np.zeros(n, np.bool_)
     _lsm_affine_kernel(
-        np.ascontiguousarray(left, np.float32),
-        np.ascontiguousarray(right, np.float32),
-        np.ascontiguousarray(t0, np.int64),
+        np.ascontiguousarray(templates.left, np.float32),
+        np.ascontiguousarray(templates.right, np.float32),
+        np.ascontiguousarray(templates.t0, np.int64),
         np.ascontiguousarray(offset, np.float64),
         np.ascontiguousarray(points, np.float64),
-        int(template),
+        int(templates.size),
         int(iterations),
         result,
         good,

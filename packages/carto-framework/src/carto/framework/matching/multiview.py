@@ -269,9 +269,8 @@ def match_views(
     """
     if matcher is None:
         matcher = _ncc_matcher()
-    primary, closing = _match_settings(
-        template, search, levels, min_score, tolerance_px, subpixel, closure_search
-    )
+    primary = match_settings(template, search, levels, min_score, tolerance_px, subpixel)
+    closing = attrs.evolve(primary, search_px=closure_search, levels=1, two_way=False)
     pts = _checked_points(orthos, reference, points, closure_px)
     views = (reference, *(n for n in orthos if n != reference))
     images = [as_image(orthos[v], v) for v in views]
@@ -288,18 +287,18 @@ def _ncc_matcher() -> Matcher:
     return NCCMatcher()
 
 
-def _match_settings(
+def match_settings(
     template: int,
     search: int,
     levels: int,
     min_score: float,
     tolerance_px: float,
     subpixel: str,
-    closure_search: int,
-) -> tuple[MatchSettings, MatchSettings]:
-    """The settings of :func:`match_views`' reference -> view matches (step 2) and of its
-    closures (step 3: one level, one direction, ``+-closure_search`` pixels)."""
-    primary = MatchSettings(
+) -> MatchSettings:
+    """The settings of :func:`match_views`' reference -> view matches (step 2: both
+    directions) from its matching options; its closures (step 3) take them on one level, in
+    one direction, ``+-closure_search`` pixels."""
+    return MatchSettings(
         template_px=template,
         search_px=search,
         levels=levels,
@@ -308,8 +307,6 @@ def _match_settings(
         tolerance_px=tolerance_px,
         subpixel=subpixel,
     )
-    closing = attrs.evolve(primary, search_px=closure_search, levels=1, two_way=False)
-    return primary, closing
 
 
 def _checked_points(

@@ -23,8 +23,9 @@ module holds the correlation that Carto's own matcher
   matches that do not come back within ``tolerance`` pixels are dropped.
 
 :func:`correlate_points` and :func:`correlate_bidirectional` are the same on prepared inputs
-(per input point, :class:`Found`; :func:`prepared_pair` checks and prepares them,
-:func:`correlate_pair` runs either), for the other area-based matchers:
+(per input point, :class:`Found`; :func:`prepared_pair` checks and prepares them, the options
+are a :class:`Correlation`, :func:`correlate_pair` runs either), for the other area-based
+matchers:
 :func:`~carto.framework.matching.pyramid.pyramid_match` (coarse-to-fine over image pyramids).
 First guesses of a global translation come from :mod:`~carto.framework.matching.shifts`
 (phase correlation, masked correlation of reduced images), candidate points from
@@ -76,7 +77,7 @@ from carto.framework.matching.inputs import (
     nan_integral,
     windows_clean,
 )
-from carto.framework.matching.lsm import lsm_affine_refine, lsm_refine
+from carto.framework.matching.lsm import Templates, lsm_affine_refine, lsm_refine
 
 # ----------------------------------------------------------------------------- helpers
 SUBPIXEL_METHODS = ("parabola", "quadratic", "lsm", "lsm-affine", "none")
@@ -147,20 +148,53 @@ class Found:
         return np.isfinite(self.score)
 
 
-def correlate_points(
-    left: NDArray[np.float32],
-    right: NDArray[np.float32],
-    points: NDArray[np.float64],
-    guess: NDArray[np.float64],
-    template: int,
-    search: int,
-    subpixel: str,
-    min_score: float,
-    nan_left: NDArray[np.integer] | None,
-    nan_right: NDArray[np.integer] | None,
-) -> Found:
-    """The correlation of :func:`match_ncc` on prepared inputs, one row per input point."""
+@attrs.frozen(eq=False)
+class PreparedPair:
+    """The checked inputs of a correlation (:func:`prepared_pair`).
 
+    Attributes:
+        left, right: the images, float32 (NaN = no data).
+        points: ``(N, 2)`` ``(line, sample)`` in the left image.
+        guess: ``(N, 2)`` expected offsets ``right - left``, pixels.
+        nan_left, nan_right: the images' NaN tables
+            (:func:`~carto.framework.matching.inputs.nan_integral`).
+    """
+
+    left: NDArray[np.float32]
+    right: NDArray[np.float32]
+    points: NDArray[np.float64]
+    guess: NDArray[np.float64]
+    nan_left: NDArray[np.integer] | None
+    nan_right: NDArray[np.integer] | None
+
+    def reversed(self, points: NDArray[np.float64], guess: NDArray[np.float64]) -> PreparedPair:
+        """The pair the other way round (right -> left), from ``points`` of the right image
+        with the ``guess`` offsets ``left - right``."""
+        return PreparedPair(self.right, self.left, points, guess, self.nan_right, self.nan_left)
+
+
+@attrs.frozen
+class Correlation:
+    """The options of a correlation (:func:`correlate_points`), as :func:`match_ncc` takes
+    them (:func:`checked_correlation`).
+
+    Attributes:
+        template: side of the square template, odd, pixels.
+        search: the search reaches ``+-search`` pixels around the guess in both directions.
+        subpixel: the sub-pixel estimator, one of :data:`SUBPIXEL_METHODS`.
+        min_score: smallest accepted correlation score.
+    """
+
+    template: int
+    search: int
+    subpixel: str
+    min_score: float
+
+
+def correlate_points(pair: PreparedPair, options: Correlation) -> Found:
+    """The correlation of :func:`match_ncc` on prepared inputs, one row per input point."""
+    left, right, points, guess = pair.left, pair.right, pair.points, pair.guess
+    template, search, subpixel = options.template, options.search, options.subpixel
     n = points.shape[0]
     right_pts = np.full((n, 2), np.nan)
     scores = np.full(n, np.nan)
@@ -180,8 +214,8 @@ def correlate_points(
     ok &= (s0[:, 0] >= 0) & (s0[:, 1] >= 0)
     ok &= (s0[:, 0] + size <= h_r) & (s0[:, 1] + size <= w_r)
     idx = np.flatnonzero(ok)
-    clean = windows_clean(nan_left, t0[idx, 0], t0[idx, 1], template)
-    clean &= windows_clean(nan_right, s0[idx, 0], s0[idx, 1], size)
+    clean = windows_clean(pair.nan_left, t0[idx, 0], t0[idx, 1], template)
+    clean &= windows_clean(pair.nan_right, s0[idx, 0], s0[idx, 1], size)
     idx = idx[clean]
     if idx.size == 0:
         return Found(right_pts, scores)
@@ -198,7 +232,7 @@ def correlate_points(
     best = flat[np.arange(idx.size), peak].astype(np.float64)
     pr, pc = np.divmod(peak, n_off)
     inner = (pr > 0) & (pr < n_off - 1) & (pc > 0) & (pc < n_off - 1)
-    good = inner & (best >= min_score)
+    good = inner & (best >= options.min_score)
     idx, pr, pc, best, surface = idx[good], pr[good], pc[good], best[good], surface[good]
     rows = pr[:, None, None] + np.arange(-1, 2)[None, :, None]
     cols = pc[:, None, None] + np.arange(-1, 2)[None, None, :]
@@ -206,9 +240,10 @@ def correlate_points(
     sub = subpixel_peak(neighbourhood, peak_method(subpixel))
     offset = g[idx] + np.stack([pr, pc], axis=1) - search + sub
     if subpixel in ("lsm", "lsm-affine"):
-        offset = lsm_refine(left, right, t0[idx], offset, template)
-    if subpixel == "lsm-affine":
-        offset = lsm_affine_refine(left, right, t0[idx], offset, template, points[idx])
+        refined = Templates(left, right, t0[idx], template)
+        offset = lsm_refine(refined, offset)
+        if subpixel == "lsm-affine":
+            offset = lsm_affine_refine(refined, offset, points[idx])
     right_pts[idx] = points[idx] + offset
     scores[idx] = best
     return Found(right_pts, scores)
@@ -318,6 +353,13 @@ def check_options(template: int, search: int, subpixel: str, min_score: float) -
         raise InputError(f"min_score must be within [-1, 1], got {min_score}")
 
 
+def checked_correlation(template: int, search: int, subpixel: str, min_score: float) -> Correlation:
+    """The options of :func:`match_ncc` as a :class:`Correlation`, or InputError
+    (:func:`check_options`)."""
+    check_options(template, search, subpixel, min_score)
+    return Correlation(template, search, subpixel, float(min_score))
+
+
 def as_guesses(guess_offsets: ArrayLike | None, n: int) -> NDArray[np.float64]:
     """The ``guess_offsets`` of :func:`match_ncc` as an ``(n, 2)`` array (zero when None; one
     ``(2,)`` offset for all points), or InputError."""
@@ -340,26 +382,6 @@ def check_tolerance(tolerance: float) -> None:
         raise InputError(f"tolerance must be > 0 pixels, got {tolerance}")
 
 
-@attrs.frozen(eq=False)
-class PreparedPair:
-    """The checked inputs of a correlation (:func:`prepared_pair`).
-
-    Attributes:
-        left, right: the images, float32 (NaN = no data).
-        points: ``(N, 2)`` ``(line, sample)`` in the left image.
-        guess: ``(N, 2)`` expected offsets ``right - left``, pixels.
-        nan_left, nan_right: the images' NaN tables
-            (:func:`~carto.framework.matching.inputs.nan_integral`).
-    """
-
-    left: NDArray[np.float32]
-    right: NDArray[np.float32]
-    points: NDArray[np.float64]
-    guess: NDArray[np.float64]
-    nan_left: NDArray[np.integer] | None
-    nan_right: NDArray[np.integer] | None
-
-
 def prepared_pair(
     left: ArrayLike, right: ArrayLike, points_left: ArrayLike, guess_offsets: ArrayLike | None
 ) -> PreparedPair:
@@ -373,22 +395,28 @@ def prepared_pair(
     )
 
 
-def correlate_pair(
-    pair: PreparedPair,
-    template: int,
-    search: int,
-    subpixel: str,
-    min_score: float,
-    tolerance: float | None,
-) -> Found:
+def correlate_pair(pair: PreparedPair, options: Correlation, tolerance: float | None) -> Found:
     """The correlation of a prepared pair around its guesses, one row per point: both
     directions within ``tolerance`` pixels (:func:`correlate_bidirectional`), or left -> right
     only when ``tolerance`` is None (:func:`correlate_points`)."""
-    images = (pair.left, pair.right, pair.points, pair.guess)
-    options = (template, search, subpixel, min_score)
     if tolerance is None:
-        return correlate_points(*images, *options, pair.nan_left, pair.nan_right)
-    return correlate_bidirectional(*images, *options, tolerance, pair.nan_left, pair.nan_right)
+        return correlate_points(pair, options)
+    return correlate_bidirectional(pair, options, tolerance)
+
+
+def _matched(
+    left: ArrayLike,
+    right: ArrayLike,
+    points_left: ArrayLike,
+    guess_offsets: ArrayLike | None,
+    options: Correlation,
+    tolerance: float | None,
+) -> Matches:
+    """The matches of :func:`match_ncc` (``tolerance`` None) or :func:`match_bidirectional`
+    with checked options: the inputs prepared (:func:`prepared_pair`) and correlated
+    (:func:`correlate_pair`)."""
+    pair = prepared_pair(left, right, points_left, guess_offsets)
+    return found_matches(pair.points, correlate_pair(pair, options, tolerance))
 
 
 # ----------------------------------------------------------------------------- matching
@@ -428,49 +456,26 @@ def match_ncc(
     Raises:
         InputError: malformed images, points, guesses or options.
     """
-    check_options(template, search, subpixel, min_score)
-    pair = prepared_pair(left, right, points_left, guess_offsets)
-    found = correlate_pair(pair, template, search, subpixel, float(min_score), None)
-    return found_matches(pair.points, found)
+    options = checked_correlation(template, search, subpixel, min_score)
+    return _matched(left, right, points_left, guess_offsets, options, None)
 
 
-def correlate_bidirectional(
-    left: NDArray[np.float32],
-    right: NDArray[np.float32],
-    points: NDArray[np.float64],
-    guess: NDArray[np.float64],
-    template: int,
-    search: int,
-    subpixel: str,
-    min_score: float,
-    tolerance: float,
-    nan_left: NDArray[np.integer] | None,
-    nan_right: NDArray[np.integer] | None,
-) -> Found:
+def correlate_bidirectional(pair: PreparedPair, options: Correlation, tolerance: float) -> Found:
     """The correlation of :func:`match_bidirectional` on prepared inputs, one row per input
     point."""
-    forward = correlate_points(
-        left, right, points, guess, template, search, subpixel, min_score, nan_left, nan_right
-    )
+    forward = correlate_points(pair, options)
     ok = forward.ok
-    back_guess = np.where(ok[:, None], points - forward.right, 0.0)
+    back_guess = np.where(ok[:, None], pair.points - forward.right, 0.0)
     back_points = np.where(ok[:, None], forward.right, np.nan)
     # the check needs no more than the parabola's accuracy, except where the forward position
     # is the affine estimate at the point: a distorted template's translation peak may lie up
     # to a pixel away from it (and comparing like with like rejects the fewest good matches)
-    backward = correlate_points(
-        right,
-        left,
-        back_points,
-        back_guess,
-        template,
-        search,
-        subpixel if subpixel == "lsm-affine" else peak_method(subpixel),
-        min_score,
-        nan_right,
-        nan_left,
+    subpixel = options.subpixel
+    back = attrs.evolve(
+        options, subpixel=subpixel if subpixel == "lsm-affine" else peak_method(subpixel)
     )
-    closure = np.hypot(*(backward.right - points).T)
+    backward = correlate_points(pair.reversed(back_points, back_guess), back)
+    closure = np.hypot(*(backward.right - pair.points).T)
     keep = backward.ok & (closure <= tolerance)
     score = np.where(keep, np.minimum(forward.score, backward.score), np.nan)
     right_pts = np.where(keep[:, None], forward.right, np.nan)
@@ -501,8 +506,6 @@ def match_bidirectional(
     by up to a pixel). The score is the smaller of the two directions' scores. Other arguments
     as :func:`match_ncc`.
     """
-    check_options(template, search, subpixel, min_score)
+    options = checked_correlation(template, search, subpixel, min_score)
     check_tolerance(tolerance)
-    pair = prepared_pair(left, right, points_left, guess_offsets)
-    found = correlate_pair(pair, template, search, subpixel, float(min_score), float(tolerance))
-    return found_matches(pair.points, found)
+    return _matched(left, right, points_left, guess_offsets, options, float(tolerance))

@@ -22,7 +22,7 @@ from carto.framework.matching.base import (
 )
 from carto.framework.matching.candidates import grid_points
 from carto.framework.matching.inputs import as_image, check_int
-from carto.framework.matching.ncc import check_options, match_ncc
+from carto.framework.matching.ncc import check_options
 from carto.framework.matching.pyramid import pyramid_match
 from carto.framework.matching.shifts import global_shift
 
@@ -99,25 +99,7 @@ class NCCMatcher(Matcher):
                 d_line, d_sample, response = global_shift(left_img, right_img)
                 if response >= self.min_response:
                     guess_offsets = np.array([d_line, d_sample])
-        # what both ways of matching take from the settings
-        ncc = {
-            "template": settings.template_px,
-            "search": settings.search_px,
-            "subpixel": settings.subpixel,
-            "min_score": settings.min_score,
-            "guess_offsets": guess_offsets,
-        }
-        if settings.levels == 1 and not settings.two_way:
-            return match_ncc(left_img, right_img, points, **ncc)
-        return pyramid_match(
-            left_img,
-            right_img,
-            points,
-            levels=settings.levels,
-            **ncc,
-            bidirectional=settings.two_way,
-            tolerance=settings.tolerance_px,
-        )
+        return pyramid_match(left_img, right_img, points, settings, guess_offsets=guess_offsets)
 
     def settings(self) -> MatchSettings:
         """This matcher's own options as :class:`MatchSettings` (both directions)."""

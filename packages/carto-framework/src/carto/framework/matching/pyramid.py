@@ -1,6 +1,7 @@
 """Coarse-to-fine matching over image pyramids.
 
-:func:`pyramid_match`: coarse-to-fine over ``cv2.pyrDown`` pyramids, offsets of a level
+:func:`pyramid_match`: coarse-to-fine over ``cv2.pyrDown`` pyramids, with the settings of a
+matcher (:class:`~carto.framework.matching.base.MatchSettings`); offsets of a level
 (cleaned by a local median) are the guesses of the next one; the full-resolution level is
 matched by the correlation of :mod:`~carto.framework.matching.ncc` (both directions by default:
 :func:`~carto.framework.matching.ncc.match_bidirectional`). Points, offsets and scores follow
@@ -13,12 +14,12 @@ import attrs
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from carto.framework.matching.base import Matches
-from carto.framework.matching.inputs import check_int, nan_integral
+from carto.framework.matching.base import Matches, MatchSettings
+from carto.framework.matching.inputs import nan_integral
 from carto.framework.matching.ncc import (
+    Correlation,
     PreparedPair,
-    check_options,
-    check_tolerance,
+    checked_correlation,
     correlate_pair,
     found_matches,
     peak_method,
@@ -58,16 +59,10 @@ def pyramid_match(
     left: ArrayLike,
     right: ArrayLike,
     points_left: ArrayLike,
+    settings: MatchSettings,
     *,
-    levels: int = 3,
-    template: int = 15,
-    search: int = 11,
-    subpixel: str = "parabola",
-    min_score: float = 0.6,
     coarse_min_score: float = 0.5,
     guess_offsets: ArrayLike | None = None,
-    bidirectional: bool = True,
-    tolerance: float = 0.5,
 ) -> Matches:
     """Coarse-to-fine matching over image pyramids (``cv2.pyrDown``, factor 2 per level).
 
@@ -76,40 +71,36 @@ def pyramid_match(
     2 pixels of that level away, or unmatched, it is replaced by the median) and passed, scaled
     by two, as the guesses of the next level. The full-resolution level is matched with
     :func:`~carto.framework.matching.ncc.match_bidirectional` (or
-    :func:`~carto.framework.matching.ncc.match_ncc` when ``bidirectional`` is False). The
-    search reach is about ``search * (2**levels - 1)`` pixels around the guesses (77 px for the
-    defaults); give larger offsets as ``guess_offsets`` (e.g. from
+    :func:`~carto.framework.matching.ncc.match_ncc` without ``two_way``; one level without it
+    is plain :func:`~carto.framework.matching.ncc.match_ncc`). The search reach is about
+    ``search_px * (2**levels - 1)`` pixels around the guesses (77 px for the defaults of three
+    levels and 11 px); give larger offsets as ``guess_offsets`` (e.g. from
     :func:`~carto.framework.matching.shifts.global_shift`). The coarse levels use the parabola
     when ``subpixel`` is least-squares matching (their offsets are only guesses).
 
     Args:
-        levels: number of pyramid levels including the full resolution (1 = no pyramid);
-            reduced where the images get smaller than two search windows.
+        settings: ``levels`` (pyramid levels including the full resolution, 1 = no pyramid;
+            reduced where the images get smaller than two search windows), ``template_px``,
+            ``search_px``, ``subpixel``, ``min_score`` (as ``template``, ``search``,
+            ``subpixel``, ``min_score`` of :func:`~carto.framework.matching.ncc.match_ncc`),
+            ``two_way`` and ``tolerance_px`` (the left-right check of
+            :func:`~carto.framework.matching.ncc.match_bidirectional`).
         coarse_min_score: smallest score accepted at the coarse levels.
-        template, search, subpixel, min_score, guess_offsets: as
-            :func:`~carto.framework.matching.ncc.match_ncc`.
-        bidirectional, tolerance: the left-right check of
-            :func:`~carto.framework.matching.ncc.match_bidirectional`.
+        guess_offsets: as :func:`~carto.framework.matching.ncc.match_ncc`.
 
     Returns:
         the full-resolution matches, in the input order.
     """
-    check_options(template, search, subpixel, min_score)
-    levels = check_int(levels, "levels", 1)
-    check_tolerance(tolerance)
+    s = settings
+    options = checked_correlation(s.template_px, s.search_px, s.subpixel, s.min_score)
     pair = prepared_pair(left, right, points_left, guess_offsets)
-    pyramid = _pyramid(pair.left, pair.right, levels, template + 2 * search)
-    offsets = _coarse_offsets(
-        pyramid, pair, template, search, peak_method(subpixel), float(coarse_min_score)
+    pyramid = _pyramid(pair.left, pair.right, int(s.levels), s.template_px + 2 * s.search_px)
+    coarse = attrs.evolve(
+        options, subpixel=peak_method(s.subpixel), min_score=float(coarse_min_score)
     )
-    found = correlate_pair(
-        attrs.evolve(pair, guess=offsets),
-        template,
-        search,
-        subpixel,
-        float(min_score),
-        float(tolerance) if bidirectional else None,
-    )
+    offsets = _coarse_offsets(pyramid, pair, coarse)
+    tolerance = float(s.tolerance_px) if s.two_way else None
+    found = correlate_pair(attrs.evolve(pair, guess=offsets), options, tolerance)
     return found_matches(pair.points, found)
 
 
@@ -133,23 +124,20 @@ def _pyramid(
 def _coarse_offsets(
     pyramid: list[tuple[NDArray[np.float32], NDArray[np.float32]]],
     pair: PreparedPair,
-    template: int,
-    search: int,
-    peak: str,
-    coarse_min_score: float,
+    coarse: Correlation,
 ) -> NDArray[np.float64]:
     """The guesses of the full-resolution level: the coarse levels matched from the coarsest
-    down (sub-pixel by ``peak``), starting from the pair's guesses, each level's offsets
+    down (with the ``coarse`` options), starting from the pair's guesses, each level's offsets
     (full-resolution pixels, cleaned by :func:`_regularise`) the guesses of the next; the
     pair's own guesses without coarse levels."""
     points, offsets = pair.points, pair.guess
     for level in range(len(pyramid) - 1, 0, -1):
         a, b = pyramid[level]
         scale = 2.0**level
-        coarse = PreparedPair(
+        level_pair = PreparedPair(
             a, b, points / scale, offsets / scale, nan_integral(a), nan_integral(b)
         )
-        found = correlate_pair(coarse, template, search, peak, coarse_min_score, None)
+        found = correlate_pair(level_pair, coarse, None)
         level_offsets = (found.right - points / scale) * scale
         offsets = _regularise(points, level_offsets, found.ok, offsets, 2.0 * scale)
     return offsets

@@ -62,21 +62,16 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import NDArray
 
 from carto.framework.errors import InputError
 from carto.framework.geometry.sensor import Sensor
 from carto.framework.imaging.preparation import block_grid, prepared_sources
-from carto.framework.matching.base import (
-    DenseSettings,
-    Matcher,
-    Matches,
-    MatchSettings,
-    OffsetField,
-)
+from carto.framework.matching.base import Matcher, Matches, MatchSettings
 from carto.framework.matching.candidates import candidate_points
 from carto.framework.matching.inputs import as_image
-from carto.framework.matching.multiview import match_views
+from carto.framework.matching.multiview import match_settings, match_views
+from carto.framework.matching.ncc_matcher import NCCMatcher
 from carto.framework.matching.tiled_ties import (
     TABLE_COLUMNS,
     TILE_PX,
@@ -179,17 +174,11 @@ def automatic_tie_points(
     return _denser_until_enough(match, settings, spacing_px, min_points, engine, tile_px)
 
 
-_MATCHING_OPTIONS = (
-    "template",
-    "search",
-    "levels",
-    "min_score",
-    "tolerance_px",
-    "closure_px",
-    "require_closure",
-    "subpixel",
-    "matcher",
-)
+_TWO_VIEW_OPTIONS = ("template", "search", "levels", "min_score", "tolerance_px", "subpixel")
+"""The arguments of :func:`automatic_tie_points` that are options of :func:`match_views` and
+apply to two images (:func:`~carto.framework.matching.multiview.match_settings`)."""
+
+_MATCHING_OPTIONS = (*_TWO_VIEW_OPTIONS, "closure_px", "require_closure", "matcher")
 """The arguments of :func:`automatic_tie_points` that are options of :func:`match_views`."""
 
 _SELECTION_OPTIONS = ("points", "candidates", "forstner", "per_cell", "min_views", "sigma_px")
@@ -310,19 +299,21 @@ _PIPELINE_DEFAULTS: dict[str, Any] = {
 }
 
 
-class OrthoTiePointMatcher(Matcher):
+class OrthoTiePointMatcher(NCCMatcher):
     """Tie points on system-level ortho-images: Forstner candidates, NCC, closures.
 
     :meth:`tie_points` runs :func:`automatic_tie_points` on a block of raw images;
     :meth:`match` matches two images already in one geometry (e.g. two orthos on one grid):
     Forstner candidates of the left image (:func:`candidate_points`), the first guess from
     :func:`~carto.framework.matching.shifts.coarse_shift`, pyramid NCC with least-squares
-    sub-pixel refinement and the left-right check.
+    sub-pixel refinement and the left-right check. Given points and dense matching are the
+    ``"ncc"`` matcher's (:meth:`match_points` with this matcher's options as the default
+    settings, no global shift; :meth:`match_dense`).
 
     Args:
         options: keyword options of :func:`automatic_tie_points` (``spacing_px``,
             ``min_score``, ``candidates``, ``template`` ...); those that apply to two images
-            are used by :meth:`match` too.
+            are used by :meth:`match` and :meth:`match_points` too.
     """
 
     name = "ortho-forstner"
@@ -338,6 +329,7 @@ class OrthoTiePointMatcher(Matcher):
                 f"{self.name}: unknown option(s) {', '.join(unknown)}; "
                 f"known: {', '.join(sorted(_PIPELINE_DEFAULTS))}"
             )
+        super().__init__(use_global_shift=False)
         self.options = dict(options)
 
     def tie_points(
@@ -370,12 +362,7 @@ class OrthoTiePointMatcher(Matcher):
             {"left": left_img, "right": as_image(right, "right")},
             "left",
             points,
-            template=o["template"],
-            search=o["search"],
-            levels=o["levels"],
-            min_score=o["min_score"],
-            tolerance_px=o["tolerance_px"],
-            subpixel=o["subpixel"],
+            **self._two_view_options(),
         )
         ok = np.isfinite(mv.positions[1, :, 0])
         right_pts = mv.positions[1, ok]
@@ -383,41 +370,16 @@ class OrthoTiePointMatcher(Matcher):
             points[ok, 0], points[ok, 1], right_pts[:, 0], right_pts[:, 1], mv.scores[1, ok]
         )
 
-    def match_points(
-        self,
-        left: NDArray,
-        right: NDArray,
-        points: ArrayLike,
-        *,
-        guess_offsets: ArrayLike | None = None,
-        settings: MatchSettings | None = None,
-    ) -> Matches:
-        """Given points matched by the ``"ncc"`` matcher with this matcher's options as the
-        default settings (``template``, ``search``, ``levels``, ``min_score``,
-        ``tolerance_px``, ``subpixel``)."""
-        from carto.framework.matching.ncc_matcher import NCCMatcher
+    def settings(self) -> MatchSettings:
+        """The default settings of :meth:`match_points`: this matcher's options that apply to
+        two images (``template``, ``search``, ``levels``, ``min_score``, ``tolerance_px``,
+        ``subpixel``), as :func:`match_views` takes them."""
+        return match_settings(**self._two_view_options())
 
+    def _two_view_options(self) -> dict[str, Any]:
+        """This matcher's options of :func:`match_views` that apply to two images."""
         o = {**_PIPELINE_DEFAULTS, **self.options}
-        if settings is None:
-            settings = MatchSettings(
-                template_px=o["template"],
-                search_px=o["search"],
-                levels=o["levels"],
-                min_score=o["min_score"],
-                tolerance_px=o["tolerance_px"],
-                subpixel=o["subpixel"],
-            )
-        return NCCMatcher().match_points(
-            left, right, points, guess_offsets=guess_offsets, settings=settings
-        )
-
-    def match_dense(
-        self, left: NDArray, right: NDArray, *, settings: DenseSettings | None = None
-    ) -> OffsetField:
-        """Dense matching of the ``"ncc"`` matcher."""
-        from carto.framework.matching.ncc_matcher import NCCMatcher
-
-        return NCCMatcher().match_dense(left, right, settings=settings)
+        return {k: o[k] for k in _TWO_VIEW_OPTIONS}
 
 
 def overlap_fraction(a: Sensor, b: Sensor, h_m: float = 0.0, n: int = 24) -> float:

@@ -44,6 +44,7 @@ from numpy.typing import NDArray
 from carto.framework.errors import InputError
 from carto.framework.geometry.sensor import Sensor
 from carto.framework.matching.candidates import (
+    CandidateOptions,
     candidate_cells,
     candidate_points,
     in_cell_range,
@@ -283,10 +284,7 @@ def _probe_task(
 
 
 def probe_guesses(
-    images: Mapping[str, Any],
-    sensors: Mapping[str, Sensor],
-    dem: Any,
-    grid: Any,
+    scene: _Scene,
     ref: str,
     lattice: tuple[NDArray, Mapping[str, NDArray]],
     engine: Any,
@@ -294,15 +292,15 @@ def probe_guesses(
 ) -> dict[str, tuple[float, float]]:
     """First guesses ``(d_line, d_sample)`` of every other image's ortho against the
     reference's: :func:`~carto.framework.matching.shifts.coarse_shift` on a window of
-    ``probe_px`` pixels (the whole grid when it is smaller: the shift of one piece) centred
-    between the two images' footprints by their models (which may not even overlap: the
-    system-level models of an agile triplet are hundreds of metres apart); one task of
-    ``engine`` per image, ``(0, 0)`` for an image that sees none of the grid."""
+    ``probe_px`` pixels of the scene's grid (the whole grid when it is smaller: the shift of
+    one piece) centred between the two images' footprints by their models (which may not even
+    overlap: the system-level models of an agile triplet are hundreds of metres apart); one
+    task of ``engine`` per image, ``(0, 0)`` for an image that sees none of the grid."""
     from carto.framework.parallel.engine import TaskFailure
 
     nodes, seen = lattice
-    scene = _Scene(images, sensors, dem, grid)
-    others = [n for n in sensors if n != ref]
+    grid = scene.grid
+    others = [n for n in scene.sensors if n != ref]
     tasks, keys, names = [], [], []
     guesses = {n: (0.0, 0.0) for n in others}
     for name in others:
@@ -414,15 +412,8 @@ def _tile_candidates(
     cells = candidate_cells(frame, spacing_px)
     wide = _widened(tile.cell_range, cells, HALO_CELLS)
     window = tile.window
-    points = window_candidates(
-        ortho,
-        spacing_px,
-        (window[0], window[1]),
-        frame,
-        wide,
-        method=settings["candidates"],
-        **dict(settings["forstner"] or {}),
-    )
+    options = CandidateOptions(settings["candidates"], **dict(settings["forstner"] or {}))
+    points = window_candidates(ortho, spacing_px, (window[0], window[1]), frame, wide, options)
     returned = in_cell_range(
         points + np.array(window[:2], np.float64), frame, cells, tile.cell_range
     )
@@ -480,7 +471,7 @@ def tiled_tie_points(
             raise InputError(f"tie points: {found}")
         return found
     lattice = coverage_lattice(grid, sensors, dem)
-    guesses = probe_guesses(images, sensors, dem, grid, ref, lattice, engine)
+    guesses = probe_guesses(scene, ref, lattice, engine)
     m = settings["matching"]
     shift = max((math.hypot(*g) for g in guesses.values()), default=0.0)
     margin = tile_margin(m.get("template", 15), m.get("search", 11), m.get("levels", 4), shift)

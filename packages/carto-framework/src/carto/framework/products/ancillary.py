@@ -31,6 +31,7 @@ from carto.framework.geometry.camera import Camera
 from carto.framework.geometry.light_path import LightPath
 from carto.framework.geometry.linescan.scanner import LineScanner
 from carto.framework.geometry.linescan.timing import LineTiming
+from carto.framework.geometry.sensor import fields_as_json
 from carto.framework.geometry.time_series import BUILTIN_KINDS, Interpolation
 from carto.framework.geometry.trajectory import AttitudeSamples, EphemerisSamples, Trajectory
 from carto.framework.geometry.trajectory_models import TrajectoryModel
@@ -82,15 +83,7 @@ class CameraSpec:
         )
 
     def to_dict(self) -> dict[str, Any]:
-        return {
-            "n_detectors": self.n_detectors,
-            "focal_length_m": self.focal_length_m,
-            "pitch_m": self.pitch_m,
-            "stagger_m": self.stagger_m,
-            "along_offset_m": self.along_offset_m,
-            "mounting_rpy_deg": list(self.mounting_rpy_deg),
-            "alignment_rpy_deg": list(self.alignment_rpy_deg),
-        }
+        return fields_as_json(self, exclude=("name",))  # the key it is stored under
 
 
 @attrs.frozen
@@ -107,18 +100,7 @@ class ImageSpec:
     timing: LineTiming
 
     def to_dict(self) -> dict[str, Any]:
-        return {
-            "camera": self.camera,
-            "raster": self.raster,
-            "n_lines": self.n_lines,
-            "width": self.width,
-            "first_line": self.first_line,
-            "first_sample": self.first_sample,
-            "timing": {
-                "line_nodes": list(self.timing.line_nodes),
-                "dt_nodes_s": list(self.timing.dt_nodes_s),
-            },
-        }
+        return fields_as_json(self, exclude=("name",))  # the key it is stored under
 
 
 @attrs.frozen(eq=False)

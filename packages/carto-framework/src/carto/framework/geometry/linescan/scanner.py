@@ -69,7 +69,15 @@ from carto.framework.geometry.linescan.solver import (
     tabulated_lines,
 )
 from carto.framework.geometry.linescan.timing import LineTiming
-from carto.framework.geometry.sensor import Parameter, Sensor, SensorType, refuse_options
+from carto.framework.geometry.sensor import (
+    Linearization,
+    Parameter,
+    ParameterChanges,
+    Sensor,
+    SensorType,
+    fields_as_json,
+    refuse_options,
+)
 from carto.framework.geometry.trajectory import Trajectory
 
 FloatArray = NDArray[np.float64]
@@ -168,29 +176,17 @@ class LineScanner(Sensor):
     def parameters(self) -> tuple[Parameter, ...]:
         return self.trajectory.parameters + self.camera.parameters
 
-    def with_parameters(
-        self,
-        values: Mapping[str, float] | None = None,
-        free: Mapping[str, bool] | None = None,
-        sigmas: Mapping[str, float] | None = None,
-    ) -> LineScanner:
+    def with_changes(self, changes: ParameterChanges) -> LineScanner:
         known_t = {p.name for p in self.trajectory.parameters}
         known_c = {p.name for p in self.camera.parameters}
-        for mapping in (values, free, sigmas):
-            unknown = sorted(set(mapping or {}) - known_t - known_c)
-            if unknown:
-                raise InputError(f"sensor {self.name}: unknown parameter(s) {', '.join(unknown)}")
-
-        def part(mapping: Mapping[str, Any] | None, keys: set[str]) -> dict[str, Any] | None:
-            return None if mapping is None else {k: v for k, v in mapping.items() if k in keys}
-
-        trajectory = self.trajectory.with_parameters(
-            part(values, known_t), part(free, known_t), part(sigmas, known_t)
+        unknown = changes.unknown(known_t | known_c)
+        if unknown:
+            raise InputError(f"sensor {self.name}: unknown parameter(s) {', '.join(unknown)}")
+        return attrs.evolve(
+            self,
+            trajectory=changes.only(known_t).applied_to(self.trajectory),
+            camera=changes.only(known_c).applied_to(self.camera),
         )
-        camera = self.camera.with_parameters(
-            part(values, known_c), part(free, known_c), part(sigmas, known_c)
-        )
-        return attrs.evolve(self, trajectory=trajectory, camera=camera)
 
     def _collinearity(
         self,
@@ -219,15 +215,10 @@ class LineScanner(Sensor):
         )
         return f, df_dx, v, r_c2e
 
-    def linearize(
-        self,
-        lon_deg: ArrayLike,
-        lat_deg: ArrayLike,
-        h_m: ArrayLike,
-        names: Sequence[str] | None = None,
-    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-        """``(line, sample, ground partials (N, 2, 3), parameter partials (N, 2, P))`` from
-        one projection (see :meth:`Sensor.linearize`).
+    def _linearize(
+        self, lon: FloatArray, lat: FloatArray, h: FloatArray, names: list[str]
+    ) -> Linearization:
+        """:meth:`Sensor.linearize` from one projection.
 
         The image point is defined implicitly by the collinearity condition
         ``F(line, sample; X, p) = 0`` (:meth:`_collinearity`), so by the implicit function
@@ -240,10 +231,6 @@ class LineScanner(Sensor):
         polynomial's coefficient ``c_k`` acts like ``c_0`` times ``tau^k`` at the imaging
         time. Ground partials are w.r.t. local east, north, up displacements in metres.
         """
-        lon, lat, h = (a.ravel() for a in as_float_arrays(lon_deg, lat_deg, h_m))
-        if names is None:
-            names = [p.name for p in self.parameters if p.free]
-        names = list(names)
         line, sample, _ = self.project(lon, lat, h)
         ok = np.isfinite(line) & np.isfinite(sample)
         point = linearization_point(self, lon, lat, h, line, sample, ok)
@@ -254,16 +241,12 @@ class LineScanner(Sensor):
         a_param[bad] = np.nan
         return line, sample, a_ground, a_param
 
-    def parameter_partials(
-        self,
-        lon_deg: ArrayLike,
-        lat_deg: ArrayLike,
-        h_m: ArrayLike,
-        names: Sequence[str] | None = None,
+    def _parameter_partials(
+        self, lon: FloatArray, lat: FloatArray, h: FloatArray, names: list[str]
     ) -> FloatArray:
         """Partials of ``(line, sample)`` w.r.t. parameters, ``(N, 2, P)`` (see
-        :meth:`linearize`)."""
-        return self.linearize(lon_deg, lat_deg, h_m, names)[3]
+        :meth:`_linearize`)."""
+        return self._linearize(lon, lat, h, names)[3]
 
     def ground_partials(self, lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike) -> FloatArray:
         """Partials of ``(line, sample)`` w.r.t. local east, north, up displacements in
@@ -387,8 +370,7 @@ class LineScanner(Sensor):
     def ground_to_image(
         self, lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike
     ) -> tuple[FloatArray, FloatArray]:
-        line, sample, inside = self.project(lon_deg, lat_deg, h_m)
-        return np.where(inside, line, np.nan), np.where(inside, sample, np.nan)
+        return self._projection_in_image(lon_deg, lat_deg, h_m)
 
     # ------------------------------------------------------------------ model file
     def to_dict(self) -> dict[str, Any]:
@@ -403,10 +385,7 @@ class LineScanner(Sensor):
                 "first_sample": self.first_sample,
                 "width": self.n_samples,
             },
-            "timing": {
-                "line_nodes": list(self.timing.line_nodes),
-                "dt_nodes_s": list(self.timing.dt_nodes_s),
-            },
+            "timing": fields_as_json(self.timing),
             "camera": self.camera.to_dict(),
             "trajectory": self.trajectory.to_dict(),
             "light_path": self.light_path.to_dict(),

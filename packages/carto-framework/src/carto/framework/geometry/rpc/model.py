@@ -61,7 +61,7 @@ rasterio conversions) and its checks. The rest of the RPC support is in sibling 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import attrs
@@ -115,6 +115,18 @@ def _coefficient_array(value: ArrayLike) -> FloatArray:
 
 def _optional_float(value: Any) -> float | None:
     return None if value is None else float(value)
+
+
+def _coefficient_row(field: str) -> property:
+    """The property of :class:`RPCCoefficients` that is the row of ``coefficients`` of RPC00B
+    field ``field`` (one of :data:`COEFF_FIELDS`)."""
+    index = COEFF_FIELDS.index(field)
+
+    def row(self: RPCCoefficients) -> FloatArray:
+        return self.coefficients[index]
+
+    row.__doc__ = f"``{field}_1..20`` (read-only view)."
+    return property(row)
 
 
 # ----------------------------------------------------------------------------- validation
@@ -363,25 +375,10 @@ class RPCCoefficients:
         validate_model(self)
 
     # ------------------------------------------------------------------ views
-    @property
-    def line_num_coeff(self) -> FloatArray:
-        """``LINE_NUM_COEFF_1..20`` (read-only view)."""
-        return self.coefficients[0]
-
-    @property
-    def line_den_coeff(self) -> FloatArray:
-        """``LINE_DEN_COEFF_1..20`` (read-only view)."""
-        return self.coefficients[1]
-
-    @property
-    def samp_num_coeff(self) -> FloatArray:
-        """``SAMP_NUM_COEFF_1..20`` (read-only view)."""
-        return self.coefficients[2]
-
-    @property
-    def samp_den_coeff(self) -> FloatArray:
-        """``SAMP_DEN_COEFF_1..20`` (read-only view)."""
-        return self.coefficients[3]
+    line_num_coeff = _coefficient_row("LINE_NUM_COEFF")
+    line_den_coeff = _coefficient_row("LINE_DEN_COEFF")
+    samp_num_coeff = _coefficient_row("SAMP_NUM_COEFF")
+    samp_den_coeff = _coefficient_row("SAMP_DEN_COEFF")
 
     # ------------------------------------------------------------------ evaluation
     def normalise(
@@ -625,51 +622,28 @@ class RPCCoefficients:
 
     # ------------------------------------------------------------------ conversions
     @classmethod
+    def from_fields(cls, fields: Mapping[str, Any]) -> RPCCoefficients:
+        """Inverse of :meth:`as_dict`: from field name (RPC00B spelling) -> value, coefficient
+        rows as sequences of 20 numbers; ``ERR_BIAS`` and ``ERR_RAND`` may be missing or
+        None."""
+        return cls(
+            **{name.lower(): fields[name] for name in SCALAR_FIELDS},
+            coefficients=[fields[name] for name in COEFF_FIELDS],
+            err_bias=fields.get("ERR_BIAS"),
+            err_rand=fields.get("ERR_RAND"),
+        )
+
+    @classmethod
     def from_rasterio(cls, rpc: Any) -> RPCCoefficients:
         """From a :class:`rasterio.rpc.RPC` (GDAL's RPC metadata, native pixel convention)."""
-        return cls(
-            line_off=rpc.line_off,
-            samp_off=rpc.samp_off,
-            lat_off=rpc.lat_off,
-            long_off=rpc.long_off,
-            height_off=rpc.height_off,
-            line_scale=rpc.line_scale,
-            samp_scale=rpc.samp_scale,
-            lat_scale=rpc.lat_scale,
-            long_scale=rpc.long_scale,
-            height_scale=rpc.height_scale,
-            coefficients=[
-                rpc.line_num_coeff,
-                rpc.line_den_coeff,
-                rpc.samp_num_coeff,
-                rpc.samp_den_coeff,
-            ],
-            err_bias=rpc.err_bias,
-            err_rand=rpc.err_rand,
-        )
+        names = (*SCALAR_FIELDS, *COEFF_FIELDS, "ERR_BIAS", "ERR_RAND")
+        return cls.from_fields({name: getattr(rpc, name.lower()) for name in names})
 
     def to_rasterio(self) -> Any:
         """As a :class:`rasterio.rpc.RPC` (for ``dataset.rpcs = ...`` or ``RPCTransformer``)."""
         from rasterio.rpc import RPC
 
-        return RPC(
-            height_off=self.height_off,
-            height_scale=self.height_scale,
-            lat_off=self.lat_off,
-            lat_scale=self.lat_scale,
-            line_den_coeff=self.line_den_coeff.tolist(),
-            line_num_coeff=self.line_num_coeff.tolist(),
-            line_off=self.line_off,
-            line_scale=self.line_scale,
-            long_off=self.long_off,
-            long_scale=self.long_scale,
-            samp_den_coeff=self.samp_den_coeff.tolist(),
-            samp_num_coeff=self.samp_num_coeff.tolist(),
-            samp_off=self.samp_off,
-            samp_scale=self.samp_scale,
-            err_bias=self.err_bias,
-            err_rand=self.err_rand,
-        )
+        return RPC(**{name.lower(): value for name, value in self.as_dict().items()})
 
     def as_dict(self) -> dict[str, Any]:
         """Field name (RPC00B spelling) -> value; coefficient rows as lists of 20 floats."""

@@ -109,11 +109,8 @@ def _build(
     err_rand: float | None = None,
 ) -> RPCCoefficients:
     try:
-        return RPCCoefficients(
-            **{name.lower(): scalars[name] for name in SCALAR_FIELDS},
-            coefficients=[coeffs[name] for name in COEFF_FIELDS],
-            err_bias=err_bias,
-            err_rand=err_rand,
+        return RPCCoefficients.from_fields(
+            {**scalars, **coeffs, "ERR_BIAS": err_bias, "ERR_RAND": err_rand}
         )
     except InputError as err:
         raise file_error(path, str(err)) from None

@@ -48,10 +48,11 @@ from carto.framework.geometry.rpc.model import RPCCoefficients
 from carto.framework.geometry.rpc.readers import read_rpc_and_shape, sniff_rpc_format
 from carto.framework.geometry.sensor import (
     Parameter,
+    ParameterChanges,
     Sensor,
     SensorType,
+    flat_float_arrays,
     refuse_options,
-    replace_parameters,
 )
 
 FloatArray = NDArray[np.float64]
@@ -247,14 +248,8 @@ class RPCSensor(Sensor):
         """``rpc.line.c0, rpc.line.c_line, rpc.line.c_sample, rpc.sample.c0, ...`` (px, px/px)."""
         return self._params
 
-    def with_parameters(
-        self,
-        values: Mapping[str, float] | None = None,
-        free: Mapping[str, bool] | None = None,
-        sigmas: Mapping[str, float] | None = None,
-    ) -> RPCSensor:
-        """A new sensor with some parameter values, free flags or sigmas replaced."""
-        params = replace_parameters(self._params, values, free, sigmas)
+    def with_changes(self, changes: ParameterChanges) -> RPCSensor:
+        params = changes.apply(self._params)
         return RPCSensor(
             self._rpc,
             self._shape if self._shape_known else None,
@@ -390,21 +385,12 @@ class RPCSensor(Sensor):
             lat = np.where(out, np.nan, lat)
         return lon, lat
 
-    def parameter_partials(
-        self,
-        lon_deg: ArrayLike,
-        lat_deg: ArrayLike,
-        h_m: ArrayLike,
-        names: Sequence[str] | None = None,
+    def _parameter_partials(
+        self, lon: FloatArray, lat: FloatArray, h: FloatArray, names: list[str]
     ) -> FloatArray:
-        """Analytic partials of ``(line, sample)`` w.r.t. the parameters, ``(N, 2, P)``.
-
-        ``names`` defaults to the free parameters; units px/px for offsets, px/(px/px) = px for
-        the affine terms.
-        """
-        line, samp = (a.ravel() for a in self._rpc.project(lon_deg, lat_deg, h_m))
-        if names is None:
-            names = [p.name for p in self._params if p.free]
+        """Analytic partials of ``(line, sample)`` w.r.t. the parameters, ``(N, 2, P)``:
+        units px/px for offsets, px/(px/px) = px for the affine terms."""
+        line, samp = self._rpc.project(lon, lat, h)
         n = len(self.prefix)
         unknown = sorted(
             m for m in names if not m.startswith(self.prefix) or m[n:] not in _PARAMETER_NAMES
@@ -421,7 +407,7 @@ class RPCSensor(Sensor):
     def ground_partials(self, lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike) -> FloatArray:
         """Analytic partials of ``(line, sample)`` w.r.t. local east, north, up displacements in
         metres, ``(N, 2, 3)`` (px/m)."""
-        lon, lat, h = (a.ravel() for a in as_float_arrays(lon_deg, lat_deg, h_m))
+        lon, lat, h = flat_float_arrays(lon_deg, lat_deg, h_m)
         _, _, jac = self._rpc.project_with_partials(lon, lat, h)
         m_per_rad_lon, m_per_rad_lat = frames.metres_per_radian(lat, h)
         m_per_deg_lon, m_per_deg_lat = np.radians(m_per_rad_lon), np.radians(m_per_rad_lat)
