@@ -101,6 +101,40 @@ def test_drift_term_uses_normalised_time_and_position_corrections():
     np.testing.assert_allclose(ang, [0.0, 2e-4], atol=1e-9)  # tau = 0 at mid, 1 at the end
 
 
+@pytest.mark.parametrize("frame", ["orbit", "eci"])
+def test_a_shared_state_gives_each_parameter_copy_its_own_evaluation(frame):
+    """:meth:`Trajectory.state` computed once serves the copies that differ in their
+    parameters (position and attitude corrections: the orbit frame follows the corrected
+    position), and a state of another trajectory's series is not used."""
+    t = np.arange(-10, 10.001, 0.125)
+    p, v = circular_orbit(t)
+    r_b2o = frames.rpy_to_matrix(0.05 + 1e-4 * t, -0.3 + 0.01 * t, 0.01 + 0 * t)
+    r = r_b2o if frame == "orbit" else frames.orbit_to_eci_matrix(p, v) @ r_b2o
+    attitude = AttitudeSamples(t, frames.matrix_to_quat(r), frame)
+    traj = Trajectory.from_samples(
+        EPOCH, EphemerisSamples(t, p, v), attitude, position_correction_order=1
+    )
+    tt = np.linspace(-9, 9, 37)
+    state = traj.state(tt)
+    moved = traj.with_parameters(
+        {
+            "trajectory.position.across.c1": 40.0,
+            "trajectory.position.radial.c0": -25.0,
+            "trajectory.attitude.yaw.c0": 3e-4,
+        }
+    )
+    for copy in (traj, moved):
+        own, shared = copy.evaluate_with_axes(tt), copy.evaluate_with_axes(tt, state)
+        for a, b in zip(own, shared, strict=True):
+            np.testing.assert_array_equal(b, a)
+    np.testing.assert_array_equal(
+        moved.inertial_velocity_ecef(tt, state), moved.inertial_velocity_ecef(tt)
+    )
+    assert np.abs(moved.evaluate(tt)[0] - traj.evaluate(tt)[0]).max() > 20.0
+    other = Trajectory.from_samples(EPOCH + 60.0, EphemerisSamples(t, p, v), attitude)
+    np.testing.assert_array_equal(other.evaluate(tt, state)[0], other.evaluate(tt)[0])
+
+
 def test_serialisation_round_trip():
     traj = make_trajectory(span_s=10.0).with_parameters({"trajectory.attitude.yaw.c1": 1e-5})
     again = Trajectory.from_dict(traj.to_dict())

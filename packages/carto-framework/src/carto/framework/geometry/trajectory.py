@@ -86,6 +86,33 @@ class FitReport:
 
 # ------------------------------------------------------------------------ the trajectory
 @attrs.frozen(eq=False)
+class TrajectoryState:
+    """A trajectory at times ``t_s`` before its correction parameters (:meth:`Trajectory.
+    state`): what the trajectories that differ from it only in their parameters (its
+    :meth:`~Trajectory.with_parameters` copies) share there. An adjustment's partials
+    evaluate one trajectory many times with one parameter changed; with the state the Earth
+    orientation, the orbit and the attitude samples are interpolated once.
+
+    Attributes:
+        t_s: the times, seconds since the trajectory's epoch.
+        p_eci, v_eci: uncorrected inertial position (m) and velocity (m/s), ``(..., 3)``.
+        r_orbit_to_eci: the orbit frame of the uncorrected position, ``(..., 3, 3)``.
+        r_eci_to_ecef: GCRS -> ITRS, ``(..., 3, 3)``.
+        r_attitude: the uncorrected attitude, ``R_body_to_orbit`` for an orbit-frame
+            trajectory, ``R_body_to_frame`` (its eci or ecef frame) otherwise.
+        source: the trajectory's orbit and attitude series (whose state this is).
+    """
+
+    t_s: FloatArray
+    p_eci: FloatArray
+    v_eci: FloatArray
+    r_orbit_to_eci: FloatArray
+    r_eci_to_ecef: FloatArray
+    r_attitude: FloatArray
+    source: tuple[Any, ...]
+
+
+@attrs.frozen(eq=False)
 class Trajectory(Adjustable):
     """Position and attitude of a platform as continuous functions of time, with corrections.
 
@@ -281,9 +308,14 @@ class Trajectory(Adjustable):
         EarthOrientation`) at ``dt_s``, ``(..., 3, 3)``."""
         return self._earth.eci_to_ecef_matrix(dt_s)
 
-    def inertial_velocity_ecef(self, dt_s: ArrayLike) -> FloatArray:
+    def inertial_velocity_ecef(
+        self, dt_s: ArrayLike, state: TrajectoryState | None = None
+    ) -> FloatArray:
         """The platform's inertial velocity in the Earth-fixed axes of ``dt_s``, m/s
-        ``(..., 3)`` (what aberration depends on, :mod:`~carto.framework.geometry.light_path`)."""
+        ``(..., 3)`` (what aberration depends on, :mod:`~carto.framework.geometry.light_path`);
+        ``state``: this trajectory's :meth:`state` at ``dt_s``, when known."""
+        if state is not None and self._is_source_of(state):
+            return np.einsum("...ij,...j->...i", state.r_eci_to_ecef, state.v_eci)
         t = np.asarray(dt_s, dtype=np.float64)
         _, v_eci = self.state_eci(t)
         return np.einsum("...ij,...j->...i", self._earth.eci_to_ecef_matrix(t), v_eci)
@@ -298,31 +330,65 @@ class Trajectory(Adjustable):
         values = self._orbit(np.asarray(dt_s, dtype=np.float64))
         return values[..., :3], values[..., 3:]
 
-    def evaluate(self, dt_s: ArrayLike) -> tuple[FloatArray, FloatArray]:
+    def state(self, dt_s: ArrayLike) -> TrajectoryState:
+        """The trajectory at ``dt_s`` before its correction parameters (:class:`TrajectoryState`),
+        for :meth:`evaluate` of it and of its :meth:`with_parameters` copies."""
+        t = np.asarray(dt_s, dtype=np.float64)
+        p_eci, v_eci = self.state_eci(t)
+        a = self._angles(t)
+        if self.attitude_frame == "orbit":
+            r_att = frames.rpy_to_matrix(a[..., 0], a[..., 1], a[..., 2])
+        else:
+            r_att = self._r_ref @ frames.small_rotation(a[..., 0], a[..., 1], a[..., 2])
+        return TrajectoryState(
+            t,
+            p_eci,
+            v_eci,
+            frames.orbit_to_eci_matrix(p_eci, v_eci),
+            self._earth.eci_to_ecef_matrix(t),
+            r_att,
+            self._state_source,
+        )
+
+    @property
+    def _state_source(self) -> tuple[Any, ...]:
+        return (self._orbit, self._angles, self._r_ref, self._earth, self.attitude_frame)
+
+    def _is_source_of(self, state: TrajectoryState) -> bool:
+        """Whether ``state`` is of this trajectory's series (its own or a parameter copy's)."""
+        return all(a is b for a, b in zip(state.source, self._state_source, strict=True))
+
+    def evaluate(
+        self, dt_s: ArrayLike, state: TrajectoryState | None = None
+    ) -> tuple[FloatArray, FloatArray]:
         """Corrected ``(P_ecef_m (..., 3), R_body_to_ecef (..., 3, 3))`` at ``dt_s``.
 
         The rotation chain is ``R_body_to_ecef = R_eci_to_ecef(t) @ R_orbit_to_eci(P, V) @
         R_correction(t) @ R_body_to_orbit(t)`` (for attitude given in eci/ecef,
         ``R_body_to_orbit = R_orbit_to_eci^T @ R_body_to_eci``), with the orbit frame of the
-        corrected position ``P``.
+        corrected position ``P``. ``state``: :meth:`state` at ``dt_s`` of this trajectory or
+        of one that differs from it only in its parameters (computed when not given).
         """
-        p, r, _ = self._evaluate(dt_s, axes=False)
+        p, r, _ = self._evaluate(dt_s, False, state)
         return p, r
 
-    def evaluate_with_axes(self, dt_s: ArrayLike) -> tuple[FloatArray, FloatArray, FloatArray]:
+    def evaluate_with_axes(
+        self, dt_s: ArrayLike, state: TrajectoryState | None = None
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
         """:meth:`evaluate` plus the ECEF axes of the attitude corrections, ``(..., 3, 3)``
         (rows: roll, pitch, yaw): increasing the correction angle of axis ``a`` by ``d``
         (radians) rotates the body by ``d`` about ``axes[..., a, :]``, so
         ``dR_body_to_ecef / d angle_a = [axis_a]x @ R_body_to_ecef`` (analytic partials)."""
-        return self._evaluate(dt_s, axes=True)
+        return self._evaluate(dt_s, True, state)
 
     def _evaluate(
-        self, dt_s: ArrayLike, axes: bool
+        self, dt_s: ArrayLike, axes: bool, state: TrajectoryState | None = None
     ) -> tuple[FloatArray, FloatArray, FloatArray | None]:
-        t = np.asarray(dt_s, dtype=np.float64)
-        p_eci, v_eci = self.state_eci(t)
+        if state is None or not self._is_source_of(state):
+            state = self.state(dt_s)
+        t = state.t_s
+        p_eci, r_o2i = state.p_eci, state.r_orbit_to_eci
         tau = (t - self.t_mid_s) / self.t_half_s
-        r_o2i = frames.orbit_to_eci_matrix(p_eci, v_eci)
         if self.position_correction_order >= 0:
             c = self._correction_coeffs("position", _POSITION_NAMES, self.position_correction_order)
             if c.any():
@@ -330,18 +396,15 @@ class Trajectory(Adjustable):
                 d_orbit = np.stack([d[0], d[1], -d[2]], axis=-1)  # radial up = -Z_o
                 p_eci = p_eci + np.einsum("...ij,...j->...i", r_o2i, d_orbit)
                 # the orbit frame follows the corrected position (it is defined by it)
-                r_o2i = frames.orbit_to_eci_matrix(p_eci, v_eci)
-        r_i2e = self._earth.eci_to_ecef_matrix(t)
+                r_o2i = frames.orbit_to_eci_matrix(p_eci, state.v_eci)
+        r_i2e = state.r_eci_to_ecef
         r_o2e = r_i2e @ r_o2i
-        a = self._angles(t)
         if self.attitude_frame == "orbit":
-            r_b2o = frames.rpy_to_matrix(a[..., 0], a[..., 1], a[..., 2])
+            r_b2o = state.r_attitude
+        elif self.attitude_frame == "eci":
+            r_b2o = np.swapaxes(r_o2i, -1, -2) @ state.r_attitude
         else:
-            r_b2f = self._r_ref @ frames.small_rotation(a[..., 0], a[..., 1], a[..., 2])
-            if self.attitude_frame == "eci":
-                r_b2o = np.swapaxes(r_o2i, -1, -2) @ r_b2f
-            else:
-                r_b2o = np.swapaxes(r_o2e, -1, -2) @ r_b2f
+            r_b2o = np.swapaxes(r_o2e, -1, -2) @ state.r_attitude
         d = np.zeros((3, *t.shape))
         corrected = False
         if self.attitude_correction_order >= 0:

@@ -19,6 +19,7 @@ from carto.framework.geometry.linescan.solver import camera_vectors
 if TYPE_CHECKING:  # the model differentiated
     from carto.framework.geometry.linescan.scanner import LineScanner
     from carto.framework.geometry.sensor import Parameter
+    from carto.framework.geometry.trajectory import Trajectory, TrajectoryState
 
 FloatArray = NDArray[np.float64]
 
@@ -33,6 +34,9 @@ class LinearizationPoint:
         x_ecef: the ground points, ECEF metres ``(N, 3)``.
         t_s: imaging times of the lines (s since the timing's epoch).
         p_ecef: body positions at ``t_s``, ECEF metres ``(N, 3)``.
+        r_body_to_ecef: the body's attitude at ``t_s``, ``(N, 3, 3)``.
+        state: the trajectory's state at ``t_s`` (shared by its parameter copies).
+        light: the light-path terms at ``t_s`` (:meth:`LineScanner.light_terms`).
         axes: the attitude corrections' rotation axes at ``t_s``, ECEF ``(N, 3, 3)``
             (rows roll, pitch, yaw; :meth:`Trajectory.evaluate_with_axes`).
         df_dx: ``dF/dX`` at the points, ``(N, 2, 3)``.
@@ -44,6 +48,9 @@ class LinearizationPoint:
     x_ecef: FloatArray
     t_s: FloatArray
     p_ecef: FloatArray
+    r_body_to_ecef: FloatArray
+    state: TrajectoryState
+    light: tuple[FloatArray, FloatArray]
     axes: FloatArray
     df_dx: FloatArray
     inv: FloatArray
@@ -77,14 +84,20 @@ def linearization_point(
     sa = np.where(ok, sample, 0.5 * sensor.n_samples)
     x = frames.geodetic_to_ecef(lon, lat, h)
     t = sensor.timing.time(li)
-    p_e, r_b2e, axes = sensor.trajectory.evaluate_with_axes(t)
-    _, df_dx, v, _ = sensor._collinearity(li, sa, x, (p_e, r_b2e @ sensor.camera.camera_to_body()))
+    state = sensor.trajectory.state(t)
+    p_e, r_b2e, axes = sensor.trajectory.evaluate_with_axes(t, state)
+    light = sensor.light_terms(t, state)
+    pose = (p_e, r_b2e @ sensor.camera.camera_to_body())
+    _, df_dx, v, _ = sensor._collinearity(li, sa, x, pose, light)
     return LinearizationPoint(
         line=li,
         sample=sa,
         x_ecef=x,
         t_s=t,
         p_ecef=p_e,
+        r_body_to_ecef=r_b2e,
+        state=state,
+        light=light,
         axes=axes,
         df_dx=df_dx,
         inv=inverse_image_jacobian(sensor, li, sa, x, v),
@@ -174,5 +187,19 @@ def collinearity_partial(
     d = 1e-3 * p.sigma if math.isfinite(p.sigma) else 1e-6
     plus = sensor.with_parameters({target: p.value + d})
     minus = sensor.with_parameters({target: p.value - d})
-    li, sa, x = point.line, point.sample, point.x_ecef
-    return (plus._collinearity(li, sa, x)[0] - minus._collinearity(li, sa, x)[0]) / (2 * d)
+    f_plus = _collinearity_at(plus, point, sensor.trajectory)
+    return (f_plus - _collinearity_at(minus, point, sensor.trajectory)) / (2 * d)
+
+
+def _collinearity_at(
+    changed: LineScanner, point: LinearizationPoint, trajectory: Trajectory
+) -> FloatArray:
+    """``F`` of ``changed`` (a parameter copy of the sensor linearized) at ``point``: its
+    trajectory from the point's state, or the point's pose when its trajectory parameters
+    are those of ``trajectory`` (a camera parameter changed)."""
+    if changed.trajectory.parameters == trajectory.parameters:
+        p, r_b2e = point.p_ecef, point.r_body_to_ecef
+    else:
+        p, r_b2e = changed.trajectory.evaluate(point.t_s, point.state)
+    pose = (p, r_b2e @ changed.camera.camera_to_body())
+    return changed._collinearity(point.line, point.sample, point.x_ecef, pose, point.light)[0]

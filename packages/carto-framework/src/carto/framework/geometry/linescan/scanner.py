@@ -78,7 +78,7 @@ from carto.framework.geometry.sensor import (
     fields_as_json,
     refuse_options,
 )
-from carto.framework.geometry.trajectory import Trajectory
+from carto.framework.geometry.trajectory import Trajectory, TrajectoryState
 
 FloatArray = NDArray[np.float64]
 
@@ -194,14 +194,16 @@ class LineScanner(Sensor):
         sample: FloatArray,
         x_ecef: FloatArray,
         pose: tuple[FloatArray, FloatArray] | None = None,
+        light: tuple[FloatArray, FloatArray] | None = None,
     ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
         """The collinearity condition at image point ``(line, sample)`` and ground ``x_ecef``:
         ``F (N, 2)``, zero when the point images there (camera-frame ``x/z`` and ``y/z`` of the
         ground direction minus the detector's ``tan psi``), and ``dF/dX (N, 2, 3)``, the
         camera-frame vector ``v (N, 3)`` and ``R_camera_to_ecef (N, 3, 3)``. ``pose``: the
-        ``(P, R_camera_to_ecef)`` at ``line`` when already known."""
+        ``(P, R_camera_to_ecef)`` at ``line`` and ``light`` its :meth:`light_terms`, when
+        already known."""
         p, r_c2e = self.camera_to_ecef(line) if pose is None else pose
-        v = np.einsum("nji,nj->ni", r_c2e, self._apparent_vector(line, x_ecef, p))
+        v = np.einsum("nji,nj->ni", r_c2e, self._apparent_vector(line, x_ecef, p, light))
         tx, ty = self.camera.tan_psi(sample + self.first_sample)
         f = np.stack([v[:, 0] / v[:, 2] - tx, v[:, 1] / v[:, 2] - ty], -1)
         # v = R^T (X - P): dv/dX = R^T, rows of R^T are the columns of R
@@ -262,13 +264,16 @@ class LineScanner(Sensor):
         return attrs.evolve(self, camera=camera, guess=FirstGuess())
 
     # ------------------------------------------------------------------ geometry
-    def light_terms(self, t_s: ArrayLike) -> tuple[FloatArray, FloatArray]:
+    def light_terms(
+        self, t_s: ArrayLike, state: TrajectoryState | None = None
+    ) -> tuple[FloatArray, FloatArray]:
         """``(beta (..., 3), omega / c (3,))`` of the light path at times ``t_s``: the
         platform's inertial velocity over ``c`` and the Earth's angular velocity over ``c``
-        (rad per metre), each zero where :attr:`light_path` switches its correction off."""
+        (rad per metre), each zero where :attr:`light_path` switches its correction off;
+        ``state``: the trajectory's state at ``t_s`` when known."""
         t = np.asarray(t_s, dtype=np.float64)
         if self.light_path.aberration:
-            beta = self.trajectory.inertial_velocity_ecef(t) / SPEED_OF_LIGHT_M_S
+            beta = self.trajectory.inertial_velocity_ecef(t, state) / SPEED_OF_LIGHT_M_S
         else:
             beta = np.zeros((*t.shape, 3))
         if self.light_path.light_time:
@@ -277,13 +282,20 @@ class LineScanner(Sensor):
             omega_c = np.zeros(3)
         return beta, omega_c
 
-    def _apparent_vector(self, line: FloatArray, x_ecef: FloatArray, p: FloatArray) -> FloatArray:
+    def _apparent_vector(
+        self,
+        line: FloatArray,
+        x_ecef: FloatArray,
+        p: FloatArray,
+        light: tuple[FloatArray, FloatArray] | None = None,
+    ) -> FloatArray:
         """``X - P`` turned into the direction the camera sees the point in (light time and
-        aberration, when on), with the length of ``X - P``."""
+        aberration, when on), with the length of ``X - P``; ``light``: :meth:`light_terms`
+        at ``line`` when known."""
         d = x_ecef - p
         if not (self.light_path.light_time or self.light_path.aberration):
             return d
-        beta, omega_c = self.light_terms(self.timing.time(line))
+        beta, omega_c = self.light_terms(self.timing.time(line)) if light is None else light
         d = emission_position(x_ecef, p, omega_c) - p
         dist = np.linalg.norm(d, axis=-1, keepdims=True)
         return apparent_direction(d / dist, beta) * dist
