@@ -281,3 +281,16 @@ def test_the_fit_in_chunks_is_the_fit_in_one_piece(synthetic, monkeypatch, datum
     assert f2.noise.sigma_m == pytest.approx(f1.noise.sigma_m, rel=1e-8)
     if platform_jitter:
         np.testing.assert_allclose(f2.platform_rad, f1.platform_rad, rtol=1e-7, atol=1e-14)
+
+
+def test_the_tie_grid_keeps_its_rows_and_widens_its_columns_to_the_budget():
+    """Rows every ``tie_spacing_px`` (the correction's sampling in time), columns widened
+    until about ``max_tie_points`` points cover the image; a shift's grid is square."""
+    settings = ro.RelativeOrientationSettings(max_tie_points=250_000)
+    assert ro._tie_spacing("line", settings, (2000, 2000)) == (8.0, 8.0)
+    rows, cols = ro._tie_spacing("line", settings, (12000, 12000))
+    assert rows == 8.0
+    assert (12000 / rows) * (12000 / cols) == pytest.approx(250_000)
+    side = ro._tie_spacing("shift", settings, (20000, 20000))
+    assert side[0] == side[1] == pytest.approx(20000 / 500)
+    assert ro._tie_spacing("shift", settings, (2000, 2000)) == (32.0, 32.0)

@@ -46,10 +46,11 @@ def test_the_tiles_cover_every_cell_once(shape):
     assert len(plan_tiles(shape, 40.0, 10_000)) == 1
 
 
-@pytest.mark.parametrize("method", ["forstner", "grid"])
-def test_window_candidates_are_the_candidates_of_the_whole_image(method):
+@pytest.mark.parametrize(
+    ("method", "spacing"), [("forstner", 24.0), ("grid", 24.0), ("grid", (8.0, 56.0))]
+)
+def test_window_candidates_are_the_candidates_of_the_whole_image(method, spacing):
     img = _texture((600, 500))
-    spacing = 24.0
     whole = candidate_points(img, spacing, method=method)
     cells = candidate_cells(img.shape, spacing)
     margin = 40
@@ -72,6 +73,11 @@ def test_window_candidates_are_the_candidates_of_the_whole_image(method):
     assert abs(len(tiled) - len(whole)) <= 0.1 * len(whole)
     if method == "grid":
         assert len(common) == len(whole) == len(tiled)
+        rows, cols = np.unique(whole[:, 0]), np.unique(whole[:, 1])
+        step = spacing if isinstance(spacing, tuple) else (spacing, spacing)
+        assert set(np.diff(rows)) <= {np.floor(step[0]), np.ceil(step[0])}
+        assert set(np.diff(cols)) <= {np.floor(step[1]), np.ceil(step[1])}
+        assert cells == (round(600 / step[0]), round(500 / step[1]))
 
 
 def test_window_candidates_of_the_whole_frame_are_candidate_points():

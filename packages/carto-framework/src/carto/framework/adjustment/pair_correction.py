@@ -61,9 +61,9 @@ class RelativeOrientationSettings:
         mode: one of :data:`MODES`.
         tie_spacing_px: grid spacing of the tie points, ortho pixels at the images' ground
             sampling (line-varying corrections; a shift takes :data:`SHIFT_SPACING_PX`).
-        max_tie_points: the grid is widened beyond ``tie_spacing_px`` to about this many
-            points over the left image (a 12000 x 12000 pair at 8 px: 1.9 M points, 170 s
-            to match; 215 000: heights of the correction 0.012-0.016 m for 0.013-0.015 m).
+        max_tie_points: the grid's columns are widened beyond ``tie_spacing_px`` to about
+            this many points over the left image (a 12000 x 12000 pair at 8 px: 1.9 M
+            points, 170 s to match; the rows keep their spacing: jitter's time sampling).
         knot_lines: knot spacing of the line-varying correction's spline, lines (slow
             wander; a spline as fine as the DEM's own band errors would copy them).
         max_frequencies: most jitter frequencies taken from the residuals.

@@ -256,8 +256,7 @@ def relative_orientation(
     record: dict[str, Any] = {"mode": settings.mode, "correction": kind, "image": names[1]}
     if kind == "none":
         return RelativeOrientation(right, {**record, "applied": False})
-    spacing = settings.tie_spacing_px if kind == "line" else SHIFT_SPACING_PX
-    spacing = max(spacing, math.sqrt(math.prod(left.image_shape) / settings.max_tie_points))
+    spacing = _tie_spacing(kind, settings, left.image_shape)
     table = _match_ties(images, sensors, dem, spacing, engine)
     platform = platform_of(left, right) if kind == "line" and settings.platform_jitter else None
     obs = ties_to_observations(table, names, left, right, dem, platform, TIE_TEMPLATE_PX)
@@ -285,12 +284,32 @@ def relative_orientation(
     return RelativeOrientation(corrected, record, left_corrected)
 
 
+def _tie_spacing(
+    kind: str, settings: RelativeOrientationSettings, shape: tuple[int, ...]
+) -> tuple[float, float]:
+    """The tie-point grid's ``(rows, cols)`` spacing, ortho pixels, over an image of ``shape``:
+    ``tie_spacing_px`` for a line correction (:data:`SHIFT_SPACING_PX` for a shift), the
+    columns widened until about ``max_tie_points`` cover the image. The rows keep their
+    spacing: they sample the correction in time (jitter of 31 lines, Cartosat-1's 97 Hz,
+    needs rows closer than 15 lines), while across the swath a few hundred points a row hold
+    a line's mean (the starting DEM's posts, not the points' number, bound it)."""
+    if kind != "line":
+        side = max(SHIFT_SPACING_PX, math.sqrt(math.prod(shape) / settings.max_tie_points))
+        return side, side
+    rows = settings.tie_spacing_px
+    return rows, max(rows, math.prod(shape) / (rows * settings.max_tie_points))
+
+
 def _match_ties(
-    images: Mapping[str, Any], sensors: Mapping[str, Sensor], dem: Any, spacing: float, engine: Any
+    images: Mapping[str, Any],
+    sensors: Mapping[str, Sensor],
+    dem: Any,
+    spacing: tuple[float, float],
+    engine: Any,
 ) -> Any:
     """The tie points of the pair: a grid over the common area (every ``spacing`` ortho
-    pixels: ``tie_spacing_px`` for a line correction, :data:`SHIFT_SPACING_PX` for a
-    shift), one per cell, refined by least-squares matching."""
+    pixels, rows and columns: :func:`_tie_spacing`), one per cell, refined by least-squares
+    matching."""
     from carto.framework.matching.tiepoints import automatic_tie_points
 
     names = tuple(sensors)

@@ -30,40 +30,51 @@ CANDIDATE_METHODS = ("forstner", "grid")
 """Ways :func:`candidate_points` chooses the points to match."""
 
 
-def grid_points(shape: tuple[int, int], spacing: float, margin: float = 0.0) -> NDArray[np.float64]:
+Spacing = float | tuple[float, float]
+"""A cell or grid spacing, pixels: one for both axes, or ``(rows, cols)``."""
+
+
+def spacing_axes(spacing: Spacing) -> tuple[float, float]:
+    """``(rows, cols)`` of a :data:`Spacing`."""
+    if isinstance(spacing, tuple | list | np.ndarray):
+        rows, cols = (float(v) for v in spacing)
+        return rows, cols
+    return float(spacing), float(spacing)
+
+
+def grid_points(
+    shape: tuple[int, int], spacing: Spacing, margin: Spacing = 0.0
+) -> NDArray[np.float64]:
     """Regular candidate points ``(N, 2)`` ``(line, sample)`` on pixel centres.
 
-    Rows and columns every ``spacing`` pixels from ``margin`` (the distance of the first and
-    last points from the image edges, pixels), centred in the image; row-major order.
+    Rows and columns every ``spacing`` pixels (one value, or ``(rows, cols)``) from
+    ``margin`` (likewise: the distance of the first and last points from the image edges,
+    pixels), centred in the image; row-major order.
     """
-    rows, cols = (int(v) for v in shape)
-    spacing = float(spacing)
-    margin = float(margin)
-    if not spacing >= 1.0:
+    steps, margins = spacing_axes(spacing), spacing_axes(margin)
+    if not min(steps) >= 1.0:
         raise InputError(f"spacing must be >= 1 pixel, got {spacing}")
-    if margin < 0.0:
+    if min(margins) < 0.0:
         raise InputError(f"margin must be >= 0, got {margin}")
 
-    def axis(n: int) -> NDArray[np.float64]:
-        span = n - 2.0 * margin - 1.0
+    def axis(n: int, step: float, edge: float) -> NDArray[np.float64]:
+        span = n - 2.0 * edge - 1.0
         if span < 0:
             return np.empty(0)
-        count = int(span // spacing) + 1
-        start = math.floor(margin + 0.5 * (span - (count - 1) * spacing))
-        return start + 0.5 + np.round(np.arange(count) * spacing)
+        count = int(span // step) + 1
+        start = math.floor(edge + 0.5 * (span - (count - 1) * step))
+        return start + 0.5 + np.round(np.arange(count) * step)
 
-    lines, samples = axis(rows), axis(cols)
+    lines, samples = (axis(int(shape[k]), steps[k], margins[k]) for k in (0, 1))
     grid_l, grid_s = np.meshgrid(lines, samples, indexing="ij")
     return np.stack([grid_l.ravel(), grid_s.ravel()], axis=1)
 
 
-def candidate_cells(shape: tuple[int, int], spacing_px: float) -> tuple[int, int]:
-    """``(rows, cols)``: the number of cells of about ``spacing_px`` pixels (at least one) that
-    divide an image of ``shape``."""
-    return (
-        max(1, round(shape[0] / float(spacing_px))),
-        max(1, round(shape[1] / float(spacing_px))),
-    )
+def candidate_cells(shape: tuple[int, int], spacing_px: Spacing) -> tuple[int, int]:
+    """``(rows, cols)``: the number of cells of about ``spacing_px`` pixels (one value or
+    ``(rows, cols)``; at least one cell) that divide an image of ``shape``."""
+    steps = spacing_axes(spacing_px)
+    return (max(1, round(shape[0] / steps[0])), max(1, round(shape[1] / steps[1])))
 
 
 def _finite_at(image: NDArray[np.float32], points: NDArray[np.float64]) -> NDArray[np.bool_]:
@@ -102,21 +113,29 @@ class CandidateOptions:
         )
 
 
-def _checked(image: ArrayLike, method: str, spacing_px: float) -> tuple[NDArray, float]:
-    """The image (:func:`~carto.framework.matching.inputs.as_image`) and the spacing, refused
-    unless the method is one of :data:`CANDIDATE_METHODS` and the spacing at least 4 px."""
+def _checked(
+    image: ArrayLike, method: str, spacing_px: Spacing
+) -> tuple[NDArray, tuple[float, float]]:
+    """The image (:func:`~carto.framework.matching.inputs.as_image`) and the spacing
+    ``(rows, cols)``, refused unless the method is one of :data:`CANDIDATE_METHODS` and the
+    spacing at least 4 px."""
     img = as_image(image, "image")
     if method not in CANDIDATE_METHODS:
         raise InputError(f"candidates {method!r} is not one of {', '.join(CANDIDATE_METHODS)}")
-    spacing = float(spacing_px)
-    if not spacing >= 4.0:
+    spacing = spacing_axes(spacing_px)
+    if not min(spacing) >= 4.0:
         raise InputError(f"spacing_px must be >= 4 pixels, got {spacing_px}")
     return img, spacing
 
 
+def _grid_margin(spacing: tuple[float, float]) -> tuple[float, float]:
+    """The grid candidates' margin: two thirds of the spacing."""
+    return (2 * spacing[0] / 3, 2 * spacing[1] / 3)
+
+
 def candidate_points(
     image: ArrayLike,
-    spacing_px: float = 40.0,
+    spacing_px: Spacing = 40.0,
     *,
     method: str = "forstner",
     per_cell: int = 2,
@@ -125,7 +144,7 @@ def candidate_points(
     weight_quantile: float = 0.5,
 ) -> NDArray[np.float64]:
     """Points of ``image`` worth matching, ``(N, 2)`` ``(line, sample)`` (first pixel centre
-    at 0.5), spread over cells of about ``spacing_px`` pixels.
+    at 0.5), spread over cells of about ``spacing_px`` pixels (one value or ``(rows, cols)``).
 
     ``method="forstner"``: :func:`~carto.framework.matching.forstner.forstner_points` (box
     ``window``, ``min_roundness``, weight above the ``weight_quantile`` of the image's weights,
@@ -138,7 +157,7 @@ def candidate_points(
     """
     img, spacing = _checked(image, method, spacing_px)
     if method == "grid":
-        points = grid_points(img.shape, spacing, margin=2 * spacing / 3)
+        points = grid_points(img.shape, spacing, margin=_grid_margin(spacing))
         return points[_finite_at(img, points)]
     cells = candidate_cells(img.shape, spacing)
     size = np.array([img.shape[0] / cells[0], img.shape[1] / cells[1]])
@@ -180,7 +199,7 @@ def in_cell_range(
 
 def window_candidates(
     image: ArrayLike,
-    spacing_px: float,
+    spacing_px: Spacing,
     offset: tuple[int, int],
     frame_shape: tuple[int, int],
     cell_range: tuple[tuple[int, int], tuple[int, int]],
@@ -206,7 +225,7 @@ def window_candidates(
         return ok
 
     if options.method == "grid":
-        points = grid_points(frame, spacing, margin=2 * spacing / 3)
+        points = grid_points(frame, spacing, margin=_grid_margin(spacing))
         points = points[in_cell_range(points, frame, cells, cell_range)] - off
         points = points[in_window(points)]
         return points[_finite_at(img, points)]

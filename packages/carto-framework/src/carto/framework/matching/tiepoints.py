@@ -68,7 +68,7 @@ from carto.framework.errors import InputError
 from carto.framework.geometry.sensor import Sensor
 from carto.framework.imaging.preparation import block_grid, prepared_sources
 from carto.framework.matching.base import Matcher, Matches, MatchSettings
-from carto.framework.matching.candidates import candidate_points
+from carto.framework.matching.candidates import Spacing, candidate_points, spacing_axes
 from carto.framework.matching.inputs import as_image
 from carto.framework.matching.multiview import match_settings, match_views
 from carto.framework.matching.ncc_matcher import NCCMatcher
@@ -99,7 +99,7 @@ def automatic_tie_points(
     *,
     reference: str | None = None,
     resolution_m: float | None = None,
-    spacing_px: float = 40.0,
+    spacing_px: Spacing = 40.0,
     min_score: float = 0.7,
     sigma_px: float = 0.3,
     points: NDArray | None = None,
@@ -132,9 +132,9 @@ def automatic_tie_points(
         dem: the coarse DEM to orthorectify on (ellipsoidal heights).
         reference: image whose ortho the others are matched against (default: the first).
         resolution_m: ortho resolution (default: the coarsest image's ground sampling).
-        spacing_px: cell size of the candidates and of the final selection, ortho pixels;
-            when fewer than ``min_points`` points are kept (a small common area), the
-            matching is repeated with denser cells, down to :data:`MIN_SPACING_PX`.
+        spacing_px: cell size of the candidates and of the final selection, ortho pixels
+            (or ``(rows, cols)``); when fewer than ``min_points`` points are kept (a small
+            common area), it is repeated with denser cells, down to :data:`MIN_SPACING_PX`.
         min_score: smallest accepted correlation (both directions, and the closures).
         sigma_px: a-priori standard deviation given to each measurement.
         points: candidate points on the reference ortho ``(N, 2)`` (row, col in ortho pixels,
@@ -208,7 +208,7 @@ def _checked_reference(sensors: Mapping[str, Sensor], reference: str | None) -> 
 def _denser_until_enough(
     match: Callable[..., dict[str, NDArray]],
     settings: Mapping[str, Any],
-    spacing_px: float,
+    spacing_px: Spacing,
     min_points: int,
     engine: Any,
     tile_px: int,
@@ -217,15 +217,17 @@ def _denser_until_enough(
     cell spacing, ``settings``, ``engine`` and ``tile_px``), matched again with denser cells
     while fewer than ``min_points`` points are kept (unless the candidates are given)."""
     given = settings["points"]
-    spacing = float(spacing_px)
+    spacing: Spacing = spacing_px
     while True:
         table = match(spacing, settings, engine=engine, tile_px=tile_px)
         n = len(set(table["id"].tolist()))
         # a small common area (large system-level misregistration, partial overlap) leaves
         # few cells: denser candidates, down to MIN_SPACING_PX, until min_points are kept
-        if given is not None or n >= min_points or spacing <= MIN_SPACING_PX:
+        steps = spacing_axes(spacing)
+        if given is not None or n >= min_points or max(steps) <= MIN_SPACING_PX:
             return table
-        spacing = max(MIN_SPACING_PX, spacing * math.sqrt(max(n, 1) / min_points))
+        factor = math.sqrt(max(n, 1) / min_points)
+        spacing = tuple(max(MIN_SPACING_PX, min(s, s * factor)) for s in steps)
 
 
 MIN_SPACING_PX = 16.0

@@ -45,6 +45,7 @@ from carto.framework.errors import InputError
 from carto.framework.geometry.sensor import Sensor
 from carto.framework.matching.candidates import (
     CandidateOptions,
+    Spacing,
     candidate_cells,
     candidate_points,
     in_cell_range,
@@ -83,7 +84,7 @@ def tie_points_on_orthos(
     sensors: Mapping[str, Sensor],
     dem: Any,
     ref: str,
-    spacing_px: float,
+    spacing_px: Spacing,
     points: NDArray | None,
     candidates: str,
     forstner: Mapping[str, Any] | None,
@@ -163,7 +164,7 @@ class _Spread:
     frame of ``frame_shape`` in which the matched window lies at ``offset`` (row, col)."""
 
     frame_shape: tuple[int, ...]
-    spacing_px: float
+    spacing_px: Spacing
     per_cell: int
     offset: tuple[int, int]
 
@@ -214,7 +215,7 @@ def _long_table(
     }
 
 
-def plan_tiles(grid_shape: tuple[int, int], spacing_px: float, tile_px: int) -> list[Range]:
+def plan_tiles(grid_shape: tuple[int, int], spacing_px: Spacing, tile_px: int) -> list[Range]:
     """The tiles of a grid: ranges ``((row0, row1), (col0, col1))`` of its candidate cells
     (:func:`~carto.framework.matching.candidates.candidate_cells`), about ``tile_px`` pixels
     a side, row-major."""
@@ -363,7 +364,7 @@ def _tile_task(
     scene: _Scene,
     tile: _Tile,
     ref: str,
-    spacing_px: float,
+    spacing_px: Spacing,
     settings: Mapping[str, Any],
     guesses: Mapping[str, tuple[float, float]] | None,
 ) -> dict[str, NDArray]:
@@ -404,7 +405,7 @@ def _tile_candidates(
     ortho: NDArray,
     tile: _Tile,
     frame: tuple[int, ...],
-    spacing_px: float,
+    spacing_px: Spacing,
     settings: Mapping[str, Any],
 ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
     """The candidates of a tile's reference ``ortho`` in its cells and the halo around them
@@ -435,7 +436,7 @@ def tiled_tie_points(
     dem: Any,
     grid: Any,
     ref: str,
-    spacing_px: float,
+    spacing_px: Spacing,
     settings: Mapping[str, Any],
     *,
     engine: Any = None,
@@ -506,7 +507,7 @@ def _useful_nodes(
 
 def _seen_tiles(
     shape: tuple[int, int],
-    spacing_px: float,
+    spacing_px: Spacing,
     tile_px: int,
     margin: int,
     useful_nodes: tuple[NDArray, NDArray[np.bool_]],
