@@ -71,7 +71,6 @@ import attrs
 from carto.cartosat1 import constants
 from carto.cartosat1.calibration import AlignmentCalibration, load_calibration
 from carto.framework.sdk.adjusters import (
-    SELF_CALIBRATION_SIGMAS,
     Adjuster,
     AdjustmentResult,
     AncillaryPrior,
@@ -80,6 +79,7 @@ from carto.framework.sdk.adjusters import (
     adjust_bundle,
     adjust_with_jitter,
     line_scanner_corrections,
+    self_calibration_field,
     trend_document,
     with_image_trends,
     with_self_calibration,
@@ -90,9 +90,8 @@ from carto.framework.sdk.common import (
     choice,
     flag,
     integer,
-    names,
-    number,
     optional,
+    positive_field,
 )
 from carto.framework.sdk.sensors import LineScanner, Sensor
 
@@ -208,20 +207,6 @@ JITTER_AMPLITUDE_DEG = 6e-5
 a pixel on the ground)."""
 
 
-def _self_calibration(name: str) -> Any:
-    """A list of :data:`SELF_CALIBRATION_SIGMAS` names (or text separated by commas), or a
-    mapping name -> a-priori sigma; None: the default."""
-    as_names = optional(names(name, tuple(SELF_CALIBRATION_SIGMAS)))
-
-    def convert(value: Any) -> Any:
-        if isinstance(value, Mapping):
-            sigma = number(f"{name} sigma", 0.0, low_open=True)
-            return {str(k): sigma(v) for k, v in value.items()}
-        return as_names(value)
-
-    return convert
-
-
 @attrs.frozen
 class Cartosat1Settings(BundleSettings):
     """The options of ``cartosat1-combined`` (see the module docstring) and the bundle's;
@@ -229,41 +214,30 @@ class Cartosat1Settings(BundleSettings):
 
     mode: str = attrs.field(default="combined", converter=choice("mode", MODES))
     calibration: Any = attrs.field(default=None)
-    self_calibration: Any = attrs.field(
-        default=None, converter=_self_calibration("self_calibration")
+    self_calibration: tuple[str, ...] | Mapping[str, float] | None = self_calibration_field(
+        "self_calibration"
     )
-    relative_calibration: Any = attrs.field(
-        default=None, converter=_self_calibration("relative_calibration")
+    relative_calibration: tuple[str, ...] | Mapping[str, float] | None = self_calibration_field(
+        "relative_calibration"
     )
     image_trend_order: int | None = attrs.field(
         default=None, converter=optional(integer("image_trend_order", 0, 2))
     )
-    image_trend_sigma_deg: float = attrs.field(
-        default=constants.IMAGE_TREND_SIGMA_DEG,
-        converter=number("image_trend_sigma_deg", 0.0, low_open=True),
+    image_trend_sigma_deg: float = positive_field(
+        "image_trend_sigma_deg", constants.IMAGE_TREND_SIGMA_DEG
     )
     attitude_order: int = attrs.field(default=1, converter=integer("attitude_order", 0, 3))
     estimate_position: bool = attrs.field(default=True, converter=flag("estimate_position"))
-    bias_sigma_deg: float = attrs.field(
-        default=constants.ATTITUDE_BIAS_SIGMA_DEG,
-        converter=number("bias_sigma_deg", 0.0, low_open=True),
+    bias_sigma_deg: float = positive_field("bias_sigma_deg", constants.ATTITUDE_BIAS_SIGMA_DEG)
+    drift_sigma_deg_s: float = positive_field(
+        "drift_sigma_deg_s", constants.ATTITUDE_DRIFT_SIGMA_DEG_S
     )
-    drift_sigma_deg_s: float = attrs.field(
-        default=constants.ATTITUDE_DRIFT_SIGMA_DEG_S,
-        converter=number("drift_sigma_deg_s", 0.0, low_open=True),
+    alignment_sigma_deg: float = positive_field(
+        "alignment_sigma_deg", constants.RESIDUAL_ALIGNMENT_SIGMA_DEG
     )
-    alignment_sigma_deg: float = attrs.field(
-        default=constants.RESIDUAL_ALIGNMENT_SIGMA_DEG,
-        converter=number("alignment_sigma_deg", 0.0, low_open=True),
-    )
-    ephemeris_sigma_m: float = attrs.field(
-        default=constants.EPHEMERIS_BIAS_SIGMA_M,
-        converter=number("ephemeris_sigma_m", 0.0, low_open=True),
-    )
+    ephemeris_sigma_m: float = positive_field("ephemeris_sigma_m", constants.EPHEMERIS_BIAS_SIGMA_M)
     jitter_hz: Any = attrs.field(default=None)
-    jitter_amplitude_deg: float = attrs.field(
-        default=JITTER_AMPLITUDE_DEG, converter=number("jitter_amplitude_deg", 0.0, low_open=True)
-    )
+    jitter_amplitude_deg: float = positive_field("jitter_amplitude_deg", JITTER_AMPLITUDE_DEG)
 
     def __attrs_post_init__(self) -> None:
         if self.image_trend_order and self.mode != "combined":

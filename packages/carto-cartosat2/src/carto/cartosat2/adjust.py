@@ -39,7 +39,6 @@ import attrs
 
 from carto.cartosat2 import constants
 from carto.framework.sdk.adjusters import (
-    SELF_CALIBRATION_SIGMAS,
     Adjuster,
     AdjustmentResult,
     AncillaryPrior,
@@ -47,16 +46,10 @@ from carto.framework.sdk.adjusters import (
     Observations,
     adjust_with_jitter,
     line_scanner_corrections,
+    self_calibration_field,
     with_self_calibration,
 )
-from carto.framework.sdk.common import (
-    UsageError,
-    flag,
-    integer,
-    names,
-    number,
-    optional,
-)
+from carto.framework.sdk.common import UsageError, flag, integer, positive, positive_field
 from carto.framework.sdk.sensors import LineScanner, Sensor
 
 PRIOR = AncillaryPrior.from_degrees(
@@ -102,11 +95,7 @@ def _frequencies(value: Any) -> tuple[float, ...] | str:
         return (float(value),)
     if isinstance(value, str) or not isinstance(value, Sequence):
         raise UsageError(f"option jitter_hz must be 'auto' or a list of frequencies, got {value!r}")
-    return tuple(number("jitter_hz", 0.0, low_open=True)(v) for v in value)
-
-
-def _positive(name: str) -> Any:
-    return number(name, 0.0, low_open=True)
+    return tuple(positive("jitter_hz")(v) for v in value)
 
 
 @attrs.frozen
@@ -118,22 +107,19 @@ class Cartosat2Settings(BundleSettings):
         default=DEFAULT_ATTITUDE_ORDER, converter=integer("attitude_order", 0, 3)
     )
     estimate_position: bool = attrs.field(default=False, converter=flag("estimate_position"))
-    bias_sigma_deg: float = attrs.field(
-        default=constants.ATTITUDE_BIAS_SIGMA_DEG, converter=_positive("bias_sigma_deg")
+    bias_sigma_deg: float = positive_field("bias_sigma_deg", constants.ATTITUDE_BIAS_SIGMA_DEG)
+    drift_sigma_deg_s: float = positive_field(
+        "drift_sigma_deg_s", constants.ATTITUDE_DRIFT_SIGMA_DEG_S
     )
-    drift_sigma_deg_s: float = attrs.field(
-        default=constants.ATTITUDE_DRIFT_SIGMA_DEG_S, converter=_positive("drift_sigma_deg_s")
-    )
-    smooth_sigma_deg: float = attrs.field(
-        default=constants.ATTITUDE_SMOOTH_SIGMA_DEG, converter=_positive("smooth_sigma_deg")
+    smooth_sigma_deg: float = positive_field(
+        "smooth_sigma_deg", constants.ATTITUDE_SMOOTH_SIGMA_DEG
     )
     jitter_hz: Any = attrs.field(default="auto", converter=_frequencies)
-    jitter_amplitude_deg: float = attrs.field(
-        default=constants.ATTITUDE_JITTER_AMPLITUDE_DEG,
-        converter=_positive("jitter_amplitude_deg"),
+    jitter_amplitude_deg: float = positive_field(
+        "jitter_amplitude_deg", constants.ATTITUDE_JITTER_AMPLITUDE_DEG
     )
-    self_calibration: tuple[str, ...] | None = attrs.field(
-        default=None, converter=optional(names("self_calibration", tuple(SELF_CALIBRATION_SIGMAS)))
+    self_calibration: tuple[str, ...] | Mapping[str, float] | None = self_calibration_field(
+        "self_calibration"
     )
 
 

@@ -1,38 +1,16 @@
 """The ``carto`` entry point of carto-cartosat2.
 
 Registered in the distribution's ``[project.entry-points.carto]``; the framework loads it with
-pluggy. Components are added here as they are implemented and tested.
+pluggy. Components are added here as they are implemented and tested; each hook imports what
+it returns only when called, so loading the plugin stays cheap.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from typing import TYPE_CHECKING
+from carto.framework.sdk.hooks import component_hook
 
-from carto.framework import hookimpl
-
-if TYPE_CHECKING:  # the hooks import what they return: loading a plugin stays cheap
-    from carto.framework.sdk.adjusters import Adjuster
-    from carto.framework.sdk.presets import ScenePreset
-    from carto.framework.sdk.sensors import SensorType
-
-
-@hookimpl
-def carto_scene_presets() -> Sequence[ScenePreset]:
-    from carto.cartosat2.presets import PaintbrushPreset, StereoPaintbrushPreset, TripletPreset
-
-    return [TripletPreset(), PaintbrushPreset(), StereoPaintbrushPreset()]
-
-
-@hookimpl
-def carto_sensor_types() -> Sequence[SensorType]:
-    from carto.cartosat2.sensor import Cartosat2SensorType
-
-    return [Cartosat2SensorType()]
-
-
-@hookimpl
-def carto_adjusters() -> Sequence[Adjuster]:
-    from carto.cartosat2.adjust import Cartosat2BlockAdjuster
-
-    return [Cartosat2BlockAdjuster()]
+carto_scene_presets = component_hook(
+    "carto.cartosat2.presets", "TripletPreset", "PaintbrushPreset", "StereoPaintbrushPreset"
+)
+carto_sensor_types = component_hook("carto.cartosat2.sensor", "Cartosat2SensorType")
+carto_adjusters = component_hook("carto.cartosat2.adjust", "Cartosat2BlockAdjuster")

@@ -4,7 +4,6 @@ final iterations start close and search a few pixels around each node."""
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -14,32 +13,23 @@ from numpy.typing import NDArray
 
 from carto.framework.sdk.common import InputError
 from carto.framework.sdk.dem import DEM, ELLIPSOID, OrthoGrid
-from carto.framework.sdk.matchers import Matcher
-from carto.framework.sdk.sensors import Sensor
 from carto.ior.grids import ior_grids
-from carto.ior.iteration import IterationReport, iterate
+from carto.ior.iteration import IORRun, IterationReport, iterate
 from carto.ior.settings import IORSettings
 from carto.ior.start import starting_surface, values_on_grid
 from carto.ior.workspace import RunState, Workspace
 
-FloatArray = NDArray[np.float64]
-
 
 def coarse_stages(
-    images: tuple[Any, Any],
-    sensors: tuple[Sensor, Sensor],
+    run: IORRun,
     init_dem: DEM,
     s: IORSettings,
     crs: Any,
     k: int,
     folder: Path,
-    engine: Any,
-    matcher: Matcher | None,
-    progress: Callable[[str], None] | None,
-    keep_failed_tiles: bool,
 ) -> tuple[DEM, tuple[float, float], list[IterationReport], DEM | None] | None:
-    """The coarse-to-fine stages before the final grid (``s.coarse_stages``): IOR on the
-    images reduced ``f = 2**c`` times (:class:`~carto.framework.raster.image_source.
+    """The coarse-to-fine stages before the final grid (``s.coarse_stages``) of ``run``: IOR
+    on the images reduced ``f = 2**c`` times (:class:`~carto.framework.raster.image_source.
     DecimatedImage`, block means: no aliasing) with their models
     (:class:`~carto.framework.geometry.decimated.DecimatedSensor`), on a grid ``f`` times
     coarser with ortho-images ``f`` times coarser, from ``c = s.coarse_stages`` down to 1,
@@ -69,25 +59,25 @@ def coarse_stages(
             levels=max(s.refine_levels, s.levels - c),
             smoothing_nodes=None,
         )
-        coarse_sensors = (DecimatedSensor(sensors[0], f), DecimatedSensor(sensors[1], f))
-        coarse_images = (DecimatedImage(images[0], f), DecimatedImage(images[1], f))
+        coarse = attrs.evolve(
+            run,
+            images=(DecimatedImage(run.images[0], f), DecimatedImage(run.images[1], f)),
+            sensors=(DecimatedSensor(run.sensors[0], f), DecimatedSensor(run.sensors[1], f)),
+        )
         try:
-            grid, o_grid, k_f = ior_grids(*coarse_sensors, start_dem, cs)
+            grid, o_grid, k_f = ior_grids(*coarse.sensors, start_dem, cs)
         except InputError:
             continue  # a footprint too small for this stage
         cs = attrs.evolve(cs, smoothing_nodes=cs.smoothing_for(k_f))
         space = Workspace(folder / f"stage_1_{f}")
         state = space.load(grid.shape)
         if state is None:
-            start = starting_surface(start_dem, grid, coarse_sensors, 0.0)
+            start = starting_surface(start_dem, grid, coarse.sensors, 0.0)
             g = (guess[0] / f, guess[1] / f)
             bound = None if search is None else search_on(search, grid, f)
             state = RunState(1, start.heights, g, (), {"start_refined": ran}, bound)
             space.begin(state)
-        stage = iterate(
-            coarse_images, coarse_sensors, grid, o_grid, k_f, cs, state, space, engine,
-            matcher, progress, keep_failed_tiles, factor=f, apply_last=True,
-        )  # fmt: skip
+        stage = iterate(coarse, (grid, o_grid, k_f), cs, state, space, factor=f, apply_last=True)
         ran = True
         start_dem = DEM.from_array(
             np.asarray(stage.surface), grid.transform, grid.crs.to_wkt(), vertical=ELLIPSOID

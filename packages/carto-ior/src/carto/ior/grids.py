@@ -5,14 +5,11 @@ is allocated."""
 from __future__ import annotations
 
 import numpy as np
-from numpy.typing import NDArray
 
 from carto.framework.sdk.common import InputError
 from carto.framework.sdk.dem import DEM, OrthoGrid, check_grid_size, footprint_box
 from carto.framework.sdk.sensors import Sensor
 from carto.ior.settings import IORSettings, option_label
-
-FloatArray = NDArray[np.float64]
 
 
 def ior_grids(

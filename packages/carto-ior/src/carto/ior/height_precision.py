@@ -37,8 +37,6 @@ __all__ = [
     "window_span_factor",
 ]
 
-FloatArray = NDArray[np.float64]
-
 
 def window_span_factor(window: int, k: int) -> float:
     """``w / (w + k - 1)``: the bound of a node's ``k x k`` overlapping window matches

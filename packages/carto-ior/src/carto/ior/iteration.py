@@ -15,7 +15,7 @@ import attrs
 import numpy as np
 from numpy.typing import NDArray
 
-from carto.framework.sdk.common import InputError, TaskFailure
+from carto.framework.sdk.common import FloatArray, InputError, TaskFailure
 from carto.framework.sdk.dem import DEM, ELLIPSOID, OrthoGrid
 from carto.framework.sdk.matchers import Matcher
 from carto.framework.sdk.sensors import Sensor, base_direction
@@ -29,12 +29,11 @@ from carto.ior.tiles import (
     NODE_QUALITY,
     ORTHO_LAYERS,
     TileJob,
+    TileWork,
     run_tile,
     tile_arrays,
 )
 from carto.ior.workspace import RunState, Workspace
-
-FloatArray = NDArray[np.float64]
 
 
 @attrs.frozen
@@ -122,6 +121,21 @@ def b_over_h(left: Sensor, right: Sensor, lon: float, lat: float, h: float) -> f
     return base_direction(left, right, lon, lat, h)[0]
 
 
+@attrs.frozen(eq=False)
+class IORRun:
+    """What every stage of one run (:func:`carto.ior.refine.refine_dem`) shares: the images
+    (read by windows), their models, the tile engine, the dense matcher (None: the
+    default), the progress callback and whether failed tiles are kept (else they stop the
+    run)."""
+
+    images: tuple[Any, Any]
+    sensors: tuple[Sensor, Sensor]
+    engine: Any
+    matcher: Matcher | None = None
+    progress: Callable[[str], None] | None = None
+    keep_failed_tiles: bool = False
+
+
 class TileFailure(InputError):
     """Tiles of an iteration failed after their retries (the cause of the first, and how
     many)."""
@@ -191,29 +205,21 @@ def _stage_label(factor: int) -> str:
 
 
 def iterate(
-    images: tuple[Any, Any],
-    sensors: tuple[Sensor, Sensor],
-    dem_grid: OrthoGrid,
-    ortho_grid: OrthoGrid,
-    k: int,
+    run: IORRun,
+    grids: tuple[OrthoGrid, OrthoGrid, int],
     s: IORSettings,
     state: RunState,
     space: Workspace,
-    engine: Any,
-    matcher: Matcher | None,
-    progress: Callable[[str], None] | None,
-    keep_failed_tiles: bool,
     factor: int = 1,
     apply_last: bool = False,
 ) -> IORResult:
-    """The iterations of :func:`refine_dem` from ``state`` on (``factor``: the stage's
-    ortho-images are that many times coarser than the final ones; ``apply_last``: the last
-    iteration's measurement updates the surface too, for a stage whose result is a start,
-    not a product: ``surface`` is then one update ahead of ``dem``)."""
-    stage = _Stage(
-        images, sensors, dem_grid, ortho_grid, k, s, space, engine, matcher,
-        keep_failed_tiles, factor, _stage_plan(sensors, dem_grid, state.heights, k, s),
-    )  # fmt: skip
+    """The iterations of :func:`refine_dem` from ``state`` on, on ``grids`` (the DEM grid,
+    the ortho grid and its pixels per node, :func:`~carto.ior.grids.ior_grids`; ``factor``:
+    the stage's ortho-images are that many times coarser than the final ones;
+    ``apply_last``: the last iteration's measurement updates the surface too, for a stage
+    whose result is a start, not a product: ``surface`` is then one update ahead of
+    ``dem``)."""
+    stage = _stage(run, grids, s, state.heights, space, factor)
     heights, guess, search = state.heights, state.guess, state.search_px
     reports = [IterationReport(**r) for r in state.reports]
     start_refined = bool(state.facts.get("start_refined"))
@@ -242,8 +248,8 @@ def iterate(
             measured.across_px, seconds, factor, med_search,
         )  # fmt: skip
         reports.append(report)
-        if progress:
-            progress(_iteration_line(report, done, last))
+        if run.progress:
+            run.progress(_iteration_line(report, done, last))
         if last:
             break
         iteration += 1
@@ -303,20 +309,34 @@ def _stage_plan(
 
 @attrs.frozen(eq=False)
 class _Stage:
-    """What every iteration of :func:`iterate` shares: its arguments and the stage's plan."""
+    """What every iteration of :func:`iterate` shares: the run, what its tiles are refined
+    with (the iteration's levels, guess, height range and variance factor left to set),
+    the ortho grid, the workspace, the stage's factor and plan."""
 
-    images: tuple[Any, Any]
-    sensors: tuple[Sensor, Sensor]
-    dem_grid: OrthoGrid
+    run: IORRun
+    work: TileWork
     ortho_grid: OrthoGrid
-    k: int
-    s: IORSettings
     space: Workspace
-    engine: Any
-    matcher: Matcher | None
-    keep_failed_tiles: bool
     factor: int
     plan: _StagePlan
+
+
+def _stage(
+    run: IORRun,
+    grids: tuple[OrthoGrid, OrthoGrid, int],
+    s: IORSettings,
+    heights: FloatArray,
+    space: Workspace,
+    factor: int,
+) -> _Stage:
+    """The stage of :func:`iterate` whose starting heights are ``heights``."""
+    dem_grid, ortho_grid, k = grids
+    plan = _stage_plan(run.sensors, dem_grid, heights, k, s)
+    work = TileWork(
+        run.images, run.sensors, dem_grid, k, plan.overlap_n, s,
+        matcher=run.matcher, base=plan.base_rc,
+    )  # fmt: skip
+    return _Stage(run, work, ortho_grid, space, factor, plan)
 
 
 def _run_iteration(
@@ -329,34 +349,31 @@ def _run_iteration(
 ) -> list[Any]:
     """The tiles of one iteration on the heights ``current`` (``close``: the last mismatch
     was small, the matching's pyramid is shallow); each tile's file, or its failure."""
-    s, space = stage.s, stage.space
-    levels = s.refine_levels if close else s.levels
+    s, space = stage.work.settings, stage.space
+    work = attrs.evolve(
+        stage.work,
+        levels=s.refine_levels if close else s.levels,
+        guess=guess,
+        h_range=(float(np.nanmin(current)), float(np.nanmax(current))),
+        variance_factor=smoothing_variance_factor(
+            s.smoothing_nodes, iteration - 1, s.window, stage.work.k
+        ),
+    )
     job = TileJob(
-        stage.images,
-        stage.sensors,
+        work,
         space.heights_path(iteration),
-        stage.dem_grid,
-        stage.k,
-        stage.plan.overlap_n,
-        s,
-        levels,
-        guess,
-        stage.matcher,
-        (float(np.nanmin(current)), float(np.nanmax(current))),
         space.iteration_dir(iteration),
-        stage.plan.base_rc,
-        smoothing_variance_factor(s.smoothing_nodes, iteration - 1, s.window, stage.k),
         None if search is None else space.search_path(iteration),
     )
     tasks = [functools.partial(run_tile, job, rows, cols) for rows, cols in stage.plan.tiles]
     outcomes = _run_tiles(
-        stage.engine,
+        stage.run.engine,
         tasks,
         f"IOR {_stage_label(stage.factor)}iteration {iteration}",
         stage.plan.keys,
     )
     failed = _failures(outcomes)
-    if failed and not stage.keep_failed_tiles:
+    if failed and not stage.run.keep_failed_tiles:
         raise TileFailure(
             f"ior: {len(failed)} of {len(stage.plan.tiles)} tiles failed in iteration {iteration} "
             f"({failed[0]})"
@@ -386,7 +403,7 @@ class _Measured:
 
 def _measured(stage: _Stage, outcomes: list[Any]) -> _Measured:
     """The tiles' node layers assembled on the DEM grid, and their mismatch."""
-    shape = stage.dem_grid.shape
+    shape = stage.work.dem_grid.shape
     # the grids of the coordinator: heights in float64, offsets in float32 (what the
     # tiles measured to a hundredth of a pixel), the rest as masks
     new = np.full(shape, np.nan)
@@ -495,7 +512,7 @@ def _stage_result(
     (DEM grid)."""
     from carto.framework.sdk.dem import TiledLayer, TilePiece, piece_path
 
-    dem_grid, ortho_grid, k = stage.dem_grid, stage.ortho_grid, stage.k
+    dem_grid, ortho_grid, k = stage.work.dem_grid, stage.ortho_grid, stage.work.k
     finished = [
         (rows, cols)
         for (rows, cols), outcome in zip(stage.plan.tiles, outcomes, strict=True)

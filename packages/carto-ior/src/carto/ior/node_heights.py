@@ -19,12 +19,12 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage
 
+from carto.framework.sdk.common import FloatArray
 from carto.framework.sdk.dem import OrthoGrid
 from carto.ior.rays import RayField, intersect_offsets
 
 __all__ = ["NodeHeights", "block_quantiles", "node_heights"]
 
-FloatArray = NDArray[np.float64]
 
 BAND_PIXELS = 2_000_000
 """Ortho pixels per band of the computation (about 20 arrays of this length at once)."""

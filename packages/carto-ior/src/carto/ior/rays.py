@@ -30,12 +30,12 @@ import attrs
 import numpy as np
 from numpy.typing import NDArray
 
+from carto.framework.sdk.common import FloatArray
 from carto.framework.sdk.dem import OrthoGrid
 from carto.framework.sdk.sensors import Sensor
 
 __all__ = ["LATTICE_NODES", "RayField", "intersect_offsets"]
 
-FloatArray = NDArray[np.float64]
 
 LATTICE_NODES = 32
 """Spacing of the lattice on which ray directions are sampled through the models, nodes."""

@@ -56,9 +56,8 @@ from typing import Any
 
 import attrs
 import numpy as np
-from numpy.typing import NDArray
 
-from carto.framework.sdk.common import InputError
+from carto.framework.sdk.common import FloatArray, InputError
 from carto.framework.sdk.dem import DEM, OrthoGrid
 from carto.framework.sdk.matchers import Matcher
 from carto.framework.sdk.sensors import Sensor
@@ -66,6 +65,7 @@ from carto.ior.coarse_to_fine import coarse_stages, search_on
 from carto.ior.grids import ior_grids as _grids
 from carto.ior.iteration import (
     IORResult,
+    IORRun,
     IterationReport,
     TileFailure,
     b_over_h,
@@ -94,7 +94,6 @@ __all__ = [
     "regularise",
     "starting_surface",
 ]
-FloatArray = NDArray[np.float64]
 
 
 def first_order_height_change(mismatch_m: Any, b_over_h: float) -> FloatArray:
@@ -178,24 +177,25 @@ def refine_dem(
     images = (as_image_source(left_image), as_image_source(right_image))
     dem_grid, ortho_grid, k = _grids(left, right, init_dem, s)
     s = attrs.evolve(s, smoothing_nodes=s.smoothing_for(k))  # for this grid's k
-    engine = scheduler if scheduler is not None else TileEngine(quiet=True)
+    run = IORRun(
+        images,
+        (left, right),
+        scheduler if scheduler is not None else TileEngine(quiet=True),
+        matcher,
+        progress,
+        keep_failed_tiles,
+    )
     with _work_folder(work_dir) as (folder, kept):
         space = Workspace(folder)
         state = space.load(dem_grid.shape)
         if state is None:
             facts = _initial_facts(init_dem, dem_grid, (left, right), s, progress)
-            stages = coarse_stages(
-                images, (left, right), init_dem, s, dem_grid.crs, k, folder, engine, matcher,
-                progress, keep_failed_tiles,
-            )  # fmt: skip
+            stages = coarse_stages(run, init_dem, s, dem_grid.crs, k, folder)
             state = _first_state(stages, init_dem, dem_grid, (left, right), facts)
             space.begin(state)
         elif progress:
             progress(f"resuming at iteration {state.iteration} from {folder}")
-        result = iterate(
-            images, (left, right), dem_grid, ortho_grid, k, s, state, space, engine, matcher,
-            progress, keep_failed_tiles,
-        )  # fmt: skip
+        result = iterate(run, (dem_grid, ortho_grid, k), s, state, space)
         return _delivered(result, state, kept)
 
 

@@ -10,12 +10,12 @@ from collections.abc import Iterator
 import numpy as np
 from numpy.typing import NDArray
 
+from carto.framework.sdk.common import FloatArray
 from carto.framework.sdk.dem import focal_nanmedian, gaussian_nearest
 from carto.ior.settings import IORSettings
 
 __all__ = ["BAND_ROWS", "regularise"]
 
-FloatArray = NDArray[np.float64]
 
 BAND_ROWS = 512
 """DEM rows per band."""

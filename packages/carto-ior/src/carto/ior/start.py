@@ -10,7 +10,7 @@ import attrs
 import numpy as np
 from numpy.typing import NDArray
 
-from carto.framework.sdk.common import InputError
+from carto.framework.sdk.common import FloatArray, InputError
 from carto.framework.sdk.dem import DEM, OrthoGrid, cubic_sample, dem_pixel_size_m, fill_voids
 from carto.framework.sdk.sensors import Sensor
 
@@ -22,8 +22,6 @@ __all__ = [
     "starting_surface",
     "values_on_grid",
 ]
-
-FloatArray = NDArray[np.float64]
 
 
 @attrs.frozen

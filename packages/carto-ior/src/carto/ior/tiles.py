@@ -14,7 +14,7 @@ import attrs
 import numpy as np
 from numpy.typing import NDArray
 
-from carto.framework.sdk.common import atomic_output
+from carto.framework.sdk.common import FloatArray, atomic_output
 from carto.framework.sdk.dem import DEM, ELLIPSOID, OrthoGrid, orthorectify, piece_path
 from carto.framework.sdk.matchers import (
     DenseSettings,
@@ -36,11 +36,11 @@ __all__ = [
     "ORTHO_LAYERS",
     "TileJob",
     "TileResult",
+    "TileWork",
     "refine_tile",
     "run_tile",
 ]
 
-FloatArray = NDArray[np.float64]
 
 NODE_LAYERS = (
     "new_height",
@@ -81,28 +81,19 @@ def _block_mean(values: NDArray, k: int, shape: tuple[int, int]) -> FloatArray:
 
 @attrs.frozen(eq=False)
 class TileResult:
-    """What :func:`refine_tile` returns for its interior nodes: the height each matched node
-    should have (the median of its matched points, :mod:`carto.ior.node_heights`; NaN: no
-    valid match), the node offsets right minus left (mean of its pixels', ortho pixels, rows
-    and columns), whether both images cover the node, the node's points (count), their
-    spread (m) and mean correlation score, the predicted standard deviation of the height
-    of the DEM the tile started from (m, :mod:`carto.ior.height_precision`), and the
-    ortho-images and matching layers of the tile interior."""
+    """What :func:`refine_tile` returns for the tile's nodes ``rows, cols``: its layers by
+    name (what its tile file holds). On its interior nodes (:data:`NODE_LAYERS`, in that
+    order): the height each matched node should have (the median of its matched points,
+    :mod:`carto.ior.node_heights`; NaN: no valid match), the node offsets right minus left
+    (mean of its pixels', ortho pixels, rows and columns), whether both images cover the
+    node, the node's points (count), their spread (m) and mean correlation score, the
+    predicted standard deviation of the height of the DEM the tile started from (m,
+    :mod:`carto.ior.height_precision`); on its interior ortho pixels
+    (:data:`ORTHO_LAYERS`): the ortho-images and matching layers."""
 
     rows: slice
     cols: slice
-    new_height: FloatArray
-    d_row_px: FloatArray
-    d_col_px: FloatArray
-    covered: NDArray[np.bool_]
-    count: NDArray[np.int32]
-    spread_m: NDArray[np.float32]
-    node_score: NDArray[np.float32]
-    sigma_m: NDArray[np.float32]
-    ortho_left: NDArray[np.float32]
-    ortho_right: NDArray[np.float32]
-    score: NDArray[np.float32]
-    valid: NDArray[np.bool_]
+    layers: dict[str, NDArray]
 
 
 def _default_matcher() -> Matcher:
@@ -111,76 +102,78 @@ def _default_matcher() -> Matcher:
     return SGMMatcher()
 
 
+@attrs.frozen(eq=False)
+class TileWork:
+    """What every tile of one iteration is refined with (:func:`refine_tile`).
+
+    ``images``: the prepared raw images (arrays or
+    :class:`~carto.framework.raster.image_source.ImageSource`: only the windows the tile's
+    ortho-images map into are read); ``sensors``: their models; ``dem_grid``: the whole DEM
+    grid, ``k`` ortho pixels per node; ``overlap``: the nodes a tile reads around its own.
+    ``levels``: the matcher's pyramid levels (default: ``settings.levels``); ``guess``: the
+    offset the search starts from, ortho pixels. ``h_range``: the lowest and highest height
+    of the whole grid (an intersection more than 500 m beyond gives no height; default:
+    from the heights). ``base``: the stereo base, ``(d_row, d_col)`` of the ortho grid, for
+    matchers that search along it. ``variance_factor``: the share of a node's measurement
+    variance the regularised updates left in the current DEM
+    (:func:`carto.ior.height_precision.smoothing_variance_factor`)."""
+
+    images: tuple[Any, Any]
+    sensors: tuple[Sensor, Sensor]
+    dem_grid: OrthoGrid
+    k: int
+    overlap: int
+    settings: IORSettings
+    levels: int | None = None
+    guess: tuple[float, float] = (0.0, 0.0)
+    matcher: Matcher | None = None
+    h_range: tuple[float, float] | None = None
+    base: tuple[float, float] | None = None
+    variance_factor: float = 1.0
+
+
 def refine_tile(
-    images: tuple[NDArray, NDArray],
-    sensors: tuple[Sensor, Sensor],
+    work: TileWork,
     heights: FloatArray,
-    dem_grid: OrthoGrid,
-    k: int,
     rows: slice,
     cols: slice,
-    overlap: int,
-    settings: IORSettings,
-    levels: int | None = None,
-    guess: tuple[float, float] = (0.0, 0.0),
-    matcher: Matcher | None = None,
-    h_range: tuple[float, float] | None = None,
-    base: tuple[float, float] | None = None,
-    variance_factor: float = 1.0,
     search_px: FloatArray | None = None,
 ) -> TileResult:
     """One tile of one iteration: orthos on the current DEM, dense matching, intersection.
 
-    ``images``: the prepared raw images (arrays or
-    :class:`~carto.framework.raster.image_source.ImageSource`: only the windows the tile's
-    ortho-images map into are read). ``heights`` is the whole current DEM grid (an array or a
-    memory map: the tile reads its window plus ``overlap`` nodes around it); the result
-    covers ``rows, cols`` (DEM node slices) only. ``h_range``: the lowest and highest height
-    of the whole grid (an intersection more than 500 m beyond gives no height; default:
-    from ``heights``). The two rays of a node are intersected by the tile's local ray model
-    (:mod:`carto.ior.rays`). ``base``: the stereo base, ``(d_row, d_col)`` of the ortho
-    grid, for matchers that search along it. ``variance_factor``: the share of a node's
-    measurement variance the regularised updates left in the current DEM
-    (:func:`carto.ior.height_precision.smoothing_variance_factor`). ``search_px``: the whole
-    grid's per-node bound on the offset along the base from the guess, ortho pixels (NaN:
-    none; None: none anywhere): the matcher's pyramid is no deeper than the tile's bounds
-    need, and matches beyond their node's bound are refused.
+    ``heights`` is the whole current DEM grid (an array or a memory map: the tile reads its
+    window plus ``work.overlap`` nodes around it); the result covers ``rows, cols`` (DEM
+    node slices) only. The two rays of a node are intersected by the tile's local ray model
+    (:mod:`carto.ior.rays`). ``search_px``: the whole grid's per-node bound on the offset
+    along the base from the guess, ortho pixels (NaN: none; None: none anywhere): the
+    matcher's pyramid is no deeper than the tile's bounds need, and matches beyond their
+    node's bound are refused.
     """
-
-    w = _tile_window(dem_grid, heights, rows, cols, overlap, k)
+    k, h_range = work.k, work.h_range
+    w = _tile_window(work.dem_grid, heights, rows, cols, work.overlap, k)
     ortho = [
-        orthorectify(img, s, w.ortho_grid, w.dem) for img, s in zip(images, sensors, strict=True)
+        orthorectify(img, s, w.ortho_grid, w.dem)
+        for img, s in zip(work.images, work.sensors, strict=True)
     ]
-    direction = base if base is not None else (0.0, 1.0)
-    field = _matched(ortho, w, settings, levels, guess, matcher, base, direction, search_px)
+    direction = work.base if work.base is not None else (0.0, 1.0)
+    field = _matched(ortho, w, work, direction, search_px)
     d_row, d_col, covered = _node_offsets(field, ortho, k, w.shape)
     # heights: every valid match intersected, carried to its node, the median per node
     surface = np.asarray(w.dem.heights, np.float64)
-    rays = RayField.sample(sensors, w.grid, surface)
+    rays = RayField.sample(work.sensors, w.grid, surface)
     if h_range is None:
         h_range = (float(np.nanmin(heights)), float(np.nanmax(heights)))
     nodes = node_heights(
         field.d_row, field.d_col, field.valid, field.score, surface, w.grid, k, rays, h_range
     )
     new = np.where(covered, nodes.height_m, np.nan)
-    sigma = _predicted_sigma(ortho, field, rays, settings.window, direction, w, variance_factor)
+    sigma = _predicted_sigma(ortho, field, rays, direction, w, work)
     ir, ic, orr, occ = w.interior(rows, cols)
-    return TileResult(
-        rows,
-        cols,
-        new[ir, ic],
-        d_row[ir, ic],
-        d_col[ir, ic],
-        covered[ir, ic],
-        nodes.count[ir, ic],
-        nodes.spread_m[ir, ic],
-        nodes.score[ir, ic],
-        sigma[ir, ic],
-        ortho[0][orr, occ],
-        ortho[1][orr, occ],
-        field.score[orr, occ],
-        field.valid[orr, occ],
-    )
+    on_nodes = (new, d_row, d_col, covered, nodes.count, nodes.spread_m, nodes.score, sigma)
+    on_pixels = (ortho[0], ortho[1], field.score, field.valid)
+    layers = {name: a[ir, ic] for name, a in zip(NODE_LAYERS, on_nodes, strict=True)}
+    layers |= {name: a[orr, occ] for name, a in zip(ORTHO_LAYERS, on_pixels, strict=True)}
+    return TileResult(rows, cols, layers)
 
 
 @attrs.frozen(eq=False)
@@ -238,11 +231,7 @@ def _tile_window(
 def _matched(
     ortho: list[NDArray],
     w: _TileWindow,
-    settings: IORSettings,
-    levels: int | None,
-    guess: tuple[float, float],
-    matcher: Matcher | None,
-    base: tuple[float, float] | None,
+    work: TileWork,
     direction: tuple[float, float],
     search_px: FloatArray | None,
 ) -> OffsetField:
@@ -250,14 +239,15 @@ def _matched(
     within the nodes' search bounds (``search_px``: the whole grid's; the pyramid no deeper
     than they need), refined to sub-pixel along the base (``direction``), matches beyond
     their node's bound refused."""
-    depth = settings.levels if levels is None else levels
+    settings, guess = work.settings, work.guess
+    depth = settings.levels if work.levels is None else work.levels
     bound = None
     if search_px is not None:  # per pixel: its node's bound
         k = w.k
         nodes = np.asarray(search_px[w.r0 : w.r1, w.c0 : w.c1], np.float32)
         bound = np.repeat(np.repeat(np.where(np.isnan(nodes), np.inf, nodes), k, 0), k, 1)
         depth = min(depth, levels_for_reach(float(bound.max())))
-    field = (matcher or _default_matcher()).match_dense(
+    field = (work.matcher or _default_matcher()).match_dense(
         ortho[0],
         ortho[1],
         settings=DenseSettings(
@@ -265,7 +255,7 @@ def _matched(
             guess=guess,
             window=settings.window,
             min_score=settings.min_score,
-            base=base,
+            base=work.base,
             search_px=bound,
         ),
     )
@@ -296,10 +286,9 @@ def _predicted_sigma(
     ortho: list[NDArray],
     field: OffsetField,
     rays: RayField,
-    window: int,
     direction: tuple[float, float],
     w: _TileWindow,
-    variance_factor: float,
+    work: TileWork,
 ) -> NDArray[np.float32]:
     """Per node of the window, the predicted height standard deviation, m
     (:func:`~carto.ior.height_precision.node_sigma_m`)."""
@@ -310,36 +299,25 @@ def _predicted_sigma(
         ortho[0],
         ortho[1],
         field,
-        window,
+        work.settings.window,
         direction,
         w.k,
         w.ortho_grid.resolution[0],
         bh,
-        variance_factor,
+        work.variance_factor,
     )
     return sigma
 
 
 @attrs.frozen(eq=False)
 class TileJob:
-    """What the tile tasks of one iteration share: the images (read by windows), their
-    models, the ``.npy`` file of the iteration's DEM grid heights, the grids, the matching
-    settings of the iteration and the folder of the tile files."""
+    """What the tile tasks of one iteration share: what they are refined with, the ``.npy``
+    file of the iteration's DEM grid heights, the folder of the tile files and the ``.npy``
+    file of the per-node search bounds (None: none anywhere)."""
 
-    images: tuple[Any, Any]
-    sensors: tuple[Sensor, Sensor]
+    work: TileWork
     heights_path: Path
-    dem_grid: OrthoGrid
-    k: int
-    overlap: int
-    settings: IORSettings
-    levels: int
-    guess: tuple[float, float]
-    matcher: Matcher | None
-    h_range: tuple[float, float]
     folder: Path
-    base: tuple[float, float] | None = None
-    variance_factor: float = 1.0
     search_path: Path | None = None
 
 
@@ -352,27 +330,10 @@ def run_tile(job: TileJob, rows: slice, cols: slice) -> Path:
     if path.is_file():
         return path
     heights = np.load(job.heights_path, mmap_mode="r")
-    result = refine_tile(
-        job.images,
-        job.sensors,
-        heights,
-        job.dem_grid,
-        job.k,
-        rows,
-        cols,
-        job.overlap,
-        job.settings,
-        job.levels,
-        job.guess,
-        job.matcher,
-        h_range=job.h_range,
-        base=job.base,
-        variance_factor=job.variance_factor,
-        search_px=None if job.search_path is None else np.load(job.search_path, mmap_mode="r"),
-    )
-    arrays = {name: getattr(result, name) for name in NODE_LAYERS + ORTHO_LAYERS}
+    search_px = None if job.search_path is None else np.load(job.search_path, mmap_mode="r")
+    result = refine_tile(job.work, heights, rows, cols, search_px)
     with atomic_output(path) as tmp, open(tmp, "wb") as stream:
-        np.savez(stream, **arrays)
+        np.savez(stream, **result.layers)
     return path
 
 

@@ -10,15 +10,13 @@ from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
 from carto.framework.adjustment.observations import Observations
+from carto.framework.arrays import FloatArray
 from carto.framework.errors import UsageError
 from carto.framework.geometry import frames
 from carto.framework.geometry.sensor import Sensor
 from carto.framework.raster.dem_measures import dem_pixel_size_m
-
-FloatArray = NDArray[np.float64]
 
 __all__ = [
     "WEAK_INTERSECTION_DEG",

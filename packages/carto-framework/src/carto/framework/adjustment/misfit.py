@@ -27,11 +27,12 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import stats
 
+from carto.framework.arrays import FloatArray
+
 if TYPE_CHECKING:
     from carto.framework.adjustment.base import AdjustmentResult
     from carto.framework.adjustment.variance_components import VarianceComponent
 
-FloatArray = NDArray[np.float64]
 MIN_POINTS = 30
 SIGMA0_TOLERANCE = 0.1
 CORRELATION_FLAG = 0.2

@@ -22,11 +22,10 @@ from numpy.typing import NDArray
 from carto.framework.adjustment.dem_heights import height_row
 from carto.framework.adjustment.observations import HEIGHT_OFFSET, Observations
 from carto.framework.adjustment.parameter_constraints import ParameterConstraint, add_constraints
+from carto.framework.arrays import FloatArray
 from carto.framework.errors import AdjustmentError
 from carto.framework.geometry import frames
 from carto.framework.geometry.sensor import Sensor
-
-FloatArray = NDArray[np.float64]
 
 
 @attrs.frozen(eq=False)

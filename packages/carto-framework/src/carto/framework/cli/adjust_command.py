@@ -11,6 +11,7 @@ from carto.framework.cli.common import (
     finite_float,
     formatter,
     non_negative_int,
+    run_options,
 )
 from carto.framework.cli.config_file import add_config_option
 from carto.framework.cli.logging_setup import add_logging_options
@@ -32,10 +33,7 @@ def cmd_adjust(args: argparse.Namespace) -> int:
         sensor_type=args.sensor,
         matcher=args.matcher,
         trajectory=args.trajectory,
-        quiet=args.quiet,
-        allow_poor=args.allow_poor,
-        workers=args.workers,
-        scheduler=args.scheduler,
+        **run_options(args),
     )
     _print_adjust_summary(report, args.out)
     return 0

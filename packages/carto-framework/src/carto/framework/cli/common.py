@@ -60,6 +60,18 @@ def add_parallel_options(p: argparse.ArgumentParser, tasks: str, note: str = "")
     )
 
 
+def run_options(args: argparse.Namespace) -> dict[str, object]:
+    """The options of a workflow that the command lines of the long commands (``adjust``,
+    ``dem``) share: progress messages, whether a poor result is written, and where the work
+    runs (:func:`add_parallel_options`)."""
+    return {
+        "quiet": args.quiet,
+        "allow_poor": args.allow_poor,
+        "workers": args.workers,
+        "scheduler": args.scheduler,
+    }
+
+
 def finite_float(text: str) -> float:
     """An argparse ``type``: a finite number (``nan`` and ``inf`` are refused here; each
     option's range is checked by the settings it feeds)."""

@@ -15,6 +15,7 @@ from carto.framework.cli.common import (
     formatter,
     non_negative_int,
     positive_int,
+    run_options,
     table,
 )
 from carto.framework.cli.config_file import add_config_option
@@ -320,10 +321,7 @@ def _dem_options(args: argparse.Namespace, options: dict[str, object]) -> dict[s
         "reference": args.reference,
         "vertical": args.vertical,
         "options": options,
-        "quiet": args.quiet,
-        "allow_poor": args.allow_poor,
-        "workers": args.workers,
-        "scheduler": args.scheduler,
+        **run_options(args),
         "relative_orientation": args.relative_orientation,
         "coregister": args.coregister,
         "coregister_accuracy_m": args.coregister_accuracy,

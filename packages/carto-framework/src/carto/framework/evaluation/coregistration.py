@@ -41,10 +41,9 @@ import attrs
 import numpy as np
 from numpy.typing import NDArray
 
+from carto.framework.arrays import FloatArray
 from carto.framework.errors import InputError
 from carto.framework.raster.dem import DEM, Geoid
-
-FloatArray = NDArray[np.float64]
 
 __all__ = [
     "Coregistration",

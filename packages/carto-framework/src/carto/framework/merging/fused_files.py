@@ -119,6 +119,24 @@ class _Writers:
     counts: Any
     flags: Any
 
+    @classmethod
+    def opened(cls, stack: Any, out: Path, grid: MosaicGrid, vertical: Any) -> _Writers:
+        """The COG writers of the fused DEM's files in ``out``, entered into ``stack`` (an
+        :class:`contextlib.ExitStack`)."""
+        from carto.framework.raster.cog import cog_writer
+
+        def writer(name: str, bands: int, dtype: str, nodata: float, **options: Any) -> Any:
+            profile = grid.profile(bands, dtype, nodata)
+            return stack.enter_context(cog_writer(out / name, profile, **options))
+
+        nearest = {"overview_resampling": "nearest"}  # counts and flags: no averaging
+        return cls(
+            writer("dem.tif", 1, "float32", np.nan, what="DEM", vertical=vertical),
+            writer("quality.tif", 2, "float32", np.nan, what="quality layers"),
+            writer("quality_counts.tif", 1, "uint16", 65535, what="quality counts", **nearest),
+            writer("quality_flags.tif", 1, "uint8", 255, what="quality flags", **nearest),
+        )
+
     def write(self, window: GridWindow, fused: FusedHeights) -> None:
         from rasterio.windows import Window
 
@@ -146,8 +164,6 @@ def fuse_dem_folders(
     DEM's figures for the report (grid size, share of nodes by number of pairs)."""
     import contextlib
 
-    from carto.framework.raster.cog import cog_writer
-
     pairs = [pair_layers(Path(f)) for f in folders]
     check_together([p.dem for p in pairs])
     grid = union_grid([p.dem for p in pairs])
@@ -155,37 +171,7 @@ def fuse_dem_folders(
     offsets = np.zeros(len(pairs)) if offsets_m is None else np.asarray(offsets_m, float)
     tally = np.zeros(len(pairs) + 2, np.int64)  # nodes by pairs kept; last: filled
     with contextlib.ExitStack() as stack:
-        writers = _Writers(
-            stack.enter_context(
-                cog_writer(
-                    out / "dem.tif",
-                    grid.profile(1, "float32", np.nan),
-                    what="DEM",
-                    vertical=vertical,
-                )
-            ),
-            stack.enter_context(
-                cog_writer(
-                    out / "quality.tif", grid.profile(2, "float32", np.nan), what="quality layers"
-                )
-            ),
-            stack.enter_context(
-                cog_writer(
-                    out / "quality_counts.tif",
-                    grid.profile(1, "uint16", 65535),
-                    overview_resampling="nearest",
-                    what="quality counts",
-                )
-            ),
-            stack.enter_context(
-                cog_writer(
-                    out / "quality_flags.tif",
-                    grid.profile(1, "uint8", 255),
-                    overview_resampling="nearest",
-                    what="quality flags",
-                )
-            ),
-        )
+        writers = _Writers.opened(stack, out, grid, vertical)
         for window in grid.windows(tile_px):
             outer = window.grown(settings.feather_posts, grid.height, grid.width)
             stack = _window_stack(pairs, grid, outer, settings.feather_posts, offsets)

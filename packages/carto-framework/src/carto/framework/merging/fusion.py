@@ -27,11 +27,11 @@ import attrs
 import numpy as np
 from numpy.typing import NDArray
 
+from carto.framework.arrays import FloatArray
 from carto.framework.errors import InputError
+from carto.framework.merging.checks import checked, positive
 
 __all__ = ["FusedHeights", "FusionSettings", "fuse_heights", "weighted_median"]
-
-FloatArray = NDArray[np.float64]
 
 
 @attrs.frozen
@@ -53,25 +53,20 @@ class FusionSettings:
             models are not those of one block adjustment.
     """
 
-    k_sigma: float = attrs.field(default=3.0)
-    sigma_floor_m: float = attrs.field(default=0.05)
-    feather_posts: int = attrs.field(default=16)
+    k_sigma: float = attrs.field(
+        default=3.0, validator=checked(positive, "fusion k_sigma {!r}: give a positive number")
+    )
+    sigma_floor_m: float = attrs.field(
+        default=0.05,
+        validator=checked(positive, "fusion sigma_floor_m {!r}: give a positive number, m"),
+    )
+    feather_posts: int = attrs.field(
+        default=16,
+        validator=checked(
+            lambda v: 0 <= v <= 1024, "fusion feather_posts {!r}: give 0 to 1024 posts"
+        ),
+    )
     align_pairs: bool = True
-
-    @k_sigma.validator
-    def _check_k(self, _attr: object, value: float) -> None:
-        if not np.isfinite(value) or value <= 0:
-            raise InputError(f"fusion k_sigma {value!r}: give a positive number")
-
-    @feather_posts.validator
-    def _check_feather(self, _attr: object, value: int) -> None:
-        if not 0 <= value <= 1024:
-            raise InputError(f"fusion feather_posts {value!r}: give 0 to 1024 posts")
-
-    @sigma_floor_m.validator
-    def _check_floor(self, _attr: object, value: float) -> None:
-        if not np.isfinite(value) or value <= 0:
-            raise InputError(f"fusion sigma_floor_m {value!r}: give a positive number, m")
 
 
 @attrs.frozen

@@ -20,14 +20,13 @@ from typing import Any
 import attrs
 import numpy as np
 from affine import Affine
-from numpy.typing import NDArray
 
+from carto.framework.arrays import FloatArray
 from carto.framework.errors import InputError
 from carto.framework.merging.sources import RasterSource
 
 __all__ = ["GridWindow", "MosaicGrid", "bounds_in", "read_window", "same_crs", "union_grid"]
 
-FloatArray = NDArray[np.float64]
 
 MAX_MOSAIC_PIXELS = 2**34
 """A grid larger than this (a wrong --tr or CRS) is refused before any work."""

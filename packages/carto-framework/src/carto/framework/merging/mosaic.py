@@ -28,7 +28,8 @@ import attrs
 import numpy as np
 from numpy.typing import NDArray
 
-from carto.framework.errors import InputError
+from carto.framework.arrays import FloatArray
+from carto.framework.merging.checks import checked
 from carto.framework.merging.grid import GridWindow, MosaicGrid, bounds_in, read_window
 from carto.framework.merging.sources import RasterSource
 
@@ -42,8 +43,6 @@ __all__ = [
     "write_mosaic",
 ]
 
-FloatArray = NDArray[np.float64]
-
 
 @attrs.frozen
 class MosaicSettings:
@@ -56,24 +55,23 @@ class MosaicSettings:
         resampling: how a source not on the mosaic's grid is resampled.
     """
 
-    feather_px: int = attrs.field(default=32)
-    tile_px: int = attrs.field(default=1024)
-    resampling: str = attrs.field(default="bilinear")
-
-    @feather_px.validator
-    def _check_feather(self, _attr: object, value: int) -> None:
-        if not 0 <= value <= 4096:
-            raise InputError(f"feather {value!r} px: give 0 to 4096 pixels")
-
-    @tile_px.validator
-    def _check_tile(self, _attr: object, value: int) -> None:
-        if not 64 <= value <= 16384:
-            raise InputError(f"mosaic tile {value!r} px: give 64 to 16384 pixels")
-
-    @resampling.validator
-    def _check_resampling(self, _attr: object, value: str) -> None:
-        if value not in ("nearest", "bilinear", "cubic"):
-            raise InputError(f"resampling {value!r}: use nearest, bilinear or cubic")
+    feather_px: int = attrs.field(
+        default=32,
+        validator=checked(lambda v: 0 <= v <= 4096, "feather {!r} px: give 0 to 4096 pixels"),
+    )
+    tile_px: int = attrs.field(
+        default=1024,
+        validator=checked(
+            lambda v: 64 <= v <= 16384, "mosaic tile {!r} px: give 64 to 16384 pixels"
+        ),
+    )
+    resampling: str = attrs.field(
+        default="bilinear",
+        validator=checked(
+            lambda v: v in ("nearest", "bilinear", "cubic"),
+            "resampling {!r}: use nearest, bilinear or cubic",
+        ),
+    )
 
 
 @attrs.frozen

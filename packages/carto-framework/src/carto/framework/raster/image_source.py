@@ -37,6 +37,11 @@ __all__ = [
 ]
 
 
+def _as_shape(shape: Any) -> tuple[int, int]:
+    """``(rows, cols)`` as two Python integers."""
+    return (int(shape[0]), int(shape[1]))
+
+
 def _slices(key: Any, shape: tuple[int, int]) -> tuple[slice, slice]:
     if not (isinstance(key, tuple) and len(key) == 2 and all(isinstance(k, slice) for k in key)):
         raise TypeError("an image source is read by two slices: source[r0:r1, c0:c1]")
@@ -65,13 +70,16 @@ class ImageSource(abc.ABC):
         """What error messages call the image."""
         return type(self).__name__
 
-    @abc.abstractmethod
     def read(self, rows: slice, cols: slice) -> NDArray[np.float32]:
         """The window ``rows x cols`` (clipped to the image), float32, NaN = no data."""
+        return self._read_window(*_slices((rows, cols), self.shape))
+
+    @abc.abstractmethod
+    def _read_window(self, rows: slice, cols: slice) -> NDArray[np.float32]:
+        """The window ``rows x cols``, already clipped to the image (:meth:`read`)."""
 
     def __getitem__(self, key: Any) -> NDArray[np.float32]:
-        rows, cols = _slices(key, self.shape)
-        return self.read(rows, cols)
+        return self._read_window(*_slices(key, self.shape))
 
     def __array__(self, dtype: Any = None, copy: Any = None) -> NDArray:
         """The whole image (only for small images: prefer windows)."""
@@ -93,8 +101,7 @@ class ArrayImage(ImageSource):
     def shape(self) -> tuple[int, int]:
         return (int(self.array.shape[0]), int(self.array.shape[1]))
 
-    def read(self, rows: slice, cols: slice) -> NDArray[np.float32]:
-        rows, cols = _slices((rows, cols), self.shape)
+    def _read_window(self, rows: slice, cols: slice) -> NDArray[np.float32]:
         return np.array(self.array[rows, cols], dtype=np.float32)
 
 
@@ -105,7 +112,7 @@ class RasterImage(ImageSource):
     ``shape`` is read once when the value is made (:meth:`open`)."""
 
     path: Path = attrs.field(converter=Path)
-    raster_shape: tuple[int, int] = attrs.field(converter=tuple)
+    shape: tuple[int, int] = attrs.field(converter=_as_shape)
     band: int = 1
 
     @classmethod
@@ -128,17 +135,12 @@ class RasterImage(ImageSource):
         return cls(Path(path), shape, band)
 
     @property
-    def shape(self) -> tuple[int, int]:
-        return (int(self.raster_shape[0]), int(self.raster_shape[1]))
-
-    @property
     def name(self) -> str:
         return str(self.path)
 
-    def read(self, rows: slice, cols: slice) -> NDArray[np.float32]:
+    def _read_window(self, rows: slice, cols: slice) -> NDArray[np.float32]:
         from rasterio.windows import Window
 
-        rows, cols = _slices((rows, cols), self.shape)
         height, width = rows.stop - rows.start, cols.stop - cols.start
         if height == 0 or width == 0:
             return np.empty((height, width), np.float32)
@@ -213,22 +215,17 @@ class BandedImage(ImageSource):
     preparation stage writes (each task its band), read by windows."""
 
     folder: Path = attrs.field(converter=Path)
-    image_shape: tuple[int, int] = attrs.field(converter=tuple)
+    shape: tuple[int, int] = attrs.field(converter=_as_shape)
     band_lines: int
 
     def band_path(self, start: int) -> Path:
         return self.folder / f"band_{start:06d}.npy"
 
     @property
-    def shape(self) -> tuple[int, int]:
-        return (int(self.image_shape[0]), int(self.image_shape[1]))
-
-    @property
     def name(self) -> str:
         return str(self.folder)
 
-    def read(self, rows: slice, cols: slice) -> NDArray[np.float32]:
-        rows, cols = _slices((rows, cols), self.shape)
+    def _read_window(self, rows: slice, cols: slice) -> NDArray[np.float32]:
         out = np.empty((rows.stop - rows.start, cols.stop - cols.start), np.float32)
         first = (rows.start // self.band_lines) * self.band_lines
         for b0 in range(first, rows.stop, self.band_lines):
@@ -269,8 +266,7 @@ class DecimatedImage(ImageSource):
     def name(self) -> str:
         return f"{self.source.name} (1/{self.factor})"
 
-    def read(self, rows: slice, cols: slice) -> NDArray[np.float32]:
-        rows, cols = _slices((rows, cols), self.shape)
+    def _read_window(self, rows: slice, cols: slice) -> NDArray[np.float32]:
         f = self.factor
         h, w = rows.stop - rows.start, cols.stop - cols.start
         out = np.empty((h, w), np.float32)

@@ -17,4 +17,6 @@ this repository; ``docs/writing-a-plugin.md`` names only these.
 * :mod:`~carto.framework.sdk.dem`: the DEM generator base and product, DEMs, ortho grids and
   orthorectification, tiled layers, image sources.
 * :mod:`~carto.framework.sdk.presets`: scene presets and simulation plans, scenes.
+* :mod:`~carto.framework.sdk.hooks`: hook implementations that import their components only
+  when called.
 """

@@ -2,7 +2,12 @@
 JSON documents, array arguments, the converters of typed settings and the tile engines (see
 :mod:`carto.framework.sdk`)."""
 
-from carto.framework.arrays import as_float_arrays
+from collections.abc import Callable
+from typing import Any
+
+import attrs
+
+from carto.framework.arrays import FloatArray, as_float_arrays
 from carto.framework.component import ComponentLookup
 from carto.framework.errors import (
     AdjustmentError,
@@ -33,6 +38,7 @@ __all__ = [
     "CartoError",
     "ComponentLookup",
     "ConvergenceError",
+    "FloatArray",
     "GeometryError",
     "InputError",
     "OutputError",
@@ -49,7 +55,21 @@ __all__ = [
     "names",
     "number",
     "optional",
+    "positive",
+    "positive_field",
     "read_json_document",
     "settings_from",
     "write_json_atomic",
 ]
+
+
+def positive(name: str) -> Callable[[Any], float]:
+    """A converter to a finite number > 0 (a-priori sigmas, amplitudes) that names the option
+    ``name`` when it refuses a value (:func:`~carto.framework.settings.number`)."""
+    return number(name, 0.0, low_open=True)
+
+
+def positive_field(name: str, default: float) -> Any:
+    """A field of a settings class: option ``name``, a number > 0 (:func:`positive`), by
+    default ``default``."""
+    return attrs.field(default=default, converter=positive(name))

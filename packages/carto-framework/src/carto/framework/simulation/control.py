@@ -16,10 +16,9 @@ import attrs
 import numpy as np
 from numpy.typing import NDArray
 
+from carto.framework.arrays import FloatArray
 from carto.framework.errors import InputError
 from carto.framework.simulation.plan import ErrorModel
-
-FloatArray = NDArray[np.float64]
 
 
 def _select_points(

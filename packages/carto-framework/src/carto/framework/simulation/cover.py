@@ -25,7 +25,8 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-FloatArray = NDArray[np.float64]
+from carto.framework.arrays import FloatArray
+
 Float32Array = NDArray[np.float32]
 
 ZONE_M = 2500.0
@@ -145,18 +146,25 @@ def _parcel_block(
             outline[j] = np.float32(0.0) if o < 0.0 else (one if o > 1.0 else o)
 
 
+_ParcelJob = tuple[
+    tuple[int, int],
+    tuple[NDArray, NDArray],
+    float,
+    tuple[NDArray, NDArray, NDArray],
+    tuple[int, int, int, int],
+    NDArray,
+    tuple[NDArray, NDArray],
+]
+"""What :func:`_parcel_rows` draws: ``(first, spans, posting, pts, grid, levels, out)``, the
+window's first pixel, its ``spans = (row runs, column runs)``, the posting, the bucketed
+points ``(x, y, bucket starts)``, the buckets ``(bx0, by0, nbx, nby)``, the points' levels
+and the outputs (levels, boundary coverage)."""
+
+
 @numba.njit(cache=True, nogil=True)
-def _parcel_rows(
-    first: tuple[int, int],
-    spans: tuple[NDArray, NDArray],
-    span_range: tuple[int, int],
-    posting: float,
-    pts: tuple[NDArray, NDArray, NDArray],
-    grid: tuple[int, int, int, int],
-    levels: NDArray,
-    out: tuple[NDArray, NDArray],
-) -> None:  # pragma: no cover - compiled
-    """The blocks of the row runs ``span_range`` of ``spans = (row runs, column runs)``."""
+def _parcel_rows(job: _ParcelJob, span_range: tuple[int, int]) -> None:  # pragma: no cover
+    """The blocks of the row runs ``span_range`` of the job's ``spans``."""
+    first, spans, posting, pts, grid, levels, out = job
     start = pts[2]
     most = 0
     for b in range(start.size - 1):
@@ -186,10 +194,12 @@ def _parcel_chunks(
     levels: NDArray,
     out: tuple[NDArray, NDArray],
 ) -> None:  # pragma: no cover - compiled
-    """:func:`_parcel_rows` by chunks of 4 row runs, one thread each."""
+    """:func:`_parcel_rows` by chunks of 4 row runs, one thread each (the job's parts as
+    arguments: numba's parallel loop takes no tuple nested in a tuple)."""
     n_runs = spans[0].size - 1
     for c in numba.prange(-(-n_runs // 4)):
-        _parcel_rows(first, spans, (4 * c, min(4 * c + 4, n_runs)), posting, pts, grid, levels, out)
+        job = (first, spans, posting, pts, grid, levels, out)
+        _parcel_rows(job, (4 * c, min(4 * c + 4, n_runs)))
 
 
 class Parcels:
@@ -293,11 +303,11 @@ class Parcels:
         )
         land = np.empty((r1 - r0, c1 - c0), np.float32)
         outline = np.empty((r1 - r0, c1 - c0), np.float32)
-        args = ((r0, c0), spans, p, pts, (bx0, by0, nbx, nby), levels, (land, outline))
+        job = ((r0, c0), spans, p, pts, (bx0, by0, nbx, nby), levels, (land, outline))
         if land.size >= _SERIAL_PX:
-            _parcel_chunks(*args)
+            _parcel_chunks(*job)
         else:
-            _parcel_rows(args[0], spans, (0, spans[0].size - 1), *args[2:])
+            _parcel_rows(job, (0, spans[0].size - 1))
         return land, outline
 
 

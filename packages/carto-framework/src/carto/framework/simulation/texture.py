@@ -62,14 +62,14 @@ from __future__ import annotations
 
 import copy
 import math
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypedDict, Unpack
 
 import attrs
 import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from carto.framework.arrays import as_float_arrays
+from carto.framework.arrays import FloatArray, as_float_arrays
 from carto.framework.errors import InputError
 from carto.framework.raster.dem import DEM, to_affine
 from carto.framework.raster.grid_sampling import bilinear_sample
@@ -93,7 +93,6 @@ if TYPE_CHECKING:
     import pyproj
     from affine import Affine
 
-FloatArray = NDArray[np.float64]
 Float32Array = NDArray[np.float32]
 BoolArray = NDArray[np.bool_]
 
@@ -563,15 +562,15 @@ class GroundTexture:
         return land, mask
 
 
-def make_texture(
-    dem: DEM,
-    posting_m: float,
-    seed: int,
-    *,
-    sun_elevation_deg: float = 55.0,
-    sun_azimuth_deg: float = 135.0,
-    uniform_mask: ArrayLike | None = None,
-) -> Texture:
+class TextureLook(TypedDict, total=False):
+    """The keyword options of :func:`make_texture`, passed on to :class:`GroundTexture`."""
+
+    sun_elevation_deg: float
+    sun_azimuth_deg: float
+    uniform_mask: ArrayLike | None
+
+
+def make_texture(dem: DEM, posting_m: float, seed: int, **look: Unpack[TextureLook]) -> Texture:
     """Ground reflectance for ``dem`` on a finer geographic grid (see the module docstring).
 
     Args:
@@ -581,11 +580,12 @@ def make_texture(
         posting_m: texture ground spacing at the centre latitude, metres (e.g. half the ground
             sample distance of the images to render).
         seed: random seed (integer >= 0); same seed and arguments give identical textures.
-        sun_elevation_deg: sun elevation above the horizon for the shading, degrees (0-90].
-        sun_azimuth_deg: sun azimuth clockwise from north, degrees.
-        uniform_mask: bool array of the DEM's shape, True on uniform ground (water, sand);
-            default :func:`~carto.framework.simulation.terrain.uniform_mask_from_dem` (exactly
-            flat areas).
+        look: keyword options (:class:`TextureLook`): ``sun_elevation_deg``, the sun's
+            elevation above the horizon for the shading, degrees (0-90], default 55;
+            ``sun_azimuth_deg``, its azimuth clockwise from north, degrees, default 135;
+            ``uniform_mask``, a bool array of the DEM's shape, True on uniform ground (water,
+            sand), default :func:`~carto.framework.simulation.terrain.uniform_mask_from_dem`
+            (exactly flat areas).
 
     Returns:
         A :class:`Texture` whose pixel centres start at the DEM's first pixel centre and cover
@@ -598,15 +598,7 @@ def make_texture(
             :data:`~carto.framework.simulation.terrain.MAX_GRID_PX`.
     """
     dem = _check_lonlat_dem(dem, "make_texture")
-    ground = GroundTexture(
-        GridTerrain(dem),
-        posting_m,
-        seed,
-        sun_elevation_deg=sun_elevation_deg,
-        sun_azimuth_deg=sun_azimuth_deg,
-        uniform_mask=uniform_mask,
-        max_px=MAX_GRID_PX,
-    )
+    ground = GroundTexture(GridTerrain(dem), posting_m, seed, max_px=MAX_GRID_PX, **look)
     n_rows, n_cols = ground.shape
     values, mask = ground.window(0, n_rows, 0, n_cols)
     values.flags.writeable = False
