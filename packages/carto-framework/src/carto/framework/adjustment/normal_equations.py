@@ -113,8 +113,10 @@ def add_rows(
     n_cc[np.ix_(idx, idx)] += flat.T @ flat
     b_c[idx] += flat.T @ rw.reshape(-1)
     contrib = np.swapaxes(a_c, 1, 2) @ a_p  # (n, Pi, 3)
-    if once:
-        n_cp[pi[:, None], idx[None, :], :] += contrib
+    if once:  # by runs of consecutive parameters: a slice, not a fancy index (10x)
+        for run in np.split(np.arange(idx.size), np.flatnonzero(np.diff(idx) != 1) + 1):
+            first, last = int(run[0]), int(run[-1]) + 1
+            n_cp[pi, idx[first] : idx[first] + last - first, :] += contrib[:, first:last, :]
     else:
         tmp = np.zeros((pi.size, n_cc.shape[0], 3))
         tmp[:, idx, :] = contrib
