@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from carto.framework.errors import UsageError
-from carto.framework.parallel.engine import TaskFailure, TileEngine, open_engine
+from carto.framework.parallel.engine import TaskFailure, TileEngine, open_engine, shared_engine
 
 
 def square(x: int) -> int:
@@ -96,6 +96,31 @@ def test_on_a_local_cluster_of_processes(tmp_path, monkeypatch):
         assert {pid for pid, _, _ in again}.isdisjoint({pid for pid, _, _ in first})
         (tmp_path / "again").mkdir()
         _check(engine, tmp_path / "again")
+
+
+def test_the_commands_of_a_shared_engine_use_its_worker_processes(tmp_path):
+    """Inside :func:`shared_engine` the engines of commands are the shared one: the second
+    command's tasks run on the first one's worker processes (started once), and the block's
+    end stops them; other worker counts keep engines of their own."""
+    import os
+
+    tasks = [functools.partial(worker_facts, k) for k in range(4)]
+    with shared_engine(2, quiet=True) as shared:
+        with open_engine(quiet=True) as first:
+            pids = {pid for pid, _, _ in first.run(tasks)}
+        with open_engine(2, quiet=True) as second:
+            assert second is first is shared
+            assert {pid for pid, _, _ in second.run(tasks)} == pids
+        with open_engine(1) as own:
+            assert own is not shared
+            assert own.client is None
+        _check(shared, tmp_path)
+    assert not pids & {os.getpid()}
+    for pid in pids:
+        with pytest.raises(ProcessLookupError):
+            os.kill(pid, 0)
+    with open_engine(1) as after:
+        assert after is not shared
 
 
 def test_on_a_running_cluster(tmp_path):

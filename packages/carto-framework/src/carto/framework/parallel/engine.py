@@ -14,12 +14,15 @@ tile means (the DEM marks it nodata and the command fails with the cause). An in
 stage first has more than one task; a single task runs in this process, on all its threads), and
 ``scheduler="tcp://host:8786"`` connects to a running cluster (``dask scheduler`` and
 ``dask worker`` on the machines, or ``dask-jobqueue`` on SLURM/PBS; the workers need Carto
-installed and the input and output folders mounted at the same paths).
+installed and the input and output folders mounted at the same paths). Several commands run
+in one process (``carto demo``) share one engine inside :func:`shared_engine`: their worker
+processes start, import and load their compiled kernels once.
 """
 
 from __future__ import annotations
 
 import contextlib
+import contextvars
 import logging
 import os
 import sys
@@ -37,6 +40,7 @@ __all__ = [
     "TileEngine",
     "default_workers",
     "open_engine",
+    "shared_engine",
 ]
 
 RETRIES = 1
@@ -218,6 +222,24 @@ def _key(name: str) -> str:
     return f"carto-{name.replace(' ', '-')}-{uuid.uuid4().hex[:12]}"
 
 
+_SHARED: contextvars.ContextVar[TileEngine | None] = contextvars.ContextVar(
+    "carto_shared_engine", default=None
+)
+
+
+@contextlib.contextmanager
+def shared_engine(workers: int | None = None, *, quiet: bool = False) -> Iterator[TileEngine]:
+    """An engine (:func:`open_engine`) that every :func:`open_engine` of the block without a
+    scheduler, and with no workers or the same number, returns instead of its own: the
+    commands of one process (``carto demo``) share its local cluster, which starts once."""
+    with open_engine(workers, None, quiet=quiet) as engine:
+        token = _SHARED.set(engine)
+        try:
+            yield engine
+        finally:
+            _SHARED.reset(token)
+
+
 @contextlib.contextmanager
 def open_engine(
     workers: int | None = None, scheduler: str | None = None, *, quiet: bool = False
@@ -239,6 +261,10 @@ def open_engine(
         raise UsageError(f"--workers must be an integer >= 1, got {workers!r}")
     if workers is not None and workers < 1:
         raise UsageError(f"--workers must be >= 1, got {workers}")
+    shared = _SHARED.get()
+    if shared is not None and scheduler is None and workers in (None, shared.workers):
+        yield shared  # closed by shared_engine
+        return
     if scheduler is not None and workers is not None:
         raise UsageError(
             "--workers and --scheduler exclude each other: the cluster's workers run the tiles"

@@ -126,8 +126,11 @@ def run_demo(
     """Run the demo into ``out_dir``; return the report (also written as ``report.json``).
 
     The whole demo is written into a staging folder that replaces ``out_dir`` when every
-    stage is done (:func:`carto.framework.files.staging.staged_folder`)."""
-    with staged_folder(out_dir, "demo") as stage:
+    stage is done (:func:`carto.framework.files.staging.staged_folder`); its stages share one
+    tile engine (:func:`~carto.framework.parallel.engine.shared_engine`)."""
+    from carto.framework.parallel.engine import shared_engine
+
+    with staged_folder(out_dir, "demo") as stage, shared_engine(quiet=quiet):
         report = _demo_into(stage, seed=seed, size=size, terrain=terrain, quiet=quiet)
         _relocate_reports(stage, Path(out_dir))
     report["scene"] = str(Path(out_dir) / Path(report["scene"]).relative_to(stage))
