@@ -20,7 +20,7 @@ from typing import Any, TypeVar
 import attrs
 import numpy as np
 
-from carto.framework.errors import UsageError
+from carto.framework.errors import InputError, UsageError
 
 T = TypeVar("T")
 
@@ -33,6 +33,7 @@ __all__ = [
     "names",
     "number",
     "optional",
+    "positive_attribute",
     "settings_from",
 ]
 
@@ -179,6 +180,18 @@ def names(name: str, known: Collection[str] | None = None) -> Callable[[Any], tu
         return out
 
     return convert
+
+
+def positive_attribute(owner: str) -> Callable[[Any, attrs.Attribute, Any], None]:
+    """An attrs validator of the fields of ``owner``'s settings that must be finite and
+    > 0: :class:`~carto.framework.errors.InputError` ``"<owner>: <field> must be > 0, got
+    <value>"`` otherwise."""
+
+    def check(_self: Any, attr: attrs.Attribute, value: Any) -> None:
+        if not (math.isfinite(value) and value > 0):
+            raise InputError(f"{owner}: {attr.name} must be > 0, got {value!r}")
+
+    return check
 
 
 def optional(convert: Callable[[Any], T]) -> Callable[[Any], T | None]:

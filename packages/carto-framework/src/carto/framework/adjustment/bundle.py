@@ -53,6 +53,7 @@ from numpy.typing import NDArray
 from carto.framework.adjustment.base import AdjustmentResult
 from carto.framework.adjustment.normal_equations import (
     Estimate,
+    HeightConstraints,
     NormalEquations,
     Reduction,
     add_control,
@@ -478,7 +479,7 @@ def _accumulate(
     # height constraints
     a_h = np.zeros((0, 3))
     if ix.hidx.size:
-        a_h = add_heights(normal, obs, ix.hidx, opts.dem, est, ix.par_index)
+        a_h = add_heights(normal, HeightConstraints(obs, ix.hidx, opts.dem, ix.par_index), est)
     # parameter priors
     add_priors(normal, ix.prior_sigma, ix.prior_value, est.values, ix.par_index, opts.constraints)
     return offsets, a_h
@@ -523,7 +524,7 @@ def _final_residuals(
         v_off[rows] = r
     v_h = np.zeros(0)
     if ix.hidx.size:
-        v_h = height_residuals(obs, ix.hidx, dem, est, ix.par_index)
+        v_h = height_residuals(HeightConstraints(obs, ix.hidx, dem, ix.par_index), est)
     return _Residuals(d_line, d_sample, v_gcp, v_off, v_h)
 
 

@@ -174,19 +174,26 @@ def _height_targets(height_m: FloatArray, dem: Any, lon: FloatArray, lat: FloatA
     return np.where(np.isfinite(at), at, height_m)
 
 
-def height_residuals(
-    obs: Observations,
-    hidx: NDArray[np.intp],
-    dem: Any,
-    est: Estimate,
-    par_index: Mapping[str, int],
-) -> FloatArray:
+@attrs.frozen(eq=False)
+class HeightConstraints:
+    """The height constraints of one solution: the observations' heights, the point of each
+    (``hidx``, -1: not placed), the DEM they follow (``None``: the given heights) and the
+    parameters' positions (``par_index``, with the height offset when it is adjusted)."""
+
+    obs: Observations
+    hidx: NDArray[np.intp]
+    dem: Any
+    par_index: Mapping[str, int]
+
+
+def height_residuals(heights: HeightConstraints, est: Estimate) -> FloatArray:
     """Residuals (target minus computed, metres) of the height constraints of placed points."""
+    obs, hidx, par_index = heights.obs, heights.hidx, heights.par_index
     ok = hidx >= 0
     offset = est.values[par_index[HEIGHT_OFFSET]] if HEIGHT_OFFSET in par_index else 0.0
     hh = hidx[ok]
     return (
-        _height_targets(obs.height_m[ok], dem, est.lon_deg[hh], est.lat_deg[hh])
+        _height_targets(obs.height_m[ok], heights.dem, est.lon_deg[hh], est.lat_deg[hh])
         - est.h_m[hh]
         - offset
     )
@@ -228,22 +235,16 @@ def add_control(
     np.add.at(normal.b_p, g, wgt * d_enu)
 
 
-def add_heights(
-    normal: NormalEquations,
-    obs: Observations,
-    hidx: NDArray[np.intp],
-    dem: Any,
-    est: Estimate,
-    par_index: Mapping[str, int],
-) -> FloatArray:
-    """The height constraints of the placed points (``hidx``); returns their rows'
+def add_heights(normal: NormalEquations, heights: HeightConstraints, est: Estimate) -> FloatArray:
+    """The height constraints of the placed points (``heights.hidx``); returns their rows'
     derivatives with respect to their points' east, north and up."""
+    hidx, par_index = heights.hidx, heights.par_index
     ok = hidx >= 0
     hh = hidx[ok]
-    wgt = 1.0 / obs.height_sigma_m[ok] ** 2
-    rho = height_residuals(obs, hidx, dem, est, par_index)
+    wgt = 1.0 / heights.obs.height_sigma_m[ok] ** 2
+    rho = height_residuals(heights, est)
     # h + offset = DEM(east, north): the row's derivatives (the DEM's slope)
-    a_h = height_row(dem, est.lon_deg[hh], est.lat_deg[hh])
+    a_h = height_row(heights.dem, est.lon_deg[hh], est.lat_deg[hh])
     if HEIGHT_OFFSET in par_index:
         k = par_index[HEIGHT_OFFSET]
         normal.n_cc[k, k] += wgt.sum()

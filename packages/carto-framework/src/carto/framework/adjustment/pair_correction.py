@@ -17,6 +17,7 @@ from numpy.typing import NDArray
 from carto.framework.adjustment.pair_observations import Noise, Observations, axes, base_axes
 from carto.framework.errors import InputError
 from carto.framework.geometry.line_correction import LineBasis
+from carto.framework.settings import positive_attribute
 
 FloatArray = NDArray[np.float64]
 
@@ -48,9 +49,7 @@ def _check_mode(_self: Any, _attr: attrs.Attribute, value: str) -> None:
         raise InputError(f"--relative-orientation must be one of {', '.join(MODES)}, got {value!r}")
 
 
-def _check_positive(_self: Any, attr: attrs.Attribute, value: float) -> None:
-    if not (math.isfinite(value) and value > 0):
-        raise InputError(f"relative orientation: {attr.name} must be > 0, got {value!r}")
+_check_positive = positive_attribute("relative orientation")
 
 
 @attrs.frozen

@@ -44,6 +44,7 @@ from numpy.typing import NDArray
 from carto.framework.arrays import FloatArray
 from carto.framework.errors import InputError
 from carto.framework.raster.dem import DEM, Geoid
+from carto.framework.settings import positive_attribute
 
 __all__ = [
     "Coregistration",
@@ -64,9 +65,7 @@ MIN_REFERENCE_POSTS = 10
 crop has three: its interpolation, not the terrain, would set the shift)."""
 
 
-def _check_positive(_self: Any, attr: attrs.Attribute, value: float) -> None:
-    if not (math.isfinite(value) and value > 0):
-        raise InputError(f"co-registration: {attr.name} must be > 0, got {value!r}")
+_check_positive = positive_attribute("co-registration")
 
 
 @attrs.frozen

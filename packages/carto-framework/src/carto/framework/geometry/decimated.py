@@ -11,8 +11,8 @@ import attrs
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from carto.framework.errors import InputError
 from carto.framework.geometry.sensor import Sensor
+from carto.framework.raster.image_source import decimation_factor
 
 __all__ = ["DecimatedSensor"]
 
@@ -24,12 +24,7 @@ class DecimatedSensor(Sensor):
     """``sensor`` on its image reduced ``factor`` times (see the module docstring)."""
 
     sensor: Sensor
-    factor: int = attrs.field()
-
-    @factor.validator
-    def _check_factor(self, _attribute: attrs.Attribute, value: int) -> None:
-        if isinstance(value, bool) or int(value) != value or value < 1:
-            raise InputError(f"sensor decimation factor must be a whole number >= 1, got {value!r}")
+    factor: int = attrs.field(validator=decimation_factor("sensor"))
 
     @property
     def name(self) -> str | None:

@@ -15,6 +15,7 @@ import abc
 import math
 import os
 import warnings
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -238,6 +239,17 @@ class BandedImage(ImageSource):
         return out
 
 
+def decimation_factor(what: str) -> Callable[[Any, attrs.Attribute, Any], None]:
+    """The attrs validator of the reduction ``factor`` of a decimated ``what`` (an image, a
+    sensor): a whole number >= 1."""
+
+    def check(_self: Any, _attribute: attrs.Attribute, value: Any) -> None:
+        if isinstance(value, bool) or int(value) != value or value < 1:
+            raise InputError(f"{what} decimation factor must be a whole number >= 1, got {value!r}")
+
+    return check
+
+
 @attrs.frozen
 class DecimatedImage(ImageSource):
     """``source`` reduced ``factor`` times: pixel ``(i, j)`` is the mean of the source's
@@ -248,12 +260,7 @@ class DecimatedImage(ImageSource):
     a coarse-to-fine stage."""
 
     source: ImageSource
-    factor: int = attrs.field()
-
-    @factor.validator
-    def _check_factor(self, _attribute: attrs.Attribute, value: int) -> None:
-        if isinstance(value, bool) or int(value) != value or value < 1:
-            raise InputError(f"image decimation factor must be a whole number >= 1, got {value!r}")
+    factor: int = attrs.field(validator=decimation_factor("image"))
 
     _STRIP_ROWS = 128  # output rows per read of the source
 

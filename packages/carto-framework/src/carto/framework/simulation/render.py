@@ -31,10 +31,18 @@ from numpy.typing import NDArray
 
 from carto.framework.errors import InputError
 from carto.framework.geometry.linescan.raycast import (
+    HEIGHT_TOLERANCE_M,
+    MAX_STEPS,
+    QUADRATIC_STEP,
     RAY_SIZE,
     STATE_SIZE,
     CameraStates,
+    DemGrid,
+    GeoGrid,
     camera_states,
+    dem_grid,
+    geo_grid,
+    grid_bilinear,
     interp_time,
     line_state,
     quadratic_table,
@@ -42,14 +50,6 @@ from carto.framework.geometry.linescan.raycast import (
 )
 from carto.framework.geometry.linescan.scanner import LineScanner
 from carto.framework.geometry.linescan.terrain_intersection import (
-    HEIGHT_TOLERANCE_M,
-    MAX_STEPS,
-    QUADRATIC_STEP,
-    DemGrid,
-    GeoGrid,
-    dem_grid,
-    geo_grid,
-    grid_bilinear,
     interpolated_quadratic,
     ray_quadratic,
     trace_quadratic,

@@ -240,22 +240,26 @@ def _clip01(v: np.float32) -> np.float32:  # pragma: no cover - compiled
     return np.float32(0.0) if v < 0.0 else (np.float32(1.0) if v > 1.0 else v)
 
 
+_MixJob = tuple[
+    tuple[int, int, int, int],
+    NDArray,
+    NDArray,
+    NDArray,
+    tuple[NDArray, NDArray, np.float32, bool],
+]
+"""A strip's mixing: ``(first, coarse, noise, land, extra)`` (see :func:`_mix_rows`)."""
+
+
 @numba.njit(cache=True, nogil=True)
-def _mix_rows(
-    stage: int,
-    rows: tuple[int, int],
-    first: tuple[int, int, int, int],
-    coarse: NDArray,
-    noise: NDArray,
-    land: NDArray,
-    extra: tuple[NDArray, NDArray, np.float32, bool],
-) -> None:  # pragma: no cover - compiled
-    """Rows ``rows`` of a strip from ``first = (r0, c0, a0, b0)`` (its first pixel and coarse
-    node), in place in ``land``: stage 0 textures and blends the parcels (``land``, ``extra =
-    (outline, mask, outline_darkening, has_uniform)``) with natural cover; stage 1 (after the
-    roads) shades, blends uniform ground, clips and sets the mask. The coarse channels are
-    linear between the nodes (pixel ``r`` at node ``r / 4 + 1``, columns first, rounded to
-    float32); float32 arithmetic in the order of the former whole-array steps."""
+def _mix_rows(stage: int, job: _MixJob, rows: tuple[int, int]) -> None:  # pragma: no cover
+    """Rows ``rows`` of a strip (``job = (first, coarse, noise, land, extra)``) from
+    ``first = (r0, c0, a0, b0)`` (its first pixel and coarse node), in place in ``land``:
+    stage 0 textures and blends the parcels (``land``, ``extra = (outline, mask,
+    outline_darkening, has_uniform)``) with natural cover; stage 1 (after the roads) shades,
+    blends uniform ground, clips and sets the mask. The coarse channels are linear between
+    the nodes (pixel ``r`` at node ``r / 4 + 1``, columns first, rounded to float32); float32
+    arithmetic in the order of the former whole-array steps."""
+    first, coarse, noise, land, extra = job
     r0, c0, a0, b0 = first
     outline, mask, darken, has_uniform = extra
     channels = np.array([1, 2]) if stage == 0 else np.array([0, 3, 4] if has_uniform else [0])
@@ -306,25 +310,21 @@ def _mix_chunks(
     land: NDArray,
     extra: tuple[NDArray, NDArray, np.float32, bool],
 ) -> None:  # pragma: no cover - compiled
-    """:func:`_mix_rows` by chunks of 64 rows, one thread each."""
+    """:func:`_mix_rows` by chunks of 64 rows, one thread each (the job's parts as
+    arguments: numba's parallel loop takes no tuple nested in a tuple)."""
     n_rows = land.shape[0]
     for k in numba.prange(-(-n_rows // 64)):
-        _mix_rows(stage, (64 * k, min(64 * k + 64, n_rows)), first, coarse, noise, land, extra)
+        job = (first, coarse, noise, land, extra)
+        _mix_rows(stage, job, (64 * k, min(64 * k + 64, n_rows)))
 
 
-def _mix(
-    stage: int,
-    first: tuple[int, int, int, int],
-    coarse: Float32Array,
-    noise: Float32Array,
-    land: Float32Array,
-    extra: tuple[Float32Array, BoolArray, np.float32, bool],
-) -> None:
+def _mix(stage: int, job: _MixJob) -> None:
     """:func:`_mix_rows` over the whole strip (on one thread when it is small)."""
+    land = job[3]
     if land.size >= _SERIAL_PX:
-        _mix_chunks(stage, first, coarse, noise, land, extra)
+        _mix_chunks(stage, *job)
     else:
-        _mix_rows(stage, (0, land.shape[0]), first, coarse, noise, land, extra)
+        _mix_rows(stage, job, (0, land.shape[0]))
 
 
 class GroundTexture:
@@ -555,10 +555,10 @@ class GroundTexture:
         land, outline = self._parcels.window(r0, r1, c0, c1)
         mask = np.zeros(land.shape, np.bool_)
         darken = np.float32(0.3 * min(1.0, 1.5 / self.posting_m))
-        args = ((r0, c0, a0, b0), coarse, noise, land, (outline, mask, darken, has_uniform))
-        _mix(0, *args)
+        job = ((r0, c0, a0, b0), coarse, noise, land, (outline, mask, darken, has_uniform))
+        _mix(0, job)
         paint_roads(land, r0, c0, self._roads)
-        _mix(1, *args)
+        _mix(1, job)
         return land, mask
 
 

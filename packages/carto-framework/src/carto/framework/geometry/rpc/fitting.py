@@ -228,7 +228,8 @@ def fit_rpc(
         tuple((r[0] + r[1]) / 2.0 for r in domain.ranges),
         tuple((r[1] - r[0]) / 2.0 for r in domain.ranges),
     )
-    lon, lat, h, line, samp = _fit_points(sensor, domain)
+    nodes = _fit_points(sensor, domain)
+    lon, lat, h, line, samp = nodes
     norm = [(v - o) / s for v, o, s in zip((lon, lat, h), *ground_norm, strict=True)]
     terms = np.empty((20, lon.size))
     monomials(norm[0], norm[1], norm[2], terms)
@@ -249,8 +250,8 @@ def fit_rpc(
         height_scale=ground_norm[1][2],
         coefficients=[ln, ld, sn, sd],
     )
-    fit = _image_errors(sensor, rpc, lon, lat, h, line, samp)
-    check = _image_errors(sensor, rpc, *_grid(domain.ranges, domain.check_dims, offset=True))
+    fit = _image_errors(rpc, nodes)
+    check = _image_errors(rpc, _projected_nodes(sensor, domain.ranges, domain.check_dims, True))
     return rpc, _fit_report(domain, fit, check, max(it_l, it_s), regularisation)
 
 
@@ -318,18 +319,27 @@ def _grid_dims(
     return dims, cdims
 
 
+def _projected_nodes(
+    sensor: Sensor, ranges: Sequence[tuple[float, float]], dims: Sequence[int], offset: bool
+) -> tuple[FloatArray, ...]:
+    """``(lon, lat, h, line, sample)`` of the nodes of a grid (:func:`_grid`) that the
+    sensor projects."""
+    lon, lat, h = _grid(ranges, dims, offset)
+    line, samp = (np.asarray(a, dtype=float).ravel() for a in sensor.ground_to_image(lon, lat, h))
+    ok = np.isfinite(line) & np.isfinite(samp)
+    return lon[ok], lat[ok], h[ok], line[ok], samp[ok]
+
+
 def _fit_points(sensor: Sensor, domain: _FitDomain) -> tuple[FloatArray, ...]:
     """``(lon, lat, h, line, sample)`` of the fit grid nodes the sensor projects (InputError
     for fewer than the 39 unknowns of a rational function)."""
-    lon, lat, h = _grid(domain.ranges, domain.dims, offset=False)
-    line, samp = (np.asarray(a, dtype=float).ravel() for a in sensor.ground_to_image(lon, lat, h))
-    ok = np.isfinite(line) & np.isfinite(samp)
-    if ok.sum() < 39:
+    nodes = _projected_nodes(sensor, domain.ranges, domain.dims, False)
+    if nodes[0].size < 39:
         raise InputError(
-            f"fit_rpc: only {int(ok.sum())} of {ok.size} grid points project into the sensor "
-            "(need >= 39); check the ranges"
+            f"fit_rpc: only {nodes[0].size} of {math.prod(domain.dims)} grid points project "
+            "into the sensor (need >= 39); check the ranges"
         )
-    return lon[ok], lat[ok], h[ok], line[ok], samp[ok]
+    return nodes
 
 
 def _fit_rational(
@@ -357,22 +367,12 @@ class _ImageErrors:
     max_px: float
 
 
-def _image_errors(
-    sensor: Sensor,
-    rpc: RPCCoefficients,
-    lon: FloatArray,
-    lat: FloatArray,
-    h: FloatArray,
-    line: FloatArray | None = None,
-    samp: FloatArray | None = None,
-) -> _ImageErrors:
-    """RPC minus sensor at ground points, the sensor's ``(line, samp)`` projected unless
-    given; points the sensor does not project are left out."""
-    if line is None:
-        line, samp = (np.asarray(a, float).ravel() for a in sensor.ground_to_image(lon, lat, h))
-    good = np.isfinite(line) & np.isfinite(samp)
-    fl, fs = rpc.project(lon[good], lat[good], h[good])
-    err = np.hypot(fl - line[good], fs - samp[good])
+def _image_errors(rpc: RPCCoefficients, nodes: tuple[FloatArray, ...]) -> _ImageErrors:
+    """RPC minus sensor at the nodes the sensor projects (``(lon, lat, h, line, sample)``,
+    :func:`_projected_nodes`)."""
+    lon, lat, h, line, samp = nodes
+    fl, fs = rpc.project(lon, lat, h)
+    err = np.hypot(fl - line, fs - samp)
     if err.size == 0:
         return _ImageErrors(0, math.nan, math.nan)
     return _ImageErrors(err.size, float(np.sqrt(np.mean(err**2))), float(np.max(err)))

@@ -62,7 +62,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from typing import Any
+from typing import Any, TypedDict
 
 import attrs
 import numpy as np
@@ -86,6 +86,7 @@ __all__ = [
     "RPC00A_TERMS",
     "RPC00A_TO_B",
     "RPC00B_TERMS",
+    "NewtonOptions",
     "RPCCoefficients",
     "monomials",
 ]
@@ -175,6 +176,14 @@ purpose: an RPC is nearly linear in height (rays are straight), vendors set tigh
 from coarse DEMs (IKONOS: 28 +- 82 m), and the Pleiades vendor RPC of
 ``pleiades-dimap-algeria`` (575 +- 85 m) stays within 0.05 px of the physical model at -30 m,
 7 height scales out (``tests/pleiades``). Heights beyond (a typo of 1e5 m) are refused."""
+
+
+class NewtonOptions(TypedDict, total=False):
+    """The keyword options of :meth:`RPCCoefficients.locate`'s Newton iteration, passed on
+    by the sensors that locate through it (defaults there)."""
+
+    tolerance_px: float
+    max_iterations: int
 
 
 def _field_error(name: str, message: str) -> InputError:

@@ -35,7 +35,7 @@ import types
 import warnings
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, Unpack
 
 import attrs
 import numpy as np
@@ -44,7 +44,7 @@ from numpy.typing import ArrayLike, NDArray
 from carto.framework.arrays import as_float_arrays
 from carto.framework.errors import InputError
 from carto.framework.geometry import frames
-from carto.framework.geometry.rpc.model import RPCCoefficients
+from carto.framework.geometry.rpc.model import NewtonOptions, RPCCoefficients
 from carto.framework.geometry.rpc.readers import read_rpc_and_shape, sniff_rpc_format
 from carto.framework.geometry.sensor import (
     Parameter,
@@ -348,18 +348,13 @@ class RPCSensor(Sensor):
         return line, samp, inside
 
     def image_to_ground(
-        self,
-        line: ArrayLike,
-        sample: ArrayLike,
-        h_m: ArrayLike,
-        *,
-        tolerance_px: float = 1e-10,
-        max_iterations: int = 30,
+        self, line: ArrayLike, sample: ArrayLike, h_m: ArrayLike, **newton: Unpack[NewtonOptions]
     ) -> tuple[FloatArray, FloatArray]:
         """Locate image points (pixels) at ellipsoidal heights ``h_m`` (metres).
 
         Undoes the image-space correction exactly, then inverts the RPC by Newton iteration
-        (:meth:`~carto.framework.geometry.rpc.model.RPCCoefficients.locate`).
+        (:meth:`~carto.framework.geometry.rpc.model.RPCCoefficients.locate`, with its
+        ``tolerance_px`` and ``max_iterations``: :class:`NewtonOptions`).
 
         Returns:
             ``(lon_deg, lat_deg)``; NaN where the iteration does not converge to
@@ -376,9 +371,7 @@ class RPCSensor(Sensor):
             ln_, sm_ = inv[0, 0] * dl + inv[0, 1] * ds, inv[1, 0] * dl + inv[1, 1] * ds
         if far.any():
             ln_ = np.where(far, np.nan, ln_)
-        lon, lat = self._rpc.locate(
-            ln_, sm_, h_, tolerance_px=tolerance_px, max_iterations=max_iterations
-        )
+        lon, lat = self._rpc.locate(ln_, sm_, h_, **newton)
         out = ~self._rpc.in_domain(lon, lat, h_)
         if out.any():
             lon = np.where(out, np.nan, lon)
