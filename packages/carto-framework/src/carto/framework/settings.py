@@ -26,6 +26,7 @@ T = TypeVar("T")
 
 __all__ = [
     "Configurable",
+    "checked",
     "checked_settings",
     "choice",
     "flag",
@@ -33,6 +34,7 @@ __all__ = [
     "names",
     "number",
     "optional",
+    "positive",
     "positive_attribute",
     "settings_from",
 ]
@@ -182,13 +184,29 @@ def names(name: str, known: Collection[str] | None = None) -> Callable[[Any], tu
     return convert
 
 
+def positive(value: Any) -> bool:
+    """Whether ``value`` is a finite number above 0."""
+    return bool(math.isfinite(value) and value > 0)
+
+
+def checked(ok: Callable[[Any], bool], message: str) -> Callable[[Any, Any, Any], None]:
+    """An attrs validator: ``InputError(message.format(value))`` for a value that is not
+    ``ok`` (``{!r}`` in ``message`` stands for the value)."""
+
+    def check(_instance: Any, _attribute: Any, value: Any) -> None:
+        if not ok(value):
+            raise InputError(message.format(value))
+
+    return check
+
+
 def positive_attribute(owner: str) -> Callable[[Any, attrs.Attribute, Any], None]:
     """An attrs validator of the fields of ``owner``'s settings that must be finite and
-    > 0: :class:`~carto.framework.errors.InputError` ``"<owner>: <field> must be > 0, got
-    <value>"`` otherwise."""
+    > 0 (:func:`positive`): :class:`~carto.framework.errors.InputError` ``"<owner>: <field>
+    must be > 0, got <value>"`` otherwise."""
 
     def check(_self: Any, attr: attrs.Attribute, value: Any) -> None:
-        if not (math.isfinite(value) and value > 0):
+        if not positive(value):
             raise InputError(f"{owner}: {attr.name} must be > 0, got {value!r}")
 
     return check

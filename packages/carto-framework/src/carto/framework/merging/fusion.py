@@ -29,7 +29,7 @@ from numpy.typing import NDArray
 
 from carto.framework.arrays import FloatArray
 from carto.framework.errors import InputError
-from carto.framework.merging.checks import checked, positive
+from carto.framework.settings import checked, positive
 
 __all__ = ["FusedHeights", "FusionSettings", "fuse_heights", "weighted_median"]
 

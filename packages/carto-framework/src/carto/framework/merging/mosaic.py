@@ -29,9 +29,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from carto.framework.arrays import FloatArray
-from carto.framework.merging.checks import checked
 from carto.framework.merging.grid import GridWindow, MosaicGrid, bounds_in, read_window
 from carto.framework.merging.sources import RasterSource
+from carto.framework.settings import checked
 
 __all__ = [
     "MosaicSettings",
