@@ -227,6 +227,38 @@ def test_a_slow_shape_along_the_base_is_taken_where_the_dem_can_tell_it(syntheti
     assert errors["none"] < 0.05
 
 
+def test_a_trend_along_the_base_is_taken_from_the_whole_swath(synthetic):
+    """A relative pitch trend: the right image moves along the base by 0.6 px from the first
+    line to the last (a height ramp of metres), with no motion across the base to vouch for
+    it. The whole swath's DEM rows measure the ramp (the knot shape alone, bounded by the
+    motion across, left it: session 45's full-swath pair); with no such error it stays
+    near zero."""
+    aft, fore, _, table, start, dem_true = synthetic
+    u0 = po.axes(po.ties_to_observations(table, ("aft", "fore"), aft, fore, start).parallax)[0]
+    u0 = np.median(u0, axis=0)
+    basis = LineBasis(12000, 4000.0)
+    knots = basis.knots
+    greville = (knots[1:-3] + knots[2:-2] + knots[3:-1]) / 3.0  # a linear spline's coefficients
+    ramp = 0.6 * (greville / 12000.0 - 0.5)
+    settings = ro.RelativeOrientationSettings(max_frequencies=0)
+    errors, shifts = {}, {}
+    for name, size in (("ramp", 1.0), ("none", 0.0)):
+        right_true = LineCorrected(fore, basis, size * u0[:, None] * ramp[None, :])
+        ties = _ties(aft, right_true, dem_true, np.random.default_rng(11))
+        obs = po.ties_to_observations(ties, ("aft", "fore"), aft, fore, start)
+        basis_e, fit, _ = ro.estimate_correction(obs, 12000, "line", "dem", settings)
+        estimated = pc.correction_px(obs, basis_e, attrs.evolve(fit, dem_offset_m=0.0))
+        shift = np.stack(right_true.shift(obs.line), axis=1) @ u0
+        error = estimated @ u0 - shift
+        errors[name] = float(np.sqrt(np.mean((error - error.mean()) ** 2)))
+        shifts[name] = float(np.std(shift))
+        if name == "ramp":  # the points cover half the lines: 0.3 px of the ramp
+            assert min(fit.along_shape["trend"]["gain"]) > 0.9
+    assert shifts["ramp"] > 0.08
+    assert errors["ramp"] < 0.25 * shifts["ramp"]
+    assert errors["none"] < 0.03  # px
+
+
 def test_gcp_offsets_replace_the_second_measurement():
     gcps = {
         "id": np.array(["G1", "G1", "G2"]),

@@ -14,6 +14,12 @@ import attrs
 import numpy as np
 from numpy.typing import NDArray
 
+from carto.framework.adjustment.along_shape import (
+    MIN_HALF_POINTS,
+    AlongTrend,
+    along_trend,
+    knot_shape,
+)
 from carto.framework.adjustment.pair_observations import Noise, Observations, axes, base_axes
 from carto.framework.errors import InputError
 from carto.framework.geometry.line_correction import LineBasis
@@ -39,9 +45,6 @@ DATUM_SIGMA_PX = 1e-3
 """Sigma of the zero-mean condition of the along-base correction (datum from the models)."""
 MIN_POINTS = 30
 """Fewer tie points than this: no relative orientation (the pair is reported as is)."""
-MIN_HALF_POINTS = 10
-"""A knot interval needs this many DEM rows each side of the swath to measure the along-base
-shape (:func:`_along_shape`)."""
 
 
 def _check_mode(_self: Any, _attr: attrs.Attribute, value: str) -> None:
@@ -99,7 +102,7 @@ class Fit:
     dem_offset_m: float
     noise: Noise
     datum: str = "dem"
-    along_shape: Mapping[str, float] | None = None
+    along_shape: Mapping[str, Any] | None = None
     platform_rad: FloatArray | None = None
     platform_hz: tuple[float, ...] = ()
     offset_parallax: FloatArray = attrs.field(factory=lambda: np.zeros(2))
@@ -117,10 +120,9 @@ JITTER_SIGMA_PX = 0.3
 """A-priori sigma of each jitter sine and cosine coefficient, px (jitter of a few tenths of a
 pixel; the prior keeps a frequency the DEM's errors alone pretend to see small)."""
 SHAPE_ACROSS_RATIO = 1.5
-"""The along-base shape's signal is at most this times the spread of the slow across-base
-correction (attitude errors of a similar size about the pitch and roll axes, whose image
-motions differ by the views' tilts): with the true models of five simulated pairs the
-unbounded shape copied the starting DEM's swath-wide errors (NMAD 0.2 -> 0.4-1.2 m)."""
+"""An along-base jitter term's sigma is this times the amplitude found across the base at its
+frequency (:func:`_along_bound_px`; the along-base shape's signal has the same bound,
+:data:`~carto.framework.adjustment.along_shape.SHAPE_ACROSS_RATIO`)."""
 JITTER_FLOOR_PX = 0.02
 """Least sigma of an along-base jitter term (:func:`_along_jitter_sigmas`)."""
 JITTER_MIN_ACROSS_PX = 0.05
@@ -493,81 +495,47 @@ def _along_bound_px(across_px: FloatArray) -> FloatArray:
     )  # fmt: skip
 
 
-def _half_means(
-    k: NDArray[np.int64], sample: FloatArray, value: FloatArray
-) -> tuple[FloatArray, FloatArray, FloatArray, NDArray[np.int64]]:
-    """Per line bin ``k``: the mean of ``value`` over the bin, over its points left and right
-    of the bin's median sample, and the count (bins with fewer than
-    :data:`MIN_HALF_POINTS` points a side are NaN)."""
-    n = int(k.max()) + 1
-    order = np.lexsort((sample, k))
-    k_s, v_s = k[order], value[order]
-    count = np.bincount(k_s, minlength=n)
-    rank = np.arange(k_s.size) - np.r_[0, np.cumsum(count)[:-1]][k_s]
-    left = rank < count[k_s] / 2.0
-    c_l = np.bincount(k_s[left], minlength=n)
-    c_r = count - c_l
-    m_l = np.bincount(k_s[left], weights=v_s[left], minlength=n) / np.maximum(c_l, 1)
-    m_r = np.bincount(k_s[~left], weights=v_s[~left], minlength=n) / np.maximum(c_r, 1)
-    full = np.bincount(k_s, weights=v_s, minlength=n) / np.maximum(count, 1)
-    ok = (c_l >= MIN_HALF_POINTS) & (c_r >= MIN_HALF_POINTS)
-    nan = np.full(n, np.nan)
-    return np.where(ok, full, nan), np.where(ok, m_l, nan), np.where(ok, m_r, nan), count
-
-
 def _along_shape(
     obs: Observations, basis: LineBasis, fit: Fit
-) -> tuple[FloatArray | None, dict[str, float] | None]:
+) -> tuple[FloatArray | None, dict[str, Any] | None]:
     """The slow shape of the along-base correction, as coefficients to add to ``fit``'s
-    (None where there is none), and its record (module docstring): the
-    along-base residuals of the DEM rows averaged per knot interval; their left and right
-    halves of the swath see the same orientation but different parts of the DEM, so half
-    their difference measures the DEM's (and matching's) error of a mean, and the spread of
-    the means beyond it the orientation's. The means, shrunk by the gain
-    ``signal / (signal + noise)`` (a Wiener filter) and of zero mean (the datum stays),
-    become spline coefficients along the base. The signal is bounded by the slow motion the
-    fit found across the base (:data:`SHAPE_ACROSS_RATIO`): a DEM's errors correlated over
-    the whole swath (a coarse DEM smooths ridges that cross it) pass the halves' test as
-    orientation, but they have no counterpart across the base."""
+    (None where there is none), and its record (module docstring), from the along-base
+    residuals of the DEM rows (:mod:`carto.framework.adjustment.along_shape`): first their
+    trend over the whole swath (:func:`~carto.framework.adjustment.along_shape.along_trend`),
+    then what is left of them per knot interval, Wiener-filtered
+    (:func:`~carto.framework.adjustment.along_shape.knot_shape`)."""
     rows = obs.dem_rows
     if rows.sum() < 4 * MIN_HALF_POINTS:
         return None, None
     along, _ = residuals_px(obs, basis, fit)
     sub = obs.subset(rows)
-    first, last = basis.span
-    width = (last - first) / max(1, round((last - first) / basis.knot_lines))
-    k = np.clip(np.floor((sub.line - first) / width), 0, None).astype(np.int64)
-    full, m_l, m_r, count = _half_means(k, sub.sample, along[rows])
-    ok = np.isfinite(full)
-    if ok.sum() < 4:
-        return None, None
-    mad = 1.4826
-    diff = (m_l - m_r)[ok]
-    noise = (mad * float(np.median(np.abs(diff - np.median(diff))))) ** 2 / 4.0
-    centred = full[ok] - np.average(full[ok], weights=count[ok])
-    spread = (mad * float(np.median(np.abs(centred - np.median(centred))))) ** 2
-    centres = first + (np.flatnonzero(ok) + 0.5) * width
-    b, _ = basis.design(centres)
-    spline = b[:, : basis.n_spline]
+    trend = along_trend(sub.line, sub.sample, along[rows], basis.span)
+    rest = along[rows] - (trend.values(sub.line) if trend is not None else 0.0)
     u0 = _base_direction(obs)
-    across = spline @ fit.coefficients[:, : basis.n_spline].T @ np.array([-u0[1], u0[0]])
-    bound = (SHAPE_ACROSS_RATIO * float(np.std(across))) ** 2
-    signal = min(max(spread - noise, 0.0), bound)
-    gain = signal / (signal + noise) if signal + noise > 0 else 0.0
-    record = {
-        "signal_px": round(math.sqrt(signal), 4),
-        "noise_px": round(math.sqrt(noise), 4),
-        "across_px": round(float(np.std(across)), 4),
-        "gain": round(gain, 3),
-        "bins": int(ok.sum()),
-    }
-    if gain <= 0.0:
+    across = np.array([-u0[1], u0[0]]) @ fit.coefficients[:, : basis.n_spline]
+    shape, record = knot_shape(sub.line, sub.sample, rest, basis, across)
+    if trend is not None:
+        record = {**(record or {}), "trend": trend.record()}
+    c = _trend_coefficients(trend, basis)
+    if shape is not None:
+        c = shape if c is None else c + shape
+    if c is None:
         return None, record
-    normal = spline.T @ spline + 1e-6 * np.eye(basis.n_spline)
-    c = np.linalg.solve(normal, spline.T @ (gain * centred))
     delta = np.zeros_like(fit.coefficients)
     delta[:, : basis.n_spline] = u0[:, None] * c[None, :]
     return delta, record
+
+
+def _trend_coefficients(trend: AlongTrend | None, basis: LineBasis) -> FloatArray | None:
+    """The spline coefficients of ``trend`` (a cubic spline holds a quadratic exactly), or
+    None."""
+    if trend is None or not np.any(trend.coefficients):
+        return None
+    first, last = basis.span
+    lines = np.linspace(first, last, 8 * basis.n_spline + 8)
+    b, _ = basis.design(lines)
+    spline = b[:, : basis.n_spline]
+    return np.linalg.lstsq(spline, trend.values(lines), rcond=None)[0]
 
 
 def _dem_coarser_than_models(

@@ -308,20 +308,21 @@ def forstner_points(
     rows, cols = _peak_pixels(t, w, q, options)
     if rows.size == 0:
         return np.empty((0, 2))
-    points = _peak_index(t, w, rows, cols, options) + 0.5
-    weight = w[rows, cols].astype(np.float64)
-    first = _distinct(points, weight)
-    points, weight = points[first], weight[first]
+    points, weight = _distinct(_peak_index(t, w, rows, cols, options) + 0.5, w[rows, cols])
     return points[_kept_order(points, weight, w.shape, options)]
 
 
-def _distinct(points: NDArray[np.float64], weight: NDArray[np.float64]) -> NDArray[np.intp]:
-    """Indices of the distinct ``points``, each the strongest (by ``weight``) of those at
-    its position: two peak pixels a suppression radius apart can refine to one corner (each
-    estimate moves up to half a window, then both windows re-centre on the same pixel)."""
+def _distinct(
+    points: NDArray[np.float64], weight: NDArray[np.floating]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The distinct ``points`` and their weights, each the strongest (by ``weight``) of
+    those at its position, in their order: two peak pixels a suppression radius apart can
+    refine to one corner (each estimate moves up to half a window, then both windows
+    re-centre on the same pixel)."""
     order = np.argsort(-weight, kind="stable")
     _, first = np.unique(points[order], axis=0, return_index=True)
-    return np.sort(order[first])
+    keep = np.sort(order[first])
+    return points[keep], weight[keep].astype(np.float64)
 
 
 @attrs.frozen

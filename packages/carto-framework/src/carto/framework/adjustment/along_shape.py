@@ -1,0 +1,215 @@
+"""The slow shape of a pair's along-base correction, from the starting DEM: its trend, a
+low-order polynomial of the image line (:func:`along_trend`), and what is left of it per knot
+interval, Wiener-filtered (:func:`knot_shape`); the method is
+:func:`carto.framework.adjustment.pair_correction.estimate_correction`'s (see
+:mod:`carto.framework.adjustment.relative_orientation`).
+
+The trend.
+
+Why. A relative pitch trend of a same-pass pair (one image's attitude drifting against the
+other's over the seconds of a scene) moves the right image along the base by an amount that
+grows with the line: a height ramp along the track that tie points cannot see (heights absorb
+it) and that one GCP cannot hold. The tied Cartosat-1 adjustment's image trends (a-priori
+1e-4 deg) leave such ramps: on a simulated full-swath pair (12 000 x 1500 px, realistic
+errors, 1 GCP) 0.82 m per 1000 lines, which made most of the DEM's NMAD (0.47 m, 0.23 m once a
+plane is removed). The starting DEM sees it: averaged over the whole swath, an SRTM-like DEM
+knows the mean height of a band of lines to centimetres, and the along-base residuals of the
+tie points against it showed 0.85 m per 1000 lines.
+
+The estimate. The DEM rows' along-base residuals are averaged over bins of
+:data:`TREND_BIN_LINES` lines; a polynomial of order :data:`TREND_ORDER` (Legendre, without the
+constant: the datum stays where the fit put it) is fitted to the bin means. The noise of a bin
+mean is the larger of what the swath's halves say (half the spread of the differences of the
+left and right halves' means: the DEM's error of a mean, where its errors are independent
+across the swath) and the scatter of the bin means about the polynomial (everything the trend
+does not explain: the DEM's errors correlated over the whole swath, jitter, wander). Each
+coefficient is shrunk by ``s^2 / (s^2 + var)`` (its a-priori sigma :data:`TREND_SIGMA_PX`
+against its variance): a trend the DEM cannot tell from its own errors (a narrow swath, a
+coarse DEM over ridges) stays near zero.
+"""
+
+from __future__ import annotations
+
+import math
+
+import attrs
+import numpy as np
+from numpy.polynomial import legendre
+from numpy.typing import NDArray
+
+from carto.framework.geometry.line_correction import LineBasis
+
+FloatArray = NDArray[np.float64]
+
+__all__ = ["AlongTrend", "along_trend", "half_means", "knot_shape"]
+
+TREND_ORDER = 2
+"""Order of the trend's polynomial of the line (the Cartosat-1 adjuster's image trends have
+orders 1 and 2)."""
+TREND_BIN_LINES = 64.0
+"""Lines per bin of the along-base residuals' means (at least: sparse points widen them)."""
+TREND_SIGMA_PX = 0.5
+"""A-priori sigma of each Legendre coefficient of the trend, px (a relative attitude trend of
+1e-4 deg over a scene moves a Cartosat-1 point by about half a pixel)."""
+MIN_HALF_POINTS = 10
+"""A bin needs this many DEM rows each side of the swath (:func:`half_means`)."""
+SHAPE_ACROSS_RATIO = 1.5
+"""The knot shape's signal is at most this times the spread of the slow across-base
+correction (attitude errors of a similar size about the pitch and roll axes, whose image
+motions differ by the views' tilts): with the true models of five simulated pairs the
+unbounded shape copied the starting DEM's swath-wide errors (NMAD 0.2 -> 0.4-1.2 m)."""
+MIN_BINS = 8
+"""Fewer full bins than this: no trend."""
+
+
+def half_means(
+    k: NDArray[np.int64], sample: FloatArray, value: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray, NDArray[np.int64]]:
+    """Per line bin ``k``: the mean of ``value`` over the bin, over its points left and right
+    of the bin's median sample, and the count (bins with fewer than
+    :data:`MIN_HALF_POINTS` points a side are NaN)."""
+    n = int(k.max()) + 1
+    order = np.lexsort((sample, k))
+    k_s, v_s = k[order], value[order]
+    count = np.bincount(k_s, minlength=n)
+    rank = np.arange(k_s.size) - np.r_[0, np.cumsum(count)[:-1]][k_s]
+    left = rank < count[k_s] / 2.0
+    c_l = np.bincount(k_s[left], minlength=n)
+    c_r = count - c_l
+    m_l = np.bincount(k_s[left], weights=v_s[left], minlength=n) / np.maximum(c_l, 1)
+    m_r = np.bincount(k_s[~left], weights=v_s[~left], minlength=n) / np.maximum(c_r, 1)
+    full = np.bincount(k_s, weights=v_s, minlength=n) / np.maximum(count, 1)
+    ok = (c_l >= MIN_HALF_POINTS) & (c_r >= MIN_HALF_POINTS)
+    nan = np.full(n, np.nan)
+    return np.where(ok, full, nan), np.where(ok, m_l, nan), np.where(ok, m_r, nan), count
+
+
+def _mad(x: FloatArray) -> float:
+    return 1.4826 * float(np.median(np.abs(x - np.median(x))))
+
+
+@attrs.frozen(eq=False)
+class AlongTrend:
+    """A trend of the along-base correction (:func:`along_trend`).
+
+    Attributes:
+        span: the lines the polynomial's ``[-1, 1]`` maps to.
+        coefficients: the shrunk Legendre coefficients of orders 1.. (px).
+        centre: the polynomial's weighted mean over the points (px), taken off its values.
+        estimate: the coefficients before the shrinking (px).
+        sigma: their standard errors (px).
+        gain: the shrinking of each.
+        bin_noise_px: the noise of a bin mean used.
+    """
+
+    span: tuple[float, float]
+    coefficients: FloatArray
+    centre: float
+    estimate: FloatArray
+    sigma: FloatArray
+    gain: FloatArray
+    bin_noise_px: float
+
+    def _x(self, lines: FloatArray) -> FloatArray:
+        first, last = self.span
+        return np.clip(2.0 * (np.asarray(lines, np.float64) - first) / (last - first) - 1.0, -1, 1)
+
+    def values(self, lines: FloatArray) -> FloatArray:
+        """The trend at ``lines`` (px along the base; constant beyond the span)."""
+        c = np.r_[0.0, self.coefficients]
+        return legendre.legval(self._x(lines), c) - self.centre
+
+    def record(self) -> dict[str, object]:
+        """What ``report.json`` says of it."""
+        return {
+            "order": int(self.coefficients.size),
+            "coefficients_px": np.round(self.coefficients, 4).tolist(),
+            "estimate_px": np.round(self.estimate, 4).tolist(),
+            "sigma_px": np.round(self.sigma, 4).tolist(),
+            "gain": np.round(self.gain, 3).tolist(),
+            "bin_noise_px": round(self.bin_noise_px, 4),
+        }
+
+
+def along_trend(
+    line: FloatArray, sample: FloatArray, along_px: FloatArray, span: tuple[float, float]
+) -> AlongTrend | None:
+    """The trend of the along-base residuals ``along_px`` of the DEM rows at ``(line,
+    sample)`` over the lines ``span`` (module docstring), or None where too few bins measure
+    it."""
+    first, last = float(span[0]), float(span[1])
+    if not last > first:
+        return None
+    # bins of TREND_BIN_LINES, wider where the points are sparse (about 4 halves' worth each)
+    width = max(TREND_BIN_LINES, 4 * MIN_HALF_POINTS * (last - first) / max(line.size, 1))
+    k = np.clip(np.floor((line - first) / width), 0, None).astype(np.int64)
+    full, m_l, m_r, count = half_means(k, sample, along_px)
+    ok = np.isfinite(full)
+    if ok.sum() < MIN_BINS:
+        return None
+    centres = first + (np.flatnonzero(ok) + 0.5) * width
+    x = np.clip(2.0 * (centres - first) / (last - first) - 1.0, -1.0, 1.0)
+    w = count[ok].astype(np.float64)
+    p = legendre.legvander(x, TREND_ORDER)[:, 1:]
+    p = p - np.average(p, axis=0, weights=w)
+    y = full[ok] - np.average(full[ok], weights=w)
+    normal = p.T @ p
+    estimate = np.linalg.solve(normal, p.T @ y)
+    halves = _mad((m_l - m_r)[ok]) ** 2 / 4.0
+    dof = max(1, int(ok.sum()) - TREND_ORDER - 1)
+    scatter = _mad(y - p @ estimate) ** 2 * (ok.sum() - 1) / dof
+    noise = max(halves, scatter, 1e-12)
+    sigma = np.sqrt(np.diag(np.linalg.inv(normal)) * noise)
+    gain = TREND_SIGMA_PX**2 / (TREND_SIGMA_PX**2 + sigma**2)
+    coefficients = gain * estimate
+    poly = legendre.legvander(x, TREND_ORDER)[:, 1:] @ coefficients
+    centre = float(np.average(poly, weights=w))
+    return AlongTrend((first, last), coefficients, centre, estimate, sigma, gain, math.sqrt(noise))
+
+
+def knot_shape(
+    line: FloatArray,
+    sample: FloatArray,
+    along_px: FloatArray,
+    basis: LineBasis,
+    across_coefficients: FloatArray,
+) -> tuple[FloatArray | None, dict[str, float] | None]:
+    """The along-base residuals ``along_px`` of the DEM rows at ``(line, sample)`` averaged
+    per knot interval of ``basis``; their left and right halves of the swath see the same
+    orientation but different parts of the DEM, so half their difference measures the DEM's
+    (and matching's) error of a mean, and the spread of the means beyond it the
+    orientation's. The means, shrunk by the gain ``signal / (signal + noise)`` (a Wiener
+    filter) and of zero mean (the datum stays), become spline coefficients along the base
+    (returned, or None where there is none, with the record). The signal is bounded by the
+    slow motion the fit found across the base (``across_coefficients``, its spline's
+    coefficients; :data:`SHAPE_ACROSS_RATIO`): a DEM's errors correlated over the whole
+    swath (a coarse DEM smooths ridges that cross it) pass the halves' test as orientation,
+    but they have no counterpart across the base."""
+    first, last = basis.span
+    width = (last - first) / max(1, round((last - first) / basis.knot_lines))
+    k = np.clip(np.floor((line - first) / width), 0, None).astype(np.int64)
+    full, m_l, m_r, count = half_means(k, sample, along_px)
+    ok = np.isfinite(full)
+    if ok.sum() < 4:
+        return None, None
+    noise = _mad((m_l - m_r)[ok]) ** 2 / 4.0
+    centred = full[ok] - np.average(full[ok], weights=count[ok])
+    spread = _mad(centred) ** 2
+    centres = first + (np.flatnonzero(ok) + 0.5) * width
+    b, _ = basis.design(centres)
+    spline = b[:, : basis.n_spline]
+    across = spline @ across_coefficients
+    bound = (SHAPE_ACROSS_RATIO * float(np.std(across))) ** 2
+    signal = min(max(spread - noise, 0.0), bound)
+    gain = signal / (signal + noise) if signal + noise > 0 else 0.0
+    record = {
+        "signal_px": round(math.sqrt(signal), 4),
+        "noise_px": round(math.sqrt(noise), 4),
+        "across_px": round(float(np.std(across)), 4),
+        "gain": round(gain, 3),
+        "bins": int(ok.sum()),
+    }
+    if gain <= 0.0:
+        return None, record
+    normal = spline.T @ spline + 1e-6 * np.eye(basis.n_spline)
+    return np.linalg.solve(normal, spline.T @ (gain * centred)), record
