@@ -253,10 +253,33 @@ def test_a_trend_along_the_base_is_taken_from_the_whole_swath(synthetic):
         errors[name] = float(np.sqrt(np.mean((error - error.mean()) ** 2)))
         shifts[name] = float(np.std(shift))
         if name == "ramp":  # the points cover half the lines: 0.3 px of the ramp
-            assert min(fit.along_shape["trend"]["gain"]) > 0.9
+            assert fit.along_shape["trend"]["gain"][0] > 0.8  # P1; P2 has no signal
     assert shifts["ramp"] > 0.08
-    assert errors["ramp"] < 0.25 * shifts["ramp"]
+    assert errors["ramp"] < 0.35 * shifts["ramp"]
     assert errors["none"] < 0.03  # px
+
+
+def test_a_tilt_across_the_swath_is_taken_from_the_dem_rows(synthetic):
+    """A relative yaw: the right image's lines turn, 0.1 px along the base per 1000 samples
+    (a height tilt across the track that no correction of the lines holds). The DEM rows
+    measure it (a start with 0.5 m of noise: the pair overlaps over 2000 samples only);
+    with no such error it stays near zero."""
+    aft, fore, _, table, start, dem_true = synthetic
+    rng = np.random.default_rng(17)
+    good = DEM.from_array(dem_true.heights + rng.normal(0.0, 0.5, start.heights.shape),
+                          start.transform, "EPSG:4326")  # fmt: skip
+    u0 = po.axes(po.ties_to_observations(table, ("aft", "fore"), aft, fore, good).parallax)[0]
+    u0 = np.median(u0, axis=0)
+    settings = ro.RelativeOrientationSettings(max_frequencies=0)
+    for size in (0.1, 0.0):
+        right_true = LineCorrected(fore, LineBasis(12000), np.zeros((2, 1)), size * u0, 1000.0)
+        ties = _ties(aft, right_true, dem_true, rng)
+        obs = po.ties_to_observations(ties, ("aft", "fore"), aft, fore, good)
+        basis_e, fit, _ = ro.estimate_correction(obs, 12000, "line", "dem", settings)
+        estimated = pc.correction_px(obs, basis_e, attrs.evolve(fit, dem_offset_m=0.0)) @ u0
+        error = estimated - np.stack(right_true.shift(obs.line, obs.sample), axis=1) @ u0
+        assert fit.tilt_px @ u0 == pytest.approx(size, abs=0.015), fit.tilt
+        assert np.sqrt(np.mean((error - error.mean()) ** 2)) < 0.02  # px, of 0.06 px RMS
 
 
 def test_gcp_offsets_replace_the_second_measurement():

@@ -11,12 +11,14 @@ from carto.framework.errors import InputError
 from carto.framework.geometry.line_correction import LineBasis, LineCorrected
 
 
-@pytest.fixture(scope="module")
-def corrected(cartosat1_pair):
+@pytest.fixture(scope="module", params=[(0.0, 0.0), (0.3, -0.2)], ids=["line", "tilted"])
+def corrected(cartosat1_pair, request):
+    """A line correction, without and with a tilt across the swath (px per 1000 samples from
+    sample 5000)."""
     basis = LineBasis(12000, 3000.0, (0.01, 0.0225))
     rng = np.random.default_rng(3)
     coefficients = rng.normal(0.0, 0.3, (2, basis.size))
-    return LineCorrected(cartosat1_pair["fore"], basis, coefficients)
+    return LineCorrected(cartosat1_pair["fore"], basis, coefficients, request.param, 5000.0)
 
 
 def test_basis_is_scipys_design_matrix_and_the_sinusoids():
@@ -57,6 +59,7 @@ def test_projection_is_the_base_plus_the_shift(corrected):
     l0, s0 = base.ground_to_image(lon, lat, 400.0)
     line, sample = corrected.ground_to_image(lon, lat, 400.0)
     d = corrected.basis.design(l0)[0] @ corrected.coefficients.T
+    d += np.outer((s0 - 5000.0) / 1000.0, corrected.tilt)
     np.testing.assert_allclose(line, l0 + d[:, 0], atol=1e-9)
     np.testing.assert_allclose(sample, s0 + d[:, 1], atol=1e-9)
 

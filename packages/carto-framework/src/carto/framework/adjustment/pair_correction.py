@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 
 from carto.framework.adjustment.along_shape import (
     MIN_HALF_POINTS,
-    AlongTrend,
+    along_tilt,
     along_trend,
     knot_shape,
 )
@@ -106,6 +106,9 @@ class Fit:
     platform_rad: FloatArray | None = None
     platform_hz: tuple[float, ...] = ()
     offset_parallax: FloatArray = attrs.field(factory=lambda: np.zeros(2))
+    tilt_px: FloatArray = attrs.field(factory=lambda: np.zeros(2))
+    tilt_centre_sample: float = 0.0
+    tilt: Mapping[str, float] | None = None
 
 
 BAND_LINES = 64.0
@@ -407,13 +410,44 @@ def estimate_correction(
     if bound is not None or p_bound is not None:
         fit = _fit(obs.subset(keep), basis, fit.noise, datum, settings, bound, hz, p_bound)
     if kind == "line" and basis.n_spline > 1:
-        delta, record = _along_shape(obs.subset(keep), basis, fit)
-        if delta is not None:  # the rest refitted under the shape
-            less = attrs.evolve(obs, residual=obs.residual - basis.evaluate(obs.line, delta)[0])
-            fit = _fit(less.subset(keep), basis, fit.noise, datum, settings, bound, hz, p_bound)
-            fit = attrs.evolve(fit, coefficients=fit.coefficients + delta)
-        fit = attrs.evolve(fit, along_shape=record)
+        fit = _with_slow_shape(obs, keep, basis, fit, (datum, settings, bound, hz, p_bound))
     return basis, fit, keep
+
+
+def _with_slow_shape(
+    obs: Observations, keep: NDArray[np.bool_], basis: LineBasis, fit: Fit, again: tuple
+) -> Fit:
+    """``fit`` with the along-base shape (:func:`_along_shape`) and the tilt across the swath
+    (:func:`_tilt`) the DEM rows measure, the rest refitted under them (``again``: the rest
+    of :func:`_fit`'s arguments)."""
+    delta, record = _along_shape(obs.subset(keep), basis, fit)
+    delta = np.zeros_like(fit.coefficients) if delta is None else delta
+    shaped = attrs.evolve(fit, coefficients=fit.coefficients + delta)
+    tilt, centre, tilt_record = _tilt(obs.subset(keep), basis, shaped)
+    if delta.any() or tilt.any():  # the rest refitted under them
+        x = (obs.sample - centre) / 1000.0
+        model = basis.evaluate(obs.line, delta)[0] + x[:, None] * tilt[None, :]
+        less = attrs.evolve(obs, residual=obs.residual - model)
+        fit = _fit(less.subset(keep), basis, fit.noise, *again)
+        fit = attrs.evolve(fit, coefficients=fit.coefficients + delta)
+    return attrs.evolve(
+        fit, along_shape=record, tilt_px=tilt, tilt_centre_sample=centre, tilt=tilt_record
+    )
+
+
+def _tilt(
+    obs: Observations, basis: LineBasis, fit: Fit
+) -> tuple[FloatArray, float, dict[str, float] | None]:
+    """The along-base tilt across the swath of the DEM rows' residuals under ``fit``
+    (:func:`~carto.framework.adjustment.along_shape.along_tilt`) as ``(d_line, d_sample)``
+    per 1000 samples, its centre (the samples' median) and its record."""
+    rows = obs.dem_rows
+    if rows.sum() < 4 * MIN_HALF_POINTS:
+        return np.zeros(2), 0.0, None
+    along, _ = residuals_px(obs, basis, fit)
+    centre = float(np.median(obs.sample[rows]))
+    slope, record = along_tilt(obs.line[rows], obs.sample[rows], along[rows], centre)
+    return _base_direction(obs) * slope, centre, record
 
 
 REFINE_HALF_WIDTH_HZ = 0.03
@@ -516,7 +550,7 @@ def _along_shape(
     shape, record = knot_shape(sub.line, sub.sample, rest, basis, across)
     if trend is not None:
         record = {**(record or {}), "trend": trend.record()}
-    c = _trend_coefficients(trend, basis)
+    c = trend.spline_coefficients(basis) if trend is not None else None
     if shape is not None:
         c = shape if c is None else c + shape
     if c is None:
@@ -524,18 +558,6 @@ def _along_shape(
     delta = np.zeros_like(fit.coefficients)
     delta[:, : basis.n_spline] = u0[:, None] * c[None, :]
     return delta, record
-
-
-def _trend_coefficients(trend: AlongTrend | None, basis: LineBasis) -> FloatArray | None:
-    """The spline coefficients of ``trend`` (a cubic spline holds a quadratic exactly), or
-    None."""
-    if trend is None or not np.any(trend.coefficients):
-        return None
-    first, last = basis.span
-    lines = np.linspace(first, last, 8 * basis.n_spline + 8)
-    b, _ = basis.design(lines)
-    spline = b[:, : basis.n_spline]
-    return np.linalg.lstsq(spline, trend.values(lines), rcond=None)[0]
 
 
 def _dem_coarser_than_models(
@@ -663,6 +685,9 @@ def correction_px(obs: Observations, basis: LineBasis, fit: Fit) -> FloatArray:
         coefficients[:, (basis.n_spline or 1) :] *= np.repeat(gain, 2)[None, :]
     model, _ = basis.evaluate(obs.line, coefficients)
     model = model + np.where(obs.on_dem, fit.dem_offset_m, 0.0)[:, None] * fit.offset_parallax
+    if fit.tilt_px.any():
+        x = (obs.sample - fit.tilt_centre_sample) / 1000.0
+        model = model + x[:, None] * fit.tilt_px[None, :]
     if fit.platform_rad is not None and fit.platform_rad.size:
         spl = _seconds_per_line(obs)
         for start in range(0, obs.line.size, FIT_CHUNK_ROWS):

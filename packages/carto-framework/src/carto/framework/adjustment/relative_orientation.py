@@ -285,7 +285,9 @@ def relative_orientation(
     if platform is not None and fit.platform_rad is not None and fit.platform_rad.size:
         left_corrected = with_platform_jitter(left, platform, fit.platform_hz, fit.platform_rad)
         right_jittered = with_platform_jitter(right, platform, fit.platform_hz, fit.platform_rad)
-    corrected = LineCorrected(right_jittered, basis, fit.coefficients)
+    corrected = LineCorrected(
+        right_jittered, basis, fit.coefficients, fit.tilt_px, fit.tilt_centre_sample
+    )
     record.update(_fit_record(obs, keep, basis, fit, _line_rate_hz(right)))
     if progress is not None:
         progress(_progress_message(names, kind, datum, int(keep.sum()), record, basis, fit))
@@ -359,6 +361,7 @@ def _fit_record(
         dem_band_factor=round(fit.noise.band_factor, 2),
         dem_offset_m=round(fit.dem_offset_m, 3),
         along_shape=fit.along_shape,
+        tilt=fit.tilt,
         correction_along_base_px={
             "min": round(float(along_shift.min()), 4),
             "max": round(float(along_shift.max()), 4),

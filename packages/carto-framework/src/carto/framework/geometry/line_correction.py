@@ -11,10 +11,13 @@ left out). :class:`LineCorrected` adds to any sensor's image coordinates
 
 with the basis :class:`LineBasis`: a constant, a cubic B-spline of the line with knots every
 ``knot_lines`` lines (slow motion), and a sine and a cosine per frequency in cycles per line
-(jitter). It works on every sensor kind (line scanners, RPCs, a plugin's) because it only
-needs the wrapped sensor's projections; its own coefficients are fixed values, estimated by
-:mod:`carto.framework.adjustment.relative_orientation`. The wrapped sensor's parameters stay
-adjustable through it.
+(jitter); plus, optionally, a tilt across the swath: shifts proportional to the sample's
+distance from a centre sample (``tilt``: line and sample shifts per 1000 samples), what a
+static relative yaw (a line shift growing across the swath: a height tilt across the track)
+or a relative scale leaves. It works on every sensor kind (line scanners, RPCs, a plugin's)
+because it only needs the wrapped sensor's projections; its own coefficients are fixed
+values, estimated by :mod:`carto.framework.adjustment.relative_orientation`. The wrapped
+sensor's parameters stay adjustable through it.
 """
 
 from __future__ import annotations
@@ -157,6 +160,13 @@ class LineBasis:
         }
 
 
+def _pair(value: ArrayLike) -> tuple[float, float]:
+    a, b = (float(v) for v in np.asarray(value, np.float64).ravel())
+    if not (math.isfinite(a) and math.isfinite(b)):
+        raise InputError(f"line correction: tilt must be finite, got {(a, b)}")
+    return a, b
+
+
 def _coefficients(value: ArrayLike) -> FloatArray:
     out = np.array(value, dtype=np.float64)
     if out.ndim != 2 or out.shape[0] != 2:
@@ -174,10 +184,14 @@ class LineCorrected(SensorWrapper):
         basis: the correction's basis functions.
         coefficients: ``(2, basis.size)``: row 0 the line shifts' coefficients, row 1 the
             sample shifts', pixels.
+        tilt: ``(d_line, d_sample)`` per 1000 samples from ``tilt_centre_sample``, pixels.
+        tilt_centre_sample: the base-model sample where the tilt is zero.
     """
 
     basis: LineBasis
     coefficients: FloatArray = attrs.field(converter=_coefficients)
+    tilt: tuple[float, float] = attrs.field(default=(0.0, 0.0), converter=_pair)
+    tilt_centre_sample: float = attrs.field(default=0.0, converter=float)
 
     def __attrs_post_init__(self) -> None:
         if self.coefficients.shape[1] != self.basis.size:
@@ -187,11 +201,18 @@ class LineCorrected(SensorWrapper):
             )
 
     # ------------------------------------------------------------------ the correction
-    def shift(self, line: ArrayLike) -> tuple[FloatArray, FloatArray]:
-        """``(d_line, d_sample)`` added at base-model lines ``line``, pixels."""
+    def shift(
+        self, line: ArrayLike, sample: ArrayLike | None = None
+    ) -> tuple[FloatArray, FloatArray]:
+        """``(d_line, d_sample)`` added at base-model points ``(line, sample)``, pixels (the
+        tilt needs the samples; without them, the line-varying part only)."""
         line = np.asarray(line, dtype=np.float64)
         d, _ = self.basis.evaluate(line, self.coefficients)
-        return d[:, 0].reshape(line.shape), d[:, 1].reshape(line.shape)
+        d_line, d_sample = d[:, 0].reshape(line.shape), d[:, 1].reshape(line.shape)
+        if sample is not None and any(self.tilt):
+            x = (np.asarray(sample, np.float64) - self.tilt_centre_sample) / 1000.0
+            d_line, d_sample = d_line + self.tilt[0] * x, d_sample + self.tilt[1] * x
+        return d_line, d_sample
 
     def _shift_and_slope(self, line: FloatArray) -> tuple[FloatArray, FloatArray]:
         return self.basis.evaluate(line, self.coefficients)
@@ -220,7 +241,7 @@ class LineCorrected(SensorWrapper):
     ) -> tuple[FloatArray, FloatArray, NDArray[np.bool_]]:
         line, sample, _ = self.base.project(lon_deg, lat_deg, h_m)
         line, sample = np.asarray(line, np.float64), np.asarray(sample, np.float64)
-        d_line, d_sample = self.shift(line)
+        d_line, d_sample = self.shift(line, sample)
         line, sample = line + d_line, sample + d_sample
         return line, sample, self.in_image(line, sample)
 
@@ -229,7 +250,7 @@ class LineCorrected(SensorWrapper):
     ) -> tuple[FloatArray, FloatArray]:
         line0, sample0 = self.base.ground_to_image(lon_deg, lat_deg, h_m)
         line0, sample0 = np.asarray(line0, np.float64), np.asarray(sample0, np.float64)
-        d_line, d_sample = self.shift(line0)
+        d_line, d_sample = self.shift(line0, sample0)
         line, sample = line0 + d_line, sample0 + d_sample
         _n_l, _n_s = self.image_shape
         seen = np.isfinite(line0) & np.isfinite(sample0)
@@ -240,26 +261,28 @@ class LineCorrected(SensorWrapper):
         self, line: ArrayLike, sample: ArrayLike, h_m: ArrayLike
     ) -> tuple[FloatArray, FloatArray]:
         line, sample, h = as_float_arrays(line, sample, h_m)
-        base_line = line.copy()
-        for _ in range(INVERSE_ITERATIONS):  # the base line whose corrected line is `line`
-            d_line, _ = self.shift(base_line)
-            base_line = line - d_line
-        d_line, d_sample = self.shift(base_line)
+        base_line, base_sample = line.copy(), sample.copy()
+        for _ in range(INVERSE_ITERATIONS):  # the base point whose corrected one is given
+            d_line, d_sample = self.shift(base_line, base_sample)
+            base_line, base_sample = line - d_line, sample - d_sample
+        d_line, d_sample = self.shift(base_line, base_sample)
         return self.base.image_to_ground(line - d_line, sample - d_sample, h)
 
     def _linearize(
         self, lon: FloatArray, lat: FloatArray, h: FloatArray, names: list[str]
     ) -> Linearization:
         line, sample, a_ground, a_param = self.base.linearize(lon, lat, h, names)
-        shift, slope = self._shift_and_slope(line)
-        # d(line + s(line)) = (1 + s'(line)) d line; the sample shift follows the line too
+        _, slope = self._shift_and_slope(line)
+        d_line, d_sample = self.shift(line, sample)
+        t_line, t_sample = (t / 1000.0 for t in self.tilt)
+        # d(line + s(line) + t x) = (1 + s'(line)) d line + t d sample; the sample likewise
         chain = np.stack(
             [
-                np.stack([1.0 + slope[:, 0], np.zeros_like(line)], axis=1),
-                np.stack([slope[:, 1], np.ones_like(line)], axis=1),
+                np.stack([1.0 + slope[:, 0], np.full_like(line, t_line)], axis=1),
+                np.stack([slope[:, 1], np.full_like(line, 1.0 + t_sample)], axis=1),
             ],
             axis=1,
         )  # (N, 2, 2): rows (line', sample'), columns (line, sample)
         a_ground = np.einsum("nij,njk->nik", chain, a_ground)
         a_param = np.einsum("nij,njk->nik", chain, a_param)
-        return line + shift[:, 0], sample + shift[:, 1], a_ground, a_param
+        return line + d_line, sample + d_sample, a_ground, a_param
