@@ -38,20 +38,19 @@ and the DEM 5.4 m low, for a starting DEM 1 m high).
 The correction. Line scanners (and wrappers of one) get a line-varying correction. Across
 the base: a cubic B-spline of the line (knots every ``knot_lines``, spanning the lines the
 points cover) plus a sine and a cosine per jitter frequency. Along the base: a constant and
-the same sinusoids in the fit, then the slow shape
-(:mod:`~carto.framework.adjustment.along_shape`). First its trend, a polynomial of orders 1-2
-of the line fitted to the DEM rows'
-along-base residuals of the whole swath (a relative pitch trend of a same-pass pair, a height
-ramp along the track that tie points cannot see), each coefficient shrunk by its a-priori
-sigma against its variance from the bin means' scatter; on a simulated full-swath pair
-(12 000 x 1500 px, realistic errors, 1 GCP; a best case) it took the adjusted models' ramp of
-0.82 m per 1000 lines and the DEM error the orientation leaves from 0.435 to 0.222 m NMAD.
-Then the rest: the along-base residuals of the DEM rows
-averaged per knot interval, where the left and right halves of the swath see the same
-orientation but different parts of the starting DEM, so half their difference measures the
-DEM's error of a mean and the spread of the means beyond it the orientation's; the means,
-shrunk by the gain ``signal / (signal + noise)`` (a Wiener filter; no shape where the DEM
-cannot tell it), become the spline along the base and the rest is refitted under it
+the same sinusoids in the fit, then the slow shape from the DEM rows' along-base residuals
+(:mod:`~carto.framework.adjustment.along_shape`). (1) Its trend, a polynomial of orders 1-2
+of the line over the whole swath (a relative pitch trend of a same-pass pair: a height ramp
+along the track that tie points cannot see), each coefficient shrunk by a Wiener gain
+against its variance from the bin means' scatter. (2) What is left, averaged per knot
+interval, where the left and right halves of the swath see the same orientation but
+different parts of the starting DEM, so half their difference measures the DEM's error of a
+mean and the spread of the means beyond it the orientation's; the means, shrunk by the gain
+``signal / (signal + noise)`` (a Wiener filter; no shape where the DEM cannot tell it),
+become the spline along the base. (3) The along-base tilt across the swath (a relative yaw:
+a height tilt across the track), which
+:class:`~carto.framework.geometry.line_correction.LineCorrected` carries as a line shift
+proportional to the sample. The rest is refitted under them
 (:func:`~carto.framework.adjustment.pair_correction.estimate_correction`). Where both
 images are line scanners of one platform (same-pass stereo: Cartosat-1 Fore and Aft), the
 jitter is the platform's attitude, one time series seen by each image at its own imaging
