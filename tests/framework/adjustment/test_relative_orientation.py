@@ -230,11 +230,14 @@ def test_a_slow_shape_along_the_base_is_taken_where_the_dem_can_tell_it(syntheti
 def test_a_trend_along_the_base_is_taken_from_the_whole_swath(synthetic):
     """A relative pitch trend: the right image moves along the base by 0.6 px from the first
     line to the last (a height ramp of metres), with no motion across the base to vouch for
-    it. The whole swath's DEM rows measure the ramp (the knot shape alone, bounded by the
-    motion across, left it: session 45's full-swath pair); with no such error it stays
-    near zero."""
+    it. The DEM rows measure the ramp (a start with 0.5 m of noise: the pair overlaps over
+    2000 samples only; the knot shape alone, bounded by the motion across, left it: session
+    45's full-swath pair); with no such error it stays near zero."""
     aft, fore, _, table, start, dem_true = synthetic
-    u0 = po.axes(po.ties_to_observations(table, ("aft", "fore"), aft, fore, start).parallax)[0]
+    rng = np.random.default_rng(11)
+    good = DEM.from_array(dem_true.heights + rng.normal(0.0, 0.5, start.heights.shape),
+                          start.transform, "EPSG:4326")  # fmt: skip
+    u0 = po.axes(po.ties_to_observations(table, ("aft", "fore"), aft, fore, good).parallax)[0]
     u0 = np.median(u0, axis=0)
     basis = LineBasis(12000, 4000.0)
     knots = basis.knots
@@ -244,8 +247,8 @@ def test_a_trend_along_the_base_is_taken_from_the_whole_swath(synthetic):
     errors, shifts = {}, {}
     for name, size in (("ramp", 1.0), ("none", 0.0)):
         right_true = LineCorrected(fore, basis, size * u0[:, None] * ramp[None, :])
-        ties = _ties(aft, right_true, dem_true, np.random.default_rng(11))
-        obs = po.ties_to_observations(ties, ("aft", "fore"), aft, fore, start)
+        ties = _ties(aft, right_true, dem_true, rng)
+        obs = po.ties_to_observations(ties, ("aft", "fore"), aft, fore, good)
         basis_e, fit, _ = ro.estimate_correction(obs, 12000, "line", "dem", settings)
         estimated = pc.correction_px(obs, basis_e, attrs.evolve(fit, dem_offset_m=0.0))
         shift = np.stack(right_true.shift(obs.line), axis=1) @ u0
@@ -253,10 +256,10 @@ def test_a_trend_along_the_base_is_taken_from_the_whole_swath(synthetic):
         errors[name] = float(np.sqrt(np.mean((error - error.mean()) ** 2)))
         shifts[name] = float(np.std(shift))
         if name == "ramp":  # the points cover half the lines: 0.3 px of the ramp
-            assert fit.along_shape["trend"]["gain"][0] > 0.8  # P1; P2 has no signal
+            assert fit.along_shape["trend"]["gain"][0] > 0.9  # P1; P2 has no signal
     assert shifts["ramp"] > 0.08
-    assert errors["ramp"] < 0.35 * shifts["ramp"]
-    assert errors["none"] < 0.03  # px
+    assert errors["ramp"] < 0.2 * shifts["ramp"]
+    assert errors["none"] < 0.02  # px
 
 
 def test_a_tilt_across_the_swath_is_taken_from_the_dem_rows(synthetic):
