@@ -129,7 +129,14 @@ def test_groups_match_a_dense_textbook_computation(problem):
     # the shares add up to the redundancy, and the covariance is the dense propagation
     assert sum(c.redundancy for c in mine.values()) == pytest.approx(result.redundancy, abs=1e-3)
     np.testing.assert_allclose(result.covariance_by_group, total, rtol=1e-3, atol=1e-18)
-    np.testing.assert_allclose(q[:n_par, :n_par], result.covariance_unit, rtol=1e-3)
+    # the covariances agree to 1e-3 of their scale sqrt(q_ii q_jj): a cross term of two
+    # nearly independent parameters is the difference of large products (0.2 % of itself
+    # apart between two CPUs, 2e-5 of its scale)
+    scale = np.sqrt(np.outer(np.diag(result.covariance_unit), np.diag(result.covariance_unit)))
+    np.testing.assert_array_less(np.abs(q[:n_par, :n_par] - result.covariance_unit), 1e-3 * scale)
+    np.testing.assert_allclose(
+        np.diag(q[:n_par, :n_par]), np.diag(result.covariance_unit), rtol=1e-3
+    )
 
 
 def test_tie_points_judged_by_their_noise_few_gcps_by_their_sigmas(problem):

@@ -43,9 +43,18 @@ def test_small_and_large_bands_give_the_same_scene(tmp_path, preset, size):
     small, large = (_rasters(s) for s in scenes.values())
     assert set(small) == set(large)
     assert {"truth/dem.tif", "truth/ortho.tif", "init_dem.tif"} <= set(small)
-    for name, values in small.items():
-        assert np.array_equal(values, large[name], equal_nan=True), name
     images = json.loads((scenes[7] / "scene.json").read_text())["images"]
+    raws = {image["raster"] for image in images.values()}
+    for name, values in small.items():
+        if name not in raws:
+            assert np.array_equal(values, large[name], equal_nan=True), name
+            continue
+        # a ray's radiance may sit on a boundary of the 10-bit quantisation, where the last
+        # bit of its float sum (which the band's vector loop can change) picks the DN: one DN
+        # on a pixel in 9000 was seen on one CPU; anything more is a different scene
+        d = np.abs(values.astype(np.int32) - large[name].astype(np.int32))
+        assert d.max() <= 1, name
+        assert np.count_nonzero(d) <= max(1, values.size // 1000), name
     for image in images.values():
         raw = small[image["raster"]]
         assert raw.shape == (size[1], size[0])
