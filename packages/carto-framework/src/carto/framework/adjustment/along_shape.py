@@ -72,13 +72,14 @@ samples)."""
 
 
 def half_means(
-    k: NDArray[np.int64], sample: FloatArray, value: FloatArray
+    k: NDArray[np.int64], position: FloatArray, value: FloatArray
 ) -> tuple[FloatArray, FloatArray, FloatArray, NDArray[np.int64]]:
-    """Per line bin ``k``: the mean of ``value`` over the bin, over its points left and right
-    of the bin's median sample, and the count (bins with fewer than
-    :data:`MIN_HALF_POINTS` points a side are NaN)."""
+    """Per bin ``k``: the mean of ``value`` over the bin, over its points below and above
+    the bin's median ``position`` (for bins of lines, the left and right halves of the
+    swath: the sample; for bins of samples, the early and late lines), and the count (bins
+    with fewer than :data:`MIN_HALF_POINTS` points a side are NaN)."""
     n = int(k.max()) + 1
-    order = np.lexsort((sample, k))
+    order = np.lexsort((position, k))
     k_s, v_s = k[order], value[order]
     count = np.bincount(k_s, minlength=n)
     rank = np.arange(k_s.size) - np.r_[0, np.cumsum(count)[:-1]][k_s]
