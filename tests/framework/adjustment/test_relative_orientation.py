@@ -227,18 +227,25 @@ def test_a_slow_shape_along_the_base_is_taken_where_the_dem_can_tell_it(syntheti
     assert errors["none"] < 0.05
 
 
+def _good_start(synthetic, rng):
+    """A starting DEM with 0.5 m of noise (what a whole swath's DEM rows average to, on a pair
+    that overlaps over 2000 samples only) and the base direction in the right image."""
+    aft, fore, _, table, start, dem_true = synthetic
+    noise = rng.normal(0.0, 0.5, start.heights.shape)
+    good = DEM.from_array(dem_true.heights + noise, start.transform, "EPSG:4326")
+    u0 = po.axes(po.ties_to_observations(table, ("aft", "fore"), aft, fore, good).parallax)[0]
+    return good, np.median(u0, axis=0)
+
+
 def test_a_trend_along_the_base_is_taken_from_the_whole_swath(synthetic):
     """A relative pitch trend: the right image moves along the base by 0.6 px from the first
     line to the last (a height ramp of metres), with no motion across the base to vouch for
     it. The DEM rows measure the ramp (a start with 0.5 m of noise: the pair overlaps over
     2000 samples only; the knot shape alone, bounded by the motion across, left it: session
     45's full-swath pair); with no such error it stays near zero."""
-    aft, fore, _, table, start, dem_true = synthetic
+    aft, fore, _, _, _, dem_true = synthetic
     rng = np.random.default_rng(11)
-    good = DEM.from_array(dem_true.heights + rng.normal(0.0, 0.5, start.heights.shape),
-                          start.transform, "EPSG:4326")  # fmt: skip
-    u0 = po.axes(po.ties_to_observations(table, ("aft", "fore"), aft, fore, good).parallax)[0]
-    u0 = np.median(u0, axis=0)
+    good, u0 = _good_start(synthetic, rng)
     basis = LineBasis(12000, 4000.0)
     knots = basis.knots
     greville = (knots[1:-3] + knots[2:-2] + knots[3:-1]) / 3.0  # a linear spline's coefficients
@@ -267,12 +274,9 @@ def test_a_tilt_across_the_swath_is_taken_from_the_dem_rows(synthetic):
     (a height tilt across the track that no correction of the lines holds). The DEM rows
     measure it (a start with 0.5 m of noise: the pair overlaps over 2000 samples only);
     with no such error it stays near zero."""
-    aft, fore, _, table, start, dem_true = synthetic
+    aft, fore, _, _, _, dem_true = synthetic
     rng = np.random.default_rng(17)
-    good = DEM.from_array(dem_true.heights + rng.normal(0.0, 0.5, start.heights.shape),
-                          start.transform, "EPSG:4326")  # fmt: skip
-    u0 = po.axes(po.ties_to_observations(table, ("aft", "fore"), aft, fore, good).parallax)[0]
-    u0 = np.median(u0, axis=0)
+    good, u0 = _good_start(synthetic, rng)
     settings = ro.RelativeOrientationSettings(max_frequencies=0)
     for size in (0.1, 0.0):
         right_true = LineCorrected(fore, LineBasis(12000), np.zeros((2, 1)), size * u0, 1000.0)

@@ -209,13 +209,18 @@ class LineCorrected(SensorWrapper):
         line = np.asarray(line, dtype=np.float64)
         d, _ = self.basis.evaluate(line, self.coefficients)
         d_line, d_sample = d[:, 0].reshape(line.shape), d[:, 1].reshape(line.shape)
-        if sample is not None and any(self.tilt):
-            x = (np.asarray(sample, np.float64) - self.tilt_centre_sample) / 1000.0
-            d_line, d_sample = d_line + self.tilt[0] * x, d_sample + self.tilt[1] * x
-        return d_line, d_sample
+        if sample is None:
+            return d_line, d_sample
+        return self._tilted(d_line, d_sample, sample)
 
-    def _shift_and_slope(self, line: FloatArray) -> tuple[FloatArray, FloatArray]:
-        return self.basis.evaluate(line, self.coefficients)
+    def _tilted(
+        self, d_line: FloatArray, d_sample: FloatArray, sample: ArrayLike
+    ) -> tuple[FloatArray, FloatArray]:
+        """The shifts ``(d_line, d_sample)`` of the lines plus the tilt at ``sample``."""
+        if not any(self.tilt):
+            return d_line, d_sample
+        x = (np.asarray(sample, np.float64) - self.tilt_centre_sample) / 1000.0
+        return d_line + self.tilt[0] * x, d_sample + self.tilt[1] * x
 
     # ------------------------------------------------------------------ Sensor data
     @property
@@ -272,8 +277,8 @@ class LineCorrected(SensorWrapper):
         self, lon: FloatArray, lat: FloatArray, h: FloatArray, names: list[str]
     ) -> Linearization:
         line, sample, a_ground, a_param = self.base.linearize(lon, lat, h, names)
-        _, slope = self._shift_and_slope(line)
-        d_line, d_sample = self.shift(line, sample)
+        shift, slope = self.basis.evaluate(line, self.coefficients)
+        d_line, d_sample = self._tilted(shift[:, 0], shift[:, 1], sample)
         t_line, t_sample = (t / 1000.0 for t in self.tilt)
         # d(line + s(line) + t x) = (1 + s'(line)) d line + t d sample; the sample likewise
         chain = np.stack(
