@@ -250,6 +250,10 @@ def _run(handler: Handler, args: argparse.Namespace) -> int:
             warn_broken(get_registry())
         code = handler(args)
         sys.stdout.flush()  # a reader gone away shows here, not at the interpreter's exit
+        from carto.framework.files.staging import interrupted
+
+        if interrupted() is not None:  # its KeyboardInterrupt was swallowed on the way
+            raise KeyboardInterrupt(interrupted())
         return code
     except BrokenPipeError:
         # the reader of the output stopped reading (carto plugins --json | head): stop quietly
