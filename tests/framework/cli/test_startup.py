@@ -88,3 +88,14 @@ def test_the_costly_help_is_built_when_asked() -> None:
     assert f"carto simulate {names[-1]} --out s2" in simulate_help
     adjust_help = " ".join(commands["adjust"].format_help().split())
     assert f"(default {GCP_OFFSET_SIGMA_PX})" in adjust_help
+
+
+def test_every_plugin_loads_without_scipy_stats() -> None:
+    """Every command but ``--version`` and the help loads the registry, so every plugin and
+    component module; ``scipy.stats`` (through ``scipy.integrate`` too) took half a second of
+    that (its distributions' docstrings), and ``carto plugins`` 2.5 s on a slow machine. The
+    modules that need it import it where they use it."""
+    code, modules = _imported(["plugins", "--json"])
+    assert code == 0
+    assert "carto.ior" in modules and "carto.cartosat1" in modules  # the registry was loaded
+    assert not [m for m in modules if m.startswith(("scipy.stats", "scipy.integrate"))]

@@ -25,7 +25,6 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import stats
 
 from carto.framework.arrays import FloatArray
 
@@ -41,6 +40,8 @@ FALSE_ALARM_FLAG = 1e-3
 
 def sigma0_check(sigma0: float, redundancy: int) -> dict[str, Any]:
     """sigma0 against its 99 % interval under a right model."""
+    from scipy import stats  # here: scipy.stats takes half a second to import
+
     r = max(int(redundancy), 1)
     lo = math.sqrt(stats.chi2.ppf(0.005, r) / r)
     hi = math.sqrt(stats.chi2.ppf(0.995, r) / r)

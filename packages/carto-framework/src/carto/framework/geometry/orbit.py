@@ -13,7 +13,6 @@ import math
 import attrs
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.integrate import solve_ivp
 
 from carto.framework.errors import InputError
 from carto.framework.geometry import frames
@@ -115,6 +114,8 @@ def propagate(
         if span[1] == 0.0:
             out[np.flatnonzero(mask)] = y0
             continue
+        from scipy.integrate import solve_ivp  # here: it imports scipy.stats (0.5 s)
+
         sol = solve_ivp(rhs, span, y0, method="DOP853", t_eval=times[order], rtol=1e-12, atol=1e-6)
         idx = np.flatnonzero(mask)[order]
         out[idx] = sol.y.T

@@ -14,7 +14,6 @@ import math
 import attrs
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.integrate import solve_ivp
 
 from carto.framework.errors import InputError
 from carto.framework.simulation.reference import earth
@@ -107,6 +106,8 @@ class ReferenceOrbit:
             return np.concatenate([y[3:], _acceleration(p, pole).reshape(-1)])
 
         def run(t_end: float):
+            from scipy.integrate import solve_ivp  # here: it imports scipy.stats (0.5 s)
+
             return solve_ivp(
                 rhs,
                 (0.0, t_end),
