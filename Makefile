@@ -15,22 +15,21 @@ TEST_PLUGINS_STAMP := $(TEST_PLUGINS)/.carto-installed
 PIP := $(BIN)/python -m pip --disable-pip-version-check
 DEMO_OUT ?= demo-out
 
-.PHONY: demo test fuzz lint format lock clean
+.PHONY: demo test fuzz lint format lock clean bytecode
 
-# Bytecode of the editable packages, written once: where PYTHONDONTWRITEBYTECODE is set, every
-# `carto` process compiled them again (0.3-0.5 s of each command's start).
-COMPILE := $(BIN)/python -m compileall -q packages/*/src examples/*/src > /dev/null
-
-demo: $(STAMP)
-	$(COMPILE)
+demo: $(STAMP) bytecode
 	$(BIN)/carto demo --out $(DEMO_OUT)
 
-test: lint $(TEST_PLUGINS_STAMP)
-	$(COMPILE)
+test: lint $(TEST_PLUGINS_STAMP) bytecode
 	$(BIN)/python -m pytest -n 2
 
+# Bytecode of the editable packages (only what changed): where PYTHONDONTWRITEBYTECODE is set,
+# every `carto` process compiled them again (0.3-0.5 s of each command's start).
+bytecode: $(STAMP)
+	$(BIN)/python -m compileall -q packages/*/src examples/*/src > /dev/null
+
 # the fuzz tests with fresh random draws (make test draws the same fixed set every time)
-fuzz: $(STAMP) $(TEST_PLUGINS_STAMP)
+fuzz: $(STAMP) $(TEST_PLUGINS_STAMP) bytecode
 	HYPOTHESIS_PROFILE=explore $(BIN)/python -m pytest -n 2 -m fuzz
 
 # ruff, and the architecture contracts of .importlinter (layers, no cycles, no plugin names)

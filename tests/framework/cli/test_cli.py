@@ -227,7 +227,7 @@ def test_a_start_up_interrupt_swallowed_on_the_way_still_exits_130(code) -> None
         assert run.stderr.strip().splitlines()[-1] == "carto: interrupted"
 
 
-def test_an_interrupt_the_command_swallowed_exits_130(monkeypatch, capsys) -> None:
+def test_an_interrupt_the_command_swallowed_exits_130(capsys) -> None:
     """An interrupt the command's own handler noted, whose KeyboardInterrupt got lost (in a
     ctypes or weakref callback), ends the command with 130 even when it returned 0."""
     import argparse

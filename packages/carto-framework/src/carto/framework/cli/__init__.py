@@ -252,8 +252,8 @@ def _run(handler: Handler, args: argparse.Namespace) -> int:
         sys.stdout.flush()  # a reader gone away shows here, not at the interpreter's exit
         from carto.framework.files.staging import interrupted
 
-        if interrupted() is not None:  # its KeyboardInterrupt was swallowed on the way
-            raise KeyboardInterrupt(interrupted())
+        if (what := interrupted()) is not None:  # its KeyboardInterrupt was swallowed
+            raise KeyboardInterrupt(what)
         return code
     except BrokenPipeError:
         # the reader of the output stopped reading (carto plugins --json | head): stop quietly

@@ -93,6 +93,8 @@ def propagate(
     Returns:
         positions ``(N, 3)`` (m) and velocities ``(N, 3)`` (m/s) at ``dt_s``.
     """
+    from scipy.integrate import solve_ivp  # here: it imports scipy.stats (0.5 s of start-up)
+
     t = np.atleast_1d(np.asarray(dt_s, dtype=np.float64))
     y0 = np.concatenate([np.asarray(position_m, float), np.asarray(velocity_m_s, float)])
 
@@ -114,8 +116,6 @@ def propagate(
         if span[1] == 0.0:
             out[np.flatnonzero(mask)] = y0
             continue
-        from scipy.integrate import solve_ivp  # here: it imports scipy.stats (0.5 s)
-
         sol = solve_ivp(rhs, span, y0, method="DOP853", t_eval=times[order], rtol=1e-12, atol=1e-6)
         idx = np.flatnonzero(mask)[order]
         out[idx] = sol.y.T
