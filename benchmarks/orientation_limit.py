@@ -9,7 +9,7 @@ the true DEM are the orientation-limited DEM error. Per scene (made by
 * ``adjusted``: the adjusted models as delivered;
 * ``relative_orientation``: corrected by ``carto dem``'s relative orientation (tie points on
   the scene's SRTM-like ``init_dem.tif``), with the default settings and with
-  ``platform_jitter``;
+  ``platform_jitter``, each with the binned and the spectral band factor (``_spectral``);
 * ``simulated_jitter_folded``: the adjusted models with the simulator's own attitude jitter
   folded into both (an oracle: what a perfect jitter estimate would leave). The simulator
   turns the body by the jitter; the models' periodic corrections turn the orbit frame, so
@@ -140,6 +140,11 @@ def scene_record(work: Path, name: str) -> dict:
         for label, settings in (
             ("relative_orientation", RelativeOrientationSettings()),
             ("relative_orientation_platform", RelativeOrientationSettings(platform_jitter=True)),
+            ("relative_orientation_spectral", RelativeOrientationSettings(band_factor="spectral")),
+            (
+                "relative_orientation_platform_spectral",
+                RelativeOrientationSettings(platform_jitter=True, band_factor="spectral"),
+            ),
         ):
             ro = relative_orientation(
                 images, pair.sensors, start, settings, gcps=datum_gcps(models, names),

@@ -318,6 +318,8 @@ def test_settings_are_checked():
         ro.RelativeOrientationSettings(mode="bogus")
     with pytest.raises(Exception, match="knot_lines"):
         ro.RelativeOrientationSettings(knot_lines=0)
+    with pytest.raises(Exception, match="band_factor must be one of binned, spectral"):
+        ro.RelativeOrientationSettings(band_factor="median")
 
 
 @pytest.mark.parametrize(("datum", "platform_jitter"), [("dem", False), ("models", True)])

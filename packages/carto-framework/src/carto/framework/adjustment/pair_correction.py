@@ -20,6 +20,7 @@ from carto.framework.adjustment.along_shape import (
     along_trend,
     knot_shape,
 )
+from carto.framework.adjustment.band_factor import band_factor
 from carto.framework.adjustment.pair_observations import Noise, Observations, axes, base_axes
 from carto.framework.errors import InputError
 from carto.framework.geometry.line_correction import LineBasis
@@ -54,6 +55,18 @@ def _check_mode(_self: Any, _attr: attrs.Attribute, value: str) -> None:
 
 _check_positive = positive_attribute("relative orientation")
 
+BAND_FACTORS = ("binned", "spectral")
+"""How :class:`RelativeOrientationSettings` measures the DEM rows' correlated share
+(:mod:`carto.framework.adjustment.band_factor`)."""
+
+
+def _check_band_factor(_self: Any, _attr: attrs.Attribute, value: str) -> None:
+    if value not in BAND_FACTORS:
+        raise InputError(
+            f"relative orientation: band_factor must be one of {', '.join(BAND_FACTORS)}, "
+            f"got {value!r}"
+        )
+
 
 @attrs.frozen
 class RelativeOrientationSettings:
@@ -78,6 +91,14 @@ class RelativeOrientationSettings:
             default: on three simulated ``--errors full`` pairs (1 GCP) the DEM error the
             orientation leaves was 0.64 / 1.13 / 1.32 m NMAD with it, 0.68 / 0.79 / 1.30 m
             without (``benchmarks/results/orientation_limit.json``, issue 30).
+        band_factor: how a line-varying correction measures the DEM rows' correlated share
+            (:data:`BAND_FACTORS`): over 64-line bins (``binned``, the default) or in the
+            jitter band (``spectral``). With ``platform_jitter`` on simulated ``--errors
+            full`` pairs (1 GCP), the spectral measure took the orientation-limited DEM error
+            (the height at the true point) from 0.62 to 0.48 m NMAD on a 12 000 x 2000 px
+            full swath, but from 0.69 to 1.03 m on a 1000 x 4000 px one, whose DEM errors
+            grow toward the lowest jitter frequencies more than the band's median says
+            (``benchmarks/results/orientation_limit_issue30_s47.json``).
     """
 
     mode: str = attrs.field(default="auto", validator=_check_mode)
@@ -87,6 +108,7 @@ class RelativeOrientationSettings:
     max_frequencies: int = attrs.field(default=8, converter=int)
     dem_offset_sigma_m: float = attrs.field(default=4.0, validator=_check_positive)
     platform_jitter: bool = False
+    band_factor: str = attrs.field(default="binned", validator=_check_band_factor)
 
 
 SHIFT_SPACING_PX = 32.0
@@ -111,10 +133,6 @@ class Fit:
     tilt: Mapping[str, float] | None = None
 
 
-BAND_LINES = 64.0
-"""Bins of this many lines measure the DEM's correlated share (:attr:`Noise.band_factor`)."""
-BAND_NEIGHBOURS = 5
-"""Each bin's mean is compared with the mean of this many bins around it."""
 SHAPE_SIGMA_PX = 0.25
 """A-priori sigma of the change of the spline between neighbouring coefficients, px: slow
 attitude wander (0.0002 deg of 15-90 s periods moves a Cartosat-1 point by about a pixel)
@@ -188,33 +206,6 @@ def _priors(
     return prior
 
 
-def _band_factor(obs: Observations, along_px: FloatArray, noise: Noise) -> float:
-    """:attr:`Noise.band_factor` from the along-base residuals of the DEM rows: the spread of
-    their means over :data:`BAND_LINES` lines, each less the mean of its
-    :data:`BAND_NEIGHBOURS` neighbours (slow motion the model leaves along the base is not
-    the DEM's), against what independent rows would give."""
-    rows = obs.dem_rows
-    if rows.sum() < 10:
-        return 1.0
-    s_along, _ = obs.subset(rows).sigmas(noise, banded=False)
-    k = np.floor(obs.line[rows] / BAND_LINES).astype(np.int64)
-    k -= k.min()
-    count = np.bincount(k)
-    full = count >= 5
-    if full.sum() < 2 * BAND_NEIGHBOURS:
-        return 1.0
-    mean = (np.bincount(k, weights=along_px[rows]) / np.maximum(count, 1))[full]
-    predicted = (np.bincount(k, weights=s_along**2) / np.maximum(count, 1) ** 2)[full]
-    window = np.ones(BAND_NEIGHBOURS) / BAND_NEIGHBOURS
-    detail = (mean - np.convolve(mean, window, mode="same"))[BAND_NEIGHBOURS:-BAND_NEIGHBOURS]
-    if detail.size < 4:
-        return 1.0
-    # a point less its window's mean keeps (1 - 1/n) of an independent variance
-    spread = 1.4826 * np.median(np.abs(detail - np.median(detail)))
-    independent = (1.0 - 1.0 / BAND_NEIGHBOURS) * np.median(predicted)
-    return max(1.0, float(spread**2 / independent))
-
-
 def offset_sigma_m(noise: Noise, dem_offset_sigma_m: float) -> float:
     """A-priori sigma of the starting DEM's offset: its stated absolute accuracy, and never
     less than its own post error (``noise.sigma_h``, measured along the base). A DEM whose
@@ -282,7 +273,8 @@ def _fit(
         s_al = float(mad * np.median(np.abs(along[dem_rows] - np.median(along[dem_rows]))))
         s_h = math.sqrt(max(s_al**2 - s_m**2, 1e-6)) / float(np.median(norm[dem_rows]))
     new = Noise(s_m, max(s_h, 0.05))
-    new = attrs.evolve(new, band_factor=_band_factor(obs, along, new))
+    spectral = settings.band_factor == "spectral" and basis.n_spline > 0
+    new = attrs.evolve(new, band_factor=band_factor(obs, along, new, spectral))
     return attrs.evolve(fit, noise=new)
 
 

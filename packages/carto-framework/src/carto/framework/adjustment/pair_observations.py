@@ -93,7 +93,8 @@ class Noise:
         band_factor: how much more a line's mean of the DEM rows varies along the base than
             independent points would (>= 1): the starting DEM's errors are correlated over
             hundreds of metres (an SRTM-like DEM's 90 m posts and its interpolation), so
-            averaging a line's points removes less of them than their number says.
+            averaging a line's points removes less of them than their number says
+            (measured by :mod:`carto.framework.adjustment.band_factor`).
     """
 
     sigma_m: float = 0.2

@@ -75,7 +75,8 @@ the Lomb-Scargle periodogram of the across-base residuals binned by line
 (:func:`~carto.framework.adjustment.jitter.detect_jitter_frequencies`; along the base the
 DEM's correlated errors look like peaks to a white-noise test), one at a time with a re-fit
 after each. Priors: ``SHAPE_SIGMA_PX``, ``JITTER_SIGMA_PX``; the DEM rows' along-base
-weight carries the DEM's correlated share (:attr:`Noise.band_factor`). Other sensors (RPCs)
+weight carries the DEM's correlated share (:attr:`Noise.band_factor`,
+:mod:`~carto.framework.adjustment.band_factor`). Other sensors (RPCs)
 get a shift. The sensors come back as
 :class:`~carto.framework.geometry.line_correction.LineCorrected`.
 
