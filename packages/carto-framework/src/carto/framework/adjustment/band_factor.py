@@ -95,15 +95,18 @@ def spectral_band_factor(
     """The DEM rows' correlated share in the jitter band (at least 1), or None where the
     image is too short for :data:`MIN_PROBES` probes.
 
-    ``along_px`` is averaged over bins of :data:`SPECTRAL_BIN_LINES` lines. At each probe
-    frequency (every ``1 / span`` cycles per line over :data:`PROBE_CYCLES_PER_LINE`:
-    independent frequencies), a sine and a cosine are projected on the bin means; their power
-    over the power independent rows of sigmas ``sigma_px`` would give is, where only noise
-    is, the factor times a chi-square of two degrees of freedom over two, whose median is
-    ``ln 2``. The median over the probes is taken: a few frequencies where jitter the fit
-    does not model stands out do not move it. Slower motion (wander the along-base shape
-    takes after the fit) is taken out first (:func:`_less_slow`): its leakage would pass for
-    noise at the lowest probes."""
+    ``along_px`` is averaged over bins of :data:`SPECTRAL_BIN_LINES` lines, each with the
+    sigma independent rows of sigmas ``sigma_px`` would give it. At each probe frequency
+    (every ``1 / span`` cycles per line over :data:`PROBE_CYCLES_PER_LINE`: independent
+    frequencies), the weighted Lomb-Scargle power of the bin means (astropy, ``psd``
+    normalisation: half the chi-square a sinusoid takes out) is, where only noise is, the
+    factor times a chi-square of two degrees of freedom over two, whose median is ``ln 2``.
+    The median over the probes is taken: a few frequencies where jitter the fit does not
+    model stands out do not move it. Slower motion (wander the along-base shape takes after
+    the fit) is taken out first (:func:`_less_slow`): its leakage would pass for noise at the
+    lowest probes."""
+    from astropy.timeseries import LombScargle  # here: not at every command's start
+
     k = np.floor((line - line.min()) / SPECTRAL_BIN_LINES).astype(np.int64)
     count = np.bincount(k)
     full = count >= MIN_BIN_POINTS
@@ -118,12 +121,8 @@ def spectral_band_factor(
     mean = (np.bincount(k, weights=along_px) / np.maximum(count, 1))[full]
     variance = (np.bincount(k, weights=sigma_px**2) / np.maximum(count, 1) ** 2)[full]
     mean = _less_slow(centres, mean, 1.0 / low)
-    ratio = np.zeros(probes.size)
-    phase = 2.0 * np.pi * probes[:, None] * centres[None, :]
-    for wave in (np.sin(phase), np.cos(phase)):
-        norm = np.sum(wave**2, axis=1)
-        ratio += (wave @ mean / norm) ** 2 / ((wave**2 @ variance) / norm**2)
-    return max(1.0, float(np.median(ratio / 2.0) / math.log(2.0)))
+    power = LombScargle(centres, mean, np.sqrt(variance)).power(probes, normalization="psd")
+    return max(1.0, float(np.median(power) / math.log(2.0)))
 
 
 def _less_slow(centres: FloatArray, mean: FloatArray, window_lines: float) -> FloatArray:
