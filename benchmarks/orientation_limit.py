@@ -120,7 +120,27 @@ def with_simulated_jitter(sensor, scene: Path):
     return replace_line_scanner(sensor, scanner.with_trajectory(folded))
 
 
-def scene_record(work: Path, name: str) -> dict:
+VARIANTS = {
+    "relative_orientation": RelativeOrientationSettings(),
+    "relative_orientation_platform": RelativeOrientationSettings(platform_jitter=True),
+    "relative_orientation_spectral": RelativeOrientationSettings(band_factor="spectral"),
+    "relative_orientation_platform_spectral": RelativeOrientationSettings(
+        platform_jitter=True, band_factor="spectral"
+    ),
+    "relative_orientation_platform_wiener": RelativeOrientationSettings(
+        platform_jitter=True, platform_along="wiener"
+    ),
+    "relative_orientation_per_image": RelativeOrientationSettings(
+        platform_jitter=True, jitter_per_image=True
+    ),
+    "relative_orientation_per_image_wiener": RelativeOrientationSettings(
+        platform_jitter=True, jitter_per_image=True, platform_along="wiener"
+    ),
+}
+"""The relative orientations compared (``--variants``: a subset)."""
+
+
+def scene_record(work: Path, name: str, variants: list[str] | None = None) -> dict:
     scene, models = work / name, work / f"{name}-adj1"
     pair = open_pair(StereoInputs(scene, models=models))
     names = list(pair.sensors)
@@ -137,20 +157,16 @@ def scene_record(work: Path, name: str) -> dict:
             )
             for n in names
         }  # fmt: skip
-        for label, settings in (
-            ("relative_orientation", RelativeOrientationSettings()),
-            ("relative_orientation_platform", RelativeOrientationSettings(platform_jitter=True)),
-            ("relative_orientation_spectral", RelativeOrientationSettings(band_factor="spectral")),
-            (
-                "relative_orientation_platform_spectral",
-                RelativeOrientationSettings(platform_jitter=True, band_factor="spectral"),
-            ),
-        ):
+        for label, settings in VARIANTS.items():
+            if variants and label not in variants:
+                continue
             ro = relative_orientation(
                 images, pair.sensors, start, settings, gcps=datum_gcps(models, names),
                 engine=engine,
             )  # fmt: skip
             out[label] = evaluate(ro.left or left, ro.right, left_true, right_true, truth)
+            if ro.record.get("platform_jitter"):
+                out[label]["platform_jitter"] = ro.record["platform_jitter"]
     out["simulated_jitter_folded"] = evaluate(
         with_simulated_jitter(left, scene), with_simulated_jitter(right, scene),
         left_true, right_true, truth,
@@ -162,10 +178,13 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--work", type=Path, required=True, help="ior_accuracy.py's --work")
     parser.add_argument("--scenes", nargs="+", default=["hilly-0", "hilly-1", "mountains-0"])
+    parser.add_argument(
+        "--variants", nargs="+", choices=sorted(VARIANTS), help="relative orientations (all)"
+    )
     args = parser.parse_args()
     result = {"scenes": {}}
     for name in args.scenes:
-        result["scenes"][name] = scene_record(args.work, name)
+        result["scenes"][name] = scene_record(args.work, name, args.variants)
         print(name, json.dumps(result["scenes"][name]), file=sys.stderr, flush=True)
     print(json.dumps(result, indent=1))
     return 0

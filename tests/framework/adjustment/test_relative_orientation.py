@@ -11,6 +11,7 @@ from affine import Affine
 
 from carto.framework.adjustment import pair_correction as pc
 from carto.framework.adjustment import pair_observations as po
+from carto.framework.adjustment import platform_jitter as pj
 from carto.framework.adjustment import relative_orientation as ro
 from carto.framework.geometry.line_correction import LineBasis, LineCorrected
 from carto.framework.raster.dem import DEM
@@ -87,7 +88,13 @@ def test_jitter_and_offset_are_recovered_from_ties_on_a_noisy_dem(synthetic):
     assert 1.5 < fit.noise.sigma_h < 4.5  # the DEM's 3 m (and its interpolation)
 
 
-def test_platform_jitter_seen_by_both_images_is_recovered_and_folded(synthetic):
+@pytest.mark.parametrize(
+    ("platform_along", "per_image"),
+    [("bound", False), ("wiener", False), ("bound", True), ("wiener", True)],
+)
+def test_platform_jitter_seen_by_both_images_is_recovered_and_folded(
+    synthetic, platform_along, per_image
+):
     """One platform jitter (roll and pitch at two frequencies, about 0.3 px) applied as
     rotations of the true trajectory, which Aft and Fore see 50 s apart: the ties through
     both true models. The fit with the platform's first-order partials recovers its effect on
@@ -105,11 +112,14 @@ def test_platform_jitter_seen_by_both_images_is_recovered_and_folded(synthetic):
     fore_true = ro.with_platform_jitter(fore, platform, hz, rad)
     table = _ties(aft_true, fore_true, dem_true, np.random.default_rng(11))
     obs = po.ties_to_observations(table, ("aft", "fore"), aft, fore, start, platform)
-    true_px = pc.platform_design(obs, hz) @ rad.ravel()
+    true_px = pj.platform_design(obs, hz) @ rad.ravel()
     u, v, _ = po.base_axes(obs.parallax)
     errors = {}
     for on in (True, False):
-        settings = ro.RelativeOrientationSettings(knot_lines=12000.0, platform_jitter=on)
+        settings = ro.RelativeOrientationSettings(
+            knot_lines=12000.0, platform_jitter=on, platform_along=platform_along,
+            jitter_per_image=per_image,
+        )  # fmt: skip
         basis, fit, _ = ro.estimate_correction(obs, 12000, "line", "dem", settings)
         got = pc.correction_px(obs, basis, attrs.evolve(fit, dem_offset_m=0.0))
         got -= np.median(got, axis=0)  # the constant (the DEM's offset) apart
@@ -120,7 +130,8 @@ def test_platform_jitter_seen_by_both_images_is_recovered_and_folded(synthetic):
         )
         if on:
             assert sorted(fit.platform_hz)[:2] == pytest.approx(hz, abs=0.02)
-            folded = ro.with_platform_jitter(fore, platform, fit.platform_hz, fit.platform_rad)
+            right_rad = pj.image_rad(fit.platform_rad, 0)
+            folded = ro.with_platform_jitter(fore, platform, fit.platform_hz, right_rad)
     assert np.sqrt(np.mean(true_px**2)) > 0.2  # px: what there is to find
     assert errors[True][0] < 0.03  # px across the base: matching noise
     assert errors[True][1] < 0.06  # along: the DEM's 3 m noise averaged (0.27 px/m)

@@ -22,6 +22,18 @@ from carto.framework.adjustment.along_shape import (
 )
 from carto.framework.adjustment.band_factor import band_factor
 from carto.framework.adjustment.pair_observations import Noise, Observations, axes, base_axes
+from carto.framework.adjustment.platform_jitter import (
+    AlongWiener,
+    along_axes,
+    along_wiener,
+    has_platform,
+    platform_design,
+    platform_sigmas,
+    px_per_rad,
+    refined_hz,
+    seconds_per_line,
+    window_gain,
+)
 from carto.framework.errors import InputError
 from carto.framework.geometry.line_correction import LineBasis
 from carto.framework.settings import positive_attribute
@@ -68,6 +80,18 @@ def _check_band_factor(_self: Any, _attr: attrs.Attribute, value: str) -> None:
         )
 
 
+PLATFORM_ALONG = ("bound", "wiener")
+"""How :class:`RelativeOrientationSettings` weighs the platform's along-base axis (pitch)."""
+
+
+def _check_platform_along(_self: Any, _attr: attrs.Attribute, value: str) -> None:
+    if value not in PLATFORM_ALONG:
+        raise InputError(
+            f"relative orientation: platform_along must be one of {', '.join(PLATFORM_ALONG)}, "
+            f"got {value!r}"
+        )
+
+
 @attrs.frozen
 class RelativeOrientationSettings:
     """Settings of :func:`relative_orientation` (checked on construction).
@@ -99,6 +123,15 @@ class RelativeOrientationSettings:
             full swath, but from 0.69 to 1.03 m on a 1000 x 4000 px one, whose DEM errors
             grow toward the lowest jitter frequencies more than the band's median says
             (``benchmarks/results/orientation_limit_issue30_s47.json``).
+        platform_along: how the platform jitter's along-base axis (pitch, for along-track
+            stereo) is weighed (:data:`PLATFORM_ALONG`): bounded by the amplitude the other
+            axes found across the base (``bound``, the default), or estimated per frequency
+            from the DEM rows against the DEM's own error at neighbouring frequencies
+            (``wiener``, :func:`~carto.framework.adjustment.platform_jitter.along_wiener`).
+        jitter_per_image: with ``platform_jitter``, each image's jitter its own sinusoids at
+            the platform's frequencies, seen at its own imaging times, instead of one series
+            of the platform: the phase between views tens of seconds apart needs a frequency
+            known to a thousandth of a hertz, which a few seconds of tie points do not give.
     """
 
     mode: str = attrs.field(default="auto", validator=_check_mode)
@@ -109,6 +142,8 @@ class RelativeOrientationSettings:
     dem_offset_sigma_m: float = attrs.field(default=4.0, validator=_check_positive)
     platform_jitter: bool = False
     band_factor: str = attrs.field(default="binned", validator=_check_band_factor)
+    platform_along: str = attrs.field(default="bound", validator=_check_platform_along)
+    jitter_per_image: bool = False
 
 
 SHIFT_SPACING_PX = 32.0
@@ -131,6 +166,7 @@ class Fit:
     tilt_px: FloatArray = attrs.field(factory=lambda: np.zeros(2))
     tilt_centre_sample: float = 0.0
     tilt: Mapping[str, float] | None = None
+    platform_along: Mapping[str, Any] | None = None
 
 
 SHAPE_SIGMA_PX = 0.25
@@ -231,20 +267,21 @@ def _fit(
     residuals too."""
     n_b = basis.size
     i_h = 2 * n_b  # the DEM offset, then the platform's jitter
-    n_l = 6 * len(platform_hz)
+    images = 2 if settings.jitter_per_image else 1
+    n_l = 6 * len(platform_hz) * images
     u, v, norm = base_axes(obs.parallax)
     expand = _expansion(basis, u[0].copy(), n_l)
     p_offset = offset_parallax(obs)
     axes_uv = (u[0].copy(), v[0].copy())
     normal, rhs, cond = _normal_equations(
-        obs, basis, noise, (platform_hz, p_offset), axes_uv, expand
+        obs, basis, noise, (platform_hz, p_offset, images == 2), axes_uv, expand
     )
     if datum == "models":  # the along-base correction has zero mean over the points
         normal += np.outer(cond, cond) / DATUM_SIGMA_PX**2
     # the DEM offset's prior is the DEM's absolute accuracy (free when the models hold the
     # datum)
     if platform_sigma is None:
-        platform_sigma = _platform_sigmas(obs, len(platform_hz))
+        platform_sigma = platform_sigmas(obs, len(platform_hz), images, JITTER_SIGMA_PX)
     normal += _priors(basis, platform_sigma, along_jitter)
     i_x = normal.shape[0] - 1 - n_l  # the DEM offset among the estimated parameters
     normal[i_x, i_x] += (
@@ -256,7 +293,7 @@ def _fit(
         float(x[i_h]),
         noise,
         datum,
-        platform_rad=x[i_h + 1 :].reshape(3, -1) if n_l else None,
+        platform_rad=x[i_h + 1 :].reshape((images, 3, -1)[2 - images :]) if n_l else None,
         platform_hz=tuple(platform_hz),
         offset_parallax=p_offset,
     )
@@ -298,19 +335,19 @@ def _normal_equations(
     chunks of :data:`FIT_CHUNK_ROWS` points; ``terms``: the platform's jitter frequencies
     and the DEM offset's parallax (:func:`offset_parallax`); ``cond``: the mean along-base
     correction's row (the models' datum)."""
-    platform_hz, p_offset = terms
+    platform_hz, p_offset, per_image = terms
     n_b = basis.size
     n_p = expand.shape[0]
     normal = np.zeros((expand.shape[1],) * 2)
     rhs = np.zeros(expand.shape[1])
     cond = np.zeros(n_p)
-    spl = _seconds_per_line(obs) if platform_hz else None
+    spl = seconds_per_line(obs) if platform_hz else None
     for start in range(0, obs.line.size, FIT_CHUNK_ROWS):
         part = obs.subset(slice(start, start + FIT_CHUNK_ROWS))
         u, v = (np.broadcast_to(d, part.parallax.shape) for d in axes_uv)
         s_along, s_across = part.sigmas(noise)
         b = _seen_design(basis, part)
-        s_p = platform_design(part, platform_hz, spl)  # (n, 2, n_l)
+        s_p = platform_design(part, platform_hz, spl, per_image)  # (n, 2, n_l)
         for axis, scale in ((u, s_along), (v, s_across)):
             a = np.empty((part.line.size, n_p))
             a[:, :n_b] = b * axis[:, 0:1]
@@ -389,21 +426,38 @@ def estimate_correction(
                 break
             found.append(new)
             if platform:
-                hz = (*hz, new / _seconds_per_line(obs))
+                hz = (*hz, new / seconds_per_line(obs))
                 fit = _fit(obs.subset(keep), basis, fit.noise, datum, settings, platform_hz=hz)
-                hz = _refined_hz(obs.subset(keep), basis, fit, len(hz) - 1)
+                part = obs.subset(keep)
+                rest = part.residual - correction_px(part, basis, fit)
+                hz = refined_hz(part, rest, fit.noise, (hz, fit.platform_rad), len(hz) - 1)
             else:
                 basis = attrs.evolve(basis, frequencies=tuple(found))
             fit = _fit(obs.subset(keep), basis, fit.noise, datum, settings, platform_hz=hz)
         keep = _inliers(obs, basis, fit)
         fit = _fit(obs.subset(keep), basis, fit.noise, datum, settings, platform_hz=hz)
     bound = _along_jitter_sigmas(obs.subset(keep), basis, fit) if basis.frequencies else None
-    p_bound = _platform_bound(obs.subset(keep), fit) if hz else None
+    wiener = bool(hz) and settings.platform_along == "wiener"
+    p_bound = _platform_bound(obs.subset(keep), fit) if hz and not wiener else None
     if bound is not None or p_bound is not None:
         fit = _fit(obs.subset(keep), basis, fit.noise, datum, settings, bound, hz, p_bound)
+    held, record = np.zeros(0), None
+    if wiener:
+        again = (datum, settings, bound)
+        obs, fit, found, p_bound = _with_along_wiener(obs, keep, basis, fit, again)
+        held, record = found.rad.ravel(), found.record()
+        fit = _less_platform(fit, held)
     if kind == "line" and basis.n_spline > 1:
         fit = _with_slow_shape(obs, keep, basis, fit, (datum, settings, bound, hz, p_bound))
-    return basis, fit, keep
+    return basis, attrs.evolve(_less_platform(fit, -held), platform_along=record), keep
+
+
+def _less_platform(fit: Fit, rad: FloatArray) -> Fit:
+    """``fit`` with ``rad`` taken from its platform terms."""
+    if not rad.size:
+        return fit
+    shape = fit.platform_rad.shape
+    return attrs.evolve(fit, platform_rad=(fit.platform_rad.ravel() - rad).reshape(shape))
 
 
 def _with_slow_shape(
@@ -440,58 +494,6 @@ def _tilt(
     centre = float(np.median(obs.sample[rows]))
     slope, record = along_tilt(obs.line[rows], obs.sample[rows], along[rows], centre)
     return _base_direction(obs) * slope, centre, record
-
-
-REFINE_HALF_WIDTH_HZ = 0.03
-"""The platform frequency is searched this far either side of the periodogram's peak."""
-REFINE_STEP_HZ = 0.0005
-"""The search step: a phase step of 0.16 rad over the 52 s between Cartosat-1's views."""
-
-
-def _refined_hz(obs: Observations, basis: LineBasis, fit: Fit, k: int) -> tuple[float, ...]:
-    """``fit.platform_hz`` with its ``k``-th frequency refined: the right and left images see
-    the platform's jitter at times tens of seconds apart (Cartosat-1: 52 s), so the phase
-    between them turns by ``2 pi df 52 s``; a periodogram of one image's few seconds does not
-    know a frequency to the thousandth of a hertz this needs. The frequency is searched on a
-    grid (:data:`REFINE_HALF_WIDTH_HZ`, :data:`REFINE_STEP_HZ`), fitting that frequency's
-    coefficients alone to the residuals the rest of the fit leaves; a whole number of cycles
-    over the gap more or less changes little, the phase between the images is what counts."""
-    hz = list(fit.platform_hz)
-    rad = np.asarray(fit.platform_rad).reshape(3, -1, 2)
-    u, v, _ = base_axes(obs.parallax)
-    s_along, s_across = obs.sigmas(fit.noise)
-    own = np.zeros_like(rad)
-    own[:, k] = rad[:, k]
-    rest = obs.residual - correction_px(obs, basis, fit)
-    rest = rest + platform_design(obs, tuple(hz)) @ own.ravel()
-    y = np.concatenate(
-        [np.einsum("ij,ij->i", u, rest) / s_along, np.einsum("ij,ij->i", v, rest) / s_across]
-    )
-    prior = np.diag(1.0 / _platform_sigmas(obs, 1) ** 2)
-    period = _seconds_per_line(obs)  # once, not per candidate
-    best, best_cost = hz[k], np.inf
-    for f in hz[k] + np.arange(-REFINE_HALF_WIDTH_HZ, REFINE_HALF_WIDTH_HZ + 1e-9, REFINE_STEP_HZ):
-        d = platform_design(obs, (float(f),), period)
-        a = np.vstack(
-            [
-                np.einsum("ij,ijk->ik", u, d) / s_along[:, None],
-                np.einsum("ij,ijk->ik", v, d) / s_across[:, None],
-            ]
-        )
-        normal = a.T @ a + prior
-        rhs = a.T @ y
-        x = np.linalg.solve(normal, rhs)
-        cost = float(y @ y - rhs @ x)
-        if cost < best_cost:
-            best, best_cost = float(f), cost
-    hz[k] = best
-    return tuple(hz)
-
-
-def _seconds_per_line(obs: Observations) -> float:
-    """The right image's line period, from its rows' imaging times."""
-    slope = abs(float(np.polyfit(obs.line, obs.time_s[:, 0], 1)[0]))
-    return slope if slope > 0 else 1.0
 
 
 def _base_direction(obs: Observations) -> FloatArray:
@@ -587,36 +589,6 @@ def _next_frequency(
     return None
 
 
-def platform_design(
-    obs: Observations, hz: tuple[float, ...], seconds_per_line: float | None = None
-) -> FloatArray:
-    """``(N, 2, 6 F)``: how each platform jitter coefficient (axis-major: roll, pitch, yaw;
-    then frequency; then sine and cosine of ``2 pi f t``, radians) moves each row's right
-    residual (line, sample), through both images at their own imaging times
-    (:attr:`Observations.attitude_px`), as the tie points see it (attenuated by their
-    matching window, :func:`window_gain`; ``seconds_per_line``: the right image's line
-    period, :func:`_seconds_per_line` when not given)."""
-    n = obs.line.size
-    if not hz:
-        return np.zeros((n, 2, 0))
-    if seconds_per_line is None:
-        seconds_per_line = _seconds_per_line(obs)
-    w = 2.0 * math.pi * np.asarray(hz)[None, None, :] * obs.time_s[:, :, None]  # (N, 2, F)
-    gain = window_gain(np.asarray(hz) * seconds_per_line, obs.window_lines)
-    waves = np.stack([np.sin(w) * gain, np.cos(w) * gain], axis=-1).reshape(n, 2, -1)
-    # (N, image, axis_img, axis_att) x (N, image, 2F) -> (N, axis_img, axis_att, 2F)
-    out = np.einsum("nika,nif->nkaf", obs.attitude_px, waves)
-    return out.reshape(n, 2, -1)
-
-
-def window_gain(cycles_per_line: FloatArray, window_lines: float) -> FloatArray:
-    """What a matching window of ``window_lines`` (a box: the template's mean) leaves of a
-    sinusoid's amplitude, ``sinc(f W)``: at Cartosat-1's 97 Hz (31 lines) a 15-line template
-    sees 0.66 of it (the platform jitter estimated on a simulated pair's true DEM came out at
-    0.53-0.73 of the simulated amplitude at 67-97 Hz without this)."""
-    return np.sinc(np.asarray(cycles_per_line, np.float64) * float(window_lines))
-
-
 def _seen_design(basis: LineBasis, obs: Observations) -> FloatArray:
     """``basis``'s design at the rows' lines as the tie points see it: the sinusoids
     attenuated by their matching window (:func:`window_gain`)."""
@@ -629,19 +601,6 @@ def _seen_design(basis: LineBasis, obs: Observations) -> FloatArray:
     return b
 
 
-def _platform_sigmas(obs: Observations, n_f: int) -> FloatArray:
-    """A-priori sigmas of the platform jitter coefficients, radians: :data:`JITTER_SIGMA_PX`
-    through the right image's median motion per radian of each axis."""
-    if not n_f:
-        return np.zeros(0)
-    return np.repeat(JITTER_SIGMA_PX / np.maximum(_px_per_rad(obs), 1e-3), 2 * n_f)
-
-
-def _px_per_rad(obs: Observations) -> FloatArray:
-    """``(3,)``: the right image's median motion per radian of roll, pitch and yaw."""
-    return np.median(np.linalg.norm(obs.attitude_px[:, 0], axis=1), axis=0)
-
-
 def _platform_bound(obs: Observations, fit: Fit) -> FloatArray:
     """Sigmas of the platform jitter coefficients after a first fit: an axis that moves the
     images mostly along the base (pitch, for along-track stereo) is told from the starting
@@ -649,22 +608,52 @@ def _platform_bound(obs: Observations, fit: Fit) -> FloatArray:
     the sigma :func:`_along_jitter_sigmas` gives from the amplitude the other axes found
     across the base at that frequency (the true models of a simulated pair took 0.1-0.5
     urad of pitch jitter from the DEM without it: NMAD 0.19 -> 0.44 m)."""
-    sigma = _platform_sigmas(obs, len(fit.platform_hz)).reshape(3, -1)
-    rad = np.asarray(fit.platform_rad).reshape(3, -1, 2)
-    px_per_rad = _px_per_rad(obs)
-    a_right = obs.attitude_px[:, 0]  # (N, 2, 3)
-    along = np.median(np.abs(np.einsum("j,njk->nk", _base_direction(obs), a_right)), axis=0)
-    along_like = along > 0.5 * px_per_rad
-    amplitude_px = np.hypot(rad[..., 0], rad[..., 1]) * px_per_rad[:, None]  # (3, F)
-    bound_px = _along_bound_px(np.sqrt(np.sum(amplitude_px[~along_like] ** 2, axis=0)))
+    rad = np.asarray(fit.platform_rad).reshape(-1, 3, len(fit.platform_hz), 2)
+    sigma = platform_sigmas(obs, len(fit.platform_hz), rad.shape[0], JITTER_SIGMA_PX).reshape(
+        -1, 3, rad.shape[2], 2
+    )
+    per_rad = px_per_rad(obs)
+    along_like = along_axes(obs)
+    amplitude_px = np.hypot(rad[..., 0], rad[..., 1]) * per_rad[None, :, None]  # (images, 3, F)
+    across = amplitude_px[:, ~along_like]
+    bound_px = _along_bound_px(np.sqrt(np.sum(across**2, axis=(0, 1)) / rad.shape[0]))
     for a in np.flatnonzero(along_like):
-        sigma[a, 0::2] = sigma[a, 1::2] = bound_px / max(px_per_rad[a], 1e-3)
+        sigma[:, a] = (bound_px / max(per_rad[a], 1e-3))[None, :, None]
     return sigma.ravel()
 
 
-def has_platform(obs: Observations) -> bool:
-    """Whether ``obs`` carry a platform's attitude partials."""
-    return bool(obs.attitude_px.size and np.any(obs.attitude_px[:, 0]))
+FIXED_SIGMA_PX = 1e-6
+"""Sigma, px, that holds the along-base axes' platform terms where :func:`along_wiener` set
+them (the fit refits the rest under them)."""
+
+
+def _with_along_wiener(
+    obs: Observations, keep: NDArray[np.bool_], basis: LineBasis, fit: Fit, again: tuple
+) -> tuple[Observations, Fit, AlongWiener, FloatArray]:
+    """The along-base axes' platform jitter estimated per frequency (:func:`along_wiener`,
+    ``RelativeOrientationSettings.platform_along="wiener"``), the rest refitted under it
+    (``again``: :func:`_fit`'s ``datum, settings, along_jitter``). Returns the observations
+    less those terms (what the later steps fit), the fit (its ``platform_rad`` with them),
+    the terms (:class:`AlongWiener`) and the platform sigmas that hold them."""
+    hz = fit.platform_hz
+    shape = fit.platform_rad.shape
+    rad = np.asarray(fit.platform_rad).reshape(-1, 3, len(hz), 2)
+    held = np.zeros_like(rad)
+    on = along_axes(obs)
+    held[:, on] = rad[:, on]
+    design = platform_design(obs, hz, None, rad.shape[0] == 2)
+    along, _ = residuals_px(obs, basis, fit)
+    u, _, _ = base_axes(obs.parallax)
+    along = along + np.einsum("ij,ij->i", u, design @ held.ravel())
+    found = along_wiener(obs.subset(keep), hz, along[keep], rad.shape[0])
+    less = attrs.evolve(obs, residual=obs.residual - design @ found.rad.ravel())
+    sigma = platform_sigmas(obs, len(hz), rad.shape[0], JITTER_SIGMA_PX).reshape(
+        rad.shape[0], 3, -1
+    )
+    sigma[:, on] = FIXED_SIGMA_PX / np.maximum(px_per_rad(obs)[on], 1e-3)[None, :, None]
+    fit = _fit(less.subset(keep), basis, fit.noise, *again, hz, sigma.ravel())
+    rad_all = np.asarray(fit.platform_rad).ravel() + found.rad.ravel()
+    return less, attrs.evolve(fit, platform_rad=rad_all.reshape(shape)), found, sigma.ravel()
 
 
 def correction_px(obs: Observations, basis: LineBasis, fit: Fit) -> FloatArray:
@@ -681,10 +670,11 @@ def correction_px(obs: Observations, basis: LineBasis, fit: Fit) -> FloatArray:
         x = (obs.sample - fit.tilt_centre_sample) / 1000.0
         model = model + x[:, None] * fit.tilt_px[None, :]
     if fit.platform_rad is not None and fit.platform_rad.size:
-        spl = _seconds_per_line(obs)
+        spl = seconds_per_line(obs)
         for start in range(0, obs.line.size, FIT_CHUNK_ROWS):
             part = slice(start, start + FIT_CHUNK_ROWS)
-            design = platform_design(obs.subset(part), fit.platform_hz, spl)
+            per_image = fit.platform_rad.ndim == 3
+            design = platform_design(obs.subset(part), fit.platform_hz, spl, per_image)
             model[part] += design @ fit.platform_rad.ravel()
     return model
 

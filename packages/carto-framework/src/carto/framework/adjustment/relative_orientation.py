@@ -127,6 +127,7 @@ from carto.framework.adjustment.pair_observations import (
     platform_of,
     ties_to_observations,
 )
+from carto.framework.adjustment.platform_jitter import image_rad
 from carto.framework.errors import InputError
 from carto.framework.geometry.line_correction import LineBasis, LineCorrected
 from carto.framework.geometry.sensor import Sensor
@@ -225,17 +226,24 @@ def _platform_record(fit: Any) -> dict[str, Any] | None:
 
     if fit.platform_rad is None or not fit.platform_rad.size:
         return None
-    amplitude = np.hypot(fit.platform_rad[:, 0::2], fit.platform_rad[:, 1::2]) * 1e6
+
+    def amplitudes(rad: FloatArray) -> dict[str, list[float]]:
+        amplitude = np.hypot(rad[:, 0::2], rad[:, 1::2]) * 1e6
+        return {axis: np.round(amplitude[k], 4).tolist() for k, axis in enumerate(AXES)}
+
+    per_image = fit.platform_rad.ndim == 3
     return {
         "frequencies_hz": [round(f, 3) for f in fit.platform_hz],
-        "amplitude_urad": {axis: np.round(amplitude[k], 4).tolist() for k, axis in enumerate(AXES)},
+        "amplitude_urad": amplitudes(image_rad(fit.platform_rad, 0)),
+        **({"left_amplitude_urad": amplitudes(fit.platform_rad[1])} if per_image else {}),
+        **({"along_wiener": fit.platform_along} if fit.platform_along else {}),
     }
 
 
 TIE_TEMPLATE_PX = 15
 """The tie points' matching template, ortho pixels at the images' ground sampling (about a
 line): jitter of a period near it is seen attenuated (:func:`~carto.framework.adjustment.
-pair_correction.window_gain`). On a simulated ``--errors full`` pair (hilly-0), modelling it
+platform_jitter.window_gain`). On a simulated ``--errors full`` pair (hilly-0), modelling it
 took the DEM error the orientation leaves from 0.73 m NMAD (measured by hand before) to
 0.68 m (``benchmarks/results/orientation_limit.json``)."""
 
@@ -283,8 +291,9 @@ def relative_orientation(
     basis, fit, keep = estimate_correction(obs, n_lines, kind, datum, settings)
     left_corrected, right_jittered = left, right
     if platform is not None and fit.platform_rad is not None and fit.platform_rad.size:
-        left_corrected = with_platform_jitter(left, platform, fit.platform_hz, fit.platform_rad)
-        right_jittered = with_platform_jitter(right, platform, fit.platform_hz, fit.platform_rad)
+        hz, rad = fit.platform_hz, fit.platform_rad
+        left_corrected = with_platform_jitter(left, platform, hz, image_rad(rad, 1))
+        right_jittered = with_platform_jitter(right, platform, hz, image_rad(rad, 0))
     corrected = LineCorrected(
         right_jittered, basis, fit.coefficients, fit.tilt_px, fit.tilt_centre_sample
     )
