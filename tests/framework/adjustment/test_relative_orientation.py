@@ -331,6 +331,25 @@ def test_settings_are_checked():
         ro.RelativeOrientationSettings(knot_lines=0)
     with pytest.raises(Exception, match="band_factor must be one of binned, spectral"):
         ro.RelativeOrientationSettings(band_factor="median")
+    with pytest.raises(Exception, match="platform_along must be one of bound, wiener"):
+        ro.RelativeOrientationSettings(platform_along="loose")
+    with pytest.raises(Exception, match="platform_jitter must be true or false"):
+        ro.RelativeOrientationSettings(platform_jitter="false")
+
+
+def test_dem_takes_relative_orientation_settings_as_a_mapping():
+    from carto.framework.errors import UsageError
+    from carto.framework.workflows.dem import _checked_datum
+
+    settings, _ = _checked_datum(
+        {"mode": "line", "platform_jitter": False}, "none", 10.0, "ellipsoid", None
+    )
+    assert settings == ro.RelativeOrientationSettings(mode="line", platform_jitter=False)
+    assert _checked_datum("shift", "none", 10.0, "ellipsoid", None)[0].mode == "shift"
+    with pytest.raises(UsageError, match=r"unknown setting.* platform_jiter"):
+        _checked_datum({"platform_jiter": False}, "none", 10.0, "ellipsoid", None)
+    with pytest.raises(UsageError, match="--relative-orientation must be one of"):
+        _checked_datum({"mode": "bogus"}, "none", 10.0, "ellipsoid", None)
 
 
 @pytest.mark.parametrize(("datum", "platform_jitter"), [("dem", False), ("models", True)])

@@ -150,7 +150,7 @@ def dem_product(
     workers: int | None = None,
     scheduler: str | None = None,
     resume: bool = False,
-    relative_orientation: str = "auto",
+    relative_orientation: str | Mapping[str, Any] = "auto",
     coregister: str | os.PathLike[str] | None = "auto",
     coregister_accuracy_m: float = 10.0,
 ) -> dict[str, Any]:
@@ -176,7 +176,9 @@ def dem_product(
     (:func:`carto.framework.files.staging.staged_folder`).
     Before the generator runs, the right image is corrected to the left one
     (``relative_orientation``: a mode of
-    :data:`~carto.framework.adjustment.relative_orientation.MODES`, see
+    :data:`~carto.framework.adjustment.relative_orientation.MODES`, or the fields of
+    :class:`~carto.framework.adjustment.relative_orientation.RelativeOrientationSettings` as a
+    mapping, e.g. ``{"mode": "line", "platform_jitter": False}``; see
     :func:`~carto.framework.adjustment.relative_orientation.relative_orientation`). The DEM
     is then co-registered (``coregister``: ``"auto"``, ``"none"`` or a reference DEM file,
     :func:`~carto.framework.workflows.dem_datum.coregistered`; a move beyond
@@ -226,7 +228,7 @@ class _DemRun:
     vertical: str
     settings: dict[str, Any]
     allow_poor: bool
-    relative_orientation: str
+    relative_orientation: str | Mapping[str, Any]
     ro_settings: RelativeOrientationSettings
     coregister: str | Path
     coregister_accuracy_m: float
@@ -260,7 +262,11 @@ class _DemRun:
             "settings": {k: str(v) for k, v in sorted(self.settings.items())},
             "allow_poor": self.allow_poor,
             "vertical": self.vertical,
-            "relative_orientation": self.relative_orientation,
+            "relative_orientation": (
+                self.relative_orientation
+                if isinstance(self.relative_orientation, str)
+                else {k: self.relative_orientation[k] for k in sorted(self.relative_orientation)}
+            ),
             "coregister": str(self.coregister),
             "coregister_accuracy_m": self.coregister_accuracy_m,
         }
@@ -303,7 +309,7 @@ def _staged_run(
 
 
 def _checked_datum(
-    relative_orientation: str,
+    relative_orientation: str | Mapping[str, Any],
     coregister: str | os.PathLike[str] | None,
     coregister_accuracy_m: float,
     vertical: str,
@@ -312,8 +318,17 @@ def _checked_datum(
     """The relative orientation's settings and the co-registration's choice
     (:func:`~carto.framework.workflows.dem_datum.resolve_coregister`) of a run, its datum
     arguments checked (a :class:`UsageError` for a bad one)."""
+    if isinstance(relative_orientation, str):
+        relative_orientation = {"mode": relative_orientation}
+    known = {f.name for f in attrs.fields(RelativeOrientationSettings)}
+    unknown = sorted(set(relative_orientation) - known)
+    if unknown:
+        raise UsageError(
+            f"relative orientation: unknown setting(s) {', '.join(unknown)} "
+            f"(known: {', '.join(sorted(known))})"
+        )
     try:
-        ro_settings = RelativeOrientationSettings(mode=relative_orientation)
+        ro_settings = RelativeOrientationSettings(**relative_orientation)
     except InputError as exc:
         raise UsageError(str(exc)) from None
     choice = resolve_coregister(coregister)
