@@ -451,8 +451,8 @@ def estimate_correction(
     held, record = np.zeros(0), None
     if wiener:
         again = (datum, settings, bound)
-        obs, fit, found, p_bound = _with_along_wiener(obs, keep, basis, fit, again)
-        held, record = found.rad.ravel(), found.record()
+        obs, fit, pitch, p_bound = _with_along_wiener(obs, keep, basis, fit, again)
+        held, record = pitch.rad.ravel(), pitch.record()
         fit = _less_platform(fit, held)
     if kind == "line" and basis.n_spline > 1:
         fit = _with_slow_shape(obs, keep, basis, fit, (datum, settings, bound, hz, p_bound))
