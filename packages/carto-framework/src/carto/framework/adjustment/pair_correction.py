@@ -23,11 +23,13 @@ from carto.framework.adjustment.along_shape import (
 from carto.framework.adjustment.band_factor import band_factor
 from carto.framework.adjustment.pair_observations import Noise, Observations, axes, base_axes
 from carto.framework.adjustment.platform_jitter import (
+    JITTER_SIGMA_PX,
     AlongWiener,
     along_axes,
     along_wiener,
     has_platform,
     platform_design,
+    platform_px,
     platform_sigmas,
     px_per_rad,
     refined_hz,
@@ -180,9 +182,6 @@ SHAPE_SIGMA_PX = 0.25
 """A-priori sigma of the change of the spline between neighbouring coefficients, px: slow
 attitude wander (0.0002 deg of 15-90 s periods moves a Cartosat-1 point by about a pixel)
 changes by a fraction of a pixel over a knot spacing of 0.6 s."""
-JITTER_SIGMA_PX = 0.3
-"""A-priori sigma of each jitter sine and cosine coefficient, px (jitter of a few tenths of a
-pixel; the prior keeps a frequency the DEM's errors alone pretend to see small)."""
 SHAPE_ACROSS_RATIO = 1.5
 """An along-base jitter term's sigma is this times the amplitude found across the base at its
 frequency (:func:`_along_bound_px`; the along-base shape's signal has the same bound,
@@ -648,12 +647,14 @@ def _with_along_wiener(
     held = np.zeros_like(rad)
     on = along_axes(obs)
     held[:, on] = rad[:, on]
-    design = platform_design(obs, hz, None, rad.shape[0] == 2)
     along, _ = residuals_px(obs, basis, fit)
     u, _, _ = base_axes(obs.parallax)
-    along = along + np.einsum("ij,ij->i", u, design @ held.ravel())
+    along = along + np.einsum(
+        "ij,ij->i", u, platform_px(obs, hz, held.reshape(shape), FIT_CHUNK_ROWS)
+    )
     found = along_wiener(obs.subset(keep), hz, along[keep], rad.shape[0])
-    less = attrs.evolve(obs, residual=obs.residual - design @ found.rad.ravel())
+    found_px = platform_px(obs, hz, found.rad.reshape(shape), FIT_CHUNK_ROWS)
+    less = attrs.evolve(obs, residual=obs.residual - found_px)
     sigma = platform_sigmas(obs, len(hz), rad.shape[0], JITTER_SIGMA_PX).reshape(
         rad.shape[0], 3, -1
     )
@@ -676,14 +677,7 @@ def correction_px(obs: Observations, basis: LineBasis, fit: Fit) -> FloatArray:
     if fit.tilt_px.any():
         x = (obs.sample - fit.tilt_centre_sample) / 1000.0
         model = model + x[:, None] * fit.tilt_px[None, :]
-    if fit.platform_rad is not None and fit.platform_rad.size:
-        spl = seconds_per_line(obs)
-        for start in range(0, obs.line.size, FIT_CHUNK_ROWS):
-            part = slice(start, start + FIT_CHUNK_ROWS)
-            per_image = fit.platform_rad.ndim == 3
-            design = platform_design(obs.subset(part), fit.platform_hz, spl, per_image)
-            model[part] += design @ fit.platform_rad.ravel()
-    return model
+    return model + platform_px(obs, fit.platform_hz, fit.platform_rad, FIT_CHUNK_ROWS)
 
 
 def residuals_px(obs: Observations, basis: LineBasis, fit: Fit) -> tuple[FloatArray, FloatArray]:

@@ -23,6 +23,11 @@ NOISE_OFFSETS = (-8, -7, -6, -5, -4, -3, 3, 4, 5, 6, 7, 8)
 """Where :func:`along_wiener` measures the DEM rows' noise at a jitter frequency: at these
 multiples of the tie points' resolution (one cycle over their lines) either side of it, so
 that the jitter's own sidelobes (1/(pi m) of its amplitude) stay small."""
+JITTER_SIGMA_PX = 0.3
+"""A-priori sigma of each jitter sine and cosine coefficient, px (jitter of a few tenths of a
+pixel; the prior keeps a frequency the DEM's errors alone pretend to see small)."""
+DESIGN_CHUNK_ROWS = 65536
+"""Rows whose :func:`platform_design` is formed at once (:func:`platform_px`)."""
 NUISANCE_PERIODS = 2.0
 """:func:`along_wiener`'s nuisance spline has knots this many of the slowest jitter period
 apart (the slow wander and the DEM's long-wave error, kept out of the jitter's estimate)."""
@@ -59,6 +64,25 @@ def platform_design(
     # (N, image, axis_img, axis_att) x (N, image, 2F) -> (N, axis_img, [image,] axis_att, 2F)
     spec = "nika,nif->nkiaf" if per_image else "nika,nif->nkaf"
     return np.einsum(spec, obs.attitude_px, waves).reshape(n, 2, -1)
+
+
+def platform_px(
+    obs: Observations,
+    hz: Sequence[float],
+    rad: FloatArray | None,
+    chunk_rows: int = DESIGN_CHUNK_ROWS,
+) -> FloatArray:
+    """``(N, 2)``: how the jitter ``rad`` (a fit's ``platform_rad``, :func:`image_rad`) at
+    ``hz`` moves each row's right residual, its design formed ``chunk_rows`` rows at a time
+    (a whole pair's 1.9 M points at 8 frequencies per image would take 2.9 GB at once)."""
+    out = np.zeros((obs.line.size, 2))
+    if not hz or rad is None or not rad.size:
+        return out
+    period, per_image = seconds_per_line(obs), rad.ndim == 3
+    for start in range(0, obs.line.size, chunk_rows):
+        part = slice(start, start + chunk_rows)
+        out[part] = platform_design(obs.subset(part), tuple(hz), period, per_image) @ rad.ravel()
+    return out
 
 
 def image_rad(rad: FloatArray, image: int) -> FloatArray:
@@ -108,8 +132,6 @@ REFINE_HALF_WIDTH_HZ = 0.03
 """The platform frequency is searched this far either side of the periodogram's peak."""
 REFINE_STEP_HZ = 0.0005
 """The search step: a phase step of 0.16 rad over the 52 s between Cartosat-1's views."""
-REFINE_SIGMA_PX = 0.3
-"""The a-priori sigma, px, of the coefficients fitted for each candidate frequency."""
 
 
 def refined_hz(
@@ -137,9 +159,9 @@ def refined_hz(
     s_along, s_across = obs.sigmas(noise)
     own = np.zeros_like(rad)
     own[:, :, k] = rad[:, :, k]
-    rest = rest_px + platform_design(obs, tuple(hz), None, per_image) @ own.ravel()
+    rest = rest_px + platform_px(obs, hz, own.reshape(jitter[1].shape))
     y = np.r_[np.einsum("ij,ij->i", u, rest) / s_along, np.einsum("ij,ij->i", v, rest) / s_across]
-    prior = np.diag(1.0 / platform_sigmas(obs, 1, rad.shape[0], REFINE_SIGMA_PX) ** 2)
+    prior = np.diag(1.0 / platform_sigmas(obs, 1, rad.shape[0], JITTER_SIGMA_PX) ** 2)
     period = seconds_per_line(obs)  # once, not per candidate
     half, step = REFINE_HALF_WIDTH_HZ, REFINE_STEP_HZ
     if per_image:
@@ -218,19 +240,26 @@ def along_wiener(
         return d - q @ (q.T @ d)
 
     y = along_px[rows] - q @ (q.T @ along_px[rows])
-    at = [columns(f) for f in hz]
-    n_c = at[0].shape[1]
-    x = np.linalg.lstsq(np.hstack(at), y, rcond=None)[0].reshape(n_f, n_c)
+    a = np.hstack([columns(f) for f in hz])
+    n_c = a.shape[1] // n_f
+    normal, rhs = a.T @ a, a.T @ y
+    x = np.linalg.lstsq(normal, rhs, rcond=None)[0].reshape(n_f, n_c)
     df_hz = 1.0 / (span * period_s)
     amplitude, noise, gains = [], [], []
     for k, f in enumerate(hz):
         power = []
+        block = slice(k * n_c, (k + 1) * n_c)
         for m in NOISE_OFFSETS:
             g = f + m * df_hz
             if g <= 0 or any(abs(g - h) < 1.5 * df_hz for j, h in enumerate(hz) if j != k):
                 continue
-            trial = [*at[:k], columns(g), *at[k + 1 :]]
-            x_m = np.linalg.lstsq(np.hstack(trial), y, rcond=None)[0].reshape(n_f, n_c)
+            c = columns(g)  # frequency k's columns moved to g, the normal equations updated
+            trial, trial_rhs = normal.copy(), rhs.copy()
+            trial[block] = c.T @ a
+            trial[:, block] = trial[block].T
+            trial[block, block] = c.T @ c
+            trial_rhs[block] = c.T @ y
+            x_m = np.linalg.lstsq(trial, trial_rhs, rcond=None)[0].reshape(n_f, n_c)
             power.append(float(np.sum(x_m[k] ** 2)))
         p = float(np.sum(x[k] ** 2))
         # the median of a chi-square of n_c terms is about n_c (1 - 2 / (9 n_c))^3 sigma^2
