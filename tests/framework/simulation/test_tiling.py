@@ -163,3 +163,39 @@ def test_a_full_scene_grid_is_accepted_and_its_lattices_are_bounded():
     values, _ = ground.window(10_000, 10_100, 20_000, 20_300)
     assert values.shape == (100, 300)
     assert np.isfinite(values).all()
+
+
+def test_true_ortho_blocks_are_those_an_outline_reaches():
+    """The true ortho-image's blocks kept for a thin, tilted strip: every block a point of
+    the strip (inside or on its edge, sampled densely) falls in is kept, plus the margin;
+    blocks far from it are not."""
+    import pyproj
+
+    from carto.framework.simulation import scene_tiles as st
+
+    crs = "EPSG:32643"
+    to_utm = pyproj.Transformer.from_crs("EPSG:4326", crs, always_xy=True)
+    to_lonlat = pyproj.Transformer.from_crs(crs, "EPSG:4326", always_xy=True)
+    # a 30 km x 200 m strip, tilted 8 degrees, in a grid of 2.5 m pixels
+    u, v = np.meshgrid(np.linspace(0, 30_000, 3001), np.linspace(0, 200, 21))
+    tilt = math.radians(8.0)
+    x = 500_000 + u * math.cos(tilt) - v * math.sin(tilt)
+    y = 3_000_000 - u * math.sin(tilt) - v * math.cos(tilt)
+    ring_u = np.r_[np.linspace(0, 30_000, 50), np.full(5, 30_000), np.linspace(30_000, 0, 50)]
+    ring_v = np.r_[np.zeros(50), np.linspace(0, 200, 5), np.full(50, 200)]
+    rx = 500_000 + ring_u * math.cos(tilt) - ring_v * math.sin(tilt)
+    ry = 3_000_000 - ring_u * math.sin(tilt) - ring_v * math.cos(tilt)
+    outline = to_lonlat.transform(rx, ry)
+    grid = (499_000.0, 3_001_000.0, 2.5)
+    shape = (3000, 14000)
+    kept = st._covered_blocks(to_utm, grid, shape, [tuple(map(np.asarray, outline))], 0)
+    rows = ((grid[1] - y) / grid[2]).astype(int) // st.ORTHO_STRIP_ROWS
+    cols = ((x - grid[0]) / grid[2]).astype(int) // st.ORTHO_BLOCK_COLS
+    reached = np.zeros_like(kept)
+    reached[rows.ravel(), cols.ravel()] = True
+    assert kept[reached].all()
+    assert kept.sum() <= reached.sum() + 2 * kept.shape[1]  # the cell grid adds little
+    assert kept.sum() < 0.5 * kept.size
+    # a margin of one block keeps the neighbours too
+    grown = st._covered_blocks(to_utm, grid, shape, [tuple(map(np.asarray, outline))], 256)
+    assert grown[np.roll(reached, 1, axis=0)].all()

@@ -379,3 +379,26 @@ def test_cli_error_size_and_platform_seed(run_carto, tmp_path):
         assert words in bad.stderr
         assert "Traceback" not in bad.stderr
         assert not (tmp_path / "x").exists()
+
+
+def test_the_true_ortho_covers_every_pixel_the_images_see(cartosat1_scene):
+    """The true ortho-image is resampled only where the images see the ground (plus a
+    margin): every pixel of either image, located on the true DEM with its true model (and
+    pyproj into the ortho's grid), falls on a value."""
+    ortho_ds = rasterio.open(cartosat1_scene / "truth/ortho.tif")
+    ortho = ortho_ds.read(1)
+    dem = DEM.open(cartosat1_scene / "truth/dem.tif")
+    import pyproj
+
+    to_grid = pyproj.Transformer.from_crs("EPSG:4326", ortho_ds.crs, always_xy=True)
+    rng = np.random.default_rng(0)
+    for name in ("fore", "aft"):
+        truth = LineScanner.load(cartosat1_scene / f"truth/{name}.model.json")
+        lines, samples = truth.image_shape
+        edge = np.r_[0.0, lines].repeat(500)
+        line = np.r_[rng.uniform(0, lines, 4000), edge]
+        sample = np.r_[rng.uniform(0, samples, 4000), rng.uniform(0, samples, edge.size)]
+        lon, lat, _ = truth.locate_on_dem(line, sample, dem)
+        x, y = to_grid.transform(lon, lat)
+        rows, cols = rasterio.transform.rowcol(ortho_ds.transform, x, y)
+        assert np.isfinite(ortho[np.asarray(rows), np.asarray(cols)]).all(), name

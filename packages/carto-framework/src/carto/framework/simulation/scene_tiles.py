@@ -41,6 +41,8 @@ ORTHO_STRIP_ROWS = 256
 """Rows of the true ortho-image computed and written at a time."""
 ORTHO_BLOCK_COLS = 2048
 """Columns of the true ortho-image resampled from one texture window."""
+ORTHO_MARGIN_PX = 64
+"""How far beyond the images' ground the true ortho-image is resampled (pixels)."""
 
 
 @contextmanager
@@ -303,28 +305,137 @@ def _block_bounds(
     return float(np.min(lon)), float(np.min(lat)), float(np.max(lon)), float(np.max(lat))
 
 
-def write_true_ortho(
-    path: Path, ground: Any, bounds: Bounds, gsd_m: float, *, quiet: bool = False
-) -> Path:
-    """The texture (reflectance) resampled (average) to a UTM grid at the GSD over
-    ``bounds``, by strips of rows, each from the texture window under it; GDAL warps and
-    compresses on every core (the same pixels and bytes as on one)."""
-    import os
+def footprint_outlines(
+    sensors: dict[str, LineScanner], h_range: tuple[float, float]
+) -> list[tuple[FloatArray, FloatArray]]:
+    """Lon/lat outlines (closed rings of 96 points) of the ground each image sees at the
+    lowest and the highest height of ``h_range``: together they bound every pixel's ground."""
+    outlines = []
+    for sensor in sensors.values():
+        n_lines, n_samples = sensor.image_shape
+        along = np.linspace(-8.0, n_lines + 8.0, 17)
+        across = np.linspace(0.0, float(n_samples), 33)
+        line = np.concatenate([np.full(33, along[0]), along, np.full(33, along[-1]), along[::-1]])
+        sample = np.concatenate(
+            [across, np.full(17, across[-1]), across[::-1], np.full(17, across[0])]
+        )
+        for h in (h_range[0] - 2.0, h_range[1] + 2.0):
+            lon, lat = sensor.image_to_ground(line, sample, np.full(line.size, h))
+            outlines.append((lon, lat))
+    return outlines
 
+
+def _covered_blocks(
+    to_utm: Any,
+    grid: tuple[float, float, float],
+    shape: tuple[int, int],
+    outlines: list[tuple[FloatArray, FloatArray]],
+    margin_px: int,
+) -> NDArray[np.bool_]:
+    """Which blocks (``ORTHO_STRIP_ROWS`` x ``ORTHO_BLOCK_COLS``) of a UTM grid ``(x0, y1,
+    gsd_m)`` of ``shape`` come within ``margin_px`` of an outline (inside or on it): the
+    outlines drawn and filled on cells of 1/8 block, grown by the margin, then pooled."""
+    import cv2
+
+    x0, y1, gsd_m = grid
+    cell = (ORTHO_STRIP_ROWS // 8, ORTHO_BLOCK_COLS // 8)
+    n_blocks = (-(-shape[0] // ORTHO_STRIP_ROWS), -(-shape[1] // ORTHO_BLOCK_COLS))
+    cells = np.zeros((n_blocks[0] * 8, n_blocks[1] * 8), np.uint8)
+    for lon, lat in outlines:
+        ok = np.isfinite(lon) & np.isfinite(lat)
+        if not ok.any():
+            return np.ones(n_blocks, bool)  # an outline off the Earth: keep every block
+        x, y = to_utm.transform(lon[ok], lat[ok])
+        # cell (i, j) is [i, i + 1) x [j, j + 1) here, centred on (i, j) for OpenCV
+        col = (np.asarray(x) - x0) / gsd_m / cell[1] - 0.5
+        row = (y1 - np.asarray(y)) / gsd_m / cell[0] - 0.5
+        points = np.round(np.stack([col, row], axis=1) * 16).astype(np.int32)[None]  # 4 bits
+        cv2.fillPoly(cells, points, 1, shift=4)
+        cv2.polylines(cells, points, True, 1, shift=4)
+    # at least one cell: OpenCV's rounding of the outline's pixels
+    grow = (max(1, math.ceil(margin_px / cell[1])), max(1, math.ceil(margin_px / cell[0])))
+    kernel = np.ones((2 * grow[1] + 1, 2 * grow[0] + 1), np.uint8)
+    cells = cv2.dilate(cells, kernel)
+    return cells.reshape(n_blocks[0], 8, n_blocks[1], 8).any(axis=(1, 3))
+
+
+def _ortho_grid(bounds: Bounds, gsd_m: float) -> tuple[Any, tuple[float, float, int, int]]:
+    """The UTM CRS of ``bounds``' centre and ``(x0, y1, nx, ny)``: the west and north edges
+    (multiples of ``gsd_m``) and the size of the grid covering ``bounds``."""
     import pyproj
-    from affine import Affine
-    from rasterio.warp import Resampling, reproject
 
     west, south, east, north = bounds
-    lon_c, lat_c = 0.5 * (west + east), 0.5 * (south + north)
-    crs = utm_crs(lon_c, lat_c)
+    crs = utm_crs(0.5 * (west + east), 0.5 * (south + north))
     to_utm = pyproj.Transformer.from_crs("EPSG:4326", crs, always_xy=True)
-    to_lonlat = pyproj.Transformer.from_crs(crs, "EPSG:4326", always_xy=True)
     xs, ys = to_utm.transform([west, east, west, east], [south, south, north, north])
     x0 = math.floor(min(xs) / gsd_m) * gsd_m
     y1 = math.ceil(max(ys) / gsd_m) * gsd_m
     nx = math.ceil((max(xs) - x0) / gsd_m)
     ny = math.ceil((y1 - min(ys)) / gsd_m)
+    return crs, (x0, y1, nx, ny)
+
+
+def _true_ortho_block(
+    ground: Any,
+    to_lonlat: Any,
+    grid: tuple[float, float, float],
+    block: tuple[int, int, int, int],
+    wkt: str,
+) -> NDArray[np.float32]:
+    """The pixels ``block = (r0, r1, c0, c1)`` of the true ortho's UTM grid ``(x0, y1,
+    gsd_m)``: the texture window under them averaged by GDAL (NaN off the texture)."""
+    import os
+
+    from affine import Affine
+    from rasterio.warp import Resampling, reproject
+
+    x0, y1, gsd_m = grid
+    r0, r1, c0, c1 = block
+    out = np.full((r1 - r0, c1 - c0), np.nan, np.float32)
+    win = grid_window(ground.transform, ground.shape, _block_bounds(to_lonlat, grid, block), 4)
+    if win is None:
+        return out
+    values, _ = ground.window(*win)
+    reproject(
+        values,
+        out,
+        src_transform=_sub_transform(ground.transform, win[0], win[2]),
+        src_crs="EPSG:4326",
+        dst_transform=Affine(gsd_m, 0.0, x0 + c0 * gsd_m, 0.0, -gsd_m, y1 - r0 * gsd_m),
+        dst_crs=wkt,
+        resampling=Resampling.average,
+        src_nodata=np.nan,
+        dst_nodata=np.nan,
+        num_threads=os.cpu_count() or 1,
+    )
+    return out
+
+
+def write_true_ortho(
+    path: Path,
+    ground: Any,
+    bounds: Bounds,
+    gsd_m: float,
+    *,
+    outlines: list[tuple[FloatArray, FloatArray]] | None = None,
+    quiet: bool = False,
+) -> Path:
+    """The texture (reflectance) resampled (average) to a UTM grid at the GSD over
+    ``bounds``, by strips of rows, each from the texture window under it; GDAL warps and
+    compresses on every core (the same pixels and bytes as on one).
+
+    With ``outlines`` (:func:`footprint_outlines`), only the blocks within
+    ``ORTHO_MARGIN_PX`` of the images' ground are resampled, the others left without
+    value: a narrow window across a tilted track no longer pays for its whole bounding box
+    (a 12000 x 80 px window: about 20 times its footprint)."""
+    import os
+
+    import pyproj
+    from affine import Affine
+
+    crs, (x0, y1, nx, ny) = _ortho_grid(bounds, gsd_m)
+    to_utm = pyproj.Transformer.from_crs("EPSG:4326", crs, always_xy=True)
+    to_lonlat = pyproj.Transformer.from_crs(crs, "EPSG:4326", always_xy=True)
     dst_transform = Affine(gsd_m, 0.0, x0, 0.0, -gsd_m, y1)
     strips = range(0, ny, ORTHO_STRIP_ROWS)
     wkt = crs.to_wkt()
@@ -334,6 +445,11 @@ def write_true_ortho(
         "beyond the texture's), ortho on truth",
     }
     threads = os.cpu_count() or 1
+    covered = (
+        np.ones((len(strips), -(-nx // ORTHO_BLOCK_COLS)), bool)
+        if outlines is None
+        else _covered_blocks(to_utm, (x0, y1, gsd_m), (ny, nx), outlines, ORTHO_MARGIN_PX)
+    )
     with (
         raster_writer(
             path,
@@ -348,30 +464,16 @@ def write_true_ortho(
         ) as dst,
         stage_bar(len(strips), "true ortho", quiet=quiet, unit="strip") as bar,
     ):
-        for r0 in strips:
+        for i, r0 in enumerate(strips):
             r1 = min(r0 + ORTHO_STRIP_ROWS, ny)
             data = np.full((r1 - r0, nx), np.nan, np.float32)
-            for c0 in range(0, nx, ORTHO_BLOCK_COLS):
+            for j, c0 in enumerate(range(0, nx, ORTHO_BLOCK_COLS)):
                 c1 = min(c0 + ORTHO_BLOCK_COLS, nx)
-                bounds = _block_bounds(to_lonlat, (x0, y1, gsd_m), (r0, r1, c0, c1))
-                win = grid_window(ground.transform, ground.shape, bounds, 4)
-                if win is None:
+                if not covered[i, j]:
                     continue
-                values, _ = ground.window(*win)
-                block = np.full((r1 - r0, c1 - c0), np.nan, np.float32)
-                reproject(
-                    values,
-                    block,
-                    src_transform=_sub_transform(ground.transform, win[0], win[2]),
-                    src_crs="EPSG:4326",
-                    dst_transform=_sub_transform(dst_transform, r0, c0),
-                    dst_crs=wkt,
-                    resampling=Resampling.average,
-                    src_nodata=np.nan,
-                    dst_nodata=np.nan,
-                    num_threads=threads,
+                data[:, c0:c1] = _true_ortho_block(
+                    ground, to_lonlat, (x0, y1, gsd_m), (r0, r1, c0, c1), wkt
                 )
-                data[:, c0:c1] = block
             dst.write(data, 1, window=_window(r0, r1, 0, nx))
             bar.advance()
     return path

@@ -469,10 +469,10 @@ def _write_ancillary(
 
 
 def _write_truth(
-    run: _Run, scene: _TrueScene, drawn: dict[str, Any], ground: Any
+    run: _Run, scene: _TrueScene, drawn: dict[str, Any], truth: _Truth
 ) -> tuple[dict[str, Path], Path]:
     """``truth/``: the true models (their paths relative to ``out``), the true ortho-image
-    and the drawn errors."""
+    (where the images see the ground) and the drawn errors."""
     from carto.framework.simulation import scene_tiles
 
     out = run.out
@@ -482,9 +482,10 @@ def _write_truth(
         models[name] = sensor.save(truth_dir / f"{name}.model.json").relative_to(out)
     ortho = scene_tiles.write_true_ortho(
         truth_dir / "ortho.tif",
-        ground,
+        truth.ground,
         scene.terrain.bounds_lonlat,
         run.plan.gsd_m,
+        outlines=scene_tiles.footprint_outlines(scene.sensors, (truth.h_lo_m, truth.h_hi_m)),
         quiet=run.quiet,
     )
     write_json_atomic(
@@ -601,7 +602,7 @@ def simulate_scene(
         write_point_table(out / "gcps.csv", gcp_rows, precision=15)
         write_point_table(out / "checkpoints.csv", check_rows, precision=15)
         scene_tiles.write_init_dem(out / "init_dem.tif", terrain, streams.init)
-        models, ortho = _write_truth(run, scene, drawn, truth.ground)
+        models, ortho = _write_truth(run, scene, drawn, truth)
     manifest = _manifest(run, scene, _Written(anc_files, models, ortho))
     return write_json_atomic(out / "scene.json", manifest)
 
