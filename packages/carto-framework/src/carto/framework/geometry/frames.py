@@ -217,32 +217,21 @@ ERA_RATE_RAD_S = 2.0 * math.pi * 1.00273781191135448 / SECONDS_PER_DAY
 """Rate of the Earth rotation angle, rad per UT1 second (IAU 2000)."""
 
 
-@functools.cache
-def _iers_table():  # pragma: no cover - exercised through earth_orientation_parameters
-    from astropy.utils import iers
-
-    with iers.conf.set_temp("auto_download", False), iers.conf.set_temp("auto_max_age", None):
-        return iers.IERS_Auto.open()
-
-
 def earth_orientation_parameters(t_s: ArrayLike) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """``(UT1 - UTC seconds, x_pole rad, y_pole rad)`` at ``t_s`` from the IERS tables; zero
-    outside them (see the module docstring)."""
-    from astropy.utils import iers
+    """``(UT1 - UTC seconds, x_pole rad, y_pole rad)`` at ``t_s`` from the IERS tables
+    (:mod:`carto.framework.geometry.iers`, as astropy's ``IERS_Auto``); zero outside them
+    (see the module docstring)."""
+    from carto.framework.geometry.iers import installed_table
 
     t = np.asarray(t_s, dtype=np.float64)
-    jd1 = np.full(t.shape, J2000_JD)
-    jd2 = t / SECONDS_PER_DAY
-    table = _iers_table()
-    with iers.conf.set_temp("auto_download", False), iers.conf.set_temp("auto_max_age", None):
-        dut1, s1 = table.ut1_utc(jd1, jd2, return_status=True)
-        xp, yp, s2 = table.pm_xy(jd1, jd2, return_status=True)
-    inside = (np.asarray(s1) >= 0) & (np.asarray(s2) >= 0)
+    dut1, xp, yp, inside = installed_table().interpolate(
+        np.full(t.shape, J2000_JD), t / SECONDS_PER_DAY
+    )
     arcsec = math.pi / (180.0 * 3600.0)
     return (
-        np.where(inside, np.asarray(dut1.to_value("s"), float), 0.0),
-        np.where(inside, np.asarray(xp.to_value("arcsec"), float) * arcsec, 0.0),
-        np.where(inside, np.asarray(yp.to_value("arcsec"), float) * arcsec, 0.0),
+        np.where(inside, dut1, 0.0),
+        np.where(inside, xp * arcsec, 0.0),
+        np.where(inside, yp * arcsec, 0.0),
     )
 
 
