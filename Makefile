@@ -23,7 +23,7 @@ demo: $(STAMP) bytecode $(KERNELS_STAMP)
 	$(BIN)/carto demo --out $(DEMO_OUT)
 
 test: lint $(TEST_PLUGINS_STAMP) bytecode $(KERNELS_STAMP)
-	$(BIN)/python -m pytest -n 2
+	$(BIN)/python -m pytest -n 2 --dist worksteal
 
 # Bytecode of the editable packages (only what changed): where PYTHONDONTWRITEBYTECODE is set,
 # every `carto` process compiled them again (0.3-0.5 s of each command's start).
