@@ -308,8 +308,10 @@ def _block_bounds(
 def footprint_outlines(
     sensors: dict[str, LineScanner], h_range: tuple[float, float]
 ) -> list[tuple[FloatArray, FloatArray]]:
-    """Lon/lat outlines (closed rings of 96 points) of the ground each image sees at the
-    lowest and the highest height of ``h_range``: together they bound every pixel's ground."""
+    """Lon/lat outlines of the ground each image sees: per image, its border's 100 points at
+    the lowest and at the highest height of ``h_range``. A pixel's ground at any height between
+    lies on the segment between its two points, so within the convex hull of its image's
+    outline."""
     outlines = []
     for sensor in sensors.values():
         n_lines, n_samples = sensor.image_shape
@@ -319,9 +321,9 @@ def footprint_outlines(
         sample = np.concatenate(
             [across, np.full(17, across[-1]), across[::-1], np.full(17, across[0])]
         )
-        for h in (h_range[0] - 2.0, h_range[1] + 2.0):
-            lon, lat = sensor.image_to_ground(line, sample, np.full(line.size, h))
-            outlines.append((lon, lat))
+        h = np.repeat([h_range[0] - 2.0, h_range[1] + 2.0], line.size)
+        lon, lat = sensor.image_to_ground(np.tile(line, 2), np.tile(sample, 2), h)
+        outlines.append((lon, lat))
     return outlines
 
 
@@ -333,8 +335,8 @@ def _covered_blocks(
     margin_px: int,
 ) -> NDArray[np.bool_]:
     """Which blocks (``ORTHO_STRIP_ROWS`` x ``ORTHO_BLOCK_COLS``) of a UTM grid ``(x0, y1,
-    gsd_m)`` of ``shape`` come within ``margin_px`` of an outline (inside or on it): the
-    outlines drawn and filled on cells of 1/8 block, grown by the margin, then pooled."""
+    gsd_m)`` of ``shape`` come within ``margin_px`` of an outline's convex hull: the hulls
+    drawn and filled on cells of 1/8 block, grown by the margin, then pooled."""
     import cv2
 
     x0, y1, gsd_m = grid
@@ -349,9 +351,10 @@ def _covered_blocks(
         # cell (i, j) is [i, i + 1) x [j, j + 1) here, centred on (i, j) for OpenCV
         col = (np.asarray(x) - x0) / gsd_m / cell[1] - 0.5
         row = (y1 - np.asarray(y)) / gsd_m / cell[0] - 0.5
-        points = np.round(np.stack([col, row], axis=1) * 16).astype(np.int32)[None]  # 4 bits
-        cv2.fillPoly(cells, points, 1, shift=4)
-        cv2.polylines(cells, points, True, 1, shift=4)
+        points = np.round(np.stack([col, row], axis=1) * 16).astype(np.int32)  # 4 bits
+        hull = cv2.convexHull(points)
+        cv2.fillConvexPoly(cells, hull, 1, shift=4)
+        cv2.polylines(cells, [hull], True, 1, shift=4)
     # at least one cell: OpenCV's rounding of the outline's pixels
     grow = (max(1, math.ceil(margin_px / cell[1])), max(1, math.ceil(margin_px / cell[0])))
     kernel = np.ones((2 * grow[1] + 1, 2 * grow[0] + 1), np.uint8)
