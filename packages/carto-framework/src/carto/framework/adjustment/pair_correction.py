@@ -38,7 +38,7 @@ from carto.framework.adjustment.platform_jitter import (
 )
 from carto.framework.errors import InputError
 from carto.framework.geometry.line_correction import LineBasis
-from carto.framework.settings import positive_attribute
+from carto.framework.settings import flag, positive_attribute
 
 FloatArray = NDArray[np.float64]
 
@@ -80,11 +80,6 @@ def _check_band_factor(_self: Any, _attr: attrs.Attribute, value: str) -> None:
             f"relative orientation: band_factor must be one of {', '.join(BAND_FACTORS)}, "
             f"got {value!r}"
         )
-
-
-def _check_bool(_self: Any, attr: attrs.Attribute, value: Any) -> None:
-    if not isinstance(value, bool):
-        raise InputError(f"relative orientation: {attr.name} must be true or false, got {value!r}")
 
 
 PLATFORM_ALONG = ("bound", "wiener")
@@ -149,10 +144,10 @@ class RelativeOrientationSettings:
     knot_lines: float = attrs.field(default=256.0, validator=_check_positive)
     max_frequencies: int = attrs.field(default=8, converter=int)
     dem_offset_sigma_m: float = attrs.field(default=4.0, validator=_check_positive)
-    platform_jitter: bool = attrs.field(default=True, validator=_check_bool)
+    platform_jitter: bool = attrs.field(default=True, converter=flag("platform_jitter"))
     band_factor: str = attrs.field(default="binned", validator=_check_band_factor)
     platform_along: str = attrs.field(default="bound", validator=_check_platform_along)
-    jitter_per_image: bool = attrs.field(default=False, validator=_check_bool)
+    jitter_per_image: bool = attrs.field(default=False, converter=flag("jitter_per_image"))
 
 
 SHIFT_SPACING_PX = 32.0

@@ -362,9 +362,10 @@ def _covered_blocks(
     return cells.reshape(n_blocks[0], 8, n_blocks[1], 8).any(axis=(1, 3))
 
 
-def _ortho_grid(bounds: Bounds, gsd_m: float) -> tuple[Any, tuple[float, float, int, int]]:
-    """The UTM CRS of ``bounds``' centre and ``(x0, y1, nx, ny)``: the west and north edges
-    (multiples of ``gsd_m``) and the size of the grid covering ``bounds``."""
+def _ortho_grid(bounds: Bounds, gsd_m: float) -> tuple[Any, Any, tuple[float, float, int, int]]:
+    """The UTM CRS of ``bounds``' centre, the lon/lat -> UTM transformer and ``(x0, y1, nx,
+    ny)``: the west and north edges (multiples of ``gsd_m``) and the size of the grid covering
+    ``bounds``."""
     import pyproj
 
     west, south, east, north = bounds
@@ -375,7 +376,7 @@ def _ortho_grid(bounds: Bounds, gsd_m: float) -> tuple[Any, tuple[float, float, 
     y1 = math.ceil(max(ys) / gsd_m) * gsd_m
     nx = math.ceil((max(xs) - x0) / gsd_m)
     ny = math.ceil((y1 - min(ys)) / gsd_m)
-    return crs, (x0, y1, nx, ny)
+    return crs, to_utm, (x0, y1, nx, ny)
 
 
 def _true_ortho_block(
@@ -436,8 +437,7 @@ def write_true_ortho(
     import pyproj
     from affine import Affine
 
-    crs, (x0, y1, nx, ny) = _ortho_grid(bounds, gsd_m)
-    to_utm = pyproj.Transformer.from_crs("EPSG:4326", crs, always_xy=True)
+    crs, to_utm, (x0, y1, nx, ny) = _ortho_grid(bounds, gsd_m)
     to_lonlat = pyproj.Transformer.from_crs(crs, "EPSG:4326", always_xy=True)
     dst_transform = Affine(gsd_m, 0.0, x0, 0.0, -gsd_m, y1)
     strips = range(0, ny, ORTHO_STRIP_ROWS)
