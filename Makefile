@@ -31,7 +31,7 @@ bytecode: $(STAMP)
 	$(BIN)/python -m compileall -q packages/*/src examples/*/src > /dev/null
 
 # The numba kernels compiled into their caches once the sources changed (set-up, like the
-# bytecode; about 100 s from a fresh clone on 2 cores, in two processes side by side): otherwise
+# bytecode; about 110 s from a fresh clone on 2 cores, in two processes side by side): otherwise
 # the first command, and every test worker at once, compiles them.
 $(KERNELS_STAMP): $(STAMP) $(shell find packages -name '*.py' -path '*/src/*' -not -path '*/__pycache__/*')
 	$(MAKE) --no-print-directory bytecode
