@@ -1,5 +1,6 @@
-"""The compiled ray caster's stages: table interpolation weights, the DEM search tuple, and
-location on a DEM against the model's own image -> ground."""
+"""The compiled ray caster's stages: table interpolation weights, the DEM search tuple,
+location on a DEM against the model's own image -> ground, and the interpolated ray models
+the renderer traces against the exact rays."""
 
 from __future__ import annotations
 
@@ -11,13 +12,26 @@ from affine import Affine
 
 from carto.framework.errors import InputError
 from carto.framework.geometry.linescan.raycast import (
+    QUADRATIC_STEP,
+    RAY_SIZE,
+    STATE_SIZE,
     DemGrid,
+    camera_states,
     dem_grid,
+    interp_time,
+    line_state,
     locate_pixels,
+    quadratic_table,
     ray_dem,
+    state_ray,
     trace_dem,
 )
 from carto.framework.geometry.linescan.solver import lagrange_weights
+from carto.framework.geometry.linescan.terrain_intersection import (
+    MODEL_ERROR_M,
+    interpolated_quadratic,
+    trace_model,
+)
 
 
 def _flat_dem(sensor, h_m: float, crs: str = "EPSG:4326") -> types.SimpleNamespace:
@@ -88,3 +102,37 @@ def test_ray_dem_is_trace_dem_with_loose_arguments(cartosat1_pair):
     local = trace_dem(ray, omega_c, grid)
     assert local[2] == pytest.approx(120.0, abs=1e-4)
     np.testing.assert_allclose(local[:2], loose[:2], atol=1e-8)
+
+
+def test_interpolated_ray_models_meet_the_terrain_where_the_exact_rays_do(cartosat1_pair):
+    """The renderer traces each ray's quadratic model interpolated between the exact models
+    of every QUADRATIC_STEP-th detector (:func:`trace_model`): within MODEL_ERROR_M of the
+    exact ray's intersection (:func:`trace_dem`), on hilly terrain, for the plain and the
+    staggered detectors."""
+    sensor = cartosat1_pair["fore"]
+    flat = _flat_dem(sensor, 400.0)
+    n_rows, n_cols = flat.heights.shape
+    yy, xx = np.mgrid[0:n_rows, 0:n_cols]
+    rough = types.SimpleNamespace(
+        heights=400.0 + 300.0 * np.sin(xx / 7.0) * np.cos(yy / 5.0),  # slopes up to about 0.6
+        transform=flat.transform,
+        crs=flat.crs,
+    )
+    grid = dem_grid(rough)
+    cam = camera_states(sensor)
+    state, ray = np.empty(STATE_SIZE), np.empty(RAY_SIZE)
+    first, n_nodes = 100.25, 40
+    table = np.empty((n_nodes, 11))
+    samples = first + np.linspace(0.0, (n_nodes - 1) * QUADRATIC_STEP, 400, endpoint=False)
+    worst = []
+    for line, stagger in ((1500.75, 0.0), (9000.25, 3e-5)):
+        assert line_state(interp_time(line, cam.line_nodes, cam.t_nodes), cam, state)
+        quadratic_table(first, n_nodes, stagger, cam, grid, state, ray, table)
+        for s in samples:
+            state_ray(s, stagger, cam, state, ray)
+            exact = np.array(trace_dem(tuple(ray[:6]), cam.omega_c, grid))
+            model = np.array(trace_model(interpolated_quadratic(table, n_nodes, first, s), grid))
+            m_per_deg = np.array([111_320.0 * np.cos(np.radians(exact[1])), 110_570.0, 1.0])
+            worst.append(np.abs(model - exact) * m_per_deg)
+    worst = np.max(worst, axis=0)
+    assert np.all(worst < MODEL_ERROR_M), worst

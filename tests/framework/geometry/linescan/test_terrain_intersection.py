@@ -1,7 +1,7 @@
 """Where a ray meets a DEM: the local slope bounds of the safe steps hold on the bilinear
 surface (distances by pyproj's geodesic), and the steps they allow still find the first
 intersection a brute-force march finds (points converted by pyproj, heights interpolated by
-scipy)."""
+scipy), on the exact ray and on its quadratic model alone."""
 
 from __future__ import annotations
 
@@ -14,10 +14,13 @@ from affine import Affine
 from scipy.interpolate import RegularGridInterpolator
 
 from carto.framework.geometry.linescan.terrain_intersection import (
+    MODEL_ERROR_M,
     dem_grid,
     grid_bilinear,
     local_slopes,
+    ray_quadratic,
     trace_dem,
+    trace_model,
 )
 
 _STEP_DEG = 5e-5  # about 5 m
@@ -126,8 +129,11 @@ def test_the_local_steps_find_the_first_intersection(seed):
         tilt = np.tan(np.radians(rng.uniform(-30, 30)))
         origin = target + 700_000.0 * (up + tilt * side) / np.hypot(1.0, tilt)
         u = (target - origin) / np.linalg.norm(target - origin)
-        got = trace_dem((*origin, *u), np.zeros(3), grid)
+        ray = (*origin, *u)
         lon_m, lat_m, h_m = _first_hit(origin, u, dem)
-        assert got[2] == pytest.approx(h_m, abs=2e-3)
-        assert got[0] == pytest.approx(lon_m, abs=1e-8)
-        assert got[1] == pytest.approx(lat_m, abs=1e-8)
+        model = trace_model(ray_quadratic(ray, np.zeros(3), grid.h_top_m, grid.h_bottom_m), grid)
+        for got, tolerance_m in ((trace_dem(ray, np.zeros(3), grid), 2e-3), (model, MODEL_ERROR_M)):
+            assert got[2] == pytest.approx(h_m, abs=tolerance_m)
+            # 1e-8 deg: about a millimetre
+            assert got[0] == pytest.approx(lon_m, abs=1e-8)
+            assert got[1] == pytest.approx(lat_m, abs=1e-8)

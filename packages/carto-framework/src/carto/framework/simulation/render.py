@@ -7,7 +7,11 @@ intersected with the DEM by *safe stepping*: at a height ``dh`` above the terrai
 descends ``c`` metres per metre and moves ``s`` metres horizontally cannot meet terrain of
 slope at most ``S`` before it has travelled ``dh / (c + s S)``; stepping by that much never
 jumps over a ridge, and it converges like Newton's method on gentle terrain. Iterations stop
-when the ray is within ``1e-4`` m of the terrain height.
+when the ray is within ``1e-4`` m of the terrain height. The steps follow each ray's geodetic
+coordinates as quadratics in the distance along it, interpolated across the line between the
+exact models of every 16th detector: the point found lies within a millimetre of the exact
+ray's (:func:`~carto.framework.geometry.linescan.terrain_intersection.trace_model`; measured
+under 0.2 mm), a thousandth of the texture's finest detail.
 
 The camera state comes from the sensor's exact interpolation table (see
 :mod:`carto.framework.geometry.linescan.scanner`); with ``stagger=True`` detectors with odd
@@ -52,6 +56,7 @@ from carto.framework.geometry.linescan.scanner import LineScanner
 from carto.framework.geometry.linescan.terrain_intersection import (
     interpolated_quadratic,
     ray_quadratic,
+    trace_model,
     trace_quadratic,
 )
 
@@ -99,18 +104,22 @@ def _ray_of(
     dem: DemGrid,
     w: _SublineScratch,
 ) -> tuple[float, float, float]:  # pragma: no cover - compiled
-    """Ground point of the ray of detector sample ``s``: its quadratic model interpolated
-    from the sub-line's ``table`` (exact where a node ray misses), then the exact ray."""
-    state_ray(s, stagger, cam, w.state, w.ray)
-    ray = (w.ray[0], w.ray[1], w.ray[2], w.ray[3], w.ray[4], w.ray[5])
+    """Ground point of the ray of detector sample ``s``: where its quadratic model,
+    interpolated from the sub-line's ``table``, meets the DEM (:func:`trace_model`); next to
+    a node ray that misses, the exact ray's."""
     q = interpolated_quadratic(table, n_nodes, first, s)
     if np.isnan(q.d0_m + q.span_m + q.lon2 + q.lat2 + q.h2):
+        state_ray(s, stagger, cam, w.state, w.ray)
+        ray = (w.ray[0], w.ray[1], w.ray[2], w.ray[3], w.ray[4], w.ray[5])
         q = ray_quadratic(ray, cam.omega_c, dem.h_top_m, dem.h_bottom_m)
-    return trace_quadratic(ray, cam.omega_c, q, dem)
+        return trace_quadratic(ray, cam.omega_c, q, dem)
+    return trace_model(q, dem)
 
 
-@numba.njit(cache=True, nogil=True)  # not inlined: numba 0.68's parallel loop then loses
-def _render_subline(  # the writes to arrays passed in a tuple
+# Not inlined: numba 0.68's parallel loop then loses the writes to arrays passed in a tuple.
+# Divisions by the grids' steps become products (arcp) and multiply-adds fuse (contract).
+@numba.njit(cache=True, nogil=True, fastmath={"arcp", "contract"})
+def _render_subline(
     window: _RenderWindow, cam: CameraStates, dem: DemGrid, tex: GeoGrid, w: _SublineScratch
 ) -> None:  # pragma: no cover - compiled
     """Add the texture values of one sub-line's rays (camera state ``w.state``,
