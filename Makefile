@@ -31,8 +31,9 @@ bytecode: $(STAMP)
 	$(BIN)/python -m compileall -q packages/*/src examples/*/src > /dev/null
 
 # The numba kernels compiled into their caches once the sources changed (set-up, like the
-# bytecode; about 110 s from a fresh clone on 2 cores, in two processes side by side): otherwise
-# the first command, and every test worker at once, compiles them.
+# bytecode; about 110 s on 2 cores, in two processes side by side): otherwise the first
+# command, and every test worker at once, compiles them. Caches older than the sources go first
+# (numba checks a kernel's cache against its own file only, not the modules it inlines).
 $(KERNELS_STAMP): $(STAMP) $(shell find packages -name '*.py' -path '*/src/*' -not -path '*/__pycache__/*')
 	$(MAKE) --no-print-directory bytecode
 	$(BIN)/python tools/compile_kernels.py

@@ -8,6 +8,11 @@ same kernels at the same time. ``make test`` and ``make demo`` run this once aft
 sources change: the whole chain on tiny simulated scenes (the kernels compiled with the
 argument types real runs give them), in two processes side by side.
 
+numba checks a cached kernel only against the file that defines it, not against the modules
+whose functions it inlines (``inline="always"``) or whose constants it froze: a kernel cached
+before one of those changed would run the old code. So every cache older than the newest
+source file is removed first, and the chains compile them all again.
+
 Usage: ``python tools/compile_kernels.py [--carto PATH]``; exit 1 when a chain fails.
 """
 
@@ -22,6 +27,25 @@ import time
 from pathlib import Path
 
 SIZE = ["--size", "160", "160"]
+ROOT = Path(__file__).resolve().parent.parent
+SOURCES = ("packages/*/src", "examples/*/src")
+
+
+def clear_stale_caches(root: Path = ROOT) -> int:
+    """Remove the numba caches (``*.nbi``, ``*.nbc``) under the packages' sources that are
+    older than their newest ``.py`` file; the number removed."""
+    trees = [d for pattern in SOURCES for d in root.glob(pattern)]
+    newest = max((f.stat().st_mtime for d in trees for f in d.rglob("*.py")), default=0.0)
+    stale = [
+        f
+        for d in trees
+        for pattern in ("*.nbi", "*.nbc")
+        for f in d.rglob(pattern)
+        if f.stat().st_mtime < newest
+    ]
+    for f in stale:
+        f.unlink(missing_ok=True)
+    return len(stale)
 
 
 def chains(carto: str, work: Path) -> list[list[list[str]]]:
@@ -59,6 +83,9 @@ def main() -> int:
     )
     args = parser.parse_args()
     start = time.perf_counter()
+    removed = clear_stale_caches()
+    if removed:
+        print(f"compile_kernels: removed {removed} stale numba cache files")
     work = Path(tempfile.mkdtemp(prefix="carto-kernels-"))
     try:
         running = [run_chain(chain) for chain in chains(args.carto, work)]

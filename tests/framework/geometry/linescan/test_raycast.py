@@ -131,7 +131,8 @@ def test_interpolated_ray_models_meet_the_terrain_where_the_exact_rays_do(cartos
         for s in samples:
             state_ray(s, stagger, cam, state, ray)
             exact = np.array(trace_dem(tuple(ray[:6]), cam.omega_c, grid))
-            model = np.array(trace_model(interpolated_quadratic(table, n_nodes, first, s), grid))
+            q = interpolated_quadratic(table, n_nodes, first, s)
+            model = np.array(trace_model(q, grid, np.inf))
             m_per_deg = np.array([111_320.0 * np.cos(np.radians(exact[1])), 110_570.0, 1.0])
             worst.append(np.abs(model - exact) * m_per_deg)
     worst = np.max(worst, axis=0)

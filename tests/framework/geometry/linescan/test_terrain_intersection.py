@@ -131,8 +131,13 @@ def test_the_local_steps_find_the_first_intersection(seed):
         u = (target - origin) / np.linalg.norm(target - origin)
         ray = (*origin, *u)
         lon_m, lat_m, h_m = _first_hit(origin, u, dem)
-        model = trace_model(ray_quadratic(ray, np.zeros(3), grid.h_top_m, grid.h_bottom_m), grid)
-        for got, tolerance_m in ((trace_dem(ray, np.zeros(3), grid), 2e-3), (model, MODEL_ERROR_M)):
+        q = ray_quadratic(ray, np.zeros(3), grid.h_top_m, grid.h_bottom_m)
+        top_m = float(np.max(dem.heights))  # the safe steps from the highest terrain
+        for got, tolerance_m in (
+            (trace_dem(ray, np.zeros(3), grid), 2e-3),
+            (trace_model(q, grid, np.inf), MODEL_ERROR_M),
+            (trace_model(q, grid, top_m), MODEL_ERROR_M),
+        ):
             assert got[2] == pytest.approx(h_m, abs=tolerance_m)
             # 1e-8 deg: about a millimetre
             assert got[0] == pytest.approx(lon_m, abs=1e-8)

@@ -9,7 +9,7 @@ slope at most ``S`` before it has travelled ``dh / (c + s S)``; stepping by that
 jumps over a ridge, and it converges like Newton's method on gentle terrain. Iterations stop
 when the ray is within ``1e-4`` m of the terrain height. The steps follow each ray's geodetic
 coordinates as quadratics in the distance along it, interpolated across the line between the
-exact models of every 16th detector: the point found lies within a millimetre of the exact
+exact models of every 32nd detector: the point found lies within a millimetre of the exact
 ray's (:func:`~carto.framework.geometry.linescan.terrain_intersection.trace_model`; measured
 under 0.2 mm), a thousandth of the texture's finest detail.
 
@@ -59,6 +59,7 @@ from carto.framework.geometry.linescan.terrain_intersection import (
     trace_model,
     trace_quadratic,
 )
+from carto.framework.geometry.linescan.terrain_tops import BLOCK_CELLS, block_maxima, segment_tops
 
 FloatArray = NDArray[np.float64]
 
@@ -82,13 +83,16 @@ class _RenderWindow(NamedTuple):
 class _SublineScratch(NamedTuple):
     """Per-row scratch space of :func:`_render_kernel`: the camera state of the sub-line
     (:data:`STATE_SIZE`), one ray (:data:`RAY_SIZE`), the quadratic models of the node rays
-    of the even and the odd detectors (:func:`quadratic_table`), and the sums and counts of
-    texture values per window column."""
+    of the even and the odd detectors (:func:`quadratic_table`) and the highest terrain
+    under the rays between consecutive nodes (:func:`segment_tops`), and the sums and counts
+    of texture values per window column."""
 
     state: NDArray
     ray: NDArray
     even: NDArray
     odd: NDArray
+    top_even: NDArray
+    top_odd: NDArray
     acc: NDArray
     count: NDArray
 
@@ -98,48 +102,58 @@ def _ray_of(
     s: float,
     stagger: float,
     table: NDArray,
-    n_nodes: int,
+    tops: NDArray,
     first: float,
     cam: CameraStates,
     dem: DemGrid,
     w: _SublineScratch,
 ) -> tuple[float, float, float]:  # pragma: no cover - compiled
     """Ground point of the ray of detector sample ``s``: where its quadratic model,
-    interpolated from the sub-line's ``table``, meets the DEM (:func:`trace_model`); next to
-    a node ray that misses, the exact ray's."""
+    interpolated from the sub-line's ``table``, meets the DEM (:func:`trace_model`, from just
+    above the highest terrain under its segment, ``tops``); next to a node ray that misses,
+    the exact ray's."""
+    n_nodes = table.shape[0]
     q = interpolated_quadratic(table, n_nodes, first, s)
     if np.isnan(q.d0_m + q.span_m + q.lon2 + q.lat2 + q.h2):
         state_ray(s, stagger, cam, w.state, w.ray)
         ray = (w.ray[0], w.ray[1], w.ray[2], w.ray[3], w.ray[4], w.ray[5])
         q = ray_quadratic(ray, cam.omega_c, dem.h_top_m, dem.h_bottom_m)
         return trace_quadratic(ray, cam.omega_c, q, dem)
-    return trace_model(q, dem)
+    segment = min(max(math.floor((s - first) / QUADRATIC_STEP), 0), n_nodes - 2)
+    return trace_model(q, dem, tops[segment])
 
 
 # Not inlined: numba 0.68's parallel loop then loses the writes to arrays passed in a tuple.
 # Divisions by the grids' steps become products (arcp) and multiply-adds fuse (contract).
 @numba.njit(cache=True, nogil=True, fastmath={"arcp", "contract"})
 def _render_subline(
-    window: _RenderWindow, cam: CameraStates, dem: DemGrid, tex: GeoGrid, w: _SublineScratch
+    window: _RenderWindow,
+    cam: CameraStates,
+    dem: DemGrid,
+    tex: GeoGrid,
+    blocks: NDArray,
+    w: _SublineScratch,
 ) -> None:  # pragma: no cover - compiled
     """Add the texture values of one sub-line's rays (camera state ``w.state``,
     :func:`line_state`) to ``w.acc`` and their number to ``w.count``, per window column:
     ``supersample`` rays per pixel across; rays that miss the DEM or the texture add
-    nothing."""
+    nothing. ``blocks``: the DEM's :func:`block_maxima`."""
     supersample = window.supersample
     inv = 1.0 / supersample
     first = window.first_sample + 0.5 * inv
     n_nodes = w.even.shape[0]
     quadratic_table(first, n_nodes, 0.0, cam, dem, w.state, w.ray, w.even)
     quadratic_table(first, n_nodes, window.stagger_tan, cam, dem, w.state, w.ray, w.odd)
+    segment_tops(w.even, n_nodes, dem, blocks, BLOCK_CELLS, w.top_even)
+    segment_tops(w.odd, n_nodes, dem, blocks, BLOCK_CELLS, w.top_odd)
     for j in range(window.n_cols):
         k = window.first_sample + j
         odd = (k % 2) == 1
         stagger = window.stagger_tan if odd else 0.0
-        table = w.odd if odd else w.even
+        table, tops = (w.odd, w.top_odd) if odd else (w.even, w.top_even)
         for b in range(supersample):
             s = k + (b + 0.5) * inv
-            lon, lat, _h = _ray_of(s, stagger, table, n_nodes, first, cam, dem, w)
+            lon, lat, _h = _ray_of(s, stagger, table, tops, first, cam, dem, w)
             if not np.isfinite(lon):
                 continue
             v = grid_bilinear(tex.values, tex.x0_deg, tex.dx_deg, tex.y0_deg, tex.dy_deg, lon, lat)
@@ -150,7 +164,7 @@ def _render_subline(
 
 @numba.njit(parallel=True, cache=True, nogil=True)
 def _render_kernel(
-    window: _RenderWindow, cam: CameraStates, dem: DemGrid, tex: GeoGrid
+    window: _RenderWindow, cam: CameraStates, dem: DemGrid, tex: GeoGrid, blocks: NDArray
 ) -> NDArray:  # pragma: no cover - compiled
     """Mean texture value of the ``supersample x supersample`` sub-pixel rays of every window
     pixel; NaN unless every ray meets the DEM and the texture. The camera state is
@@ -165,15 +179,16 @@ def _render_kernel(
         ray = np.empty(RAY_SIZE)
         even = np.empty((n_nodes, 11))
         odd = np.empty((n_nodes, 11))
+        top_even = np.empty(n_nodes)
+        top_odd = np.empty(n_nodes)
         acc = np.zeros(window.n_cols)
         count = np.zeros(window.n_cols, np.int64)
         for a in range(supersample):
             line = window.line0 + i + (a + 0.5) * inv
             t = interp_time(line, cam.line_nodes, cam.t_nodes)
             if line_state(t, cam, state):
-                _render_subline(
-                    window, cam, dem, tex, _SublineScratch(state, ray, even, odd, acc, count)
-                )
+                scratch = _SublineScratch(state, ray, even, odd, top_even, top_odd, acc, count)
+                _render_subline(window, cam, dem, tex, blocks, scratch)
         for j in range(window.n_cols):
             if count[j] == supersample * supersample:
                 image[i, j] = acc[j] / count[j]
@@ -229,7 +244,7 @@ def render_reflectance(
     window = _RenderWindow(
         0, n_lines, n_cols, sensor.first_sample, _stagger_tan(sensor, stagger), supersample
     )
-    return _render_kernel(window, cam, dem_search, tex)
+    return _render_kernel(window, cam, dem_search, tex, block_maxima(dem_search.heights))
 
 
 def render_band(
@@ -269,4 +284,4 @@ def render_band(
         _stagger_tan(sensor, stagger),
         supersample,
     )
-    return _render_kernel(window, cam, dem_search, tex)
+    return _render_kernel(window, cam, dem_search, tex, block_maxima(dem_search.heights))

@@ -233,13 +233,13 @@ def _quadratic_at(
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def _safe_steps(
-    q: RayQuadratic, dem: DemGrid, tolerance_m: float
+    q: RayQuadratic, dem: DemGrid, tolerance_m: float, d_start: float
 ) -> tuple[float, float]:  # pragma: no cover - compiled
-    """Safe steps along the quadratic model from the top height until the ray is within
-    ``tolerance_m`` of the terrain: ``(d, c)``, the distance along the ray (m) and the height
-    it loses per metre there; ``d`` NaN when the ray leaves the DEM, does not descend or takes
-    :data:`MAX_STEPS` steps."""
-    d = q.d0_m
+    """Safe steps along the quadratic model from ``d_start`` metres along the ray (at or
+    above the terrain) until the ray is within ``tolerance_m`` of the terrain: ``(d, c)``,
+    the distance along the ray (m) and the height it loses per metre there; ``d`` NaN when
+    the ray leaves the DEM, does not descend or takes :data:`MAX_STEPS` steps."""
+    d = d_start
     for _ in range(MAX_STEPS):
         tau, lon, lat, h = _quadratic_at(q, d)
         ground, slope = _height_and_slope(dem, lon, lat)
@@ -348,7 +348,7 @@ def trace_dem(
     q = ray_quadratic(ray, omega_c, dem.h_top_m, dem.h_bottom_m)
     if np.isnan(q.d0_m):
         return np.nan, np.nan, np.nan
-    d, c = _safe_steps(q, dem, _SAFE_STOP_M)
+    d, c = _safe_steps(q, dem, _SAFE_STOP_M, q.d0_m)
     if np.isnan(d):
         return np.nan, np.nan, np.nan
     return _exact_refinement(ray, omega_c, q, dem, d, c)
@@ -366,31 +366,52 @@ def trace_quadratic(
     on the exact ray (:func:`_exact_refinement`)."""
     if np.isnan(q.d0_m):
         return np.nan, np.nan, np.nan
-    d, c = _safe_steps(q, dem, _SAFE_STOP_M)
+    d, c = _safe_steps(q, dem, _SAFE_STOP_M, q.d0_m)
     if np.isnan(d):
         return np.nan, np.nan, np.nan
     return _exact_refinement(ray, omega_c, q, dem, d, c)
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def trace_model(q: RayQuadratic, dem: DemGrid) -> tuple[float, float, float]:  # pragma: no cover
+def trace_model(
+    q: RayQuadratic, dem: DemGrid, top_m: float
+) -> tuple[float, float, float]:  # pragma: no cover - compiled
     """Where a ray's quadratic model ``q`` meets the DEM, ``(lon_deg, lat_deg, h_m)``
     within :data:`HEIGHT_TOLERANCE_M` of the terrain by safe steps alone (NaN as
     :func:`trace_dem`): the model's point, not the exact ray's. For an exact model
     (:func:`ray_quadratic`) or one interpolated over :data:`QUADRATIC_STEP` samples
     (:func:`interpolated_quadratic`) it lies within :data:`MODEL_ERROR_M` of
     :func:`trace_dem`'s, at a third of the cost: the simulator's renderer, which samples a
-    texture there, takes it."""
+    texture there, takes it.
+
+    ``top_m`` bounds the terrain under the model's path between the search heights (``inf``:
+    unknown): the steps start where the ray descends to it (:func:`_start_below`)."""
     if np.isnan(q.d0_m):
         return np.nan, np.nan, np.nan
-    d, _ = _safe_steps(q, dem, HEIGHT_TOLERANCE_M)
+    d, _ = _safe_steps(q, dem, HEIGHT_TOLERANCE_M, _start_below(q, top_m))
     if np.isnan(d):
         return np.nan, np.nan, np.nan
     _, lon, lat, h = _quadratic_at(q, d)
     return lon, lat, h
 
 
-QUADRATIC_STEP = 16.0
+@numba.njit(cache=True, nogil=True, inline="always")
+def _start_below(q: RayQuadratic, top_m: float) -> float:  # pragma: no cover - compiled
+    """Distance along the ray (m) where its model has descended to 1 cm above ``top_m``, the
+    highest the terrain gets under its path: no terrain above, so safe steps may start there.
+    The search's top ``q.d0_m`` where ``top_m`` is not below it (or unknown)."""
+    target = top_m + 0.01
+    if not target < q.h0:
+        return q.d0_m
+    tau = (target - q.h0) / q.h1  # h1 < 0 for a descending ray; then Newton on the quadratic
+    for _ in range(2):
+        tau -= (q.h0 + tau * (q.h1 + tau * q.h2) - target) / (q.h1 + 2.0 * tau * q.h2)
+    if not 0.0 < tau < 1.0 or q.h0 + tau * (q.h1 + tau * q.h2) < top_m:
+        return q.d0_m
+    return q.d0_m + tau * q.span_m
+
+
+QUADRATIC_STEP = 32.0
 """Detector samples between the rays whose quadratic models
 :func:`~carto.framework.geometry.linescan.raycast.quadratic_table` fits exactly; the rays
 between take :func:`interpolated_quadratic` (linear in the sample: the models are smooth in
