@@ -49,8 +49,10 @@ def test_block_maxima_hold_every_node_their_cells_read():
             want[i // block, j // block] = max(want[i // block, j // block], top)
     np.testing.assert_array_equal(got[:, :-1][:-1], want[:-1, :-1])
     # the last row and column of blocks also see the nodes of the grid's last row / column
-    assert np.all(got[-1] >= want[-1]) and np.all(got[:, -1] >= want[:, -1])
-    assert np.isinf(got[20 // block, 11 // block]) and np.isinf(got[19 // block, 10 // block])
+    assert np.all(got[-1] >= want[-1])
+    assert np.all(got[:, -1] >= want[:, -1])
+    assert np.isinf(got[20 // block, 11 // block])
+    assert np.isinf(got[19 // block, 10 // block])
 
 
 def _walled_dem(sensor, seed: int) -> types.SimpleNamespace:
@@ -86,7 +88,10 @@ def test_segment_tops_bound_the_terrain_under_the_rays_and_keep_the_first_hit(ca
                 q = interpolated_quadratic(table, n_nodes, first, s)
                 lon = q.lon0 + tau * (q.lon1 + tau * q.lon2)
                 lat = q.lat0 + tau * (q.lat1 + tau * q.lat2)
-                under = [grid_bilinear(grid.heights, *grid[1:5], x, y) for x, y in zip(lon, lat)]
+                under = [
+                    grid_bilinear(grid.heights, *grid[1:5], x, y)
+                    for x, y in zip(lon, lat, strict=True)
+                ]
                 assert np.nanmax(under) <= tops[m]
                 from_top = trace_model(q, grid, np.inf)
                 from_block = trace_model(q, grid, tops[m])
