@@ -1,5 +1,6 @@
-"""The regularised DEM update by bands of rows equals the update computed on the whole grid
-at once (written here plainly: scipy filters over the whole arrays), whatever the band size."""
+"""The regularised DEM update by bands of rows, its hole-filling filters on tiles, equals the
+update computed on the whole grid at once (written here plainly: scipy filters over the whole
+arrays), whatever the band and tile sizes."""
 
 from __future__ import annotations
 
@@ -43,12 +44,15 @@ def grids():
     return heights, new
 
 
-@pytest.mark.parametrize("band_rows", [1, 7, 64, 10_000])
-def test_bands_give_the_whole_grid_update(grids, band_rows):
+@pytest.mark.parametrize(
+    ("band_rows", "fill_tile"),
+    [(1, 512), (7, 512), (64, 512), (10_000, 512), (64, 16), (10_000, 9)],
+)
+def test_bands_and_fill_tiles_give_the_whole_grid_update(grids, band_rows, fill_tile):
     heights, new = grids
     settings = IORSettings(smoothing_nodes=1.5)
     expected, expected_inlier = _whole_grid(heights, new, settings)
-    out, inlier = regularise(heights, new, settings, band_rows=band_rows)
+    out, inlier = regularise(heights, new, settings, band_rows=band_rows, fill_tile=fill_tile)
     np.testing.assert_array_equal(inlier, expected_inlier)
     np.testing.assert_allclose(out, expected, rtol=0, atol=1e-9)
     assert (~inlier & np.isfinite(new)).sum() > 100  # the wild matches were found
@@ -63,3 +67,21 @@ def test_default_smoothing_follows_the_matching_window_in_ortho_pixels():
     assert IORSettings().smoothing_for(4) == 1.0
     assert IORSettings(window=21).smoothing_for(4) == pytest.approx(21 / 12)
     assert IORSettings(smoothing_nodes=1.5).smoothing_for(1) == 1.5
+
+
+@pytest.mark.parametrize("tile", [16, 37, 64])
+def test_fill_filters_on_tiles_equal_the_whole_grid_filter(tile):
+    """The wide Gaussians that fill holes run only on the tiles holding a hole, with their
+    reach around: the same values at the holes as scipy's filter of the whole grid."""
+    from carto.ior.regularise import _cuts, _filled, _reach
+
+    rng = np.random.default_rng(2)
+    values = rng.normal(0.0, 1.0, (400, 300)).cumsum(axis=1)
+    missing = np.zeros(values.shape, bool)
+    missing[10:40, 250:295] = True  # near the grid's edges
+    missing[200:230, 100:120] = True
+    sigma = 4.0
+    expected = np.where(missing, ndimage.gaussian_filter(values, sigma, mode="nearest"), values)
+    np.testing.assert_allclose(_filled(values, missing, sigma, tile), expected, rtol=0, atol=1e-9)
+    cut_out = sum(values[outer].size for _, outer in _cuts(missing, _reach(sigma), tile))
+    assert cut_out < values.size  # the tiles ran, not the whole grid
