@@ -56,6 +56,7 @@ from carto.framework.geometry.linescan.scanner import LineScanner
 from carto.framework.geometry.linescan.terrain_intersection import (
     interpolated_quadratic,
     ray_quadratic,
+    read_only,
     trace_model,
     trace_quadratic,
 )
@@ -270,9 +271,7 @@ def render_band(
     _check_supersample(supersample)
     dem_search = dem_grid(dem, h_range, max_slope)
     t = texture.transform
-    tex = GeoGrid(
-        np.ascontiguousarray(texture.reflectance), float(t.c), float(t.a), float(t.f), float(t.e)
-    )
+    tex = GeoGrid(read_only(texture.reflectance), float(t.c), float(t.a), float(t.f), float(t.e))
     cam = camera_states(sensor)
     first, last = lines
     s0, s1 = samples or (0, sensor.image_shape[1])

@@ -495,7 +495,17 @@ def geographic_grid(
     )
     if b != 0 or d != 0 or e >= 0:
         raise InputError(f"{what} must be a north-up grid without rotation")
-    return np.ascontiguousarray(grid, dtype=np.float64), c, a, f, e
+    return read_only(grid), c, a, f, e
+
+
+def read_only(values: NDArray) -> NDArray[np.float64]:
+    """``values`` as the kernels take a grid: C-contiguous float64, flagged read-only (a view,
+    copied only to convert). numba compiles a kernel once per argument type, and read-only is
+    part of the type: a writable grid from one caller and a read-only one (a
+    :class:`~carto.framework.raster.dem.DEM`'s heights) from another compiled it twice."""
+    view = np.ascontiguousarray(values, dtype=np.float64).view()
+    view.flags.writeable = False
+    return view
 
 
 def max_terrain_slope(heights: NDArray, dx_deg: float, dy_deg: float, lat_deg: float) -> float:
