@@ -11,7 +11,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from carto.framework.sdk.common import FloatArray
-from carto.framework.sdk.dem import focal_nanmedian, gaussian_nearest
+from carto.framework.sdk.dem import focal_nanmedian, gaussian_nearest, gaussian_nearest_at
 from carto.ior.settings import IORSettings
 
 __all__ = ["BAND_ROWS", "FILL_TILE", "regularise"]
@@ -21,7 +21,7 @@ BAND_ROWS = 512
 """DEM rows per band."""
 FILL_TILE = 512
 """Side (nodes) of the tiles on which the wider Gaussians that fill holes run: only those
-holding a hole, each with the filter's reach around it (:func:`_filled`)."""
+holding a hole, each with the filter's reach around it (``gaussian_nearest_at``)."""
 
 _MEDIAN_RADIUS = 2  # the 5 x 5 neighbourhood of the outlier test
 _FILL_FACTORS = (3.0, 9.0)  # the wider Gaussians that fill holes, in smoothing sigmas
@@ -39,46 +39,6 @@ def _bands(n_rows: int, band_rows: int, halo: int) -> Iterator[tuple[slice, slic
         r1 = min(n_rows, r0 + step)
         a, b = max(0, r0 - halo), min(n_rows, r1 + halo)
         yield slice(r0, r1), slice(a, b), slice(r0 - a, r1 - a)
-
-
-Cut = tuple[slice, slice]
-
-
-def _cuts(missing: NDArray[np.bool_], reach: int, tile: int) -> list[tuple[Cut, Cut]]:
-    """``(tile, cut-out)`` of every tile of ``tile`` nodes holding a missing node; the cut-out
-    is the tile with ``reach`` nodes around it, within the grid."""
-    rows, cols = missing.shape
-    step = max(1, int(tile))
-    out = []
-    for i0 in range(0, rows, step):
-        for j0 in range(0, cols, step):
-            inner = (slice(i0, min(rows, i0 + step)), slice(j0, min(cols, j0 + step)))
-            if missing[inner].any():
-                a, c = max(0, i0 - reach), max(0, j0 - reach)
-                outer = (
-                    slice(a, min(rows, i0 + step + reach)),
-                    slice(c, min(cols, j0 + step + reach)),
-                )
-                out.append((inner, outer))
-    return out
-
-
-def _filled(values: FloatArray, missing: NDArray[np.bool_], sigma: float, tile: int) -> FloatArray:
-    """``values`` with ``gaussian_nearest(values, sigma)`` at the ``missing`` nodes: the filter
-    run on the tiles (:func:`_cuts`) that hold a missing node, each with the filter's reach
-    around it (every missing node sees the neighbourhood, the grid's edges repeated beyond
-    it, that the whole grid's filter gives it); on the whole grid when the cut-outs would
-    cover more."""
-    cuts = _cuts(missing, _reach(sigma), tile)
-    if sum(values[outer].size for _, outer in cuts) >= values.size:
-        return np.where(missing, gaussian_nearest(values, sigma), values)
-    out = values.copy()
-    for inner, outer in cuts:
-        rows = slice(inner[0].start - outer[0].start, inner[0].stop - outer[0].start)
-        cols = slice(inner[1].start - outer[1].start, inner[1].stop - outer[1].start)
-        blurred = gaussian_nearest(values[outer], sigma)[rows, cols]
-        out[inner] = np.where(missing[inner], blurred, values[inner])
-    return out
 
 
 def regularise(
@@ -125,8 +85,8 @@ def regularise(
             if not missing.any():
                 break
             wider = factor * sigma
-            num = _filled(num, missing, wider, fill_tile)
-            den = _filled(den, missing, wider, fill_tile)
+            num = gaussian_nearest_at(num, missing, wider, fill_tile)
+            den = gaussian_nearest_at(den, missing, wider, fill_tile)
         with np.errstate(invalid="ignore", divide="ignore"):
             update = np.where(den > 1e-3, num / den, 0.0)
         out[rows] = heights[rows] + update[inner]

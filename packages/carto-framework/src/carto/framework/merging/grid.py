@@ -24,43 +24,13 @@ from affine import Affine
 from carto.framework.arrays import FloatArray
 from carto.framework.errors import InputError
 from carto.framework.merging.sources import RasterSource
+from carto.framework.raster.grid_window import GridWindow
 
 __all__ = ["GridWindow", "MosaicGrid", "bounds_in", "read_window", "same_crs", "union_grid"]
 
 
 MAX_MOSAIC_PIXELS = 2**34
 """A grid larger than this (a wrong --tr or CRS) is refused before any work."""
-
-
-@attrs.frozen
-class GridWindow:
-    """Rows ``row0:row0+n_rows``, columns ``col0:col0+n_cols`` of a grid."""
-
-    row0: int
-    col0: int
-    n_rows: int
-    n_cols: int
-
-    def grown(self, halo: int, height: int, width: int) -> GridWindow:
-        """This window with ``halo`` more pixels on every side, clipped to the grid."""
-        r0, c0 = max(self.row0 - halo, 0), max(self.col0 - halo, 0)
-        r1 = min(self.row0 + self.n_rows + halo, height)
-        c1 = min(self.col0 + self.n_cols + halo, width)
-        return GridWindow(r0, c0, r1 - r0, c1 - c0)
-
-    def tiles(self, tile_px: int) -> list[GridWindow]:
-        """This window cut into tiles of ``tile_px`` (smaller at the right and bottom)."""
-        r1, c1 = self.row0 + self.n_rows, self.col0 + self.n_cols
-        return [
-            GridWindow(r, c, min(tile_px, r1 - r), min(tile_px, c1 - c))
-            for r in range(self.row0, r1, tile_px)
-            for c in range(self.col0, c1, tile_px)
-        ]
-
-    def inner(self, outer: GridWindow) -> tuple[slice, slice]:
-        """Where this window sits inside ``outer`` (a window that holds it)."""
-        r, c = self.row0 - outer.row0, self.col0 - outer.col0
-        return slice(r, r + self.n_rows), slice(c, c + self.n_cols)
 
 
 @attrs.frozen

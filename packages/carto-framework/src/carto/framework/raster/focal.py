@@ -1,4 +1,5 @@
-"""Focal (moving-window) filters of rasters: a Gaussian (:func:`gaussian_nearest`) and
+"""Focal (moving-window) filters of rasters: a Gaussian (:func:`gaussian_nearest`, and at
+chosen nodes only: :func:`gaussian_nearest_at`) and
 statistics of rasters with voids, compiled: work proportional to the
 pixels, memory of the output only (a ``sliding_window_view`` with ``numpy.nanmedian`` makes a
 copy of ``window`` values per pixel)."""
@@ -10,8 +11,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from carto.framework.errors import InputError
+from carto.framework.raster.grid_window import GridWindow
 
-__all__ = ["focal_nanmedian", "gaussian_nearest"]
+__all__ = ["focal_nanmedian", "gaussian_nearest", "gaussian_nearest_at"]
 
 
 @numba.njit(parallel=True, cache=True, nogil=True)
@@ -82,3 +84,27 @@ def gaussian_nearest(values: ArrayLike, sigma: float) -> NDArray[np.float64]:
     return cv2.sepFilter2D(
         array, cv2.CV_64F, kernel, kernel, borderType=cv2.BORDER_REPLICATE
     ).reshape(array.shape)
+
+
+def gaussian_nearest_at(
+    values: ArrayLike, where: NDArray[np.bool_], sigma: float, tile: int = 512
+) -> NDArray[np.float64]:
+    """``values`` with :func:`gaussian_nearest` at the nodes ``where``: the filter run only on
+    the tiles of ``tile`` nodes holding such a node, each with the filter's reach (4 sigma)
+    around it, so every node sees the neighbourhood (the grid's edges repeated beyond it) the
+    whole grid's filter gives it; on the whole grid when those cut-outs would cover more."""
+    array = np.asarray(values, dtype=np.float64)
+    height, width = array.shape
+    reach = int(4.0 * float(sigma) + 0.5)
+    cuts = [
+        (t, t.grown(reach, height, width))
+        for t in GridWindow(0, 0, height, width).tiles(max(1, int(tile)))
+        if where[t.slices].any()
+    ]
+    if sum(o.n_rows * o.n_cols for _, o in cuts) >= array.size:
+        return np.where(where, gaussian_nearest(array, sigma), array)
+    out = array.copy()
+    for inner, outer in cuts:
+        blurred = gaussian_nearest(array[outer.slices], sigma)[inner.inner(outer)]
+        out[inner.slices] = np.where(where[inner.slices], blurred, array[inner.slices])
+    return out

@@ -17,7 +17,7 @@ from carto.framework.imaging.ortho_grid import (
 )
 from carto.framework.raster.dem import DEM, ELLIPSOID, MIN_DEM_POSTS
 from carto.framework.raster.dem_measures import dem_pixel_size_m, fill_voids
-from carto.framework.raster.focal import focal_nanmedian, gaussian_nearest
+from carto.framework.raster.focal import focal_nanmedian, gaussian_nearest, gaussian_nearest_at
 from carto.framework.raster.grid_sampling import cubic_sample
 from carto.framework.raster.image_source import (
     DecimatedImage,
@@ -52,6 +52,7 @@ __all__ = [
     "focal_nanmedian",
     "footprint_box",
     "gaussian_nearest",
+    "gaussian_nearest_at",
     "orthorectify",
     "piece_path",
 ]
