@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+import attrs
 import numpy as np
 import pytest
 
@@ -39,10 +40,16 @@ def adjuster():
     return get_registry().get("adjuster", "cartosat1-combined")
 
 
-def test_combined_shares_one_set_of_body_corrections(setup, adjuster):
-    scene, obs, check = setup
+@pytest.fixture(scope="module")
+def combined(setup, adjuster):
+    scene, obs, _ = setup
+    return adjuster.adjust(scene.sensors(), obs)
+
+
+def test_combined_shares_one_set_of_body_corrections(setup, combined):
+    scene, _, check = setup
     sensors = scene.sensors()
-    result = adjuster.adjust(sensors, obs)
+    result = combined
     body = [n for n in result.parameters if n.startswith("trajectory.attitude.")]
     assert len(body) == 6  # roll, pitch, yaw x (bias, drift) for both cameras
     # one position bias for both (a position error is not one rotation for both views)
@@ -78,6 +85,28 @@ def test_combined_shares_one_set_of_body_corrections(setup, adjuster):
     # the factor 1.5 over seeds); here it must be of the right size
     pred = predicted_checkpoint_sigma(result, check)
     assert 1 / 3 <= pred["predicted_sigma_planimetric_m"] / acc["rmse_planimetric_m"] <= 3
+
+
+def test_a_checkpoint_whose_rays_do_not_intersect_is_left_out(setup, combined):
+    # a point seen twice along one line of sight (a strip's consecutive scenes repeat lines
+    # of one camera: the overlap's points can be seen only in fore1 and fore2) has no
+    # intersection: checkpoint_accuracy leaves it out, and so must the prediction (it raised
+    # numpy's LinAlgError, "Singular matrix", out of carto adjust on a strip)
+    _, _, check = setup
+    first = check["id"][0]
+    keep = check["id"] != first
+    rows = np.flatnonzero(check["id"] == first)
+    fore = rows[check["image"][rows] == "fore"][:1]
+    twice = {k: np.concatenate([v[keep], v[fore], v[fore]]) for k, v in check.items()}
+    twice["image"][-1] = "fore_again"  # the Fore image's geometry under a second name
+    without = {k: v[keep] for k, v in check.items()}
+    result = attrs.evolve(
+        combined,
+        sensors={**combined.sensors, "fore_again": combined.sensors["fore"]},
+    )
+    assert not combined.parameter_sensors  # the prediction reads result.sensors
+    assert checkpoint_accuracy(result.sensors, twice)["count"] == len(set(without["id"]))
+    assert predicted_checkpoint_sigma(result, twice) == predicted_checkpoint_sigma(result, without)
 
 
 def test_separate_mode_has_one_set_per_camera(setup, adjuster):

@@ -123,6 +123,17 @@ def checkpoint_accuracy(
     }
 
 
+def _intersects(normal: FloatArray, min_angle_rad: float = 1e-5) -> bool:
+    """Whether the normal matrix ``A^T A`` of a point's image partials (pixels per metre)
+    fixes all three coordinates: its smallest eigenvalue over its largest is at least
+    ``sin(min_angle_rad / 2)^2``, the criterion of
+    :func:`~carto.framework.geometry.intersection.intersect_rays`. Rays closer to parallel
+    (a point seen only in the overlap of one camera's consecutive scenes, the same lines
+    twice) intersect nowhere; :func:`checkpoint_accuracy` leaves such points out too."""
+    eig = np.linalg.eigvalsh(normal)
+    return bool(np.all(np.isfinite(eig)) and eig[0] > eig[-1] * np.sin(0.5 * min_angle_rad) ** 2)
+
+
 def predicted_checkpoint_sigma(
     result: Any, table: Mapping[str, NDArray], sigma_px: float | None = None
 ) -> dict[str, float]:
@@ -189,7 +200,10 @@ def predicted_checkpoint_sigma(
             continue
         ax = np.concatenate(a_x)
         ac = np.concatenate(a_c)
-        n_inv = np.linalg.inv(ax.T @ ax)
+        normal = ax.T @ ax
+        if not _intersects(normal):
+            continue
+        n_inv = np.linalg.inv(normal)
         dxdc = -n_inv @ ax.T @ ac
         c_x = dxdc @ cov @ dxdc.T + point_px**2 * n_inv
         e2.append(c_x[0, 0] + c_x[1, 1])
