@@ -128,11 +128,63 @@ def test_a_pair_that_fails_is_reported_and_the_others_fuse(triplet, tmp_path, mo
         pairs=(("fore", "aft"), ("nadir", "aft")),
     )
     report = multiview_dem_product(request, **OPTIONS)
-    status = {(p["left"], p["right"]): p["status"] for p in report["pairs"]}
-    assert status == {("fore", "aft"): "failed", ("nadir", "aft"): "done"}
-    assert "0.1 % of the nodes" in report["pairs"][0]["error"]
+    by_pair = {(p["left"], p["right"]): p for p in report["pairs"]}
+    assert {k: p["status"] for k, p in by_pair.items()} == {
+        ("fore", "aft"): "failed",
+        ("nadir", "aft"): "done",
+    }
+    # the narrower pair ran first; the wide one failed from the starting DEM, then again
+    # from the narrower pair's DEM
+    assert [(p["left"], p["right"]) for p in report["pairs"]] == [("nadir", "aft"), ("fore", "aft")]
+    assert "0.1 % of the nodes" in by_pair["fore", "aft"]["error"]
+    assert "0.1 % of the nodes" in by_pair["fore", "aft"]["error_from_starting_dem"]
     assert (tmp_path / "dem" / "dem.tif").is_file()
     assert not (tmp_path / "dem" / "pairs").exists()
+
+
+def test_a_wide_pair_that_fails_starts_again_from_the_narrower_pairs_dem(
+    triplet, tmp_path, monkeypatch
+):
+    """The wide pair of an urban triplet fails its checks over a building-less starting DEM
+    (issue 33's benchmark); from the narrower pairs' fused DEM it matches."""
+    from carto.framework.raster.dem import DEM
+    from carto.framework.workflows import dem as dem_workflow
+
+    real = dem_workflow.dem_product
+    starts = []
+
+    def failing(out_dir, inputs, **kwargs):
+        if tuple(inputs.pair) == ("fore", "aft"):
+            if kwargs.get("init_dem") is None:
+                raise InputError("dem: the ortho-images agree on 33 % of the blocks")
+            starts.append(DEM.open(kwargs["init_dem"]))
+        return real(out_dir, inputs, **kwargs)
+
+    monkeypatch.setattr(dem_workflow, "dem_product", failing)
+    out = tmp_path / "dem"
+    request = MultiViewRequest(
+        out,
+        triplet.root,
+        models=triplet.root / "truth",
+        pairs=(("fore", "aft"), ("nadir", "aft")),
+        keep_pairs=True,
+    )
+    report = multiview_dem_product(request, **OPTIONS)
+    wide = next(p for p in report["pairs"] if p["left"] == "fore")
+    assert wide["status"] == "done"
+    assert wide["start"]["pairs"] == ["nadir/aft"]
+    assert "33 % of the blocks" in wide["start"]["error_from_starting_dem"]
+    # the start was the narrower pair's DEM (one pair: fused = its heights)
+    (start,) = starts
+    narrow = DEM.open(out / "pairs" / "nadir_aft" / "dem.tif")
+    assert start.shape == narrow.shape
+    both = np.isfinite(start.heights) & np.isfinite(narrow.heights)
+    assert both.mean() > 0.5
+    np.testing.assert_allclose(start.heights[both], narrow.heights[both], atol=1e-3)
+    # and the wide pair's DEM from that start is as good as the truth says it should be
+    truth = triplet.root / "truth" / "dem.tif"
+    wide_err = _errors_on(out / "dem.tif", out / "pairs" / "fore_aft" / "dem.tif", truth)
+    assert _nmad(wide_err[np.isfinite(wide_err)]) < 0.5
 
 
 def test_bad_input_is_refused_in_one_line(triplet, tmp_path):

@@ -134,6 +134,29 @@ def _intersects(normal: FloatArray, min_angle_rad: float = 1e-5) -> bool:
     return bool(np.all(np.isfinite(eig)) and eig[0] > eig[-1] * np.sin(0.5 * min_angle_rad) ** 2)
 
 
+def _row_partials(
+    sensors: Mapping[str, Sensor], names: list[str], table: Mapping[str, NDArray]
+) -> tuple[FloatArray, FloatArray]:
+    """The image partials of every row of ``table``, one call per image: by the point's
+    ground coordinates ``(rows, 2, 3)`` (NaN for images without a sensor) and by the
+    parameters ``names`` ``(rows, 2, len(names))``."""
+    n_rows = len(table["id"])
+    row_ax = np.full((n_rows, 2, 3), np.nan)
+    row_ac = np.zeros((n_rows, 2, len(names)))
+    for image in sorted(set(table["image"].tolist()) & set(sensors)):
+        rows = np.flatnonzero(table["image"] == image)
+        s = sensors[image]
+        own = [n for n in names if n in {p.name for p in s.parameters}]
+        lon = np.asarray(table["lon_deg"][rows], np.float64)
+        lat = np.asarray(table["lat_deg"][rows], np.float64)
+        h = np.asarray(table["h_m"][rows], np.float64)
+        _, _, a_p, a_c = s.linearize(lon, lat, h, own)
+        row_ax[rows] = a_p
+        if own:
+            row_ac[np.ix_(rows, [0, 1], [names.index(n) for n in own])] = a_c
+    return row_ax, row_ac
+
+
 def predicted_checkpoint_sigma(
     result: Any, table: Mapping[str, NDArray], sigma_px: float | None = None
 ) -> dict[str, float]:
@@ -168,21 +191,7 @@ def predicted_checkpoint_sigma(
     ids = sorted(set(table["id"].tolist()))
     e2, u2 = [], []
     column = table.get("sigma_px")
-    # the partials of every row, one call per image (rows of images without a sensor: NaN)
-    n_rows = len(table["id"])
-    row_ax = np.full((n_rows, 2, 3), np.nan)
-    row_ac = np.zeros((n_rows, 2, len(names)))
-    for image in sorted(set(table["image"].tolist()) & set(sensors)):
-        rows = np.flatnonzero(table["image"] == image)
-        s = sensors[image]
-        own = [n for n in names if n in {p.name for p in s.parameters}]
-        lon = np.asarray(table["lon_deg"][rows], np.float64)
-        lat = np.asarray(table["lat_deg"][rows], np.float64)
-        h = np.asarray(table["h_m"][rows], np.float64)
-        _, _, a_p, a_c = s.linearize(lon, lat, h, own)
-        row_ax[rows] = a_p
-        if own:
-            row_ac[np.ix_(rows, [0, 1], [names.index(n) for n in own])] = a_c
+    row_ax, row_ac = _row_partials(sensors, names, table)
     for pid in ids:
         rows = np.flatnonzero(table["id"] == pid)
         if sigma_px is not None:

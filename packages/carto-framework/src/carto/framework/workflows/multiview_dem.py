@@ -16,8 +16,12 @@ out, with its figures in ``report.json``. Each pair's left image is the one clos
 as for one pair.
 
 Each pair runs as ``carto dem --pair`` does (tiles, workers, relative orientation, checks) into
-``pairs/LEFT_RIGHT`` of the output; a pair that fails is reported and left out, and the others
-still fuse. Fusion (:func:`~carto.framework.merging.fusion.fuse_heights`) weights each pair's
+``pairs/LEFT_RIGHT`` of the output, the narrowest base first. A pair that fails from the
+starting DEM is run again from the fused DEM of the pairs done before it (narrower ones): a
+wide pair over buildings that a building-less starting DEM cannot bring together (its
+ortho-images disagree, the pair checks refuse it) matches from the narrower pairs' DEM, which
+has the buildings. A pair that fails again is reported and left out, and the others still
+fuse. Fusion (:func:`~carto.framework.merging.fusion.fuse_heights`) weights each pair's
 height by its predicted sigma (the generator's ``sigma_m`` layer; 1 m for a generator without
 one), rejects outliers against the weighted median, and ignores filled nodes where another
 pair measured. It runs tile by tile over the pairs' DEM files: memory depends on the tile,
@@ -253,9 +257,19 @@ class MultiViewRequest:
             raise UsageError("--images and --pairs exclude each other: give one")
 
 
-def failed_pair_record(pair: PairChoice, exc: CartoError) -> dict[str, Any]:
-    """What ``report.json`` says of a pair that failed."""
-    return {**pair.as_dict(), "status": "failed", "error": str(exc).splitlines()[0]}
+def failed_pair_record(
+    pair: PairChoice, exc: CartoError, first: CartoError | None = None
+) -> dict[str, Any]:
+    """What ``report.json`` says of a pair that failed (``first``: its failure from the
+    starting DEM when it failed again from the fused DEM of the pairs before it)."""
+    record = {**pair.as_dict(), "status": "failed", "error": _line(exc)}
+    if first is not None:
+        record["error_from_starting_dem"] = _line(first)
+    return record
+
+
+def _line(exc: CartoError) -> str:
+    return str(exc).splitlines()[0]
 
 
 def pair_record(pair: PairChoice, report: Mapping[str, Any], kept: bool) -> dict[str, Any]:
@@ -352,8 +366,10 @@ def _run_pairs(
     from carto.framework.workflows.reporting import progress
     from carto.framework.workflows.stereo_pair import StereoInputs
 
-    records, done = [], []
-    for k, pair in enumerate(pairs, 1):
+    records: list[dict[str, Any]] = []
+    done: list[tuple[PairChoice, Path]] = []
+    ordered = sorted(pairs, key=lambda p: p.b_over_h)
+    for k, pair in enumerate(ordered, 1):
         progress(
             "dem",
             f"pair {k}/{len(pairs)}: {pair.left} / {pair.right} (B/H {pair.b_over_h:.2f})",
@@ -366,18 +382,65 @@ def _run_pairs(
             sensor_type=request.sensor_type,
             pair=(pair.left, pair.right),
         )
+        options = {**dem_options, "resume": False}
         try:
-            report = dem_product(folder, inputs, **{**dem_options, "resume": False})
+            report = dem_product(folder, inputs, **options)
+            start = None
         except CartoError as exc:
             progress("dem", f"pair {pair.left} / {pair.right} failed: {exc}", quiet)
-            records.append(failed_pair_record(pair, exc))
-            continue
-        records.append(pair_record(pair, report, request.keep_pairs))
+            if not done:
+                records.append(failed_pair_record(pair, exc))
+                continue
+            start = _fused_start(stage / "work" / f"start_{pair.folder}", request, done)
+            progress("dem", f"pair {pair.left} / {pair.right} again from {start['pairs']}", quiet)
+            retry = {**options, "init_dem": start["dem"], "init_height_m": None}
+            try:
+                report = dem_product(folder, inputs, **retry)
+            except CartoError as again:
+                progress("dem", f"pair {pair.left} / {pair.right} failed again: {again}", quiet)
+                records.append(failed_pair_record(pair, again, first=exc))
+                continue
+            start = {"pairs": start["pairs"], "error_from_starting_dem": _line(exc)}
+        record = pair_record(pair, report, request.keep_pairs)
+        if start is not None:
+            record["start"] = start
+        records.append(record)
         done.append((pair, folder))
     if not done:
         causes = "; ".join(f"{r['left']}/{r['right']}: {r['error']}" for r in records)
         raise InputError(f"dem: every pair failed ({causes})")
     return records, done
+
+
+def _fused_start(
+    out: Path, request: MultiViewRequest, done: Sequence[tuple[PairChoice, Path]]
+) -> dict[str, Any]:
+    """The fused DEM of the pairs ``done`` (aligned and fused as the product is), written
+    into ``out`` as the starting DEM of a pair that failed from the scene's."""
+    from carto.framework.merging.fused_files import fuse_dem_folders
+
+    out.mkdir(parents=True, exist_ok=True)
+    fuse_dem_folders(
+        [folder for _, folder in done],
+        out,
+        request.fusion,
+        tile_px=request.tile_px,
+        offsets_m=_pair_offsets(request, done, _pair_steps(done)),
+    )
+    return {"dem": out / "dem.tif", "pairs": [f"{p.left}/{p.right}" for p, _ in done]}
+
+
+def _pair_offsets(
+    request: MultiViewRequest, done: Sequence[tuple[PairChoice, Path]], steps: Sequence[Any]
+) -> Any:
+    """The constant steps that align the pairs' DEMs on the widest pair's, from the steps
+    between them (:func:`_pair_steps`; :attr:`FusionSettings.align_pairs`, zeros when off)."""
+    from carto.framework.merging.mosaic import step_offsets
+
+    if not request.fusion.align_pairs:
+        return np.zeros(len(done))
+    best = max(range(len(done)), key=lambda k: done[k][0].b_over_h)
+    return step_offsets(steps, len(done), held=best)
 
 
 def _fused_into(
@@ -389,17 +452,11 @@ def _fused_into(
     quiet: bool,
 ) -> dict[str, Any]:
     from carto.framework.merging.fused_files import fuse_dem_folders
-    from carto.framework.merging.mosaic import step_offsets
     from carto.framework.workflows.reporting import progress
 
     folders = [folder for _, folder in done]
     steps = _pair_steps(done)
-    best = max(range(len(done)), key=lambda k: done[k][0].b_over_h)
-    offsets = (
-        step_offsets(steps, len(done), held=best)
-        if request.fusion.align_pairs
-        else np.zeros(len(done))
-    )
+    offsets = _pair_offsets(request, done, steps)
     progress("dem", f"fusing {len(folders)} pair DEM(s)", quiet)
     fusion = fuse_dem_folders(
         folders, stage, request.fusion, tile_px=request.tile_px, offsets_m=offsets
