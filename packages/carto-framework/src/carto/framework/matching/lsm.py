@@ -135,7 +135,8 @@ def _lsm_chunk(
             rhs[:, a] = np.einsum("nk,nk->n", columns[a], resid)
         normal[:, 3, 3] = t * t
         rhs[:, 3] = resid.sum(axis=1)
-        ok = np.linalg.det(normal) > 1e-12 * np.einsum("nii->n", normal) ** 4
+        with np.errstate(invalid="ignore"):  # a window with NaN: not ok, silently
+            ok = np.linalg.det(normal) > 1e-12 * np.einsum("nii->n", normal) ** 4
         step = np.zeros((idx.size, 4))
         if ok.any():
             step[ok] = np.linalg.solve(normal[ok], rhs[ok][..., None])[..., 0]
