@@ -392,7 +392,8 @@ def _run_pairs(
                 records.append(failed_pair_record(pair, exc))
                 continue
             start = _fused_start(stage / "work" / f"start_{pair.folder}", request, done)
-            progress("dem", f"pair {pair.left} / {pair.right} again from {start['pairs']}", quiet)
+            names = ", ".join(start["pairs"])
+            progress("dem", f"pair {pair.left} / {pair.right} again from the DEM of {names}", quiet)
             retry = {**options, "init_dem": start["dem"], "init_height_m": None}
             try:
                 report = dem_product(folder, inputs, **retry)
