@@ -48,3 +48,26 @@ def test_a_strip_makes_one_dem_without_steps_between_scenes(strip, tmp_path, run
     )
     has = np.isfinite(error)
     assert 1.4826 * np.median(np.abs(error[has] - np.median(error[has]))) < 0.5
+
+
+def test_a_strip_adjusts_as_one_block(strip, tmp_path, run_carto):
+    """``carto adjust`` on the strip: one block of the six images, tied across the scenes'
+    overlaps, judged at the checkpoints against the truth. A checkpoint in an overlap seen
+    only in one camera's two scenes (parallel rays) has no intersection and is left out of
+    the figures, not an internal error (it was, on a 1000 x 500 px strip)."""
+    out = tmp_path / "adjusted"
+    done = run_carto(["adjust", str(strip), "--gcps", "1", "--out", str(out), "-q"])
+    assert done.returncode == 0, done.stderr
+    report = json.loads((out / "report.json").read_text())
+    assert report["adjuster"] == "cartosat1-combined"
+    # tied across the scenes: tie points between images of consecutive scenes
+    with open(out / "tie_points.csv") as f:
+        pairs = {line.split(":")[0] for line in f.read().splitlines()[1:]}
+    scenes = {tuple(sorted(name[-1] for name in pair.split("-"))) for pair in pairs}
+    assert {("1", "2"), ("2", "3")} <= scenes
+    check = report["checkpoints"]
+    assert check["count"] > 10
+    # one GCP for three scenes: metres, not the hundreds of the system-level models
+    assert check["rmse_planimetric_m"] < 5.0
+    assert np.isfinite(check["predicted_sigma_planimetric_m"])
+    assert report["checkpoints_before"]["rmse_planimetric_m"] > 10 * check["rmse_planimetric_m"]
