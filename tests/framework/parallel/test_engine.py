@@ -100,14 +100,16 @@ def test_on_a_local_cluster_of_processes(tmp_path, monkeypatch):
 
 def test_the_commands_of_a_shared_engine_use_its_worker_processes(tmp_path):
     """Inside :func:`shared_engine` the engines of commands are the shared one: the second
-    command's tasks run on the first one's worker processes (started once), and the block's
-    end stops them; other worker counts keep engines of their own."""
+    command's tasks run on the first one's worker processes (started once, not stopped by a
+    command's release), and the block's end stops them; other worker counts keep engines of
+    their own."""
     import os
 
     tasks = [functools.partial(worker_facts, k) for k in range(4)]
     with shared_engine(2, quiet=True) as shared:
         with open_engine(quiet=True) as first:
             pids = {pid for pid, _, _ in first.run(tasks)}
+            first.release()  # a command's release keeps the shared cluster for the next
         with open_engine(2, quiet=True) as second:
             assert second is first is shared
             assert {pid for pid, _, _ in second.run(tasks)} == pids
