@@ -42,6 +42,7 @@ Results
 
 from __future__ import annotations
 
+import logging
 import math
 from collections.abc import Mapping, Sequence
 from typing import Any
@@ -75,6 +76,7 @@ from carto.framework.geometry import frames
 from carto.framework.geometry.sensor import Parameter, Sensor
 
 FloatArray = NDArray[np.float64]
+_LOG = logging.getLogger("carto.adjust")
 
 #: Fewest GCPs among which a GCP can be rejected as a blunder (data snooping).
 MIN_GCPS_FOR_SNOOPING = 3
@@ -418,6 +420,11 @@ def _iterate(
         # converged: parameters move by < tolerance sigma, points by < 1 mm RMS (and none by
         # more than 5 cm: a weakly determined point may wobble while its weight settles)
         small = step_par < opts.tolerance and rms_pt < 1e-3 and step_pt < 0.05
+        _LOG.debug(
+            "iteration %d: parameters %.3g sigma, points %.3g m RMS / %.3g m max, weights "
+            "%.3g, residual %.4g",
+            iterations, step_par, rms_pt, step_pt, weight_change, rms_norm,
+        )  # fmt: skip
         if small and (not robust or (reweighting and weight_change < 0.01)):
             converged = True
             break
