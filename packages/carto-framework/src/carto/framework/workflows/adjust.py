@@ -365,7 +365,7 @@ def _adjust_into(
     prepared = _PreparedImages(inputs, work, engine)
     tie_table = _tie_table(ties, inputs, chosen_matcher, prepared, engine, quiet)
     # the workers' memory back before the bundle adjustment: on a three-scene strip they
-    # held 1.5 GB idle beside its 2.3 GB (benchmarks/results/strip_scale.json)
+    # held 1.5 GB idle beside its 3.3 GB (benchmarks/results/strip_scale.json)
     engine.release()
     run = AdjustRun(
         src=src,
