@@ -137,3 +137,19 @@ def merge_runs(
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(document, indent=2) + "\n")
     return document
+
+
+def stamp(doc: dict[str, Any], method: str) -> None:
+    """Mark a results document with this machine (cores, memory, Python), today's date and
+    how its figures were measured."""
+    import datetime
+    import os
+    import platform
+
+    doc["machine"] = {
+        "cpus": os.cpu_count(),
+        "memory_gb": round(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 1e9, 1),
+        "python": platform.python_version(),
+    }
+    doc["updated"] = datetime.date.today().isoformat()
+    doc["method"] = method

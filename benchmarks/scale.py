@@ -22,17 +22,14 @@ scene's and memory <= 1.3 x; two workers >= 1.7 x faster than one on the full sc
 from __future__ import annotations
 
 import argparse
-import datetime
 import json
-import os
-import platform
 import shutil
 import sys
 from pathlib import Path
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from measure import run_measured, timeline_peaks
+from measure import run_measured, stamp, timeline_peaks
 
 ROOT = Path(__file__).resolve().parent.parent
 RESULT = ROOT / "benchmarks" / "results" / "scale.json"
@@ -215,16 +212,13 @@ def main() -> int:
     def save(size: str, entry: dict[str, Any]) -> None:
         doc["runs"][size] = entry
         doc["summary"] = summary(doc["runs"])
-        doc["machine"] = {
-            "cpus": os.cpu_count(),
-            "memory_gb": round(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 1e9, 1),
-            "python": platform.python_version(),
-        }
-        doc["updated"] = datetime.date.today().isoformat()
-        doc["method"] = (
-            "benchmarks/scale.py: each carto command in a subprocess; peak of the summed RSS "
-            "of the process tree (workers included) polled every 0.2 s, GB = 1e9 bytes; "
-            "simulated scenes: a best case (#18)"
+        stamp(
+            doc,
+            (
+                "benchmarks/scale.py: each carto command in a subprocess; peak of the summed RSS "
+                "of the process tree (workers included) polled every 0.2 s, GB = 1e9 bytes; "
+                "simulated scenes: a best case (#18)"
+            ),
         )
         RESULT.write_text(json.dumps(doc, indent=2) + "\n")
 

@@ -24,15 +24,13 @@ of scenes.
 from __future__ import annotations
 
 import argparse
-import datetime
 import json
-import os
-import platform
 import sys
 from pathlib import Path
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from measure import stamp
 from scale import CARTO, _step
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -180,16 +178,13 @@ def main() -> int:
     def save(entry: dict[str, Any]) -> None:
         entry["summary"] = summary(entry, single_runs.get(args.size))
         doc["runs"][args.size] = entry
-        doc["machine"] = {
-            "cpus": os.cpu_count(),
-            "memory_gb": round(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 1e9, 1),
-            "python": platform.python_version(),
-        }
-        doc["updated"] = datetime.date.today().isoformat()
-        doc["method"] = (
-            "benchmarks/strip_scale.py: each carto command in a subprocess; peak of the summed "
-            "RSS of the process tree (workers included) polled every 0.2 s, GB = 1e9 bytes; "
-            "single-scene times from scale.json; simulated scenes: a best case (#18)"
+        stamp(
+            doc,
+            (
+                "benchmarks/strip_scale.py: each carto command in a subprocess; peak of the summed "
+                "RSS of the process tree (workers included) polled every 0.2 s, GB = 1e9 bytes; "
+                "single-scene times from scale.json; simulated scenes: a best case (#18)"
+            ),
         )
         RESULT.write_text(json.dumps(doc, indent=2) + "\n")
 

@@ -129,14 +129,14 @@ class TileEngine:
     quiet: bool = False
     connect: Callable[[], Any] | None = None
     disconnect: Callable[[], None] | None = None
-    shared: bool = False
 
     def release(self) -> None:
         """Stop the local cluster this engine started, so that its worker processes give
         their memory back while the command goes on in this process (the bundle adjustment
         after the tie points); a later stage starts it again. A shared engine
-        (:func:`shared_engine`) keeps its cluster for the commands after."""
-        if self.client is not None and self.disconnect is not None and not self.shared:
+        (:func:`shared_engine`) has no ``disconnect``: it keeps its cluster for the commands
+        after, until its block ends."""
+        if self.client is not None and self.disconnect is not None:
             self.disconnect()
             self.client = None
 
@@ -236,7 +236,7 @@ def shared_engine(workers: int | None = None, *, quiet: bool = False) -> Iterato
     scheduler, and with no workers or the same number, returns instead of its own: the
     commands of one process (``carto demo``) share its local cluster, which starts once."""
     with open_engine(workers, None, quiet=quiet) as engine:
-        engine.shared = True
+        engine.disconnect = None  # the block's end stops the cluster, not a command's release
         token = _SHARED.set(engine)
         try:
             yield engine
