@@ -55,3 +55,27 @@ def test_logging_is_put_back_after_an_in_process_run(tmp_path, flags):
     after = [(n, logging.getLogger(n).level, list(logging.getLogger(n).handlers))
              for n in ("carto", "rasterio")]  # fmt: skip
     assert after == before
+
+
+@pytest.mark.parametrize("to_file", [True, False])
+def test_a_local_cluster_does_not_silence_carto(tmp_path, to_file, capsys):
+    """dask's LocalCluster sets the stream handlers of the ``distributed`` logger to WARNING;
+    the handler carto shares with it must keep carto's details (``carto demo --log-file``
+    stopped writing them at its first local cluster)."""
+    import argparse
+
+    from distributed import LocalCluster
+
+    from carto.framework.cli.logging_setup import command_logging
+
+    # --log-file FILE, or -vv (the terminal's handler is then the libraries' too)
+    log_file = tmp_path / "l.log" if to_file else None
+    args = argparse.Namespace(verbose=0 if to_file else 2, log_file=log_file)
+    log = logging.getLogger("carto.test")
+    with command_logging(args):
+        with LocalCluster(n_workers=1, processes=False, dashboard_address=None):
+            log.debug("inside the cluster")
+        log.debug("after the cluster")
+    text = log_file.read_text() if log_file else capsys.readouterr().err
+    assert "inside the cluster" in text
+    assert "after the cluster" in text

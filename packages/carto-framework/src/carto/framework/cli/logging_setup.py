@@ -50,6 +50,25 @@ class _Details(logging.Filter):
         return record.levelno < logging.INFO or not record.name.startswith("carto")
 
 
+class _Sealed(logging.Handler):
+    """A handler that passes every record to ``inner``, and is no :class:`StreamHandler`
+    itself: dask's ``LocalCluster`` sets every stream handler of the ``distributed`` logger
+    to WARNING (``silence_logs``), and the one handler carto shares between its loggers and
+    the libraries' lost carto's details with it (``--log-file`` and ``-vv`` stopped at the
+    first local cluster)."""
+
+    def __init__(self, inner: logging.Handler) -> None:
+        super().__init__()
+        self.inner = inner
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.inner.handle(record)
+
+    def close(self) -> None:
+        self.inner.close()
+        super().close()
+
+
 @contextlib.contextmanager
 def command_logging(args: argparse.Namespace) -> Iterator[None]:
     """Logging as ``args`` asks for while a command runs; everything is put back after
@@ -72,16 +91,15 @@ def command_logging(args: argparse.Namespace) -> Iterator[None]:
 
             raise UsageError(f"--log-file {log_file}: {exc.strerror or exc}") from exc
         file_handler.setFormatter(logging.Formatter(FILE_FORMAT))
-    handlers = [h for h in (terminal, file_handler) if h is not None]
+    handlers = [_Sealed(h) for h in (terminal, file_handler) if h is not None]
     carto.setLevel(logging.DEBUG if handlers else logging.INFO)
     for lg in libraries:
         lg.setLevel(logging.DEBUG if (verbose >= 2 or log_file) else logging.CRITICAL)
     for lg in (carto, *libraries):
         lg.propagate = False
-        if file_handler is not None:
-            lg.addHandler(file_handler)
-        if terminal is not None and (lg is carto or verbose >= 2):
-            lg.addHandler(terminal)
+        for h in handlers:
+            if h.inner is file_handler or lg is carto or verbose >= 2:
+                lg.addHandler(h)
     try:
         yield
     finally:
