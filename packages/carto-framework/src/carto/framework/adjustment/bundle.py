@@ -23,8 +23,9 @@ Solution
     :mod:`carto.framework.adjustment.normal_equations`; where the points start:
     :mod:`carto.framework.adjustment.starting_points`.)
 Robustness
-    iteratively reweighted least squares (Huber weights on normalised residuals) and, after
-    convergence, rejection of observations whose normalised residual exceeds
+    iteratively reweighted least squares (Huber weights on normalised residuals, the tie
+    points' settled point by point first: :mod:`carto.framework.adjustment.point_reweighting`)
+    and, after convergence, rejection of observations whose normalised residual exceeds
     ``outlier_threshold`` (a GCP whose ground or image residuals are too large is flagged by
     its id, one at a time and only among at least :data:`MIN_GCPS_FOR_SNOOPING` GCPs), then
     a new solution without them, from the previous one. A GCP that the model cannot project
@@ -69,6 +70,7 @@ from carto.framework.adjustment.normal_equations import (
 )
 from carto.framework.adjustment.observations import HEIGHT_OFFSET, Observations
 from carto.framework.adjustment.parameter_constraints import ParameterConstraint
+from carto.framework.adjustment.point_reweighting import huber, settle_tie_weights
 from carto.framework.adjustment.starting_points import place_points
 from carto.framework.adjustment.variance_components import solution_components
 from carto.framework.errors import AdjustmentError, InputError
@@ -99,12 +101,6 @@ def _move(
         "nij,ni->nj", frames.enu_basis(lon, lat), d_enu
     )
     return frames.ecef_to_geodetic(x)
-
-
-def _huber(v: FloatArray, k: float) -> FloatArray:
-    """Huber weights of normalised residuals ``v``: 1 up to ``k``, ``k / |v|`` beyond."""
-    a = np.abs(v)
-    return np.where(a <= k, 1.0, k / np.maximum(a, 1e-300))
 
 
 def free_parameters(sensors: Mapping[str, Sensor]) -> tuple[list[str], dict[str, Parameter]]:
@@ -271,6 +267,11 @@ class _Indexed:
     def n_par(self) -> int:
         return len(self.names)
 
+    @property
+    def constrained(self) -> NDArray[np.intp]:
+        """The points with observations besides image measurements (GCPs, heights, offsets)."""
+        return np.unique(np.concatenate([self.gidx, self.hidx, self.oidx]))
+
     @classmethod
     def of(
         cls,
@@ -414,9 +415,10 @@ def _iterate(
         if reweighting:
             # iteratively reweighted least squares: Huber weights from the residuals at the
             # current estimate, every iteration, until neither estimate nor weights change
-            new_w = _huber(np.nan_to_num(norm_img, nan=1e9), 2.0)
+            new_w = huber(np.nan_to_num(norm_img, nan=1e9))
             weight_change = float(np.max(np.abs(new_w - w_img), initial=0.0))
-            w_img = new_w
+            # ... with the tie points' own weights settled first (point_reweighting)
+            w_img = settle_tie_weights(new_w, images, ix.obs.sigma_px, ix.constrained)
         normal = NormalEquations.zeros(ix.n_pts, ix.n_par)
         offsets, a_h = _accumulate(normal, cur, ix, estimate, images, (w_img, w_gcp), opts)
         d_c, d_p, good, reduction = solve_normal(normal, ix.names)
