@@ -7,10 +7,12 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pyproj
 import pytest
 import rasterio
 
 from carto.framework.errors import InputError, UsageError
+from carto.framework.products.scene import Scene
 from carto.framework.workflows import multiview_dem
 from carto.framework.workflows.multiview_dem import (
     MultiViewRequest,
@@ -108,6 +110,38 @@ def test_a_triplet_makes_three_pairs_and_fuses_them(fused):
         with rasterio.open(out / f"ortho_{name}.tif") as ds:
             assert ds.tags()["CARTO_IMAGE"] == name
             assert ds.read(1, masked=True).count() > 0.3 * ds.width * ds.height
+    # every pair on the CRS of the triplet's centre (common_crs), which the fused DEM keeps
+    sensors = list(Scene.open(truth.parent.parent).truth_sensors().values())
+    common = multiview_dem.common_crs(sensors, float(np.nanmean(on_grid(truth, truth))))
+    for folder in [p["folder"] for p in report["pairs"]] + ["."]:
+        with rasterio.open(out / folder / "dem.tif") as ds:  # 3-D: ellipsoidal heights
+            assert pyproj.CRS(ds.crs.to_wkt()).to_2d().to_string() == common, folder
+
+
+class _Strip:
+    """A stand-in line scanner whose footprint spans ``lon0 .. lon0 + 0.3`` degrees east and
+    0.25 degrees north from ``lat0`` (the stand-in image is 100 x 100 px)."""
+
+    image_shape = (100, 100)
+
+    def __init__(self, lon0: float, lat0: float) -> None:
+        self.lon0, self.lat0 = lon0, lat0
+
+    def image_to_ground(self, line, sample, h):
+        return self.lon0 + 0.003 * np.asarray(sample), self.lat0 + 0.0025 * np.asarray(line)
+
+
+def test_the_pairs_of_a_strip_across_two_utm_zones_share_the_zone_of_its_centre():
+    """Three scenes of a strip at 77.95 deg E (UTM zones 43 and 44 meet at 78 deg E; the
+    simulator's default target): the first two scenes' own centres are in zone 43, the
+    third's in 44, and the DEMs of all pairs are made in the zone of the strip's centre."""
+    from carto.framework.raster.crs import utm_crs
+
+    scenes = [_Strip(77.6 + 0.15 * k, 30.0 + 0.25 * k) for k in range(3)]
+    own = [utm_crs(s.lon0 + 0.15, s.lat0 + 0.125).to_epsg() for s in scenes]
+    assert own == [32643, 32643, 32644]
+    assert multiview_dem.common_crs(scenes, 0.0) == "EPSG:32643"
+    assert multiview_dem.common_crs(scenes[2:], 0.0) == "EPSG:32644"
 
 
 def test_a_pair_that_fails_is_reported_and_the_others_fuse(triplet, tmp_path, monkeypatch):

@@ -296,6 +296,7 @@ class _SceneViews:
     sensors: dict[str, Sensor]
     rasters: dict[str, Path]
     h_m: float
+    types: tuple[Any, ...] = ()
 
 
 def _scene_views(request: MultiViewRequest) -> _SceneViews:
@@ -312,13 +313,14 @@ def _scene_views(request: MultiViewRequest) -> _SceneViews:
         )
     scene = Scene.open(request.source)
     models = None if request.models is None else require_complete_output(request.models, "adjust")
+    product = open_product(scene.root, request.sensor_type)
     sensors = {
-        name: adjusted_model(models, name, sensor)
-        for name, sensor in open_product(scene.root, request.sensor_type).sensors.items()
+        name: adjusted_model(models, name, sensor) for name, sensor in product.sensors.items()
     }
     init = scene.manifest.get("init_dem")
     h_m = float(np.nanmedian(DEM.open(scene.path(init)).heights)) if init else 0.0
-    return _SceneViews(sensors, {n: scene.raster(n) for n in sensors}, h_m)
+    types = tuple(product.types[n] for n in sorted(product.types))
+    return _SceneViews(sensors, {n: scene.raster(n) for n in sensors}, h_m, types)
 
 
 def multiview_dem_product(request: MultiViewRequest, **dem_options: Any) -> dict[str, Any]:
@@ -334,6 +336,7 @@ def multiview_dem_product(request: MultiViewRequest, **dem_options: Any) -> dict
     pairs, left_out = choose_pairs(
         views.sensors, images=request.images, pairs=request.pairs, h_m=h_m
     )
+    dem_options = _on_one_crs(dem_options, views, [views.sensors[n] for n in _images_of(pairs)])
     started = utc_now()
     inputs = [
         request.source,
@@ -353,6 +356,47 @@ def multiview_dem_product(request: MultiViewRequest, **dem_options: Any) -> dict
             shutil.rmtree(stage / "pairs", ignore_errors=True)
         report = record_run(stage / "report.json", report, [p for p in inputs if p], started, "dem")
     return report
+
+
+def _images_of(pairs: Sequence[PairChoice]) -> list[str]:
+    return sorted({n for p in pairs for n in (p.left, p.right)})
+
+
+def common_crs(sensors: Sequence[Sensor], h_m: float) -> str:
+    """The WGS84 UTM zone of the centre of all the images' footprints (``EPSG:326xx`` or
+    ``327xx``): every pair's DEM on it, whichever zone each pair's own centre is in."""
+    from carto.framework.raster.crs import utm_crs
+
+    points = [_footprint_points(sensor, h_m, n=9) for sensor in sensors]
+    lon = np.concatenate([p[0] for p in points])
+    lat = np.concatenate([p[1] for p in points])
+    ok = np.isfinite(lon) & np.isfinite(lat)
+    if not ok.any():
+        raise InputError("dem: the images' footprints have no ground coordinates")
+    lon, lat = lon[ok], lat[ok]
+    centre = (0.5 * (lon.min() + lon.max()), 0.5 * (lat.min() + lat.max()))
+    return utm_crs(float(centre[0]), float(centre[1])).to_string()
+
+
+def _on_one_crs(
+    dem_options: Mapping[str, Any], views: _SceneViews, sensors: Sequence[Sensor]
+) -> dict[str, Any]:
+    """``dem_options`` with the generator's ``crs`` option set to :func:`common_crs` unless
+    given: the pairs of a strip (three Cartosat-1 scenes are 90 km long) may sit in two UTM
+    zones, and their DEMs must share one CRS to be fused. A generator without a ``crs``
+    option makes each pair's DEM in its own CRS: the fusion refuses DEMs in two."""
+    from carto.framework.plugins.registry import get_registry
+    from carto.framework.workflows.dem import choose_dem_generator
+
+    options = dict(dem_options.get("options") or {})
+    if options.get("crs") is not None:
+        return dict(dem_options)
+    name = choose_dem_generator(dem_options.get("generator"), views.types)
+    settings = getattr(get_registry().get("dem-generator", name), "Settings", None)
+    if settings is None or "crs" not in attrs.fields_dict(settings):
+        return dict(dem_options)
+    options["crs"] = common_crs(sensors, views.h_m)
+    return {**dem_options, "options": options}
 
 
 def _run_pairs(
