@@ -130,6 +130,10 @@ class _Strip:
     def image_to_ground(self, line, sample, h):
         return self.lon0 + 0.003 * np.asarray(sample), self.lat0 + 0.0025 * np.asarray(line)
 
+    def locate_on_dem(self, line, sample, dem):
+        lon, lat = self.image_to_ground(line, sample, None)
+        return lon, lat, np.zeros_like(lon)
+
 
 def test_the_pairs_of_a_strip_across_two_utm_zones_share_the_zone_of_its_centre():
     """Three scenes of a strip at 77.95 deg E (UTM zones 43 and 44 meet at 78 deg E; the

@@ -363,19 +363,14 @@ def _images_of(pairs: Sequence[PairChoice]) -> list[str]:
 
 
 def common_crs(sensors: Sequence[Sensor], h_m: float) -> str:
-    """The WGS84 UTM zone of the centre of all the images' footprints (``EPSG:326xx`` or
-    ``327xx``): every pair's DEM on it, whichever zone each pair's own centre is in."""
-    from carto.framework.raster.crs import utm_crs
+    """The CRS a single pair's DEM of all these images would get (``footprint_box``'s
+    default: the WGS84 UTM zone of the centre of their footprints at ``h_m``), for every
+    pair's DEM, whichever zone each pair's own centre is in."""
+    from carto.framework.imaging.ortho_grid import footprint_box
+    from carto.framework.raster.dem import DEM
 
-    points = [_footprint_points(sensor, h_m, n=9) for sensor in sensors]
-    lon = np.concatenate([p[0] for p in points])
-    lat = np.concatenate([p[1] for p in points])
-    ok = np.isfinite(lon) & np.isfinite(lat)
-    if not ok.any():
-        raise InputError("dem: the images' footprints have no ground coordinates")
-    lon, lat = lon[ok], lat[ok]
-    centre = (0.5 * (lon.min() + lon.max()), 0.5 * (lat.min() + lat.max()))
-    return utm_crs(float(centre[0]), float(centre[1])).to_string()
+    crs, _ = footprint_box(list(sensors), DEM.constant(h_m))
+    return str(crs.to_string())
 
 
 def _on_one_crs(
