@@ -8,10 +8,13 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pyproj
 import pytest
+import rasterio
 
 from carto.cartosat1.presets import STRIP_OVERLAP
 from carto.framework.products.scene import Scene
+from carto.framework.raster.dem import DEM
 from tests.scenes import on_grid, simulate, true_model_dem
 
 
@@ -48,6 +51,37 @@ def test_a_strip_makes_one_dem_without_steps_between_scenes(strip, tmp_path, run
     )
     has = np.isfinite(error)
     assert 1.4826 * np.median(np.abs(error[has] - np.median(error[has]))) < 0.5
+    _orthos_cover_their_own_scene(strip, out)
+
+
+def _orthos_cover_their_own_scene(strip, out):
+    """Each image's ortho-image on the fused DEM is on the fused grid's lattice and covers that
+    image's footprint (its corners located on the truth DEM, taken to the map by pyproj) as
+    far as the fused DEM goes, not the strip: over half of it is image (a rotated footprint
+    in its box), and it is under 0.6 of the strip's length."""
+    truth_dem = DEM.open(strip / "truth" / "dem.tif")
+    with rasterio.open(out / "dem.tif") as ds:
+        lattice, crs, dem_bounds = ds.transform, ds.crs, ds.bounds
+    to_map = pyproj.Transformer.from_crs("EPSG:4326", crs.to_wkt(), always_xy=True)
+    for name, sensor in Scene.open(strip).truth_sensors().items():
+        n_l, n_s = sensor.image_shape
+        lon, lat, _ = sensor.locate_on_dem(
+            np.array([0.0, 0.0, n_l, n_l]), np.array([0.0, n_s, 0.0, n_s]), truth_dem
+        )
+        x, y = to_map.transform(lon, lat)
+        # as far as the fused DEM goes (the union of the pairs' DEMs, narrower than an image)
+        x = np.clip(x, dem_bounds.left, dem_bounds.right)
+        y = np.clip(y, dem_bounds.bottom, dem_bounds.top)
+        with rasterio.open(out / f"ortho_{name}.tif") as ds:
+            t, b, image = ds.transform, ds.bounds, ds.read(1, masked=True)
+        offset = ((t.c - lattice.c) / t.a, (t.f - lattice.f) / t.e)
+        assert np.allclose(offset, np.round(offset), atol=1e-6), name
+        assert b.left <= x.min(), name
+        assert x.max() <= b.right, name
+        assert b.bottom <= y.min(), name
+        assert y.max() <= b.top, name
+        assert b.top - b.bottom < 0.6 * (dem_bounds.top - dem_bounds.bottom), name
+        assert image.count() > 0.5 * image.size, name  # the whole strip: under 0.2
 
 
 def test_a_strip_adjusts_as_one_block(strip, tmp_path, run_carto):

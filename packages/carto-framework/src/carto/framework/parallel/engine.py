@@ -32,6 +32,7 @@ from typing import Any
 import attrs
 
 from carto.framework.errors import UsageError
+from carto.framework.parallel.process_memory import release_free_memory
 from carto.framework.parallel.progress import stage_bar
 
 __all__ = [
@@ -166,8 +167,10 @@ class TileEngine:
                         TaskFailure(key, _cause(value)) if isinstance(value, Exception) else value
                     )
                     bar.advance()
-                return results
-            return self._run_distributed(tasks, names, retries, bar)
+            else:
+                results = self._run_distributed(tasks, names, retries, bar)
+        release_free_memory(desc)  # what the stage freed, back to the system
+        return results
 
     def __call__(self, tasks: Sequence[Callable[[], Any]]) -> list[Any]:
         """The DEM generators' ``scheduler`` contract: results in order."""

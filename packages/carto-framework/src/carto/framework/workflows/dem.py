@@ -24,6 +24,7 @@ from carto.framework.errors import InputError, UsageError
 from carto.framework.files.documents import write_json_atomic
 from carto.framework.files.staging import staged_folder
 from carto.framework.geometry.sensor import SensorType
+from carto.framework.parallel.process_memory import release_free_memory
 from carto.framework.plugins.registry import get_registry
 from carto.framework.products.scene import scene_files
 from carto.framework.products.stac import ITEM_FILE, dem_item
@@ -386,8 +387,10 @@ def _dem_into(out: Path, run: _DemRun, *, quiet: bool, engine: Any, work: Path) 
     written = dem.to_geoid(geoid_grid) if run.vertical == "geoid" else dem
     vertical_reference = vertical_tag(written.vertical)
     rasters = {n: oriented.rasters[n] for n in oriented.names}
+    release_free_memory("before the DEM's files")
     files = _write_rasters(out, written, product, rasters, generator)
     del written
+    release_free_memory("after the DEM's files")
     from carto.framework.raster.quicklook import hillshade_png
 
     files["hillshade"] = hillshade_png(out / "dem.tif", out / "dem_hillshade.png", "DEM").name

@@ -1,5 +1,6 @@
 """``carto dem`` on three or more images: every useful pair through the DEM generator, then
-one DEM fused node by node, and one ortho-image per image on it.
+one DEM fused node by node, and one ortho-image per image on it (on the fused DEM's grid,
+over the image's own footprint).
 
 Pairs. Given explicitly (``--pairs A:B,B:C``), or every two of the images (a scene's images,
 all of them by default when it has three or more, or ``--images A B C``) whose
@@ -48,6 +49,7 @@ __all__ = [
     "MIN_OVERLAP",
     "PairChoice",
     "choose_pairs",
+    "image_window",
     "pair_geometry",
     "parse_pairs",
 ]
@@ -401,6 +403,7 @@ def _run_pairs(
     dem_options: Mapping[str, Any],
     quiet: bool,
 ) -> tuple[list[dict[str, Any]], list[tuple[PairChoice, Path]]]:
+    from carto.framework.parallel.process_memory import release_free_memory
     from carto.framework.workflows.dem import dem_product
     from carto.framework.workflows.reporting import progress
     from carto.framework.workflows.stereo_pair import StereoInputs
@@ -409,6 +412,7 @@ def _run_pairs(
     done: list[tuple[PairChoice, Path]] = []
     ordered = sorted(pairs, key=lambda p: p.b_over_h)
     for k, pair in enumerate(ordered, 1):
+        release_free_memory(f"before pair {pair.folder}")  # what the pairs before freed
         progress(
             "dem",
             f"pair {k}/{len(pairs)}: {pair.left} / {pair.right} (B/H {pair.b_over_h:.2f})",
@@ -609,11 +613,12 @@ def _orthos_on_fused(
     files = {}
     for name in names:
         progress("dem", f"ortho-image of {name} on the fused DEM", quiet)
-        layer = _tiled_ortho(sources[name], sensors[name], grid, dem, work / "ortho" / name)
+        own = image_window(grid, sensors[name], dem)
+        layer = _tiled_ortho(sources[name], sensors[name], own, dem, work / "ortho" / name)
         files[f"ortho_{name}"] = write_ortho(
             stage / f"ortho_{name}.tif",
             layer,
-            grid,
+            own,
             out_dtype=radiometry(rasters[name]),
             tags={"CARTO_PRODUCT": "ortho", "CARTO_IMAGE": name},
         ).name
@@ -634,6 +639,28 @@ def _ortho_grid(dem: Any, pair_ortho: Path) -> Any:
     rows = math.ceil(dem.shape[0] * abs(t.e) / step - 1e-9)
     cols = math.ceil(dem.shape[1] * abs(t.a) / step - 1e-9)
     return OrthoGrid(dem.crs, Affine(step, 0.0, t.c, 0.0, -step, t.f), (rows, cols))
+
+
+IMAGE_MARGIN_PX = 8
+"""Pixels of the fused grid kept around an image's footprint in its ortho-image."""
+
+
+def image_window(grid: Any, sensor: Sensor, dem: Any) -> Any:
+    """The part of ``grid`` (pixels of the same lattice) that covers ``sensor``'s footprint
+    on ``dem``, :data:`IMAGE_MARGIN_PX` around it: one image of a strip or of a paint-brush
+    set sees a part of the fused DEM, and its ortho-image covers that part, not the whole
+    strip (whose orthos would otherwise grow with the square of its length)."""
+    from carto.framework.imaging.ortho_grid import footprint_box
+
+    _, (left, bottom, right, top) = footprint_box(sensor, dem, crs=grid.crs)
+    t, (rows, cols) = grid.transform, grid.shape
+    c0 = max(0, math.floor((left - t.c) / t.a) - IMAGE_MARGIN_PX)
+    c1 = min(cols, math.ceil((right - t.c) / t.a) + IMAGE_MARGIN_PX)
+    r0 = max(0, math.floor((top - t.f) / t.e) - IMAGE_MARGIN_PX)
+    r1 = min(rows, math.ceil((bottom - t.f) / t.e) + IMAGE_MARGIN_PX)
+    if c1 <= c0 or r1 <= r0:
+        raise InputError(f"image {getattr(sensor, 'name', '?')}: its footprint is off the DEM")
+    return grid.window(r0, c0, r1 - r0, c1 - c0)
 
 
 ORTHO_TILE_PX = 2048

@@ -1,0 +1,65 @@
+"""This process's memory between stages: freed heap memory given back to the system.
+
+glibc keeps the memory that ``free`` returns inside its heap unless it lies at the heap's top,
+and raises its mmap threshold after each large block freed (up to 32 MB), so that arrays of a
+few MB to 32 MB come from the heap. A command's coordinating process makes and frees such
+arrays at every stage (a DEM iteration's assembly, the writing of a product, the reference
+comparison): its resident memory rose stage after stage and never came down, 1.2 GB after a
+whole scene's first pair of a strip, 2.7 GB from the second on, where the arrays it still
+held were a few hundred MB (issue 33). :func:`release_free_memory` asks glibc to give every
+free page back (``malloc_trim(0)``) between stages; it costs milliseconds, where a low
+``MALLOC_TRIM_THRESHOLD_`` costs page faults on every array of the hot loops (see
+``engine._NANNY_ENVIRON``)."""
+
+from __future__ import annotations
+
+import ctypes
+import ctypes.util
+import functools
+import logging
+import sys
+from typing import Any
+
+__all__ = ["release_free_memory", "resident_mb"]
+
+
+@functools.cache
+def _trim() -> Any:
+    """glibc's ``malloc_trim``, or None (another C library, another system)."""
+    if not sys.platform.startswith("linux"):
+        return None
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+        trim = libc.malloc_trim
+    except (OSError, AttributeError):  # musl and others have no malloc_trim
+        return None
+    trim.argtypes = [ctypes.c_size_t]
+    trim.restype = ctypes.c_int
+    return trim
+
+
+def resident_mb() -> float | None:
+    """This process's resident memory, MB (None where ``/proc`` does not say)."""
+    try:
+        with open("/proc/self/statm") as f:
+            pages = int(f.read().split()[1])
+    except (OSError, ValueError, IndexError):
+        return None
+    import resource
+
+    return pages * resource.getpagesize() / 1e6
+
+
+def release_free_memory(stage: str = "") -> bool:
+    """Give the heap's free pages back to the system (glibc's ``malloc_trim(0)``); whether
+    it could (False where the C library has no such call). ``stage`` names the point for
+    the debug log, which gives the resident memory before and after."""
+    trim = _trim()
+    if trim is None:
+        return False
+    before = resident_mb()
+    trim(0)
+    log = logging.getLogger("carto.memory")
+    if log.isEnabledFor(logging.DEBUG) and before is not None:
+        log.debug("%s: resident %.0f MB -> %.0f MB", stage or "heap", before, resident_mb() or 0.0)
+    return True
