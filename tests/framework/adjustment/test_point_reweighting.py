@@ -48,3 +48,38 @@ def test_points_within_the_threshold_keep_unit_weights_and_nothing_is_empty():
     assert np.all(settled_weights(np.array([0, 0, 1, 1]), a_p, r, np.full(4, 0.1)) == 1.0)
     nothing = (np.zeros(0, np.intp), np.zeros((0, 2, 3)), np.zeros((0, 2)), np.zeros(0))
     assert settled_weights(*nothing).size == 0
+
+
+def test_a_held_term_enters_each_points_huber_estimate():
+    """Points seen in two images with misfits of 1-3 px, each also held by a quadratic term
+    that is not reweighted (a height constraint: ``0.5 (d - c)^T H (d - c)``, given as
+    ``H`` and ``H c``): the weights are Huber's at the residuals of the estimate that
+    minimises the Huber cost plus that term."""
+    rng = np.random.default_rng(5)
+    n_pts = 30
+    point = np.repeat(np.arange(n_pts), 2)
+    a_p = rng.normal(0.0, 1.0, (2 * n_pts, 2, 3)) * 0.4
+    r = rng.normal(0.0, 0.3, (2 * n_pts, 2))
+    r[::2] += rng.uniform(1.0, 3.0, (n_pts, 2))
+    sigma = np.full(2 * n_pts, 0.1)
+    rows = rng.normal(0.0, 1.0, (n_pts, 3)) * 3.0  # one constraint row a point
+    target = rng.normal(0.0, 2.0, n_pts)
+    held_pp = rows[:, :, None] * rows[:, None, :]
+    held_b = target[:, None] * rows
+    w = settled_weights(
+        point, a_p, r, sigma, tolerance=1e-7, max_rounds=2000, held=(held_pp, held_b)
+    )
+    free = settled_weights(point, a_p, r, sigma, tolerance=1e-7, max_rounds=2000)
+    assert np.max(np.abs(w - free)) > 0.05  # the held term matters here
+
+    def cost(d, a, z, row, t):
+        return _huber_cost(d, a, z) + 0.5 * (row @ d - t) ** 2
+
+    for p in range(n_pts):
+        at = point == p
+        a, z = a_p[at] / 0.1, r[at] / 0.1
+        best = minimize(
+            cost, np.zeros(3), args=(a, z, rows[p], target[p]), method="BFGS", tol=1e-12
+        ).x
+        want = huber(np.linalg.norm(z - a @ best, axis=1))
+        assert w[at] == pytest.approx(want, abs=2e-3), p

@@ -14,31 +14,27 @@ Observations (each with its standard deviation)
     optional height constraints on tie points (e.g. from a DEM); a-priori values of the
     parameters (ephemeris and attitude enter as weighted observations, so few GCPs suffice).
 Solution
-    Gauss-Newton. The normal equations are reduced to the parameters by eliminating the
-    3 x 3 point blocks (Schur complement), so the cost grows linearly with the number of
-    points; the reduced system is solved by Cholesky. A system whose reduced matrix is
-    singular raises :class:`~carto.framework.errors.AdjustmentError` naming the parameters
-    nothing determines.
-    (The normal equations and their reduction:
-    :mod:`carto.framework.adjustment.normal_equations`; where the points start:
-    :mod:`carto.framework.adjustment.starting_points`.)
+    Gauss-Newton. The normal equations are reduced to the parameters by eliminating the 3 x 3
+    point blocks (Schur complement), so the cost grows linearly with the number of points; the
+    reduced system is solved by Cholesky. A system whose reduced matrix is singular raises
+    :class:`~carto.framework.errors.AdjustmentError` naming the parameters nothing determines
+    (the normal equations: :mod:`.normal_equations`; where the points start:
+    :mod:`.starting_points`).
 Robustness
-    iteratively reweighted least squares (Huber weights on normalised residuals, the tie
-    points' settled point by point first: :mod:`carto.framework.adjustment.point_reweighting`)
-    and, after convergence, rejection of observations whose normalised residual exceeds
-    ``outlier_threshold`` (a GCP whose ground or image residuals are too large is flagged by
-    its id, one at a time and only among at least :data:`MIN_GCPS_FOR_SNOOPING` GCPs), then
-    a new solution without them, from the previous one. A GCP that the model cannot project
-    into an image measuring it (ground coordinates far off) counts as the worst outlier;
-    with fewer GCPs it raises :class:`~carto.framework.errors.AdjustmentError` rather than
-    being left out unsaid. (Gross control errors are refused before, at the boundary:
-    :mod:`carto.framework.adjustment.control_checks`.)
+    iteratively reweighted least squares (Huber weights on normalised residuals, the tie points'
+    settled point by point first: :mod:`.point_reweighting`) and, after convergence, rejection
+    of observations whose normalised residual exceeds ``outlier_threshold`` (a GCP whose ground
+    or image residuals are too large is flagged by its id, one at a time and only among at least
+    :data:`MIN_GCPS_FOR_SNOOPING` GCPs), then a new solution without them, from the previous
+    one. A GCP that the model cannot project into an image measuring it (ground coordinates far
+    off) counts as the worst outlier; with fewer GCPs it raises
+    :class:`~carto.framework.errors.AdjustmentError` rather than being left out unsaid. (Gross
+    control errors are refused before, at the boundary: :mod:`.control_checks`.)
 Results
-    a-posteriori sigma0, the parameter covariance (``sigma0^2 S^-1``), each observation
-    group's variance component and the covariance under them
-    (:mod:`carto.framework.adjustment.variance_components`: tie points judged by their own
-    residuals, a few GCPs by their a-priori sigmas), residuals of every observation, flagged
-    outliers and a convergence report (:class:`AdjustmentResult`).
+    a-posteriori sigma0, the parameter covariance (``sigma0^2 S^-1``), each observation group's
+    variance component and the covariance under them (:mod:`.variance_components`: tie points
+    judged by their own residuals, a few GCPs by their a-priori sigmas), residuals of every
+    observation, flagged outliers and a convergence report (:class:`AdjustmentResult`).
 """
 
 from __future__ import annotations
@@ -66,6 +62,7 @@ from carto.framework.adjustment.normal_equations import (
     control_sigmas,
     height_residuals,
     offset_rows,
+    point_height_terms,
     solve_normal,
 )
 from carto.framework.adjustment.observations import HEIGHT_OFFSET, Observations
@@ -269,8 +266,12 @@ class _Indexed:
 
     @property
     def constrained(self) -> NDArray[np.intp]:
-        """The points with observations besides image measurements (GCPs, heights, offsets)."""
-        return np.unique(np.concatenate([self.gidx, self.hidx, self.oidx]))
+        """Points with reweighted observations besides image ones (GCPs, image offsets)."""
+        return np.unique(np.concatenate([self.gidx, self.oidx]))
+
+    def heights(self, dem: Any) -> HeightConstraints:
+        """The height constraints of these points on ``dem`` (None: their given heights)."""
+        return HeightConstraints(self.obs, self.hidx, dem, self.par_index)
 
     @classmethod
     def of(
@@ -413,12 +414,12 @@ def _iterate(
         norm_img = np.linalg.norm(v_img / ix.obs.sigma_px[:, None], axis=1)
         weight_change = 0.0
         if reweighting:
-            # iteratively reweighted least squares: Huber weights from the residuals at the
-            # current estimate, every iteration, until neither estimate nor weights change
+            # IRLS: Huber weights at the current estimate, every iteration, until neither the
+            # estimate nor the weights change; the tie points' own weights settled first
             new_w = huber(np.nan_to_num(norm_img, nan=1e9))
             weight_change = float(np.max(np.abs(new_w - w_img), initial=0.0))
-            # ... with the tie points' own weights settled first (point_reweighting)
-            w_img = settle_tie_weights(new_w, images, ix.obs.sigma_px, ix.constrained)
+            held = point_height_terms(ix.heights(opts.dem), estimate, ix.n_pts)
+            w_img = settle_tie_weights(new_w, images, ix.obs.sigma_px, ix.constrained, held)
         normal = NormalEquations.zeros(ix.n_pts, ix.n_par)
         offsets, a_h = _accumulate(normal, cur, ix, estimate, images, (w_img, w_gcp), opts)
         d_c, d_p, good, reduction = solve_normal(normal, ix.names)
@@ -532,7 +533,7 @@ def _accumulate(
     # height constraints
     a_h = np.zeros((0, 3))
     if ix.hidx.size:
-        a_h = add_heights(normal, HeightConstraints(obs, ix.hidx, opts.dem, ix.par_index), est)
+        a_h = add_heights(normal, ix.heights(opts.dem), est)
     # parameter priors
     add_priors(normal, ix.prior_sigma, ix.prior_value, est.values, ix.par_index, opts.constraints)
     return offsets, a_h
@@ -577,7 +578,7 @@ def _final_residuals(
         v_off[rows] = r
     v_h = np.zeros(0)
     if ix.hidx.size:
-        v_h = height_residuals(HeightConstraints(obs, ix.hidx, dem, ix.par_index), est)
+        v_h = height_residuals(ix.heights(dem), est)
     return _Residuals(d_line, d_sample, v_gcp, v_off, v_h)
 
 

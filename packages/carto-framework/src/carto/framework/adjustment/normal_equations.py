@@ -235,16 +235,36 @@ def add_control(
     np.add.at(normal.b_p, g, wgt * d_enu)
 
 
+def _height_rows(
+    heights: HeightConstraints, est: Estimate
+) -> tuple[NDArray[np.intp], FloatArray, FloatArray, FloatArray]:
+    """The placed points' height constraints: their points, weights, residuals and rows'
+    derivatives with respect to their points' east, north and up."""
+    ok = heights.hidx >= 0
+    hh = heights.hidx[ok]
+    wgt = 1.0 / heights.obs.height_sigma_m[ok] ** 2
+    # h + offset = DEM(east, north): the row's derivatives (the DEM's slope)
+    a_h = height_row(heights.dem, est.lon_deg[hh], est.lat_deg[hh])
+    return hh, wgt, height_residuals(heights, est), a_h
+
+
+def point_height_terms(
+    heights: HeightConstraints, est: Estimate, n_pts: int
+) -> tuple[FloatArray, FloatArray]:
+    """The height constraints' share of every point's own normal equations, ``(n_pts, 3, 3)``
+    and ``(n_pts, 3)`` (zero for points without one), the parameters held."""
+    hh, wgt, rho, a_h = _height_rows(heights, est)
+    n_pp, b_p = np.zeros((n_pts, 3, 3)), np.zeros((n_pts, 3))
+    np.add.at(n_pp, hh, wgt[:, None, None] * a_h[:, :, None] * a_h[:, None, :])
+    np.add.at(b_p, hh, (wgt * rho)[:, None] * a_h)
+    return n_pp, b_p
+
+
 def add_heights(normal: NormalEquations, heights: HeightConstraints, est: Estimate) -> FloatArray:
     """The height constraints of the placed points (``heights.hidx``); returns their rows'
     derivatives with respect to their points' east, north and up."""
-    hidx, par_index = heights.hidx, heights.par_index
-    ok = hidx >= 0
-    hh = hidx[ok]
-    wgt = 1.0 / heights.obs.height_sigma_m[ok] ** 2
-    rho = height_residuals(heights, est)
-    # h + offset = DEM(east, north): the row's derivatives (the DEM's slope)
-    a_h = height_row(heights.dem, est.lon_deg[hh], est.lat_deg[hh])
+    par_index = heights.par_index
+    hh, wgt, rho, a_h = _height_rows(heights, est)
     if HEIGHT_OFFSET in par_index:
         k = par_index[HEIGHT_OFFSET]
         normal.n_cc[k, k] += wgt.sum()

@@ -40,17 +40,22 @@ def settle_tie_weights(
     images: Mapping[str, tuple],
     sigma_px: FloatArray,
     constrained: NDArray[np.intp],
+    held: tuple[FloatArray, FloatArray] | None = None,
 ) -> FloatArray:
     """``w_img`` with the weights of the measurements of every point not in ``constrained``
     settled (:func:`settled_weights`) on the bundle's linearisation ``images`` (by sensor
-    ``(rows, points, own parameter names, a_p, a_c, residuals, ok)``)."""
+    ``(rows, points, own parameter names, a_p, a_c, residuals, ok)``); ``held``: every
+    point's share of its normal equations from other observations that are not reweighted
+    (height constraints: :func:`~.normal_equations.point_height_terms`)."""
     parts = [(rows[ok], pi[ok], a_p[ok], r[ok]) for rows, pi, _, a_p, _, r, ok in images.values()]
     if not parts:
         return w_img
     rows, point, a_p, r = (np.concatenate(p) for p in zip(*parts, strict=True))
     free = ~np.isin(point, constrained)
     out = w_img.copy()
-    out[rows[free]] = settled_weights(point[free], a_p[free], r[free], sigma_px[rows[free]])
+    out[rows[free]] = settled_weights(
+        point[free], a_p[free], r[free], sigma_px[rows[free]], held=held
+    )
     return out
 
 
@@ -62,6 +67,7 @@ def settled_weights(
     *,
     tolerance: float = 0.01,
     max_rounds: int = 100,
+    held: tuple[FloatArray, FloatArray] | None = None,
 ) -> FloatArray:
     """Robust weights of image measurements after their points alone have been solved again
     and again until the weights no longer change (by more than ``tolerance``; at most
@@ -74,20 +80,24 @@ def settled_weights(
             up (``(n, 2, 3)``).
         r: residuals at the current estimate, measured minus computed (``(n, 2)``, pixels).
         sigma_px: each measurement's sigma.
+        held: each point's share of its normal equations from observations that are not
+            reweighted (``(N, 3, 3)`` and ``(N, 3)``, indexed by the labels of ``point``,
+            in the units of the measurements normalised by their sigmas), or None.
 
     Returns:
         the ``(n,)`` weights.
     """
     if point.size == 0:
         return np.zeros(0)
-    _, local = np.unique(point, return_inverse=True)
-    n_pts = int(local.max()) + 1
+    ids, local = np.unique(point, return_inverse=True)
+    n_pts = ids.size
+    fixed = None if held is None else (held[0][ids], held[1][ids])
     a = a_p / sigma_px[:, None, None]
     z = r / sigma_px[:, None]
     w = huber(np.linalg.norm(z, axis=1))
     active = np.ones(n_pts, dtype=bool)
     for _ in range(max_rounds):
-        d_p = _point_steps(a, z, w, local, n_pts, active)
+        d_p = _point_steps(a, z, w, local, active, fixed)
         at = active[local]
         moved = z[at] - np.einsum("nij,nj->ni", a[at], d_p[local[at]])
         new = huber(np.linalg.norm(moved, axis=1))
@@ -106,16 +116,18 @@ def _point_steps(
     z: FloatArray,
     w: FloatArray,
     local: NDArray[np.intp],
-    n_pts: int,
     active: NDArray[np.bool_],
+    fixed: tuple[FloatArray, FloatArray] | None,
 ) -> FloatArray:
     """Each active point's weighted least-squares step ``(n_pts, 3)`` (zero for the others
-    and for points whose normal equations are singular)."""
+    and for points whose normal equations are singular), ``fixed`` added to its normal
+    equations."""
+    n_pts = active.size
     at = active[local]
     aw = a[at] * np.sqrt(w[at])[:, None, None]
     zw = z[at] * np.sqrt(w[at])[:, None]
-    n_pp = np.zeros((n_pts, 3, 3))
-    b_p = np.zeros((n_pts, 3))
+    n_pp = np.zeros((n_pts, 3, 3)) if fixed is None else fixed[0].copy()
+    b_p = np.zeros((n_pts, 3)) if fixed is None else fixed[1].copy()
     np.add.at(n_pp, local[at], np.swapaxes(aw, 1, 2) @ aw)
     np.add.at(b_p, local[at], np.einsum("nji,nj->ni", aw, zw))
     det = np.linalg.det(n_pp)
