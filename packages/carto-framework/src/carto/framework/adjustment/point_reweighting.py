@@ -12,8 +12,10 @@ With the parameters held, each point is a small problem of its own: its 3 x 3 no
 equations from the rows of the current linearisation. Reweighting and solving those again
 (points whose weights did not change are done) costs a few array operations on the rows
 that still move, and brings the weights to where the next iteration of the bundle finds
-them. A point with other observations (ground control, a height constraint, an image
-offset) is left to the bundle: its rows here would not be all of its equations.
+them. A point held to a DEM's height takes its height constraint along as a fixed term of
+its problem (``held``; a strip of three whole scenes holds 245 663 of its tie points so, and
+without it crept through 38 iterations of its first solution, 12 with it). A point with
+reweighted observations besides (ground control, an image offset) is left to the bundle.
 """
 
 from __future__ import annotations
