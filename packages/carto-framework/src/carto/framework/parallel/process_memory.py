@@ -56,9 +56,11 @@ def release_free_memory(stage: str = "") -> bool:
     trim = _trim()
     if trim is None:
         return False
+    log = logging.getLogger("carto.memory")
+    if not log.isEnabledFor(logging.DEBUG):
+        trim(0)
+        return True
     before = resident_mb()
     trim(0)
-    log = logging.getLogger("carto.memory")
-    if log.isEnabledFor(logging.DEBUG) and before is not None:
-        log.debug("%s: resident %.0f MB -> %.0f MB", stage or "heap", before, resident_mb() or 0.0)
+    log.debug("%s: resident %s MB -> %s MB", stage or "heap", before, resident_mb())
     return True
