@@ -76,12 +76,17 @@ def _initial_points(
     if np.any(todo):
         res = intersect_sensors([sensors[nm] for nm in names], lines[:, todo], samples[:, todo])
         lon[todo], lat[todo], h[todo] = res.lon_deg, res.lat_deg, res.h_m
-    single = np.isnan(lon) & (n_views >= 1)
-    for i in np.flatnonzero(single):
-        k = int(np.flatnonzero(np.isfinite(lines[:, i]))[0])
-        hh = heights.get(point_ids[i], np.nan)
-        if not np.isfinite(hh):
-            continue
-        lo, la = sensors[names[k]].image_to_ground(lines[k, i], samples[k, i], hh)
-        lon[i], lat[i], h[i] = float(lo), float(la), hh
+    # one ray at the constrained height (points seen once, or whose rays do not meet: the
+    # same line of sight in the overlap of two consecutive scenes), by image: the first
+    # image that measures each
+    hh = np.array([heights.get(p, np.nan) for p in point_ids], dtype=np.float64)
+    single = np.isnan(lon) & (n_views >= 1) & np.isfinite(hh)
+    first = np.argmax(np.isfinite(lines), axis=0)
+    for k, name in enumerate(names):
+        sel = np.flatnonzero(single & (first == k))
+        if sel.size:
+            lon[sel], lat[sel] = sensors[name].image_to_ground(
+                lines[k, sel], samples[k, sel], hh[sel]
+            )
+            h[sel] = hh[sel]
     return lon, lat, h, np.isfinite(lon) & np.isfinite(lat) & np.isfinite(h)

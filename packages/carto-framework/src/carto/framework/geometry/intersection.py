@@ -389,11 +389,17 @@ def _sensors_rays(
     """``(K, N, 3)`` origins and unit directions (ECEF) of every sensor's line of sight
     through its image points, from its ground locations at the two heights."""
     k, n = pts.lines.shape
-    origins = np.empty((k, n, 3))
-    directions = np.empty((k, n, 3))
+    origins = np.full((k, n, 3), np.nan)
+    directions = np.full((k, n, 3), np.nan)
+    low, high = (
+        np.broadcast_to(np.asarray(v, dtype=np.float64), (n,)) for v in (h_low_m, h_high_m)
+    )
     for i, sensor in enumerate(sensors):
-        origins[i], directions[i] = sensor_rays(
-            sensor, pts.lines[i], pts.samples[i], h_low_m, h_high_m
+        m = pts.w[i] > 0  # only where the sensor measures (a strip's images see a third)
+        if not m.any():
+            continue
+        origins[i, m], directions[i, m] = sensor_rays(
+            sensor, pts.lines[i, m], pts.samples[i, m], low[m], high[m]
         )
     return origins, directions
 
@@ -464,8 +470,11 @@ def _sensor_result(
     observed = pts.observed
     residuals_px = np.full((k, n, 2), np.nan)
     for i, sensor in enumerate(sensors):
-        pred = np.stack(sensor.project(lon, lat, h)[:2], axis=-1)
-        residuals_px[i] = np.where(pts.w[i, :, None] > 0, observed[i] - pred, np.nan)
+        m = pts.w[i] > 0
+        if not m.any():
+            continue
+        pred = np.stack(sensor.project(lon[m], lat[m], h[m])[:2], axis=-1)
+        residuals_px[i, m] = observed[i, m] - pred
     local_o, local_u = _sensors_rays(sensors, pts, h - 1.0, h + 1.0)
     w = pts.w
     rms_px = np.where(invalid, np.nan, _weighted_rms(np.linalg.norm(residuals_px, axis=-1), w))
@@ -499,15 +508,17 @@ def _normal_equations(
     normal = np.zeros((la.size, 3, 3))
     rhs = np.zeros((la.size, 3))
     for i, sensor in enumerate(sensors):
-        pred = np.stack(sensor.project(la, ph, hh)[:2], axis=-1)  # (M, 2)
-        jac = sensor.ground_partials(la, ph, hh)  # (M, 2, 3)
-        wi = weights[i]
-        ok = (wi > 0) & np.isfinite(pred).all(-1) & np.isfinite(jac).all((-1, -2))
-        wi = np.where(ok, wi, 0.0)
-        v = np.where(ok[:, None], observed[i] - pred, 0.0)
+        m = np.flatnonzero(weights[i] > 0)  # only the points this sensor measures
+        if m.size == 0:
+            continue
+        pred = np.stack(sensor.project(la[m], ph[m], hh[m])[:2], axis=-1)  # (m, 2)
+        jac = sensor.ground_partials(la[m], ph[m], hh[m])  # (m, 2, 3)
+        ok = np.isfinite(pred).all(-1) & np.isfinite(jac).all((-1, -2))
+        wi = np.where(ok, weights[i, m], 0.0)
+        v = np.where(ok[:, None], observed[i, m] - pred, 0.0)
         jac = np.where(ok[:, None, None], jac, 0.0)
-        normal += wi[:, None, None] * np.einsum("mri,mrj->mij", jac, jac)
-        rhs += wi[:, None] * np.einsum("mri,mr->mi", jac, v)
+        normal[m] += wi[:, None, None] * np.einsum("mri,mrj->mij", jac, jac)
+        rhs[m] += wi[:, None] * np.einsum("mri,mr->mi", jac, v)
     return normal, rhs
 
 
