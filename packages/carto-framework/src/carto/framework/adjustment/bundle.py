@@ -25,9 +25,9 @@ Robustness
     settled point by point first: :mod:`.point_reweighting`) and, after convergence, rejection
     of observations whose normalised residual exceeds ``outlier_threshold`` (a GCP whose ground
     or image residuals are too large is flagged by its id, one at a time and only among at least
-    :data:`MIN_GCPS_FOR_SNOOPING` GCPs), then a new solution without them, from the previous
-    one. A GCP that the model cannot project into an image measuring it (ground coordinates far
-    off) counts as the worst outlier; with fewer GCPs it raises
+    :data:`.solution_residuals.MIN_GCPS_FOR_SNOOPING` GCPs), then a new solution without them,
+    from the previous one. A GCP that the model cannot project into an image measuring it
+    (ground coordinates far off) counts as the worst outlier; with fewer GCPs it raises
     :class:`~carto.framework.errors.AdjustmentError` rather than being left out unsaid. (Gross
     control errors are refused before, at the boundary: :mod:`.control_checks`.)
 Results
@@ -40,7 +40,6 @@ Results
 from __future__ import annotations
 
 import logging
-import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -49,18 +48,15 @@ import numpy as np
 from numpy.typing import NDArray
 
 from carto.framework.adjustment.base import AdjustmentResult
+from carto.framework.adjustment.indexed_observations import IndexedObservations
 from carto.framework.adjustment.normal_equations import (
     Estimate,
-    HeightConstraints,
     NormalEquations,
     Reduction,
     add_control,
     add_heights,
     add_priors,
     add_rows,
-    control_residuals,
-    control_sigmas,
-    height_residuals,
     offset_rows,
     point_height_terms,
     solve_normal,
@@ -68,9 +64,15 @@ from carto.framework.adjustment.normal_equations import (
 from carto.framework.adjustment.observations import HEIGHT_OFFSET, Observations
 from carto.framework.adjustment.parameter_constraints import ParameterConstraint
 from carto.framework.adjustment.point_reweighting import huber, settle_tie_weights
+from carto.framework.adjustment.solution_residuals import (
+    SolutionResiduals,
+    final_residuals,
+    flag_outliers,
+    sigma0_and_redundancy,
+)
 from carto.framework.adjustment.starting_points import place_points
 from carto.framework.adjustment.variance_components import solution_components
-from carto.framework.errors import AdjustmentError, InputError
+from carto.framework.errors import InputError
 from carto.framework.geometry import frames
 from carto.framework.geometry.sensor import Parameter, Sensor
 
@@ -84,9 +86,6 @@ sigmas. A whole 12000 x 12000 Cartosat-1 pair (79 000 tie points) never met 1e-4
 sigma: with robust weights and points settled, its steps stayed at 1e-3 to 3e-3 a-priori
 sigma, 1e-3 to 3e-3 of the formal sigma (the position biases), for 40 iterations in each of
 its two solutions (``carto -v adjust`` prints each iteration's steps)."""
-
-#: Fewest GCPs among which a GCP can be rejected as a blunder (data snooping).
-MIN_GCPS_FOR_SNOOPING = 3
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -240,63 +239,6 @@ class _Options:
 
 
 @attrs.frozen(eq=False)
-class _Indexed:
-    """The observations of one solution, indexed to its unknowns: ``obs_point``, ``gidx``,
-    ``hidx``, ``oidx`` are the point of each image measurement, GCP, height constraint and
-    image offset (-1: a point not placed), ``par_index`` the parameters' positions."""
-
-    obs: Observations
-    names: list[str]
-    point_ids: list[str]
-    obs_point: NDArray[np.intp]
-    gidx: NDArray[np.intp]
-    hidx: NDArray[np.intp]
-    oidx: NDArray[np.intp]
-    par_index: dict[str, int]
-    prior_sigma: FloatArray
-    prior_value: FloatArray
-
-    @property
-    def n_pts(self) -> int:
-        return len(self.point_ids)
-
-    @property
-    def n_par(self) -> int:
-        return len(self.names)
-
-    @property
-    def constrained(self) -> NDArray[np.intp]:
-        """Points with reweighted observations besides image ones (GCPs, image offsets)."""
-        return np.unique(np.concatenate([self.gidx, self.oidx]))
-
-    def heights(self, dem: Any) -> HeightConstraints:
-        """The height constraints of these points on ``dem`` (None: their given heights)."""
-        return HeightConstraints(self.obs, self.hidx, dem, self.par_index)
-
-    @classmethod
-    def of(
-        cls,
-        obs: Observations,
-        names: list[str],
-        priors: Mapping[str, Parameter],
-        point_ids: list[str],
-    ) -> _Indexed:
-        pindex = {p: i for i, p in enumerate(point_ids)}
-        return cls(
-            obs,
-            names,
-            point_ids,
-            np.array([pindex[p] for p in obs.point_id], dtype=np.intp),
-            np.array([pindex.get(c, -1) for c in obs.control_id], dtype=np.intp),
-            np.array([pindex.get(c, -1) for c in obs.height_id], dtype=np.intp),
-            np.array([pindex.get(c, -1) for c in obs.offset_id], dtype=np.intp),
-            {n: i for i, n in enumerate(names)},
-            np.array([priors[n].sigma for n in names]),
-            np.array([priors[n].value for n in names]),
-        )
-
-
-@attrs.frozen(eq=False)
 class _Linearisation:
     """What the variance components need of the last iteration: the image rows by sensor
     ``(rows, points, own parameter names, a_p, a_c, residuals, ok)``, the image offsets'
@@ -325,19 +267,6 @@ class _Iterated:
     converged: bool
 
 
-@attrs.frozen(eq=False)
-class _Residuals:
-    """Residuals at the final estimate (measured minus computed): image ``d_line``,
-    ``d_sample`` (pixels), GCPs ``v_gcp`` (east/north/up metres), image offsets ``v_off``
-    (pixels), height constraints ``v_h`` (metres, placed points only)."""
-
-    d_line: FloatArray
-    d_sample: FloatArray
-    v_gcp: FloatArray
-    v_off: FloatArray
-    v_h: FloatArray
-
-
 def _solve(
     sensors: dict[str, Sensor],
     obs: Observations,
@@ -357,7 +286,7 @@ def _solve(
     robust weights (image measurements, GCPs)."""
     opts = _Options(max_iterations, tolerance, robust, threshold, dem, constraints)
     obs, point_ids, points = place_points(sensors, obs, start)
-    ix = _Indexed.of(obs, names, priors, point_ids)
+    ix = IndexedObservations.of(obs, names, priors, point_ids)
     values = ix.prior_value.copy()
     if start is not None and tuple(start.parameters) == tuple(names):
         values = np.array(start.values, dtype=np.float64)
@@ -371,10 +300,10 @@ def _solve(
 
     # final residuals with the final estimate
     cur = _with_values(sensors, ix.par_index, done.estimate.values)
-    res = _final_residuals(cur, ix, done.estimate, dem)
-    sigma0, redundancy = _sigma0(ix, res, done.estimate.values)
+    res = final_residuals(cur, ix, done.estimate, dem)
+    sigma0, redundancy = sigma0_and_redundancy(ix, res, done.estimate.values)
     result = _assemble(cur, ix, done, res, sigma0, redundancy)
-    flagged = _flag_outliers(ix, res, robust, threshold)
+    flagged = flag_outliers(ix, res, robust, threshold)
     return result, flagged, (done.w_img, done.w_gcp)
 
 
@@ -392,7 +321,7 @@ def _with_values(
 
 def _iterate(
     sensors: Mapping[str, Sensor],
-    ix: _Indexed,
+    ix: IndexedObservations,
     estimate: Estimate,
     weights: tuple[FloatArray, FloatArray],
     opts: _Options,
@@ -455,7 +384,7 @@ def _formal_step(d_c: FloatArray, reduction: Reduction) -> float:
 
 def _log_iteration(
     iteration: int,
-    ix: _Indexed,
+    ix: IndexedObservations,
     d_c: FloatArray,
     reduction: Reduction,
     steps: Mapping[str, float],
@@ -481,7 +410,7 @@ def _log_iteration(
 
 
 def _linearize_images(
-    cur: Mapping[str, Sensor], ix: _Indexed, est: Estimate
+    cur: Mapping[str, Sensor], ix: IndexedObservations, est: Estimate
 ) -> tuple[dict[str, tuple], FloatArray]:
     """The image measurements linearised, by sensor ``(rows, points, own parameter names,
     a_p, a_c, residuals, ok)``, and their residuals (NaN where a row sits out)."""
@@ -508,7 +437,7 @@ def _linearize_images(
 def _accumulate(
     normal: NormalEquations,
     cur: Mapping[str, Sensor],
-    ix: _Indexed,
+    ix: IndexedObservations,
     est: Estimate,
     images: dict[str, tuple],
     weights: tuple[FloatArray, FloatArray],
@@ -540,7 +469,11 @@ def _accumulate(
 
 
 def _take_step(
-    ix: _Indexed, est: Estimate, d_c: FloatArray, d_p: FloatArray, good: NDArray[np.bool_]
+    ix: IndexedObservations,
+    est: Estimate,
+    d_c: FloatArray,
+    d_p: FloatArray,
+    good: NDArray[np.bool_],
 ) -> tuple[Estimate, dict[str, float]]:
     """The estimate moved by the step, and the step's size (for the history)."""
     lon, lat, h = _move(est.lon_deg, est.lat_deg, est.h_m, np.where(good[:, None], d_p, 0.0))
@@ -558,100 +491,11 @@ def _take_step(
     return Estimate(est.values + d_c, lon, lat, h), steps
 
 
-def _final_residuals(
-    cur: Mapping[str, Sensor], ix: _Indexed, est: Estimate, dem: Any
-) -> _Residuals:
-    """Every observation's residual at the final estimate."""
-    obs, lon, lat, h = ix.obs, est.lon_deg, est.lat_deg, est.h_m
-    d_line = np.full(obs.point_id.size, np.nan)
-    d_sample = np.full(obs.point_id.size, np.nan)
-    for name, sensor in cur.items():
-        rows = np.flatnonzero(obs.image == name)
-        if rows.size:
-            pi = ix.obs_point[rows]
-            line, sample, _ = sensor.project(lon[pi], lat[pi], h[pi])
-            d_line[rows] = obs.line[rows] - line
-            d_sample[rows] = obs.sample[rows] - sample
-    v_gcp = control_residuals(obs, ix.gidx, est)
-    v_off = np.full((ix.oidx.size, 2), np.nan)
-    for rows, _idx, _a_p, _a_c, r in offset_rows(cur, obs, ix.oidx, ix.names, lon, lat, h):
-        v_off[rows] = r
-    v_h = np.zeros(0)
-    if ix.hidx.size:
-        v_h = height_residuals(ix.heights(dem), est)
-    return _Residuals(d_line, d_sample, v_gcp, v_off, v_h)
-
-
-def _sigma0(ix: _Indexed, res: _Residuals, values: FloatArray) -> tuple[float, int]:
-    """A-posteriori sigma0 and the redundancy (rows minus unknowns; NaN sigma0 without)."""
-    obs = ix.obs
-    vpv = np.nansum((res.d_line / obs.sigma_px) ** 2 + (res.d_sample / obs.sigma_px) ** 2)
-    n_rows = 2 * int(np.sum(np.isfinite(res.d_line)))
-    vpv += float(np.nansum((res.v_off / obs.offset_sigma_px[:, None]) ** 2))
-    n_rows += 2 * int(np.sum(np.isfinite(res.v_off[:, 0])))
-    if ix.gidx.size:
-        vpv += float(np.sum((res.v_gcp / control_sigmas(obs)) ** 2))
-        n_rows += 3 * int(np.sum(ix.gidx >= 0))
-    if ix.hidx.size:
-        ok = ix.hidx >= 0
-        vpv += float(np.sum((res.v_h / obs.height_sigma_m[ok]) ** 2))
-        n_rows += int(ok.sum())
-    finite = np.isfinite(ix.prior_sigma)
-    vpv += float(np.sum(((values - ix.prior_value)[finite] / ix.prior_sigma[finite]) ** 2))
-    n_rows += int(finite.sum())
-    redundancy = n_rows - ix.n_par - 3 * ix.n_pts
-    sigma0 = math.sqrt(vpv / redundancy) if redundancy > 0 else float("nan")
-    return sigma0, redundancy
-
-
-def _flag_outliers(ix: _Indexed, res: _Residuals, robust: bool, threshold: float) -> list[str]:
-    """The points to reject: normalised residuals above the threshold (the worst GCP alone,
-    else every such tie point); an unprojectable GCP is the worst of all.
-
-    Raises:
-        AdjustmentError: a GCP cannot be projected and cannot be rejected either.
-    """
-    obs = ix.obs
-    controls = set(obs.control_id.tolist())
-    # a GCP the adjusted model cannot project into an image where it is measured (its ground
-    # coordinates far from the image: lat/lon swapped ...) took no part in the solution:
-    # it is the worst of outliers, never silently left out
-    is_control = np.array([p in controls for p in obs.point_id.tolist()], dtype=bool)
-    lost = is_control & ~(np.isfinite(res.d_line) & np.isfinite(res.d_sample))
-    if np.any(lost) and not (robust and len(controls) >= MIN_GCPS_FOR_SNOOPING):
-        k = int(np.flatnonzero(lost)[0])
-        raise AdjustmentError(
-            f"GCP {obs.point_id[k]!r} cannot be projected into image {obs.image[k]!r} "
-            "(its ground coordinates are far from where the image measures it), and with "
-            f"fewer than {MIN_GCPS_FOR_SNOOPING} GCPs it cannot be rejected as a blunder"
-        )
-    if not robust:
-        return []
-    # a GCP blunder distorts the whole block: reject the worst GCP alone and solve again;
-    # only when the GCPs agree, reject every tie point above the threshold at once
-    norm_img = np.nan_to_num(np.hypot(res.d_line, res.d_sample) / obs.sigma_px, nan=0.0)
-    norm_img[lost] = np.inf
-    worst: dict[str, float] = {}
-    for pid, v in zip(obs.point_id.tolist(), norm_img.tolist(), strict=True):
-        worst[pid] = max(worst.get(pid, 0.0), v)
-    if ix.gidx.size:
-        nrm = np.linalg.norm(res.v_gcp / control_sigmas(obs), axis=1)
-        for cid, v in zip(obs.control_id.tolist(), nrm.tolist(), strict=True):
-            worst[cid] = max(worst.get(cid, 0.0), v)
-    # a GCP blunder can only be told from the others when at least three remain to
-    # compare: with two, both show the same misfit and rejecting one would leave the
-    # datum to the other (GCPs are then kept whatever their residuals)
-    bad_gcps = [(v, c) for c, v in worst.items() if c in controls and v > threshold]
-    if bad_gcps and len(controls) >= MIN_GCPS_FOR_SNOOPING:
-        return [max(bad_gcps)[1]]
-    return sorted(p for p, v in worst.items() if v > threshold and p not in controls)
-
-
 def _assemble(
     cur: dict[str, Sensor],
-    ix: _Indexed,
+    ix: IndexedObservations,
     done: _Iterated,
-    res: _Residuals,
+    res: SolutionResiduals,
     sigma0: float,
     redundancy: int,
 ) -> AdjustmentResult:
