@@ -7,6 +7,7 @@ import math
 import shutil
 from pathlib import Path
 
+import attrs
 import numpy as np
 import pytest
 
@@ -297,3 +298,46 @@ def test_robust_weights_settle_point_by_point(scene, caplog):
     got, want = (checkpoint_accuracy(r.sensors, cp) for r in (result, plain))
     for key in ("rmse_planimetric_m", "rmse_height_m"):
         assert got[key] == pytest.approx(want[key], abs=0.05), key
+
+
+def test_a_warm_start_ends_where_a_fresh_solution_does(scene, caplog):
+    """``carto adjust`` solves again with the tie points' measured sigma and with the GCP
+    offsets; started from the first result it must reach what a fresh solution reaches (the
+    same parameters, points and outliers), in fewer iterations. A result of other
+    parameters is no start."""
+    import logging
+
+    from tests.integration.adjustment.test_variance_components import _projected
+
+    truth, cp = scene.truth_sensors(), scene.control("checkpoints")
+    rng = np.random.default_rng(1)
+    pts = [rng.uniform(cp[k].min(), cp[k].max(), 300) for k in ("lon_deg", "lat_deg", "h_m")]
+    ties = _projected(truth, "T", *pts, rng, 0.03, 0.3)  # sigma 0.3 px: 10x the noise
+    ties["sample"] = np.where(ties["id"] == "T007", ties["sample"] + 40.0, ties["sample"])
+    gcps, sensors = scene.control("gcps"), scene.sensors()
+    first = adjust_bundle(sensors, Observations.from_tables(gcps, ties))
+    assert "T007" in first.outliers
+    ties["sigma_px"] = np.full(ties["line"].size, 0.03)  # what the first one measured
+    obs = Observations.from_tables(gcps, ties)
+
+    def counted(**options):
+        caplog.clear()
+        with caplog.at_level(logging.DEBUG, logger="carto.adjust"):
+            result = adjust_bundle(sensors, obs, **options)
+        return result, sum(" iteration " in f" {r.getMessage()}" for r in caplog.records)
+
+    fresh, n_fresh = counted()
+    warm, n_warm = counted(start=first)
+    assert warm.converged
+    assert set(warm.outliers) == set(fresh.outliers)
+    assert n_warm < n_fresh, (n_warm, n_fresh)
+    assert np.all(np.abs(warm.values - fresh.values) < 0.05 * fresh.sigmas)
+    common = sorted(set(warm.points) & set(fresh.points))
+    assert len(common) == len(fresh.points)
+    xyz = [
+        frames.geodetic_to_ecef(*np.array([r.points[p] for p in common]).T) for r in (warm, fresh)
+    ]
+    assert np.max(np.linalg.norm(xyz[0] - xyz[1], axis=1)) < 0.01
+    # a start of other parameters (here: none of them) is ignored
+    other = adjust_bundle(sensors, obs, start=attrs.evolve(first, parameters=("nothing",)))
+    np.testing.assert_allclose(other.values, fresh.values, rtol=0, atol=1e-9)

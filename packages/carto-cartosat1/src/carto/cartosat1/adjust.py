@@ -268,9 +268,15 @@ class Cartosat1Adjuster(Adjuster):
     name = "cartosat1-combined"
     description = "Cartosat-1 tied-camera adjustment: one body correction for Fore+Aft"
     Settings = Cartosat1Settings
+    warm_start = True
 
     def adjust(
-        self, sensors: Mapping[str, Sensor], observations: Observations, **options: Any
+        self,
+        sensors: Mapping[str, Sensor],
+        observations: Observations,
+        *,
+        start: AdjustmentResult | None = None,
+        **options: Any,
     ) -> AdjustmentResult:
         s = self.settings(options)
         calibration = load_calibration(s.calibration) if s.calibration is not None else None
@@ -304,7 +310,7 @@ class Cartosat1Adjuster(Adjuster):
                 prepared, observations, s.jitter_hz, amplitude, **s.bundle_options()
             )
         else:
-            result = adjust_bundle(prepared, observations, **s.bundle_options())
+            result = adjust_bundle(prepared, observations, start=start, **s.bundle_options())
         trends = trend_document(result.sensors, list(result.parameters), result.sigmas)
         if trends is not None:
             result = attrs.evolve(result, products={**result.products, "image_trends": trends})

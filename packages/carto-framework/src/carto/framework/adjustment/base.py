@@ -131,6 +131,12 @@ class AdjustmentResult:
 class Adjuster(Component, Configurable):
     """Estimates corrections to sensor parameters from ground control and tie points."""
 
+    warm_start: bool = False
+    """True when :meth:`adjust` also takes ``start=``: an earlier result of this adjuster on
+    the same images to start from (``carto adjust`` passes it when it adjusts again with the
+    tie points' measured sigma and with the GCP transfer's offsets; an adjuster built on
+    :func:`adjust_bundle` hands it on). Without it every adjustment starts afresh."""
+
     @abc.abstractmethod
     def adjust(
         self, sensors: Mapping[str, Sensor], observations: Observations, **options: Any

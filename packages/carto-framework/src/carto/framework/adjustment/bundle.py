@@ -122,6 +122,7 @@ def adjust_bundle(
     outlier_threshold: float = 4.0,
     dem: Any = None,
     constraints: Sequence[ParameterConstraint] = (),
+    start: AdjustmentResult | None = None,
     **unknown: Any,
 ) -> AdjustmentResult:
     """Adjust ``sensors`` to ``obs`` (see the module docstring); return the result.
@@ -138,6 +139,11 @@ def adjust_bundle(
         dem: optional DEM whose heights are re-read at the current position of points that
             have height constraints (the constraint follows the point over the terrain).
         constraints: linear pseudo-observations on the parameters (datum conditions).
+        start: an earlier result of this adjustment of these images (e.g. before the tie
+            points' sigma changed, or image offsets were added): the solution starts from its
+            parameters and points, without the points it rejected (outliers of this result
+            too) or could not place, and reweights from the first iteration. Ignored when
+            its parameters are not these.
 
     Raises:
         AdjustmentError: the system is singular (names the undetermined parameters) or no
@@ -146,9 +152,11 @@ def adjust_bundle(
     _check_inputs(sensors, obs, unknown)
     names, priors = _unknowns(sensors, obs)
     outliers: list[str] = []
-    current = obs
-    result = None
-    weights = None
+    current, result, weights = obs, start, None
+    if start is not None and tuple(start.parameters) == tuple(names):
+        current, weights, outliers = _warm_start(obs, start)
+    else:
+        result = None
     for _round in range(10):
         result, flagged, weights = _solve(
             dict(sensors),
@@ -204,6 +212,18 @@ def _unknowns(
         names.append(HEIGHT_OFFSET)
         priors[HEIGHT_OFFSET] = Parameter(HEIGHT_OFFSET, 0.0, obs.height_offset_sigma_m, "m")
     return names, priors
+
+
+def _warm_start(
+    obs: Observations, start: AdjustmentResult
+) -> tuple[Observations, tuple[FloatArray, FloatArray], list[str]]:
+    """The observations a solution from ``start`` takes (without the points it rejected or
+    could not place), unit robust weights (reweighted at once) and the rejected points."""
+    present = set(obs.point_id.tolist()) | set(obs.control_id.tolist())
+    rejected = [p for p in start.outliers if p in present]
+    unplaced = sorted(set(obs.point_id.tolist()) - set(start.points) - set(rejected))
+    current = obs.without_points([*rejected, *unplaced])
+    return current, (np.ones(current.point_id.size), np.ones(current.control_id.size)), rejected
 
 
 def _without_rejected(

@@ -390,10 +390,12 @@ def _adjust_into(
         quiet,
     )
 
-    def adjust(observations: Observations) -> AdjustmentResult:
-        """The adjuster run on the run's images and DEM with ``observations``."""
+    def adjust(observations: Observations, start: Any = None) -> AdjustmentResult:
+        """The adjuster run on the run's images and DEM with ``observations`` (from the
+        result ``start`` when the adjuster can: :attr:`Adjuster.warm_start`)."""
+        warm = {"start": start} if start is not None and component.warm_start else {}
         return component.adjust(
-            inputs.sensors, observations, dem=inputs.dem, **opts.adjuster_options
+            inputs.sensors, observations, dem=inputs.dem, **warm, **opts.adjuster_options
         )
 
     adjusted = _first_adjustment(adjust, obs, ties)
@@ -487,7 +489,7 @@ def _transfer_status(gcp_transfer: str | bool, inputs: _AdjustInputs) -> dict[st
 
 
 def _first_adjustment(
-    adjust: Callable[[Observations], AdjustmentResult], obs: Observations, ties: str
+    adjust: Callable[..., AdjustmentResult], obs: Observations, ties: str
 ) -> Adjustment:
     """The adjustment, run again with the automatic tie points' sigma the first run
     measured when it differs from their a-priori one."""
@@ -495,13 +497,13 @@ def _first_adjustment(
     tie_sigma = estimated_tie_sigma(obs, result) if ties == "auto" else None
     if tie_sigma is not None:  # the matched tie points' precision, from the data
         obs = tie_sigma.observations
-        result = adjust(obs)
+        result = adjust(obs, result)
     return Adjustment(result, obs, tie_sigma)
 
 
 def _with_gcp_transfer(
     adjusted: Adjustment,
-    adjust: Callable[[Observations], AdjustmentResult],
+    adjust: Callable[..., AdjustmentResult],
     inputs: _AdjustInputs,
     opts: _WorkflowOptions,
     transfer: dict[str, Any],
@@ -546,7 +548,7 @@ def _with_gcp_transfer(
             first_outliers = sorted(rejected)
             obs = obs.without_points(first_outliers)
         adjusted = attrs.evolve(
-            adjusted, result=adjust(obs), obs=obs, first_outliers=first_outliers
+            adjusted, result=adjust(obs, adjusted.result), obs=obs, first_outliers=first_outliers
         )
     return adjusted
 
