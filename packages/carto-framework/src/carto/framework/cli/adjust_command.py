@@ -228,7 +228,8 @@ def _add_tie_options(p: argparse.ArgumentParser) -> None:
         type=finite_float,
         metavar="SIGMA_M",
         help="constrain tie-point heights to the DEM with this sigma (0: never; default: "
-        "30 m when no GCP is used, else off)",
+        "30 m on every tie point when no GCP is used, else on those seen in an image without "
+        "GCP or whose rays meet at less than 10 degrees)",
     )
     p.add_argument(
         "--dem-offset-sigma",
