@@ -10,6 +10,7 @@ the sidecar of ``<image>.tif``), a residual plot (``residuals.png``) and ``repor
 from __future__ import annotations
 
 import contextlib
+import functools
 import math
 import os
 import shutil
@@ -390,14 +391,7 @@ def _adjust_into(
         quiet,
     )
 
-    def adjust(observations: Observations, start: Any = None) -> AdjustmentResult:
-        """The adjuster run on the run's images and DEM with ``observations`` (from the
-        result ``start`` when the adjuster can: :attr:`Adjuster.warm_start`)."""
-        warm = {"start": start} if start is not None and component.warm_start else {}
-        return component.adjust(
-            inputs.sensors, observations, dem=inputs.dem, **warm, **opts.adjuster_options
-        )
-
+    adjust = functools.partial(_run_adjuster, component, inputs, opts.adjuster_options)
     adjusted = _first_adjustment(adjust, obs, ties)
     if "why_not" not in transfer:
         adjusted = _with_gcp_transfer(
@@ -409,6 +403,19 @@ def _adjust_into(
     for warning in warnings:
         progress("adjust", f"warning: {warning}", quiet)
     return write_outputs(out, run, adjusted, warnings, transfer, t0, engine, quiet)
+
+
+def _run_adjuster(
+    component: Any,
+    inputs: _AdjustInputs,
+    options: Mapping[str, Any],
+    observations: Observations,
+    start: AdjustmentResult | None = None,
+) -> AdjustmentResult:
+    """The adjuster run on the run's images and DEM with ``observations`` (from the result
+    ``start`` when the adjuster can: its ``warm_start``)."""
+    warm = {"start": start} if start is not None and component.warm_start else {}
+    return component.adjust(inputs.sensors, observations, dem=inputs.dem, **warm, **options)
 
 
 def _tie_table(
