@@ -236,7 +236,8 @@ def _add_tie_options(p: argparse.ArgumentParser) -> None:
         type=finite_float,
         metavar="M",
         help="a-priori sigma of one height offset common to all DEM constraints, estimated "
-        "(the DEM's absolute vertical error, e.g. 4 for SRTM)",
+        "(the DEM's absolute vertical error, e.g. 4 for SRTM; 0: none; default: 10 with GCPs, "
+        "which then set the level, none without)",
     )
     p.add_argument(
         "--calibration",

@@ -208,6 +208,16 @@ def _input_files(src: Path, ties: str, options: Mapping[str, Any] | None) -> lis
     return inputs
 
 
+DEM_OFFSET_SIGMA_M = 10.0
+"""A-priori sigma, metres, of one offset common to the tie points' DEM heights when GCPs are
+used (``height_offset_sigma_m`` "auto"): the DEM's errors are correlated over kilometres, so
+its heights, taken as independent, would set the block's level to their mean at a formal
+sigma of centimetres. A Cartosat-1 strip of three scenes with one GCP, 245 663 DEM-held tie
+points: checkpoint heights 1.73 m (predicted 0.045 m) without the offset, 0.87 m (predicted
+1.69 m) with it (benchmarks/results/README.md, session 54). Without GCPs the DEM is the datum:
+no offset."""
+
+
 @attrs.frozen(eq=False)
 class _WorkflowOptions:
     """The options the workflow takes for itself out of ``options``; the rest
@@ -218,7 +228,7 @@ class _WorkflowOptions:
     gcp_offset_sigma_px: float
     tie_heights: str | bool
     height_sigma_m: float
-    height_offset_sigma_m: float
+    height_offset_sigma_m: float | None  # None: "auto" (DEM_OFFSET_SIGMA_M with GCPs)
 
     @classmethod
     def take(cls, options: Mapping[str, Any] | None) -> _WorkflowOptions:
@@ -230,7 +240,8 @@ class _WorkflowOptions:
             raise InputError(f"gcp_offset_sigma_px must be > 0, got {offset_sigma_px}")
         tie_heights = _auto_flag(rest.pop("tie_heights", "auto"), "tie_heights")
         height_sigma_m = float(rest.pop("height_sigma_m", 30.0))
-        height_offset_sigma_m = float(rest.pop("height_offset_sigma_m", 0.0))
+        offset = rest.pop("height_offset_sigma_m", "auto")
+        height_offset_sigma_m = None if offset == "auto" else float(offset)
         return cls(
             rest, gcp_transfer, offset_sigma_px, tie_heights, height_sigma_m, height_offset_sigma_m
         )
@@ -243,7 +254,9 @@ class _WorkflowOptions:
             "gcp_transfer": self.gcp_transfer,
             "tie_heights": self.tie_heights,
             "height_sigma_m": self.height_sigma_m,
-            "height_offset_sigma_m": self.height_offset_sigma_m,
+            "height_offset_sigma_m": (
+                "auto" if self.height_offset_sigma_m is None else self.height_offset_sigma_m
+            ),
             "gcp_offset_sigma_px": self.gcp_offset_sigma_px,
         }
 
@@ -466,13 +479,11 @@ def _observations(
     tie_heights = flat_heights(opts.tie_heights, inputs.flat_height_m, n_used)
     if inputs.dem is not None and tie_table is not None and tie_heights is not False:
         weak = WEAK_INTERSECTION_DEG if (tie_heights == "auto" and n_used > 0) else None
+        offset = opts.height_offset_sigma_m
+        if offset is None:  # with GCPs the DEM holds the block's shape, the GCPs its level
+            offset = DEM_OFFSET_SIGMA_M if n_used > 0 else 0.0
         obs = with_dem_heights(
-            obs,
-            inputs.sensors,
-            inputs.dem,
-            opts.height_sigma_m,
-            opts.height_offset_sigma_m,
-            below_angle_deg=weak,
+            obs, inputs.sensors, inputs.dem, opts.height_sigma_m, offset, below_angle_deg=weak
         )
     return obs
 
