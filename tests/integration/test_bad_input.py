@@ -375,6 +375,22 @@ def test_one_wrong_gcp_among_several_is_flagged(tmp_path: Path) -> None:
     assert report["checkpoints"]["rmse_planimetric_m"] < 1.0
 
 
+@pytest.mark.parametrize("value", ["ten", -1.0, float("nan"), True])
+def test_a_bad_dem_offset_sigma_is_refused_before_any_work(
+    tmp_path: Path, cartosat1_scene: Path, value: object
+) -> None:
+    """``height_offset_sigma_m``: "auto" or a number >= 0; anything else is an InputError
+    naming it (a ValueError out of float() before), and nothing is written."""
+    from carto.framework.errors import InputError
+    from carto.framework.workflows.adjust import adjust_product
+
+    with pytest.raises(InputError, match="height_offset_sigma_m"):
+        adjust_product(
+            cartosat1_scene, tmp_path / "o", options={"height_offset_sigma_m": value}, quiet=True
+        )
+    assert not (tmp_path / "o").exists()
+
+
 # --------------------------------------------------------------------------- configurations
 @pytest.fixture
 def configuration(tmp_path: Path, cartosat1_adjusted: Path, cartosat1_scene: Path):  # type: ignore[no-untyped-def]
