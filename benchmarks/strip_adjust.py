@@ -44,20 +44,12 @@ def sub_strip(strip: Path, scenes: tuple[int, ...], out: Path) -> Path:
     out.mkdir(parents=True, exist_ok=True)
     keep = {f"{camera}{k}" for k in scenes for camera in ("fore", "aft")}
     doc = json.loads((strip / "scene.json").read_text())
+    left_out = {f"{n}.tif" for n in doc["images"] if n not in keep}
     doc["images"] = {n: v for n, v in doc["images"].items() if n in keep}
-    for entry in strip.iterdir():
-        if entry.name in ("scene.json", "checkpoints.csv") or entry.suffix == ".tif":
-            continue
+    for entry in strip.iterdir():  # the strip's files but the others' rasters (and these two)
         link = out / entry.name
-        if not link.exists():
+        if entry.name not in {"scene.json", "checkpoints.csv", *left_out} and not link.exists():
             link.symlink_to(entry.resolve())
-    for name in keep:
-        link = out / f"{name}.tif"
-        if not link.exists():
-            link.symlink_to((strip / f"{name}.tif").resolve())
-    for name in ("init_dem.tif",):
-        if not (out / name).exists():
-            (out / name).symlink_to((strip / name).resolve())
     with open(strip / "checkpoints.csv", newline="") as f:
         rows = [r for r in csv.DictReader(f) if r["image"] in keep]
     with open(out / "checkpoints.csv", "w", newline="") as f:

@@ -51,6 +51,7 @@ from carto.framework.adjustment.base import AdjustmentResult
 from carto.framework.adjustment.indexed_observations import IndexedObservations
 from carto.framework.adjustment.normal_equations import (
     Estimate,
+    HeightRows,
     NormalEquations,
     Reduction,
     add_control,
@@ -58,7 +59,6 @@ from carto.framework.adjustment.normal_equations import (
     add_priors,
     add_rows,
     offset_rows,
-    point_height_terms,
     solve_normal,
 )
 from carto.framework.adjustment.observations import HEIGHT_OFFSET, Observations
@@ -152,11 +152,10 @@ def adjust_bundle(
     _check_inputs(sensors, obs, unknown)
     names, priors = _unknowns(sensors, obs)
     outliers: list[str] = []
-    current, result, weights = obs, start, None
+    current, result, weights = obs, None, None
     if start is not None and tuple(start.parameters) == tuple(names):
         current, weights, outliers = _warm_start(obs, start)
-    else:
-        result = None
+        result = start
     for _round in range(10):
         result, flagged, weights = _solve(
             dict(sensors),
@@ -362,15 +361,20 @@ def _iterate(
         images, v_img = _linearize_images(cur, ix, estimate)
         norm_img = np.linalg.norm(v_img / ix.obs.sigma_px[:, None], axis=1)
         weight_change = 0.0
+        # the height constraints at this estimate (the DEM read once an iteration)
+        heights = HeightRows.at(ix.heights(opts.dem), estimate) if ix.hidx.size else None
         if reweighting:
             # IRLS: Huber weights at the current estimate, every iteration, until neither the
             # estimate nor the weights change; the tie points' own weights settled first
             new_w = huber(np.nan_to_num(norm_img, nan=1e9))
             weight_change = float(np.max(np.abs(new_w - w_img), initial=0.0))
-            held = point_height_terms(ix.heights(opts.dem), estimate, ix.n_pts)
+            held = None if heights is None else heights.point_terms(ix.n_pts)
             w_img = settle_tie_weights(new_w, images, ix.obs.sigma_px, ix.constrained, held)
         normal = NormalEquations.zeros(ix.n_pts, ix.n_par)
-        offsets, a_h = _accumulate(normal, cur, ix, estimate, images, (w_img, w_gcp), opts)
+        offsets = _accumulate(normal, cur, ix, estimate, images, (w_img, w_gcp), opts)
+        if heights is not None:
+            add_heights(normal, heights, ix.par_index)
+        a_h = np.zeros((0, 3)) if heights is None else heights.a_h
         d_c, d_p, good, reduction = solve_normal(normal, ix.names)
         linear = _Linearisation(images, offsets, a_h, reduction)
         estimate, steps = _take_step(ix, estimate, d_c, d_p, good)
@@ -462,9 +466,9 @@ def _accumulate(
     images: dict[str, tuple],
     weights: tuple[FloatArray, FloatArray],
     opts: _Options,
-) -> tuple[list[tuple], FloatArray]:
-    """Add every observation group to ``normal``; return the image offsets' rows and the
-    height constraints' derivatives it took."""
+) -> list[tuple]:
+    """Add every observation group but the height constraints to ``normal``; return the
+    image offsets' rows."""
     obs, lon, lat, h = ix.obs, est.lon_deg, est.lat_deg, est.h_m
     w_img, w_gcp = weights
     for rows, pi, own, a_p, a_c, r, ok in images.values():
@@ -479,13 +483,9 @@ def _accumulate(
         add_rows(normal, ix.oidx[rows], idx, a_p, a_c, r, 1.0 / obs.offset_sigma_px[rows], ok)
     # ground control (east, north, up)
     add_control(normal, obs, ix.gidx, est, w_gcp)
-    # height constraints
-    a_h = np.zeros((0, 3))
-    if ix.hidx.size:
-        a_h = add_heights(normal, ix.heights(opts.dem), est)
-    # parameter priors
+    # parameter priors (the height constraints: added by the caller, at the same estimate)
     add_priors(normal, ix.prior_sigma, ix.prior_value, est.values, ix.par_index, opts.constraints)
-    return offsets, a_h
+    return offsets
 
 
 def _take_step(

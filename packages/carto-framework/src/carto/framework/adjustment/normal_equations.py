@@ -235,44 +235,48 @@ def add_control(
     np.add.at(normal.b_p, g, wgt * d_enu)
 
 
-def _height_rows(
-    heights: HeightConstraints, est: Estimate
-) -> tuple[NDArray[np.intp], FloatArray, FloatArray, FloatArray]:
-    """The placed points' height constraints: their points, weights, residuals and rows'
-    derivatives with respect to their points' east, north and up."""
-    ok = heights.hidx >= 0
-    hh = heights.hidx[ok]
-    wgt = 1.0 / heights.obs.height_sigma_m[ok] ** 2
-    # h + offset = DEM(east, north): the row's derivatives (the DEM's slope)
-    a_h = height_row(heights.dem, est.lon_deg[hh], est.lat_deg[hh])
-    return hh, wgt, height_residuals(heights, est), a_h
+@attrs.frozen(eq=False)
+class HeightRows:
+    """The placed points' height constraints at one estimate: their points (``points``),
+    weights, residuals (target minus computed, metres) and the rows' derivatives with
+    respect to their points' east, north and up (``a_h``, the DEM's slope)."""
+
+    points: NDArray[np.intp]
+    weights: FloatArray
+    residuals: FloatArray
+    a_h: FloatArray
+
+    @classmethod
+    def at(cls, heights: HeightConstraints, est: Estimate) -> HeightRows:
+        ok = heights.hidx >= 0
+        hh = heights.hidx[ok]
+        wgt = 1.0 / heights.obs.height_sigma_m[ok] ** 2
+        # h + offset = DEM(east, north): the row's derivatives (the DEM's slope)
+        a_h = height_row(heights.dem, est.lon_deg[hh], est.lat_deg[hh])
+        return cls(hh, wgt, height_residuals(heights, est), a_h)
+
+    def point_terms(self, n_pts: int) -> tuple[FloatArray, FloatArray]:
+        """Their share of every point's own normal equations, ``(n_pts, 3, 3)`` and
+        ``(n_pts, 3)`` (zero for points without one), the parameters held."""
+        n_pp, b_p = np.zeros((n_pts, 3, 3)), np.zeros((n_pts, 3))
+        self._add_points(n_pp, b_p)
+        return n_pp, b_p
+
+    def _add_points(self, n_pp: FloatArray, b_p: FloatArray) -> None:
+        hh, wgt, a_h = self.points, self.weights, self.a_h
+        np.add.at(n_pp, hh, wgt[:, None, None] * a_h[:, :, None] * a_h[:, None, :])
+        np.add.at(b_p, hh, (wgt * self.residuals)[:, None] * a_h)
 
 
-def point_height_terms(
-    heights: HeightConstraints, est: Estimate, n_pts: int
-) -> tuple[FloatArray, FloatArray]:
-    """The height constraints' share of every point's own normal equations, ``(n_pts, 3, 3)``
-    and ``(n_pts, 3)`` (zero for points without one), the parameters held."""
-    hh, wgt, rho, a_h = _height_rows(heights, est)
-    n_pp, b_p = np.zeros((n_pts, 3, 3)), np.zeros((n_pts, 3))
-    np.add.at(n_pp, hh, wgt[:, None, None] * a_h[:, :, None] * a_h[:, None, :])
-    np.add.at(b_p, hh, (wgt * rho)[:, None] * a_h)
-    return n_pp, b_p
-
-
-def add_heights(normal: NormalEquations, heights: HeightConstraints, est: Estimate) -> FloatArray:
-    """The height constraints of the placed points (``heights.hidx``); returns their rows'
-    derivatives with respect to their points' east, north and up."""
-    par_index = heights.par_index
-    hh, wgt, rho, a_h = _height_rows(heights, est)
+def add_heights(normal: NormalEquations, rows: HeightRows, par_index: Mapping[str, int]) -> None:
+    """The height constraints' rows (:class:`HeightRows`, and the common offset when it is
+    one of the parameters ``par_index``)."""
     if HEIGHT_OFFSET in par_index:
         k = par_index[HEIGHT_OFFSET]
-        normal.n_cc[k, k] += wgt.sum()
-        normal.b_c[k] += np.sum(wgt * rho)
-        np.add.at(normal.n_cp[:, k, :], hh, wgt[:, None] * a_h)
-    np.add.at(normal.n_pp, hh, wgt[:, None, None] * a_h[:, :, None] * a_h[:, None, :])
-    np.add.at(normal.b_p, hh, (wgt * rho)[:, None] * a_h)
-    return a_h
+        normal.n_cc[k, k] += rows.weights.sum()
+        normal.b_c[k] += np.sum(rows.weights * rows.residuals)
+        np.add.at(normal.n_cp[:, k, :], rows.points, rows.weights[:, None] * rows.a_h)
+    rows._add_points(normal.n_pp, normal.b_p)
 
 
 def add_priors(

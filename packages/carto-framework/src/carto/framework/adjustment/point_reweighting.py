@@ -13,8 +13,9 @@ equations from the rows of the current linearisation. Reweighting and solving th
 (points whose weights did not change are done) costs a few array operations on the rows
 that still move, and brings the weights to where the next iteration of the bundle finds
 them. A point held to a DEM's height takes its height constraint along as a fixed term of
-its problem (``held``; a strip of three whole scenes holds 245 663 of its tie points so, and
-without it crept through 38 iterations of its first solution, 12 with it). A point with
+its problem (``held``, :meth:`.normal_equations.HeightRows.point_terms`; a strip of three
+whole scenes holds 245 663 of its tie points so, and without it crept through 38 iterations
+of its first solution, 12 with it). A point with
 reweighted observations besides (ground control, an image offset) is left to the bundle.
 """
 
@@ -48,7 +49,7 @@ def settle_tie_weights(
     settled (:func:`settled_weights`) on the bundle's linearisation ``images`` (by sensor
     ``(rows, points, own parameter names, a_p, a_c, residuals, ok)``); ``held``: every
     point's share of its normal equations from other observations that are not reweighted
-    (height constraints: :func:`~.normal_equations.point_height_terms`)."""
+    (height constraints: :meth:`~.normal_equations.HeightRows.point_terms`)."""
     parts = [(rows[ok], pi[ok], a_p[ok], r[ok]) for rows, pi, _, a_p, _, r, ok in images.values()]
     if not parts:
         return w_img

@@ -41,6 +41,7 @@ from carto.framework.matching.gcp_transfer import (
     gcp_offsets,
 )
 from carto.framework.plugins.registry import get_registry
+from carto.framework.settings import number
 from carto.framework.workflows.adjust_checks import (
     corrections_beyond_priors,
     gcps_not_transferred,
@@ -240,8 +241,9 @@ class _WorkflowOptions:
             raise InputError(f"gcp_offset_sigma_px must be > 0, got {offset_sigma_px}")
         tie_heights = _auto_flag(rest.pop("tie_heights", "auto"), "tie_heights")
         height_sigma_m = float(rest.pop("height_sigma_m", 30.0))
-        height_offset_sigma_m = _auto_number(
-            rest.pop("height_offset_sigma_m", "auto"), "height_offset_sigma_m"
+        offset = rest.pop("height_offset_sigma_m", "auto")  # "auto" or a number >= 0
+        height_offset_sigma_m = (
+            None if offset == "auto" else number("height_offset_sigma_m", 0.0)(offset)
         )
         return cls(
             rest, gcp_transfer, offset_sigma_px, tie_heights, height_sigma_m, height_offset_sigma_m
@@ -626,19 +628,6 @@ def estimated_tie_sigma(obs: Observations, result: AdjustmentResult) -> TieSigma
     before = float(np.median(obs.sigma_px[ties]))
     sigma = np.where(ties, obs.sigma_px * scale, obs.sigma_px)
     return TieSigma(attrs.evolve(obs, sigma_px=sigma), before, before * scale)
-
-
-def _auto_number(value: Any, name: str) -> float | None:
-    """An ``"auto"`` (None) or number >= 0 option, checked."""
-    if value == "auto":
-        return None
-    try:
-        number = float(value)
-    except (TypeError, ValueError):
-        number = math.nan
-    if isinstance(value, bool) or not (math.isfinite(number) and number >= 0):
-        raise InputError(f"{name} must be 'auto' or a number >= 0, got {value!r}")
-    return number
 
 
 def _auto_flag(value: Any, name: str) -> str | bool:
