@@ -6,6 +6,7 @@ from __future__ import annotations
 import functools
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from carto.framework.errors import UsageError
@@ -32,15 +33,19 @@ def interrupted() -> None:
     raise KeyboardInterrupt
 
 
-def dies_once(marker: str, x: int) -> int:
-    """Kills its worker process on its first call (marked in a file), then returns ``x``."""
+def dies_once(marker: str, x: int, table: np.ndarray | None = None) -> float:
+    """Kills its worker process on its first call (marked in a file), then returns ``x``
+    (plus the sum of ``table``, into which it writes ``x`` first)."""
     import os
 
     path = Path(marker)
     if not path.exists():
         path.write_text("died")
         os._exit(1)
-    return x
+    if table is None:
+        return x
+    table += x
+    return float(table.sum())
 
 
 def worker_facts(_: int) -> tuple[int, str | None, str | None]:
@@ -255,6 +260,14 @@ def test_a_worker_killed_mid_run_is_replaced_and_its_task_run_again(tmp_path):
     with open_engine(2) as engine:
         tasks = [functools.partial(dies_once, str(marker), k) for k in range(4)]
         assert engine.run(tasks) == [0, 1, 2, 3]
+        assert marker.read_text() == "died"
+        # tasks that share a large array (sent once to every worker, issue 33): a dead
+        # worker's replacement gets it, and each task writes into its own copy of it
+        marker.unlink()
+        table = np.arange(100_000, dtype=float)
+        tasks = [functools.partial(dies_once, str(marker), k, table) for k in range(6)]
+        expected = [float((table + k).sum()) for k in range(6)]
+        assert engine.run(tasks) == expected
     assert marker.read_text() == "died"
 
 

@@ -3,7 +3,9 @@
 record of the tasks that failed.
 
 A task is an argument-less callable (a ``functools.partial`` of a module-level function over
-paths, windows and settings), so it pickles and runs on any worker that sees the files. A task
+paths, windows and settings), so it pickles and runs on any worker that sees the files; the
+large arrays that a stage's tasks share (sensors' tables, a DEM) travel once, not in every task
+(:mod:`~carto.framework.parallel.task_packing`). A task
 that raises is retried (:data:`RETRIES` times); one that still fails gives a
 :class:`TaskFailure` in its place, and the stage goes on: the caller decides what a missing
 tile means (the DEM marks it nodata and the command fails with the cause). An interruption
@@ -181,12 +183,24 @@ class TileEngine:
     ) -> list[Any]:
         from distributed import wait
 
+        from carto.framework.parallel.task_packing import pack_tasks, run_packed
+
+        packed = pack_tasks(tasks)  # the stage's large arrays once, not in every task
         # Ctrl-C and SIGTERM are held while distributed works (it may swallow an interruption
         # in its own waits) and raised here, between waits of at most half a second
         with _signals_deferred() as pending:
+            shared = self._scatter(packed.arrays)
             futures = [
-                self.client.submit(_call, task, pure=False, retries=retries, key=_key(name))
-                for task, name in zip(tasks, names, strict=True)
+                self.client.submit(
+                    run_packed,
+                    blob,
+                    keys,
+                    *(shared[k] for k in keys),
+                    pure=False,
+                    retries=retries,
+                    key=_key(name),
+                )
+                for blob, keys, name in zip(packed.blobs, packed.keys, names, strict=True)
             ]
             index = {f.key: k for k, f in enumerate(futures)}
             results: list[Any] = [None] * len(futures)
@@ -215,11 +229,25 @@ class TileEngine:
             except BaseException:
                 self.client.cancel(futures)
                 raise
+            finally:
+                for future in shared.values():
+                    future.release()
         return results
 
+    def _scatter(self, arrays: dict[str, Any]) -> dict[str, Any]:
+        """``arrays`` as tasks of their own (futures by key): each worker that runs a task
+        needing one gets it once for the stage. Tasks, not scattered data, which the
+        cluster cannot make again when the worker holding it dies."""
+        import warnings
 
-def _call(task: Callable[[], Any]) -> Any:
-    return task()
+        from carto.framework.parallel.task_packing import shared_array
+
+        with warnings.catch_warnings():  # "large graph": sent once by design, not per task
+            warnings.filterwarnings("ignore", "Sending large graph", UserWarning)
+            return {
+                key: self.client.submit(shared_array, array, pure=False, key=_key(key))
+                for key, array in arrays.items()
+            }
 
 
 def _key(name: str) -> str:
