@@ -48,6 +48,16 @@ def dies_once(marker: str, x: int, table: np.ndarray | None = None) -> float:
     return float(table.sum())
 
 
+def pid_on(table: np.ndarray, k: int) -> tuple[int, float]:
+    """The worker's process id after a short wait (so that one worker cannot take every
+    task), and ``table[k]``."""
+    import os
+    import time
+
+    time.sleep(0.3)
+    return os.getpid(), float(table[k])
+
+
 def worker_facts(_: int) -> tuple[int, str | None, str | None]:
     import os
 
@@ -101,6 +111,11 @@ def test_on_a_local_cluster_of_processes(tmp_path, monkeypatch):
         assert {pid for pid, _, _ in again}.isdisjoint({pid for pid, _, _ in first})
         (tmp_path / "again").mkdir()
         _check(engine, tmp_path / "again")
+        # tasks that share a large array (sent once, issue 33) still run on every worker
+        table = np.arange(200_000, dtype=float)
+        shared = engine.run([functools.partial(pid_on, table, k) for k in range(8)])
+        assert [v for _, v in shared] == list(range(8))
+        assert len({pid for pid, _ in shared}) == 2
 
 
 def test_the_commands_of_a_shared_engine_use_its_worker_processes(tmp_path):

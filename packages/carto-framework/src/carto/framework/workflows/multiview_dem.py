@@ -49,7 +49,6 @@ __all__ = [
     "MIN_OVERLAP",
     "PairChoice",
     "choose_pairs",
-    "image_window",
     "pair_geometry",
     "parse_pairs",
 ]
@@ -496,6 +495,7 @@ def _fused_into(
     quiet: bool,
 ) -> dict[str, Any]:
     from carto.framework.merging.fused_files import fuse_dem_folders
+    from carto.framework.workflows.fused_orthos import engine_options, orthos_on_fused
     from carto.framework.workflows.reporting import progress
 
     folders = [folder for _, folder in done]
@@ -511,10 +511,18 @@ def _fused_into(
         "quality_counts": "quality_counts.tif",
         "quality_flags": "quality_flags.tif",
     }
-    files.update(_orthos_on_fused(stage, views, done, quiet))
+    images = sorted({n for pair, _ in done for n in (pair.left, pair.right)})
+    views = attrs.evolve(
+        views,
+        sensors={n: views.sensors[n] for n in images},
+        rasters={n: views.rasters[n] for n in images},
+    )
+    pair_ortho = done[0][1] / "ortho_left.tif"
+    engine = engine_options(dem_options)
+    files.update(orthos_on_fused(stage, views.sensors, views.rasters, pair_ortho, engine, quiet))
     report: dict[str, Any] = {
         "generator": "fusion",
-        "images": sorted({n for pair, _ in done for n in (pair.left, pair.right)}),
+        "images": images,
         "fusion": {**attrs.asdict(request.fusion), **fusion},
         "quality_layers": {
             "sigma_m": {
@@ -587,98 +595,3 @@ def _evaluated(
         )
         report["accuracy"] = comparison.report
     return files
-
-
-def _orthos_on_fused(
-    stage: Path, views: _SceneViews, done: Sequence[tuple[PairChoice, Path]], quiet: bool
-) -> dict[str, str]:
-    """One ortho-image per image of the pairs on the fused DEM, at the pairs' ortho
-    posting, written from tiles orthorectified one by one (memory of a tile, not of the
-    scene)."""
-    import shutil
-
-    from carto.framework.imaging.ortho import write_ortho
-    from carto.framework.imaging.preparation import prepared_sources
-    from carto.framework.raster.dem import DEM
-    from carto.framework.workflows.dem import radiometry
-    from carto.framework.workflows.reporting import progress
-
-    dem = DEM.open(stage / "dem.tif")
-    names = sorted({n for pair, _ in done for n in (pair.left, pair.right)})
-    sensors = {n: views.sensors[n] for n in names}
-    rasters = {n: views.rasters[n] for n in names}
-    grid = _ortho_grid(dem, done[0][1] / "ortho_left.tif")
-    work = stage / "work"
-    sources = prepared_sources(rasters, sensors, dem, folder=work / "prepared")
-    files = {}
-    for name in names:
-        progress("dem", f"ortho-image of {name} on the fused DEM", quiet)
-        own = image_window(grid, sensors[name], dem)
-        layer = _tiled_ortho(sources[name], sensors[name], own, dem, work / "ortho" / name)
-        files[f"ortho_{name}"] = write_ortho(
-            stage / f"ortho_{name}.tif",
-            layer,
-            own,
-            out_dtype=radiometry(rasters[name]),
-            tags={"CARTO_PRODUCT": "ortho", "CARTO_IMAGE": name},
-        ).name
-    shutil.rmtree(work, ignore_errors=True)
-    return files
-
-
-def _ortho_grid(dem: Any, pair_ortho: Path) -> Any:
-    """The fused DEM's extent at the posting of a pair's ortho-image."""
-    import rasterio
-    from affine import Affine
-
-    from carto.framework.imaging.ortho_grid import OrthoGrid
-
-    with rasterio.open(pair_ortho) as ds:
-        step = abs(ds.transform.a)
-    t = dem.transform
-    rows = math.ceil(dem.shape[0] * abs(t.e) / step - 1e-9)
-    cols = math.ceil(dem.shape[1] * abs(t.a) / step - 1e-9)
-    return OrthoGrid(dem.crs, Affine(step, 0.0, t.c, 0.0, -step, t.f), (rows, cols))
-
-
-IMAGE_MARGIN_PX = 8
-"""Pixels of the fused grid kept around an image's footprint in its ortho-image."""
-
-
-def image_window(grid: Any, sensor: Sensor, dem: Any) -> Any:
-    """The part of ``grid`` (pixels of the same lattice) that covers ``sensor``'s footprint
-    on ``dem``, :data:`IMAGE_MARGIN_PX` around it: one image of a strip or of a paint-brush
-    set sees a part of the fused DEM, and its ortho-image covers that part, not the whole
-    strip (whose orthos would otherwise grow with the square of its length)."""
-    from carto.framework.imaging.ortho_grid import footprint_box
-
-    _, (left, bottom, right, top) = footprint_box(sensor, dem, crs=grid.crs)
-    t, (rows, cols) = grid.transform, grid.shape
-    c0 = max(0, math.floor((left - t.c) / t.a) - IMAGE_MARGIN_PX)
-    c1 = min(cols, math.ceil((right - t.c) / t.a) + IMAGE_MARGIN_PX)
-    r0 = max(0, math.floor((top - t.f) / t.e) - IMAGE_MARGIN_PX)
-    r1 = min(rows, math.ceil((bottom - t.f) / t.e) + IMAGE_MARGIN_PX)
-    if c1 <= c0 or r1 <= r0:
-        raise InputError(f"image {getattr(sensor, 'name', '?')}: its footprint is off the DEM")
-    return grid.window(r0, c0, r1 - r0, c1 - c0)
-
-
-ORTHO_TILE_PX = 2048
-"""Side of the tiles an ortho-image on the fused DEM is made of, pixels."""
-
-
-def _tiled_ortho(source: Any, sensor: Sensor, grid: Any, dem: Any, folder: Path) -> Any:
-    from carto.framework.imaging.ortho import orthorectify
-    from carto.framework.raster.tiled_layer import TiledLayer, TilePiece, piece_path
-
-    folder.mkdir(parents=True, exist_ok=True)
-    rows, cols = grid.shape
-    pieces = []
-    for r0 in range(0, rows, ORTHO_TILE_PX):
-        for c0 in range(0, cols, ORTHO_TILE_PX):
-            n_r, n_c = min(ORTHO_TILE_PX, rows - r0), min(ORTHO_TILE_PX, cols - c0)
-            values = orthorectify(source, sensor, grid.window(r0, c0, n_r, n_c), dem)
-            path = piece_path(folder, r0, c0)
-            np.savez(path, ortho=values)
-            pieces.append(TilePiece(path, "ortho", r0, c0, (n_r, n_c)))
-    return TiledLayer.of(grid.shape, pieces)
