@@ -40,6 +40,17 @@ def test_an_array_shared_by_every_task_is_packed_once():
     assert np.array_equal(packed.arrays[packed.keys[0][0]], np.arange(big.size, dtype=float))
 
 
+def test_a_read_only_array_is_shared_by_the_tasks_read_only():
+    heights = np.zeros(SHARED_ARRAY_BYTES // 8)
+    heights.flags.writeable = False
+    packed = pack_tasks([functools.partial(np.sum, heights)] * 2)
+    (key,) = packed.arrays
+    first, second = (_unpacked(packed, k) for k in range(2))
+    assert first.args[0].base is second.args[0].base is packed.arrays[key]
+    assert not first.args[0].flags.writeable
+    assert first() == 0.0
+
+
 def test_a_closure_is_packed_with_cloudpickle():
     big = np.full(SHARED_ARRAY_BYTES, 2, np.uint8)
     tasks = [lambda k=k: int(big.sum()) + k for k in range(2)]

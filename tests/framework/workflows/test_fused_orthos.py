@@ -30,7 +30,9 @@ def test_tiles_on_the_engine_make_the_whole_window_s_ortho_image(
         source = prepared_sources(
             {"fore": scene.raster("fore")}, {"fore": sensor}, dem, tmp_path / "p", engine
         )["fore"]
-        layer = fused_orthos._tiled_ortho(engine, source, sensor, window, dem, tmp_path / "t")
+        layer = fused_orthos._tiled_ortho(
+            engine, source, sensor, window, cartosat1_scene / "truth" / "dem.tif", tmp_path / "t"
+        )
     assert len(layer.pieces) == -(-window.shape[0] // 96) * -(-window.shape[1] // 96)
     tiled = layer.read(slice(None), slice(None))
     whole = orthorectify(source, sensor, window, dem)

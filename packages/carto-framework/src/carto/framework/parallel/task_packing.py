@@ -14,9 +14,9 @@ it dies), and runs :func:`run_packed` on the workers, which unpickles each task 
 worker's copy of its arrays.
 A task that cannot be pickled so (a closure that only ``cloudpickle`` knows) is packed by
 ``cloudpickle`` the same way. Arrays are shared by identity: the same array object in two
-tasks is sent once; an equal copy is sent again. Each task still gets its own copy of them
-(it may write into it, as into the copy a whole pickle gave it): a copy costs far less than
-the task.
+tasks is sent once; an equal copy is sent again. Each task still gets its own copy of an
+array that was writeable (it may write into it, as into the copy a whole pickle gave it); a
+read-only array (a DEM's heights) is shared by the tasks of a worker, read-only.
 """
 
 from __future__ import annotations
@@ -70,7 +70,8 @@ def _packer_class(base: type) -> type:
                 return None
             key = self.ids.get(id(obj))
             if key is None:  # kept in ``arrays``: its id stays its own while packing
-                key = self.ids[id(obj)] = f"array-{len(self.ids)}"
+                mode = "rw" if obj.flags.writeable else "ro"
+                key = self.ids[id(obj)] = f"array-{len(self.ids)}-{mode}"
                 self.arrays[key] = obj
             self.used.add(key)
             return key
@@ -122,7 +123,12 @@ class _Unpacker(pickle.Unpickler):
         self.arrays = arrays
 
     def persistent_load(self, pid: Any) -> Any:
-        return np.array(self.arrays[pid])  # the task's own copy, as it had when pickled whole
+        array = self.arrays[pid]
+        if pid.endswith("-rw"):
+            return np.array(array)  # the task's own copy, as it had when pickled whole
+        view = array.view()  # read-only when packed: shared by the worker's tasks
+        view.flags.writeable = False
+        return view
 
 
 def unpack_task(blob: bytes, keys: Sequence[str], arrays: Sequence[Any]) -> Callable[[], Any]:

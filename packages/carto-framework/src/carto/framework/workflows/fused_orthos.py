@@ -64,7 +64,7 @@ def orthos_on_fused(
             progress("dem", f"ortho-image of {name} on the fused DEM", quiet)
             own = image_window(grid, sensors[name], dem)
             layer = _tiled_ortho(
-                tiles, sources[name], sensors[name], own, dem, work / "ortho" / name
+                tiles, sources[name], sensors[name], own, stage / "dem.tif", work / "ortho" / name
             )
             files[f"ortho_{name}"] = write_ortho(
                 stage / f"ortho_{name}.tif",
@@ -111,34 +111,33 @@ def image_window(grid: Any, sensor: Sensor, dem: Any) -> Any:
 
 
 def _tiled_ortho(
-    engine: Any, source: Any, sensor: Sensor, grid: Any, dem: Any, folder: Path
+    engine: Any, source: Any, sensor: Sensor, grid: Any, dem_file: Path, folder: Path
 ) -> Any:
-    """The ortho-image of ``source`` on ``grid`` as tiles of :data:`ORTHO_TILE_PX`, each a
-    task of ``engine`` that writes its tile into ``folder``."""
+    """The ortho-image of ``source`` on ``grid`` over the DEM in ``dem_file``, as tiles of
+    :data:`ORTHO_TILE_PX`, each a task of ``engine`` that reads the DEM's rows under it
+    and writes its tile into ``folder``."""
     from carto.framework.parallel.engine import TaskFailure
     from carto.framework.raster.tiled_layer import TiledLayer
 
     folder.mkdir(parents=True, exist_ok=True)
     rows, cols = grid.shape
-    corners = [
-        (r0, c0) for r0 in range(0, rows, ORTHO_TILE_PX) for c0 in range(0, cols, ORTHO_TILE_PX)
-    ]
+    step = ORTHO_TILE_PX
+    corners = [(r0, c0) for r0 in range(0, rows, step) for c0 in range(0, cols, step)]
     tasks = [
         functools.partial(
             _ortho_tile,
             source,
             sensor,
-            grid.window(r0, c0, min(ORTHO_TILE_PX, rows - r0), min(ORTHO_TILE_PX, cols - c0)),
-            dem,
+            grid.window(r0, c0, min(step, rows - r0), min(step, cols - c0)),
+            dem_file,
             folder,
             (r0, c0),
         )
         for r0, c0 in corners
     ]
     name = getattr(sensor, "name", folder.name)
-    pieces = engine.run(
-        tasks, desc=f"ortho-image of {name}", keys=[f"tile {r},{c}" for r, c in corners]
-    )
+    keys = [f"tile {r},{c}" for r, c in corners]
+    pieces = engine.run(tasks, desc=f"ortho-image of {name}", keys=keys)
     failed = [p for p in pieces if isinstance(p, TaskFailure)]
     if failed:
         raise InputError(
@@ -147,14 +146,40 @@ def _tiled_ortho(
     return TiledLayer.of(grid.shape, pieces)
 
 
+DEM_MARGIN_PX = 32
+"""Ortho-image pixels of DEM rows read beyond a tile's edges: the orthorectification computes
+its mapping on a lattice of 16 pixels that may end past the tile, and samples the DEM
+bilinearly there."""
+
+
+def dem_rows_under(window: Any, dem_file: Path) -> tuple[int, int]:
+    """The rows ``start, stop`` of the DEM in ``dem_file`` (north up, any CRS) under the grid
+    ``window``, :data:`DEM_MARGIN_PX` beyond its edges."""
+    import rasterio
+    from rasterio.warp import transform_bounds
+
+    w = window.transform
+    margin = DEM_MARGIN_PX * abs(w.a)
+    left, top = w.c - margin, w.f + margin
+    right = w.c + w.a * window.shape[1] + margin
+    bottom = w.f + w.e * window.shape[0] - margin
+    with rasterio.open(dem_file) as ds:
+        t, crs = ds.transform, ds.crs
+    _, south, _, north = transform_bounds(window.crs, crs, left, bottom, right, top, densify_pts=21)
+    return math.floor((north - t.f) / t.e) - 1, math.ceil((south - t.f) / t.e) + 2
+
+
 def _ortho_tile(
-    source: Any, sensor: Sensor, window: Any, dem: Any, folder: Path, corner: tuple[int, int]
+    source: Any, sensor: Sensor, window: Any, dem_file: Path, folder: Path, corner: tuple[int, int]
 ) -> Any:
-    """One tile of an ortho-image (a task): orthorectified, written into ``folder``; its
+    """One tile of an ortho-image (a task): orthorectified on the DEM's rows under it (read
+    from ``dem_file``, not the whole DEM in every task), written into ``folder``; its
     :class:`~carto.framework.raster.tiled_layer.TilePiece`."""
     from carto.framework.imaging.ortho import orthorectify
+    from carto.framework.raster.dem import DEM
     from carto.framework.raster.tiled_layer import TilePiece, piece_path
 
+    dem = DEM.open(dem_file, rows=dem_rows_under(window, dem_file))
     values = orthorectify(source, sensor, window, dem)
     path = piece_path(folder, *corner)
     np.savez(path, ortho=values)
