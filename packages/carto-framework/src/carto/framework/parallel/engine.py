@@ -189,7 +189,7 @@ class TileEngine:
         # Ctrl-C and SIGTERM are held while distributed works (it may swallow an interruption
         # in its own waits) and raised here, between waits of at most half a second
         with _signals_deferred() as pending:
-            shared = self._scatter(packed.arrays)
+            shared = self._share(packed.arrays)
             futures = [
                 self.client.submit(
                     run_packed,
@@ -234,13 +234,13 @@ class TileEngine:
                     future.release()
         return results
 
-    def _scatter(self, arrays: dict[str, Any]) -> dict[str, Any]:
+    def _share(self, arrays: dict[str, Any]) -> dict[str, Any]:
         """``arrays`` on every worker (futures by key), each sent once for the stage's
         tasks. They are tasks of their own, not scattered data, which the cluster cannot make
         again when the worker holding it dies; and copied to every worker before the tile
-        tasks are submitted: the scheduler gives a task to a worker that holds its inputs,
-        so with one copy all the tiles went to the worker that made it and waited for work
-        stealing to share them (the strip's pair took 19 % longer)."""
+        tasks are submitted: the scheduler gives a task to a worker that holds its inputs
+        (distributed's ``decide_worker``), so with one copy every tile would be given to the
+        worker that made it and wait for work stealing to move it."""
         import warnings
 
         from distributed import wait
