@@ -21,6 +21,7 @@ read-only array (a DEM's heights) is shared by the tasks of a worker, read-only.
 
 from __future__ import annotations
 
+import functools
 import io
 import pickle
 from collections.abc import Callable, Sequence
@@ -57,51 +58,51 @@ class PackedTasks:
     arrays: dict[str, np.ndarray]
 
 
-def _packer_class(base: type) -> type:
-    class Packer(base):  # type: ignore[misc, valid-type]
-        """Pickles with large arrays replaced by keys, shared across tasks by identity."""
+class _ArrayKeys:
+    """What both picklers below add: large arrays replaced by keys (pickle's persistent
+    ids), shared across tasks by identity."""
 
-        def __init__(self, file: Any, arrays: dict[str, Any], ids: dict[int, str]) -> None:
-            super().__init__(file, protocol=pickle.HIGHEST_PROTOCOL)
-            self.arrays, self.ids, self.used = arrays, ids, set()
+    def __init__(self, file: Any, arrays: dict[str, Any], ids: dict[int, str]) -> None:
+        super().__init__(file, protocol=pickle.HIGHEST_PROTOCOL)  # type: ignore[call-arg]
+        self.arrays, self.ids, self.used = arrays, ids, set()
 
-        def persistent_id(self, obj: Any) -> str | None:
-            if type(obj) is not np.ndarray or obj.nbytes < SHARED_ARRAY_BYTES:
-                return None
-            key = self.ids.get(id(obj))
-            if key is None:  # kept in ``arrays``: its id stays its own while packing
-                mode = "rw" if obj.flags.writeable else "ro"
-                key = self.ids[id(obj)] = f"array-{len(self.ids)}-{mode}"
-                self.arrays[key] = obj
-            self.used.add(key)
-            return key
-
-    return Packer
+    def persistent_id(self, obj: Any) -> str | None:
+        if type(obj) is not np.ndarray or obj.nbytes < SHARED_ARRAY_BYTES:
+            return None
+        key = self.ids.get(id(obj))
+        if key is None:  # kept in ``arrays``: its id stays its own while packing
+            mode = "rw" if obj.flags.writeable else "ro"
+            key = self.ids[id(obj)] = f"array-{len(self.ids)}-{mode}"
+            self.arrays[key] = obj
+        self.used.add(key)
+        return key
 
 
-_PACKERS: dict[type, type] = {}
-
-
-def _packer(base: type) -> type:
-    if base not in _PACKERS:
-        _PACKERS[base] = _packer_class(base)
-    return _PACKERS[base]
+class _Packer(_ArrayKeys, pickle.Pickler):
+    pass
 
 
 def _pack_one(task: Any, arrays: dict[str, Any], ids: dict[int, str]) -> tuple[bytes, set[str]]:
+    buffer = io.BytesIO()
+    packer: _ArrayKeys = _Packer(buffer, arrays, ids)
+    try:
+        packer.dump(task)  # type: ignore[attr-defined]
+    except (pickle.PicklingError, AttributeError, TypeError):  # a closure: cloudpickle's
+        buffer = io.BytesIO()
+        packer = _cloud_packer()(buffer, arrays, ids)
+        packer.dump(task)  # type: ignore[attr-defined]
+    return buffer.getvalue(), packer.used
+
+
+@functools.cache
+def _cloud_packer() -> type[_ArrayKeys]:
+    """:class:`_Packer` on ``cloudpickle`` (imported when a task needs it)."""
     import cloudpickle
 
-    for base in (pickle.Pickler, cloudpickle.Pickler):
-        buffer = io.BytesIO()
-        packer = _packer(base)(buffer, arrays, ids)
-        try:
-            packer.dump(task)
-        except (pickle.PicklingError, AttributeError, TypeError):
-            if base is cloudpickle.Pickler:
-                raise
-            continue
-        return buffer.getvalue(), packer.used
-    raise AssertionError("unreachable")  # pragma: no cover
+    class _CloudPacker(_ArrayKeys, cloudpickle.Pickler):  # type: ignore[misc]
+        pass
+
+    return _CloudPacker
 
 
 def pack_tasks(tasks: Sequence[Callable[[], Any]]) -> PackedTasks:
@@ -133,7 +134,7 @@ class _Unpacker(pickle.Unpickler):
 
 def unpack_task(blob: bytes, keys: Sequence[str], arrays: Sequence[Any]) -> Callable[[], Any]:
     """The task pickled in ``blob`` (:func:`pack_tasks`) around ``arrays``, the arrays of
-    ``keys`` in that order (on a worker: its copies of the scattered arrays)."""
+    ``keys`` in that order (on a worker: its copies of the shared arrays)."""
     return _Unpacker(io.BytesIO(blob), dict(zip(keys, arrays, strict=True))).load()  # type: ignore[no-any-return]
 
 
@@ -144,6 +145,6 @@ def shared_array(array: Any) -> Any:
 
 
 def run_packed(blob: bytes, keys: Sequence[str], *arrays: Any) -> Any:
-    """Run the task packed in ``blob`` (what a worker runs; dask gives it the scattered
+    """Run the task packed in ``blob`` (what a worker runs; dask gives it the shared
     arrays in place of their futures)."""
     return unpack_task(blob, keys, arrays)()
