@@ -58,10 +58,16 @@ def pid_on(table: np.ndarray, k: int) -> tuple[int, float]:
     return os.getpid(), float(table[k])
 
 
-def worker_facts(_: int) -> tuple[int, str | None, str | None]:
+def worker_facts(_: int) -> tuple[int, str | None, str | None, str | None]:
     import os
 
-    return os.getpid(), os.environ.get("GDAL_CACHEMAX"), os.environ.get("MALLOC_TRIM_THRESHOLD_")
+    env = os.environ
+    return (
+        os.getpid(),
+        env.get("GDAL_CACHEMAX"),
+        env.get("MALLOC_TRIM_THRESHOLD_"),
+        env.get("MALLOC_ARENA_MAX"),
+    )
 
 
 def _check(engine: TileEngine, tmp_path: Path) -> None:
@@ -90,6 +96,7 @@ def test_on_a_local_cluster_of_processes(tmp_path, monkeypatch):
 
     monkeypatch.delenv("GDAL_CACHEMAX", raising=False)
     monkeypatch.delenv("MALLOC_TRIM_THRESHOLD_", raising=False)
+    monkeypatch.delenv("MALLOC_ARENA_MAX", raising=False)
     with open_engine(2) as engine:
         assert engine.workers == 2
         assert "LocalCluster of 2 processes" in engine.description
@@ -98,17 +105,19 @@ def test_on_a_local_cluster_of_processes(tmp_path, monkeypatch):
         first = engine.run(tasks)
         # the workers are other processes, with GDAL's block cache bounded and glibc's own
         # trim threshold (not distributed's 64 KiB, which faults every large array in anew)
-        assert {pid for pid, _, _ in first}.isdisjoint({os.getpid()})
-        assert {cache for _, cache, _ in first} == {"256"}
-        assert {trim for _, _, trim in first} == {None}
+        # and two malloc arenas
+        assert {pid for pid, *_ in first}.isdisjoint({os.getpid()})
+        assert {cache for _, cache, _, _ in first} == {"256"}
+        assert {trim for _, _, trim, _ in first} == {None}
+        assert {arenas for *_, arenas in first} == {"2"}
         # released: the worker processes stop; the next stage starts new ones
         engine.release()
         assert engine.client is None
-        for pid, _, _ in first:
+        for pid, *_ in first:
             with pytest.raises(ProcessLookupError):
                 os.kill(pid, 0)
         again = engine.run(tasks)
-        assert {pid for pid, _, _ in again}.isdisjoint({pid for pid, _, _ in first})
+        assert {pid for pid, *_ in again}.isdisjoint({pid for pid, *_ in first})
         (tmp_path / "again").mkdir()
         _check(engine, tmp_path / "again")
         # tasks that share a large array (sent once, issue 33) still run on every worker
@@ -128,11 +137,11 @@ def test_the_commands_of_a_shared_engine_use_its_worker_processes(tmp_path):
     tasks = [functools.partial(worker_facts, k) for k in range(4)]
     with shared_engine(2, quiet=True) as shared:
         with open_engine(quiet=True) as first:
-            pids = {pid for pid, _, _ in first.run(tasks)}
+            pids = {pid for pid, *_ in first.run(tasks)}
             first.release()  # a command's release keeps the shared cluster for the next
         with open_engine(2, quiet=True) as second:
             assert second is first is shared
-            assert {pid for pid, _, _ in second.run(tasks)} == pids
+            assert {pid for pid, *_ in second.run(tasks)} == pids
         with open_engine(1) as own:
             assert own is not shared
             assert own.client is None

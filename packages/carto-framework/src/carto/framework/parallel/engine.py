@@ -436,13 +436,26 @@ def _signals_deferred() -> Iterator[list[int]]:
             signal.signal(s, handler)
 
 
-_NANNY_ENVIRON = {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}
-"""distributed starts its workers with ``MALLOC_TRIM_THRESHOLD_=65536``, so that glibc gives
-freed memory back to the system at once; a tile task allocates and frees arrays of tens of MB
-all the time, and with that setting every one of them is faulted in again page by page: on
-the quarter scene, workers spent 40 % of their time in the kernel and two workers were no
-faster than one. Unset, glibc keeps its own (adaptive) threshold; memory still comes back
-when a task ends its large arrays."""
+WORKER_ARENAS = 2
+"""glibc malloc arenas per worker process unless ``MALLOC_ARENA_MAX`` is set. glibc gives
+each thread that allocates its own arena, up to 8 per core; a worker's threads (dask's event
+loop and task thread, OpenCV's and GDAL's pools) made 8-9 arenas of 40-52 MB each that hold
+their freed memory between tiles: 350-390 MB of a worker's 1.2 GB on the strip of issue 33.
+Two arenas hold it to the task thread's and one other."""
+
+
+def _nanny_environ() -> dict[str, Any]:
+    """What the nanny sets before it starts a worker process (what glibc reads as the
+    process starts): glibc's own trim threshold (distributed sets ``MALLOC_TRIM_THRESHOLD_``
+    to 64 KiB, so that glibc gives freed memory back at once; a tile task allocates and
+    frees arrays of tens of MB all the time, and with that setting every one of them is
+    faulted in again page by page: on the quarter scene, workers spent 40 % of their time in
+    the kernel and two workers were no faster than one) and :data:`WORKER_ARENAS`."""
+    arenas = os.environ.get("MALLOC_ARENA_MAX", str(WORKER_ARENAS))
+    return {
+        "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None,
+        "distributed.nanny.pre-spawn-environ.MALLOC_ARENA_MAX": arenas,
+    }
 
 
 @contextlib.contextmanager
@@ -457,7 +470,7 @@ def _local_cluster(n: int) -> Iterator[Any]:
 
         for name in ("distributed", "tornado", "bokeh"):
             logging.getLogger(name).setLevel(logging.ERROR)
-        with dask.config.set(_NANNY_ENVIRON):
+        with dask.config.set(_nanny_environ()):
             cluster = LocalCluster(
                 n_workers=n,
                 threads_per_worker=1,

@@ -10,7 +10,7 @@ smaller scenes the Python-level arrays it held stayed at 145-175 MB while glibc 
 freed in its heap after each pair. :func:`release_free_memory` asks glibc to give every
 free page back (``malloc_trim(0)``) between stages; it costs milliseconds, where a low
 ``MALLOC_TRIM_THRESHOLD_`` costs page faults on every array of the hot loops (see
-``engine._NANNY_ENVIRON``)."""
+``engine._nanny_environ``)."""
 
 from __future__ import annotations
 
