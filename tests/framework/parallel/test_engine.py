@@ -82,6 +82,27 @@ def _check(engine: TileEngine, tmp_path: Path) -> None:
     assert counter.read_text() == "2"  # failed once, retried once
 
 
+def test_a_stage_gives_the_freed_heap_back_before_and_after(monkeypatch):
+    from carto.framework.parallel import engine as engine_module
+
+    stages: list[str] = []
+    monkeypatch.setattr(engine_module, "release_free_memory", stages.append)
+    with open_engine(1) as engine:
+        assert engine.run([functools.partial(square, 2)], desc="tiles of x") == [4]
+    # before: what the caller freed since the last stage; after: what the stage freed
+    assert stages == ["before tiles of x", "tiles of x"]
+
+
+def test_the_users_malloc_arenas_are_kept(monkeypatch):
+    from carto.framework.parallel.engine import WORKER_ARENAS, _nanny_environ
+
+    key = "distributed.nanny.pre-spawn-environ.MALLOC_ARENA_MAX"
+    monkeypatch.delenv("MALLOC_ARENA_MAX", raising=False)
+    assert _nanny_environ()[key] == str(WORKER_ARENAS)
+    monkeypatch.setenv("MALLOC_ARENA_MAX", "8")
+    assert _nanny_environ()[key] == "8"
+
+
 def test_in_this_process(tmp_path):
     with open_engine(1) as engine:
         assert engine.client is None

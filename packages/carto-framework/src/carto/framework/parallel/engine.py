@@ -162,7 +162,7 @@ class TileEngine:
         logging.getLogger("carto.engine").debug("%s: %d task(s) on %s", desc, len(tasks), where)
         # what the caller freed since the last stage (e.g. an iteration's assembly of the
         # tiles' results) back to the system before the workers' memory rises: it stayed
-        # resident in this process's heap through the stage, 250-670 MB of a whole scene's
+        # resident in this process's heap through the stage, 420-670 MB of a whole scene's
         # (issue 33)
         release_free_memory(f"before {desc}")
         with stage_bar(len(tasks), desc, quiet=self.quiet) as bar:
