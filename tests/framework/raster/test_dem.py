@@ -623,3 +623,27 @@ def test_cubic_sample_reproduces_quadratics_and_keeps_voids():
     assert np.isnan(out[:3]).all()
     assert np.isfinite(out[3])
     assert np.isnan(cubic_sample(grid, np.array([-0.5, 19.5]), np.array([3.0, 3.0]))).all()
+
+
+def test_values_at_nodes_band_by_band_match_pyproj(monkeypatch):
+    """A function of lon/lat at every node of a rotated UTM grid, computed in bands of two
+    rows, against the nodes' centres transformed by pyproj directly."""
+    import pyproj
+
+    from carto.framework.raster import dem_measures
+
+    transform = Affine(10.0, 2.0, 500_000.0, 1.5, -10.0, 4_900_000.0)
+    dem = DEM.from_array(np.zeros((7, 5)), transform, "EPSG:32631")
+    monkeypatch.setattr(dem_measures, "NODE_BAND_NODES", 10)  # 2 rows of 5 per band
+    calls: list[tuple[int, ...]] = []
+
+    def sample(lon, lat):
+        calls.append(np.shape(lon))
+        return lon * 1000.0 + lat
+
+    got = dem_measures.values_at_nodes(dem, sample)
+    rows, cols = np.mgrid[0:7, 0:5] + 0.5
+    x, y = transform * (cols, rows)
+    lon, lat = pyproj.Transformer.from_crs(32631, 4326, always_xy=True).transform(x, y)
+    np.testing.assert_allclose(got, lon * 1000.0 + lat, rtol=0, atol=1e-6)
+    assert calls == [(2, 5), (2, 5), (2, 5), (1, 5)]

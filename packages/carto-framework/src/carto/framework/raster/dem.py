@@ -604,13 +604,11 @@ class DEM:
             self, heights=self.heights - undulation, vertical=f"geoid:{geoid.model}"
         )
 
-    def node_lonlat(self) -> tuple[FloatArray, FloatArray]:
-        """WGS84 lon/lat of every node's centre, two grids of the DEM's shape."""
+    def node_lonlat(self, rows: slice = slice(None)) -> tuple[FloatArray, FloatArray]:
+        """WGS84 lon/lat of every node's centre (of the band of ``rows``), two grids."""
         n_rows, n_cols = self.shape
-        rows, cols = np.meshgrid(
-            np.arange(n_rows, dtype=np.float64), np.arange(n_cols, dtype=np.float64), indexing="ij"
-        )
-        return self._pixel_to_lonlat(rows, cols)
+        r = np.arange(n_rows, dtype=np.float64)[rows]
+        return self._pixel_to_lonlat(r[:, None], np.arange(n_cols, dtype=np.float64)[None, :])
 
     def _undulation(self, geoid: Geoid | str | os.PathLike[str]) -> FloatArray:
         """The geoid undulation at every node; InputError where it misses a valid node."""

@@ -1,9 +1,12 @@
 """Measures of a DEM grid: ground pixel size, height gradient and slope (any CRS); its voids
-filled (:func:`fill_voids`)."""
+filled (:func:`fill_voids`); a function of lon/lat sampled at its nodes band by band
+(:func:`values_at_nodes`)."""
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from typing import Any
 
 import attrs
 import numpy as np
@@ -13,6 +16,10 @@ from carto.framework.errors import InputError
 from carto.framework.raster.dem import DEM, Bounds
 
 FloatArray = NDArray[np.float64]
+
+NODE_BAND_NODES = 1 << 20
+"""Nodes per band of :func:`values_at_nodes` (the lon/lat of a band and their transform's
+copies take about 50 MB)."""
 
 
 def dem_pixel_size_m(dem: DEM) -> tuple[FloatArray, FloatArray]:
@@ -169,3 +176,17 @@ def is_flat(dem: DEM, tolerance_m: float = FLAT_TOLERANCE_M) -> bool:
     residual = h - design @ np.linalg.lstsq(design, h, rcond=None)[0]
     low, high = np.percentile(residual, [1, 99])
     return bool(high - low < tolerance_m)
+
+
+def values_at_nodes(dem: DEM, sample: Callable[[Any, Any], ArrayLike]) -> FloatArray:
+    """``sample(lon_deg, lat_deg)`` at every node of ``dem`` (e.g. another DEM's
+    :meth:`~carto.framework.raster.dem.DEM.height`), one grid of its shape (float64),
+    computed band by band of rows: beside the result, memory of a band, not of the grid
+    (the whole grid's lon/lat and their copies took 0.7 GB for a scene's DEM)."""
+    n_rows, n_cols = dem.shape
+    out = np.empty((n_rows, n_cols), np.float64)
+    step = max(1, NODE_BAND_NODES // max(n_cols, 1))
+    for start in range(0, n_rows, step):
+        rows = slice(start, min(start + step, n_rows))
+        out[rows] = sample(*dem.node_lonlat(rows))
+    return out

@@ -13,7 +13,7 @@ import numpy as np
 
 from carto.framework.files.control_table import ground_points
 from carto.framework.raster.dem import DEM
-from carto.framework.raster.dem_measures import is_flat
+from carto.framework.raster.dem_measures import is_flat, values_at_nodes
 
 MIN_MATCHED_FRACTION = 0.05
 """A DEM run that measured less than this share of the nodes fails (``--allow-poor`` writes
@@ -56,7 +56,7 @@ def departs_from_start(dem: DEM, start: DEM) -> list[str]:
         return []
     # on the DEM's nodes, the start interpolated (a 90 m start has no post inside a small
     # DEM: the Ventoux crop of 250 m, compared on the start's grid, had none)
-    diff = difference_statistics(dem.heights - start.height(*dem.node_lonlat()))
+    diff = difference_statistics(dem.heights - values_at_nodes(dem, start.height))
     if not diff["count"]:  # no common valid node: the coverage checks say so
         return []
     nmad, median = float(diff["nmad_m"]), float(diff["median_m"])
