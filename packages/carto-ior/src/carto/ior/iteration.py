@@ -253,6 +253,7 @@ def iterate(
         if last:
             break
         iteration += 1
+        del measured  # its DEM-grid arrays (100 MB of a whole scene) not held through the tiles
         space.begin(
             RunState(
                 iteration,
