@@ -182,7 +182,8 @@ def values_at_nodes(dem: DEM, sample: Callable[[Any, Any], ArrayLike]) -> FloatA
     """``sample(lon_deg, lat_deg)`` at every node of ``dem`` (e.g. another DEM's
     :meth:`~carto.framework.raster.dem.DEM.height`), one grid of its shape (float64),
     computed band by band of rows: beside the result, memory of a band, not of the grid
-    (the whole grid's lon/lat and their copies took 0.7 GB for a scene's DEM)."""
+    (on the whole grid at once, lon/lat, their copies and the sampling took 1.4 GB for a
+    whole scene's pair DEM of 3266 x 3185 nodes; 0.1 GB in bands)."""
     n_rows, n_cols = dem.shape
     out = np.empty((n_rows, n_cols), np.float64)
     step = max(1, NODE_BAND_NODES // max(n_cols, 1))
