@@ -4,6 +4,8 @@ nodes without heights; tiles beyond the common footprint get no task."""
 
 from __future__ import annotations
 
+import itertools
+
 import attrs
 import numpy as np
 import pytest
@@ -12,6 +14,7 @@ from carto.framework.parallel.engine import TaskFailure, TileEngine
 from carto.framework.raster.dem import DEM
 from carto.framework.raster.image_source import ArrayImage
 from carto.framework.raster.images import read_raster
+from carto.ior.iteration import tile_edges
 from carto.ior.refine import IORSettings, TileFailure, refine_dem
 
 SETTINGS = IORSettings(
@@ -117,10 +120,9 @@ def test_a_kept_failed_tile_has_no_heights(pair, uninterrupted, tmp_path):
     k = round(SETTINGS.posting_m / result.ortho_grid.resolution[0])
     n = max(16, SETTINGS.tile_px // k)
     heights = result.dem.heights
-    assert np.isnan(heights[r * n : (r + 1) * n, c * n : (c + 1) * n]).all()
-    assert np.isnan(
-        np.asarray(result.ortho_left)[r * n * k : (r + 1) * n * k, c * n * k : (c + 1) * n * k]
-    ).all()
+    (r0, r1), (c0, c1) = tile_edges(heights.shape[0], n)[r], tile_edges(heights.shape[1], n)[c]
+    assert np.isnan(heights[r0:r1, c0:c1]).all()
+    assert np.isnan(np.asarray(result.ortho_left)[r0 * k : r1 * k, c0 * k : c1 * k]).all()
     elsewhere = np.isfinite(heights) & np.isfinite(uninterrupted.dem.heights)
     assert elsewhere.mean() > 0.3
 
@@ -136,3 +138,15 @@ def test_tiles_beyond_the_footprint_get_no_task(pair):
     n_r, n_c = grid.shape
     total = -(-n_r // 16) * -(-n_c // 16)
     assert 0 < len(plan) <= total
+
+
+@pytest.mark.parametrize(("n", "tile_n"), [(531, 512), (512, 512), (1, 16), (3200, 457), (100, 16)])
+def test_tiles_split_an_axis_evenly_within_the_tile_size(n, tile_n):
+    edges = tile_edges(n, tile_n)
+    sizes = [b - a for a, b in edges]
+    assert edges[0][0] == 0
+    assert edges[-1][1] == n
+    assert all(a == b for (_, a), (b, _) in itertools.pairwise(edges))
+    assert max(sizes) <= tile_n
+    assert max(sizes) - min(sizes) <= 1
+    assert len(edges) == -(-n // tile_n)  # no more tiles than the size needs

@@ -7,6 +7,7 @@ refine_dem` runs them for each coarse-to-fine stage and the final grid."""
 from __future__ import annotations
 
 import functools
+import itertools
 import time
 from collections.abc import Callable
 from typing import Any
@@ -141,17 +142,26 @@ class TileFailure(InputError):
     many)."""
 
 
+def tile_edges(n: int, tile_n: int) -> list[tuple[int, int]]:
+    """The ``(start, stop)`` of each tile along an axis of ``n`` nodes: as few tiles as hold
+    at most ``tile_n`` nodes each, of equal size to a node (no sliver at the end, so the
+    tasks of a small grid share the workers evenly)."""
+    edges = np.linspace(0, n, -(-n // tile_n) + 1).round().astype(int)
+    return [(int(a), int(b)) for a, b in itertools.pairwise(edges)]
+
+
 def _tile_plan(
     sensors: tuple[Sensor, Sensor], grid: OrthoGrid, heights: FloatArray, tile_n: int
 ) -> list[tuple[slice, slice]]:
-    """The tiles (node slices) that both images see: each tile's nodes sampled on an 9 x 9
+    """The tiles (node slices) that both images see: the grid cut into equal tiles of at
+    most ``tile_n`` nodes a side (:func:`tile_edges`), each tile's nodes sampled on an 9 x 9
     lattice (edges included) at the starting heights; tiles beyond the common footprint get
     no task."""
     n_r, n_c = grid.shape
     tiles = [
-        (slice(r, min(n_r, r + tile_n)), slice(c, min(n_c, c + tile_n)))
-        for r in range(0, n_r, tile_n)
-        for c in range(0, n_c, tile_n)
+        (slice(r0, r1), slice(c0, c1))
+        for r0, r1 in tile_edges(n_r, tile_n)
+        for c0, c1 in tile_edges(n_c, tile_n)
     ]
     rr, cc, owner = [], [], []
     for k, (rows, cols) in enumerate(tiles):
@@ -303,7 +313,10 @@ def _stage_plan(
     tile_n = max(16, s.tile_px // k)
     overlap_n = max(2, -(-s.overlap_px // k))
     tiles = _tile_plan((left, right), dem_grid, heights, tile_n)
-    keys = [f"tile {rows.start // tile_n},{cols.start // tile_n}" for rows, cols in tiles]
+    starts = [[a for a, _ in tile_edges(n, tile_n)] for n in (n_r, n_c)]
+    keys = [
+        f"tile {starts[0].index(rows.start)},{starts[1].index(cols.start)}" for rows, cols in tiles
+    ]
     px_per_m = bh * k / abs(dem_grid.transform.a)  # along-base pixels per metre of height
     return _StagePlan(bh, (float(base_rc[0]), float(base_rc[1])), tiles, keys, overlap_n, px_per_m)
 
