@@ -134,7 +134,7 @@ def test_tiles_beyond_the_footprint_get_no_task(pair):
     left, right, init = pair[2], pair[3], pair[4]
     grid, _, _ = _grids(left, right, init, SETTINGS)
     heights = np.full(grid.shape, float(np.nanmedian(init.heights)))
-    plan = _tile_plan((left, right), grid, heights, 16)
+    plan = _tile_plan((left, right), grid, heights, (16, 16))
     n_r, n_c = grid.shape
     total = -(-n_r // 16) * -(-n_c // 16)
     assert 0 < len(plan) <= total
@@ -150,3 +150,16 @@ def test_tiles_split_an_axis_evenly_within_the_tile_size(n, tile_n):
     assert max(sizes) <= tile_n
     assert max(sizes) - min(sizes) <= 1
     assert len(edges) == -(-n // tile_n)  # no more tiles than the size needs
+
+
+def test_a_small_grid_is_cut_for_the_workers_only_where_it_pays():
+    from carto.ior.iteration import _tile_sides
+
+    # one tile of 266 x 269 nodes, 32 read around: two workers take half each
+    sides = _tile_sides((266, 269), 512, 32, 2)
+    assert [len(tile_edges(n, m)) for n, m in zip((266, 269), sides, strict=True)] == [1, 2]
+    # 133 x 135 nodes: halves would read nearly the whole grid each
+    assert _tile_sides((133, 135), 512, 32, 2) == (512, 512)
+    # a grid of many tiles keeps the tile size; one worker too
+    assert _tile_sides((3200, 3200), 512, 32, 2) == (512, 512)
+    assert _tile_sides((266, 269), 512, 32, 1) == (512, 512)

@@ -116,7 +116,9 @@ class TileWork:
     from the heights). ``base``: the stereo base, ``(d_row, d_col)`` of the ortho grid, for
     matchers that search along it. ``variance_factor``: the share of a node's measurement
     variance the regularised updates left in the current DEM
-    (:func:`carto.ior.height_precision.smoothing_variance_factor`)."""
+    (:func:`carto.ior.height_precision.smoothing_variance_factor`). ``precision``: the
+    predicted height precision is computed (``sigma_m``; NaN without: a coarse-to-fine
+    stage, whose result is only the next stage's start)."""
 
     images: tuple[Any, Any]
     sensors: tuple[Sensor, Sensor]
@@ -130,6 +132,7 @@ class TileWork:
     h_range: tuple[float, float] | None = None
     base: tuple[float, float] | None = None
     variance_factor: float = 1.0
+    precision: bool = True
 
 
 def refine_tile(
@@ -167,7 +170,11 @@ def refine_tile(
         field.d_row, field.d_col, field.valid, field.score, surface, w.grid, k, rays, h_range
     )
     new = np.where(covered, nodes.height_m, np.nan)
-    sigma = _predicted_sigma(ortho, field, rays, direction, w, work)
+    sigma = (
+        _predicted_sigma(ortho, field, rays, direction, w, work)
+        if work.precision
+        else np.full(w.shape, np.nan, np.float32)
+    )
     ir, ic, orr, occ = w.interior(rows, cols)
     on_nodes = (new, d_row, d_col, covered, nodes.count, nodes.spread_m, nodes.score, sigma)
     on_pixels = (ortho[0], ortho[1], field.score, field.valid)
