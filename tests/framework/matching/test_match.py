@@ -209,6 +209,49 @@ def test_guesses_and_pyramid_reach_large_offsets():
     np.testing.assert_allclose(offsets(pyr), np.broadcast_to(shift, (len(pyr), 2)), atol=0.1)
 
 
+def test_dense_points_reach_large_offsets_through_thinned_coarse_levels(monkeypatch):
+    from carto.framework.matching import pyramid
+
+    shift = (37.4, -58.7)
+    big = texture((1024, 1024), 6, wrap=True)
+    left = big[200:700, 200:700]
+    right = fourier_shifted(big, shift)[200:700, 200:700]
+    points = grid_points(left.shape, 4, 20)  # 4 px apart: 1 px at the coarsest level
+    matched_at_coarse_levels = []
+    correlate = pyramid.correlate_pair
+
+    def counting(pair, options, tolerance):
+        if tolerance is None:
+            matched_at_coarse_levels.append(len(pair.points))
+        return correlate(pair, options, tolerance)
+
+    monkeypatch.setattr(pyramid, "correlate_pair", counting)
+    pyr = pyramid_match(left, right, points, MatchSettings(levels=4, subpixel="lsm"))
+    assert len(pyr) > 0.75 * len(points)  # the others' windows leave the right image
+    np.testing.assert_allclose(offsets(pyr), np.broadcast_to(shift, (len(pyr), 2)), atol=0.1)
+    # levels 3, 2, 1 (8, 4, 2 times coarser): one point per 7 x 7 cell of the level
+    assert len(matched_at_coarse_levels) == 3
+    assert all(n < len(points) / 3 for n in matched_at_coarse_levels)
+
+
+def test_thinning_keeps_the_first_point_of_every_cell():
+    from carto.framework.matching.pyramid import _thinned
+
+    rng = np.random.default_rng(3)
+    points = rng.uniform(0, 100, (2000, 2))
+    points[5] = np.nan
+    kept = _thinned(points, 7)
+    cells = [tuple(c) for c in np.floor(points[kept] / 7).astype(int)]
+    assert len(set(cells)) == len(cells)  # one a cell
+    every = {tuple(c) for c in np.floor(points[np.isfinite(points).all(1)] / 7).astype(int)}
+    assert set(cells) == every  # every cell with a point
+    first = {}
+    for i, c in enumerate(np.floor(points / 7)):
+        if np.isfinite(c).all():
+            first.setdefault(tuple(c.astype(int)), i)
+    assert sorted(first.values()) == kept.tolist()
+
+
 def test_grid_points_are_pixel_centres_inside_the_margin():
     points = grid_points((100, 60), 10, 8)
     assert np.all(points % 1 == 0.5)

@@ -66,9 +66,11 @@ def pyramid_match(
 ) -> Matches:
     """Coarse-to-fine matching over image pyramids (``cv2.pyrDown``, factor 2 per level).
 
-    At the coarsest level the points are matched with the given guesses (scaled); the offsets
-    found are cleaned (each compared with the median of its 9 nearest neighbours: more than
-    2 pixels of that level away, or unmatched, it is replaced by the median) and passed, scaled
+    At the coarsest level the points are matched with the given guesses (scaled), at most one
+    per cell of half a template at each coarse level (:func:`_thinned`; the others take
+    their neighbours' median); the offsets found are cleaned (each compared with the median
+    of its 9 nearest neighbours: more than 2 pixels of that level away, or unmatched, it is
+    replaced by the median) and passed, scaled
     by two, as the guesses of the next level. The full-resolution level is matched with
     :func:`~carto.framework.matching.ncc.match_bidirectional` (or
     :func:`~carto.framework.matching.ncc.match_ncc` without ``two_way``; one level without it
@@ -134,10 +136,29 @@ def _coarse_offsets(
     for level in range(len(pyramid) - 1, 0, -1):
         a, b = pyramid[level]
         scale = 2.0**level
+        some = _thinned(points / scale, coarse.template // 2)
         level_pair = PreparedPair(
-            a, b, points / scale, offsets / scale, nan_integral(a), nan_integral(b)
+            a, b, points[some] / scale, offsets[some] / scale, nan_integral(a), nan_integral(b)
         )
         found = correlate_pair(level_pair, coarse, None)
-        level_offsets = (found.right - points / scale) * scale
-        offsets = _regularise(points, level_offsets, found.ok, offsets, 2.0 * scale)
+        level_offsets = np.full_like(offsets, np.nan)
+        level_offsets[some] = (found.right - points[some] / scale) * scale
+        ok = np.zeros(len(points), bool)
+        ok[some] = found.ok
+        offsets = _regularise(points, level_offsets, ok, offsets, 2.0 * scale)
     return offsets
+
+
+def _thinned(points: NDArray[np.float64], cell: int) -> NDArray[np.intp]:
+    """The indices of at most one point per ``cell x cell`` pixel cell (the first of each, in
+    order): a coarse level matches no more points than its templates can tell apart (a
+    template shares half its pixels with one ``template // 2`` away); the others take the
+    median of their nearest matched neighbours (:func:`_regularise`)."""
+    finite = np.flatnonzero(np.isfinite(points).all(axis=1))
+    if cell <= 1 or finite.size == 0:
+        return finite
+    cells = np.floor(points[finite] / cell).astype(np.int64)
+    cells -= cells.min(axis=0)
+    key = cells[:, 0] * (int(cells[:, 1].max()) + 1) + cells[:, 1]
+    _, first = np.unique(key, return_index=True)
+    return finite[np.sort(first)]
