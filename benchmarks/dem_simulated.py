@@ -11,6 +11,8 @@ the true DEM sampled (bilinear) at the DEM nodes:
 
 * median, NMAD, RMSE and LE90 of the measured nodes, and of all nodes with a height (filled
   holes included); the nodes measured, filled and left empty (``report.json``'s completeness);
+* the matchers on the nodes that all of them measured (``common_nodes``): the NMAD of each
+  and NCC's over SGM's, per terrain and posting (medians over the seeds);
 * predicted against measured: the ``sigma_m`` band of ``quality.tif`` at the measured nodes;
   ``nmad_over_median_sigma`` (the measured NMAD over the median predicted sigma: 1 when the
   prediction has the right size), ``z_nmad`` (NMAD of error / sigma: the same node by node),
@@ -173,6 +175,46 @@ def summary(runs: list[dict[str, Any]]) -> dict[str, Any]:
     return out
 
 
+def _measured_errors(out: Path, truth_path: Path) -> np.ndarray:
+    """DEM minus truth at the nodes the run measured (NaN elsewhere: filled or empty)."""
+    import rasterio
+
+    dem = DEM.open(out / "dem.tif")
+    error = dem.heights - DEM.open(truth_path).height(*dem.node_lonlat())
+    with rasterio.open(out / "quality_flags.tif") as ds:
+        filled = dict(zip(ds.descriptions, ds.read(), strict=True))["filled"] == 1
+    return np.where(filled, np.nan, error)
+
+
+def common_nodes(work: Path, runs: list[dict[str, Any]]) -> dict[str, Any]:
+    """The matchers compared on the nodes that all of them measured, per terrain and
+    posting (medians over the seeds): a matcher that leaves the hard nodes to the filling is
+    otherwise measured on the easy ones only."""
+    matchers = sorted({r["matcher"] for r in runs})
+    if len(matchers) < 2:
+        return {}
+    cases: dict[str, dict[str, list[float]]] = {}
+    for terrain, seed, posting in sorted({(r["terrain"], r["seed"], r["posting_m"]) for r in runs}):
+        labels = [f"{terrain}-{seed}-{posting:g}m-{m}" for m in matchers]
+        if not all((work / label / "dem.tif").is_file() for label in labels):
+            continue
+        truth = work / f"{terrain}-{seed}" / "truth" / "dem.tif"
+        errors = [_measured_errors(work / label, truth) for label in labels]
+        both = np.logical_and.reduce([np.isfinite(e) for e in errors])
+        case = cases.setdefault(f"{terrain} {posting:g} m", {"share_of_nodes": []})
+        case["share_of_nodes"].append(float(both.mean()))
+        for m, e in zip(matchers, errors, strict=True):
+            case.setdefault(f"{m}_nmad_m", []).append(_nmad(e[both]))
+    out = {}
+    for key, values in cases.items():
+        out[key] = {name: round(float(np.median(v)), 3) for name, v in values.items()}
+        out[key]["seeds"] = len(values["share_of_nodes"])
+        if {"ncc", "sgm"} <= set(matchers):
+            ratios = np.divide(values["ncc_nmad_m"], values["sgm_nmad_m"])
+            out[key]["ncc_over_sgm_nmad"] = round(float(np.median(ratios)), 3)
+    return out
+
+
 def _option(text: str) -> tuple[str, Any]:
     key, _, value = text.partition("=")
     try:
@@ -226,6 +268,7 @@ def main() -> int:
                     )
     result = {
         "summary": summary(runs),
+        "common_nodes": common_nodes(work, runs),
         "targets": TARGETS,
         "runs": runs,
         "size_px": list(args.size),
