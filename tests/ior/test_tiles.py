@@ -73,6 +73,24 @@ def test_resume_from_finished_tiles_gives_the_same_dem(pair, uninterrupted, tmp_
     ]
 
 
+def test_a_finished_tile_of_another_extent_is_computed_again(pair, uninterrupted, tmp_path):
+    """A work folder whose tile file starts where a tile of this plan starts but holds
+    another extent (a version that cut the grid otherwise) is not taken for that tile."""
+    work = tmp_path / "work"
+    first = refine_dem(*pair, SETTINGS, work_dir=tmp_path / "count")
+    per_iteration = len(list((tmp_path / "count").glob("iteration_*/tile_*.npz")))
+    del first
+    with pytest.raises(KeyboardInterrupt):
+        refine_dem(*pair, SETTINGS, scheduler=StopAfter(per_iteration + 2), work_dir=work)
+    path = sorted(work.glob("iteration_02/tile_*.npz"))[0]
+    with np.load(path) as data:
+        cropped = {name: data[name][:-1] for name in data.files}  # one row short
+    with open(path, "wb") as stream:
+        np.savez(stream, **cropped)
+    resumed = refine_dem(*pair, SETTINGS, work_dir=work)
+    np.testing.assert_array_equal(resumed.dem.heights, uninterrupted.dem.heights)
+
+
 def test_resume_inside_a_coarse_stage_gives_the_same_dem(pair, tmp_path):
     """Interrupted in the coarse stage (half resolution), resumed: the same DEM and the same
     iterations as a run never interrupted."""
@@ -134,7 +152,7 @@ def test_tiles_beyond_the_footprint_get_no_task(pair):
     left, right, init = pair[2], pair[3], pair[4]
     grid, _, _ = _grids(left, right, init, SETTINGS)
     heights = np.full(grid.shape, float(np.nanmedian(init.heights)))
-    plan = _tile_plan((left, right), grid, heights, (16, 16))
+    plan = _tile_plan((left, right), grid, heights, 16)
     n_r, n_c = grid.shape
     total = -(-n_r // 16) * -(-n_c // 16)
     assert 0 < len(plan) <= total
@@ -150,18 +168,3 @@ def test_tiles_split_an_axis_evenly_within_the_tile_size(n, tile_n):
     assert max(sizes) <= tile_n
     assert max(sizes) - min(sizes) <= 1
     assert len(edges) == -(-n // tile_n)  # no more tiles than the size needs
-
-
-def test_a_small_grid_is_cut_for_the_workers_only_where_it_pays():
-    from carto.ior.iteration import _tile_sides
-
-    # one tile of 500 x 500 nodes, 32 read around: two workers take half each
-    sides = _tile_sides((500, 500), 512, 32, 2)
-    assert sorted(len(tile_edges(500, m)) for m in sides) == [1, 2]
-    # 1036 x 1044 nodes reading 128 around: halves would take three quarters each
-    assert _tile_sides((1036, 1044), 2048, 128, 2) == (2048, 2048)
-    # 133 x 135 nodes: halves would read nearly the whole grid each
-    assert _tile_sides((133, 135), 512, 32, 2) == (512, 512)
-    # a grid of many tiles keeps the tile size; one worker too
-    assert _tile_sides((3200, 3200), 512, 32, 2) == (512, 512)
-    assert _tile_sides((500, 500), 512, 32, 1) == (512, 512)

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import functools
 import itertools
-import math
 import time
 from collections.abc import Callable
 from typing import Any
@@ -151,48 +150,18 @@ def tile_edges(n: int, tile_n: int) -> list[tuple[int, int]]:
     return [(int(a), int(b)) for a, b in itertools.pairwise(edges)]
 
 
-def _tile_sides(
-    shape: tuple[int, int], tile_n: int, overlap_n: int, workers: int
-) -> tuple[int, int]:
-    """The tiles' sides (rows, columns), nodes: ``tile_n``, unless cutting the grid into
-    more tiles (up to ``workers`` along an axis) lets the workers finish sooner: the cost
-    of a cut is the rounds of tasks its tiles take times a tile's window (its nodes with the
-    ``overlap_n`` it reads around them, within the grid)."""
-
-    def cost(sides: tuple[int, int]) -> float:
-        tiles = math.prod(len(tile_edges(n, m)) for n, m in zip(shape, sides, strict=True))
-        window = math.prod(min(n, m + 2 * overlap_n) for n, m in zip(shape, sides, strict=True))
-        return -(-tiles // workers) * window
-
-    options = [
-        (min(tile_n, -(-shape[0] // a)), min(tile_n, -(-shape[1] // b)))
-        for a in range(1, workers + 1)
-        for b in range(1, workers + 1)
-    ]
-    best = min(options, key=cost)
-    return best if cost(best) < SHARING_GAIN * cost((tile_n, tile_n)) else (tile_n, tile_n)
-
-
-SHARING_GAIN = 0.65
-"""A cut of :func:`_tile_sides` replaces the tile size only where it takes at most this
-share of the time by its windows' nodes: each task has costs beside them (measured: the
-Reunion pair's 0.5 m grid, 0.75 by the windows, took as long in two tiles as in one, with
-27 % more CPU; the demo's half-resolution stage, 0.74 by the windows, 0.86 of the time in
-one run)."""
-
-
 def _tile_plan(
-    sensors: tuple[Sensor, Sensor], grid: OrthoGrid, heights: FloatArray, sides: tuple[int, int]
+    sensors: tuple[Sensor, Sensor], grid: OrthoGrid, heights: FloatArray, tile_n: int
 ) -> list[tuple[slice, slice]]:
     """The tiles (node slices) that both images see: the grid cut into equal tiles of at
-    most ``sides`` nodes (rows, columns: :func:`tile_edges`), each tile's nodes sampled on an 9 x 9
+    most ``tile_n`` nodes a side (:func:`tile_edges`), each tile's nodes sampled on an 9 x 9
     lattice (edges included) at the starting heights; tiles beyond the common footprint get
     no task."""
     n_r, n_c = grid.shape
     tiles = [
         (slice(r0, r1), slice(c0, c1))
-        for r0, r1 in tile_edges(n_r, sides[0])
-        for c0, c1 in tile_edges(n_c, sides[1])
+        for r0, r1 in tile_edges(n_r, tile_n)
+        for c0, c1 in tile_edges(n_c, tile_n)
     ]
     rr, cc, owner = [], [], []
     for k, (rows, cols) in enumerate(tiles):
@@ -332,10 +301,8 @@ def _stage_plan(
     heights: FloatArray,
     k: int,
     s: IORSettings,
-    workers: int = 1,
 ) -> _StagePlan:
-    """The plan of a stage whose starting heights are ``heights``, for an engine of
-    ``workers``."""
+    """The plan of a stage whose starting heights are ``heights``."""
     left, right = sensors
     n_r, n_c = dem_grid.shape
     c_lon, c_lat = dem_grid.lonlat(n_r / 2, n_c / 2)
@@ -344,9 +311,9 @@ def _stage_plan(
     )
     base_rc = np.array([-base_en[1], base_en[0]])  # (row, col) of the north-up grid
     overlap_n = max(2, -(-s.overlap_px // k))
-    sides = _tile_sides((n_r, n_c), max(16, s.tile_px // k), overlap_n, workers)
-    tiles = _tile_plan((left, right), dem_grid, heights, sides)
-    starts = [[a for a, _ in tile_edges(n, m)] for n, m in zip((n_r, n_c), sides, strict=True)]
+    tile_n = max(16, s.tile_px // k)
+    tiles = _tile_plan((left, right), dem_grid, heights, tile_n)
+    starts = [[a for a, _ in tile_edges(n, tile_n)] for n in (n_r, n_c)]
     keys = [
         f"tile {starts[0].index(rows.start)},{starts[1].index(cols.start)}" for rows, cols in tiles
     ]
@@ -378,7 +345,7 @@ def _stage(
 ) -> _Stage:
     """The stage of :func:`iterate` whose starting heights are ``heights``."""
     dem_grid, ortho_grid, k = grids
-    plan = _stage_plan(run.sensors, dem_grid, heights, k, s, getattr(run.engine, "workers", 1))
+    plan = _stage_plan(run.sensors, dem_grid, heights, k, s)
     work = TileWork(
         run.images, run.sensors, dem_grid, k, plan.overlap_n, s,
         matcher=run.matcher, base=plan.base_rc,

@@ -332,9 +332,10 @@ def run_tile(job: TileJob, rows: slice, cols: slice) -> Path:
     """Refine one tile (:func:`refine_tile`) and write its result to its file in
     ``job.folder`` (written under a temporary name and renamed: a file that exists is
     complete); return the file. A tile whose file exists is not computed again (a resumed
-    run)."""
+    run), unless that file holds another extent (a work folder of a version that cut the
+    grid otherwise)."""
     path = piece_path(job.folder, rows.start, cols.start)
-    if path.is_file():
+    if path.is_file() and _holds(path, (rows.stop - rows.start, cols.stop - cols.start)):
         return path
     heights = np.load(job.heights_path, mmap_mode="r")
     search_px = None if job.search_path is None else np.load(job.search_path, mmap_mode="r")
@@ -342,6 +343,12 @@ def run_tile(job: TileJob, rows: slice, cols: slice) -> Path:
     with atomic_output(path) as tmp, open(tmp, "wb") as stream:
         np.savez(stream, **result.layers)
     return path
+
+
+def _holds(path: Path, shape: tuple[int, int]) -> bool:
+    """Whether the tile file at ``path`` holds nodes of ``shape``."""
+    with np.load(path) as data:
+        return tuple(data["new_height"].shape) == shape
 
 
 def tile_arrays(path: str | os.PathLike[str], names: tuple[str, ...]) -> dict[str, NDArray]:
