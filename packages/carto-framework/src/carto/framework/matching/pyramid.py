@@ -66,12 +66,13 @@ def pyramid_match(
 ) -> Matches:
     """Coarse-to-fine matching over image pyramids (``cv2.pyrDown``, factor 2 per level).
 
-    At the coarsest level the points are matched with the given guesses (scaled), at most one
-    per cell of half a template at each coarse level (:func:`_thinned`; the others take
-    their neighbours' median); the offsets found are cleaned (each compared with the median
-    of its 9 nearest neighbours: more than 2 pixels of that level away, or unmatched, it is
-    replaced by the median) and passed, scaled
-    by two, as the guesses of the next level. The full-resolution level is matched with
+    At the coarsest level the points are matched with the given guesses (scaled); the offsets
+    found are cleaned (each compared with the median of its 9 nearest neighbours: more than
+    2 pixels of that level away, or unmatched, it is replaced by the median) and passed, scaled
+    by two, as the guesses of the next level. A coarse level matches at most one point per
+    cell of half a template (:func:`_thinned`: closer points share most of their template);
+    the others take the median of their nearest matched neighbours, as unmatched points do.
+    The full-resolution level is matched with
     :func:`~carto.framework.matching.ncc.match_bidirectional` (or
     :func:`~carto.framework.matching.ncc.match_ncc` without ``two_way``; one level without it
     is plain :func:`~carto.framework.matching.ncc.match_ncc`). The search reach is about
