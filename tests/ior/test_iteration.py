@@ -62,3 +62,42 @@ def test_the_final_resolution_updates_at_least_once_after_a_coarse_stage(hilly):
     assert result.converged
     sigma = np.asarray(result.node_quality["sigma_m"])
     assert np.nanmedian(sigma) > 0.0
+
+
+def test_only_iterations_that_may_end_the_run_predict_the_precision(hilly, monkeypatch):
+    """After a coarse stage the final grid's first iteration cannot be its last: it skips the
+    predicted precision, as the coarse stage does, and the DEM and its sigma are those of a
+    run that computes it in every iteration."""
+    from carto.framework.raster.dem import DEM
+    from carto.framework.raster.images import read_raster
+    from carto.ior import iteration
+
+    truth = hilly.truth_sensors()
+    init = DEM.open(hilly.path("init_dem.tif"))
+    images = [truth[n].prepare_raw(read_raster(hilly.raster(n)), init) for n in ("aft", "fore")]
+    settings = IORSettings(posting_m=10.0, coarse_stages=1, max_iterations=2)
+    args = (*images, truth["aft"], truth["fore"], init, settings)
+    run_iteration = iteration._run_iteration
+    calls = []
+
+    def recorded(stage, *rest):
+        calls.append((stage.factor, rest[-1]))
+        return run_iteration(stage, *rest)
+
+    monkeypatch.setattr(iteration, "_run_iteration", recorded)
+    lean = refine_dem(*args)
+    final = [p for f, p in calls if f == 1]
+    assert all(not p for f, p in calls if f > 1)
+    assert len(final) >= 2
+    assert not final[0]
+    assert all(final[1:])
+
+    def always(stage, *rest):
+        return run_iteration(stage, *rest[:-1], True)
+
+    monkeypatch.setattr(iteration, "_run_iteration", always)
+    full = refine_dem(*args)
+    np.testing.assert_array_equal(lean.dem.heights, full.dem.heights)
+    sigma = np.asarray(lean.node_quality["sigma_m"])
+    assert np.isfinite(sigma).any()
+    np.testing.assert_array_equal(sigma, np.asarray(full.node_quality["sigma_m"]))

@@ -238,7 +238,11 @@ def iterate(
         t0 = time.perf_counter()
         current = heights
         close = reports[-1].median_abs_mismatch_px < 2.0 if reports else start_refined
-        outcomes = _run_iteration(stage, iteration, current, guess, search, close)
+        # the predicted precision is a product's: not of a coarse stage, nor of an
+        # iteration that cannot be the last (a refined start's first: see _converged)
+        may_end = not (not reports and start_refined) or iteration > s.max_iterations
+        precision = factor == 1 and may_end
+        outcomes = _run_iteration(stage, iteration, current, guess, search, close, precision)
         measured = _measured(stage, outcomes)
         # the across-base offset stays; the along-base one the DEM removes
         if measured.matched.any():
@@ -360,9 +364,11 @@ def _run_iteration(
     guess: tuple[float, float],
     search: NDArray[np.float32] | None,
     close: bool,
+    precision: bool = True,
 ) -> list[Any]:
     """The tiles of one iteration on the heights ``current`` (``close``: the last mismatch
-    was small, the matching's pyramid is shallow); each tile's file, or its failure."""
+    was small, the matching's pyramid is shallow; ``precision``: the tiles predict their
+    heights' precision); each tile's file, or its failure."""
     s, space = stage.work.settings, stage.space
     work = attrs.evolve(
         stage.work,
@@ -372,7 +378,7 @@ def _run_iteration(
         variance_factor=smoothing_variance_factor(
             s.smoothing_nodes, iteration - 1, s.window, stage.work.k
         ),
-        precision=stage.factor == 1,  # a coarse stage's result is only a start
+        precision=precision,
     )
     job = TileJob(
         work,
