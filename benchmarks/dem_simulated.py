@@ -69,14 +69,7 @@ def _figures(d: np.ndarray) -> dict[str, float]:
 
 def evaluate(out: Path, truth_path: Path) -> dict[str, Any]:
     """The figures of one ``carto dem`` output folder against the true DEM."""
-    import rasterio
-
-    dem = DEM.open(out / "dem.tif")
-    error = dem.heights - DEM.open(truth_path).height(*dem.node_lonlat())
-    bands = {}
-    for name in ("quality.tif", "quality_flags.tif"):
-        with rasterio.open(out / name) as ds:
-            bands |= dict(zip(ds.descriptions, ds.read(), strict=True))
+    error, bands = _node_errors(out, truth_path, ("quality.tif", "quality_flags.tif"))
     filled = bands["filled"] == 1
     has = np.isfinite(error)
     measured = has & ~filled
@@ -175,15 +168,26 @@ def summary(runs: list[dict[str, Any]]) -> dict[str, Any]:
     return out
 
 
-def _measured_errors(out: Path, truth_path: Path) -> np.ndarray:
-    """DEM minus truth at the nodes the run measured (NaN elsewhere: filled or empty)."""
+def _node_errors(
+    out: Path, truth_path: Path, rasters: tuple[str, ...]
+) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """DEM minus truth at every node of a run's ``dem.tif``, and the bands of its
+    ``rasters`` (quality layers) by name."""
     import rasterio
 
     dem = DEM.open(out / "dem.tif")
     error = dem.heights - DEM.open(truth_path).height(*dem.node_lonlat())
-    with rasterio.open(out / "quality_flags.tif") as ds:
-        filled = dict(zip(ds.descriptions, ds.read(), strict=True))["filled"] == 1
-    return np.where(filled, np.nan, error)
+    bands: dict[str, np.ndarray] = {}
+    for name in rasters:
+        with rasterio.open(out / name) as ds:
+            bands |= dict(zip(ds.descriptions, ds.read(), strict=True))
+    return error, bands
+
+
+def _measured_errors(out: Path, truth_path: Path) -> np.ndarray:
+    """DEM minus truth at the nodes the run measured (NaN elsewhere: filled or empty)."""
+    error, bands = _node_errors(out, truth_path, ("quality_flags.tif",))
+    return np.where(bands["filled"] == 1, np.nan, error)
 
 
 def common_nodes(work: Path, runs: list[dict[str, Any]]) -> dict[str, Any]:

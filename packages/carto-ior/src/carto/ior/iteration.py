@@ -239,8 +239,8 @@ def iterate(
         current = heights
         close = reports[-1].median_abs_mismatch_px < 2.0 if reports else start_refined
         # the predicted precision is a product's: not of a coarse stage, nor of an
-        # iteration that cannot be the last (a refined start's first: see _converged)
-        may_end = not (not reports and start_refined) or iteration > s.max_iterations
+        # iteration that cannot be the last
+        may_end = not _first_here(reports, start_refined) or iteration > s.max_iterations
         precision = factor == 1 and may_end
         outcomes = _run_iteration(stage, iteration, current, guess, search, close, precision)
         measured = _measured(stage, outcomes)
@@ -462,10 +462,15 @@ def _converged(
     # converged: the mismatch is below the threshold, or it no longer improves (what
     # is left is the matching noise, which no height change removes)
     stalled = bool(reports) and med > (1.0 - s.min_improvement) * reports[-1].median_abs_mismatch_px
-    # a stage that starts from a coarser one updates at least once at its own resolution:
-    # a small median mismatch there says the coarse relief is right, not the fine one
-    first_here = not reports and start_refined
-    return bool(measured.matched.any() and (med < s.threshold_px or stalled)) and not first_here
+    converged = bool(measured.matched.any() and (med < s.threshold_px or stalled))
+    return converged and not _first_here(reports, start_refined)
+
+
+def _first_here(reports: list[IterationReport], start_refined: bool) -> bool:
+    """Whether the coming iteration is the first of a stage that starts from a coarser one:
+    it updates at least once at its own resolution, so that one cannot converge (a small
+    median mismatch there says the coarse relief is right, not the fine one)."""
+    return not reports and start_refined
 
 
 def _median_search(search: NDArray[np.float32] | None, covered: NDArray[np.bool_]) -> float:

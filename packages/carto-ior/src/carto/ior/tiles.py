@@ -117,8 +117,8 @@ class TileWork:
     matchers that search along it. ``variance_factor``: the share of a node's measurement
     variance the regularised updates left in the current DEM
     (:func:`carto.ior.height_precision.smoothing_variance_factor`). ``precision``: the
-    predicted height precision is computed (``sigma_m``; NaN without: a coarse-to-fine
-    stage, whose result is only the next stage's start)."""
+    predicted height precision is computed (``sigma_m``; NaN without: an iteration whose
+    tiles are not delivered, a coarse-to-fine stage's or one that cannot be the last)."""
 
     images: tuple[Any, Any]
     sensors: tuple[Sensor, Sensor]
