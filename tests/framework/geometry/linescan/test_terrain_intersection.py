@@ -15,6 +15,8 @@ from scipy.interpolate import RegularGridInterpolator
 
 from carto.framework.geometry.linescan.terrain_intersection import (
     MODEL_ERROR_M,
+    RayQuadratic,
+    _cell_crossing,
     dem_grid,
     grid_bilinear,
     local_slopes,
@@ -142,3 +144,48 @@ def test_the_local_steps_find_the_first_intersection(seed):
             # 1e-8 deg: about a millimetre
             assert got[0] == pytest.approx(lon_m, abs=1e-8)
             assert got[1] == pytest.approx(lat_m, abs=1e-8)
+
+
+def test_the_cell_crossing_is_the_first_root_in_the_cell():
+    """:func:`_cell_crossing` against a march of 1 mm steps along the straight ray over
+    scipy's bilinear heights: where the ray meets the cell's surface, or where it leaves the
+    cell without meeting it (edges found by the march too)."""
+    dem = _rough_dem(2)
+    grid = dem_grid(dem)
+    n = dem.heights.shape[0]
+    lats = _Y1 - (np.arange(n) + 0.5) * _STEP_DEG
+    lons = _X0 + (np.arange(n) + 0.5) * _STEP_DEG
+    terrain = RegularGridInterpolator((lats[::-1], lons), dem.heights[::-1])
+    rng = np.random.default_rng(3)
+    met = left = 0
+    for _ in range(300):
+        i, j = rng.integers(5, n - 6, 2)
+        lon = _X0 + (j + 0.5 + rng.random()) * _STEP_DEG
+        lat = _Y1 - (i + 0.5 + rng.random()) * _STEP_DEG
+        # degrees per metre along the ray (a cell is ~5 m), descent per metre, start height
+        heading = rng.uniform(0.0, 2.0 * np.pi)
+        horizontal = rng.uniform(0.0, 0.6)
+        a, b = (horizontal * _STEP_DEG / 5.0) * np.array([np.sin(heading), np.cos(heading)])
+        c = np.sqrt(1.0 - horizontal**2)
+        ground = float(terrain([lat, lon])[0])
+        gap = rng.uniform(1e-3, 8.0)
+        q = RayQuadratic(0.0, 1.0, lon, a, 0.0, lat, b, 0.0, ground + gap, -c, 0.0)
+        meets, t = _cell_crossing(q, grid, 0.0, lon, lat, c, gap)
+        march = np.arange(0.0, 40.0, 1e-3)
+        lo, la = lon + a * march, lat + b * march
+        inside = (np.floor((lo - _X0) / _STEP_DEG - 0.5) == j) & (
+            np.floor((_Y1 - la) / _STEP_DEG - 0.5) == i
+        )
+        exit_t = march[np.argmin(inside)] if not inside.all() else np.inf
+        below = (ground + gap - c * march) <= terrain(np.column_stack([la, lo]))
+        first = march[np.argmax(below & inside)] if (below & inside).any() else np.inf
+        if first < np.inf:
+            met += 1
+            assert meets
+            assert t == pytest.approx(first, abs=2e-3)
+        else:
+            left += 1
+            assert not meets
+            assert t == pytest.approx(exit_t, abs=2e-3)
+    assert met > 50  # both cases are exercised
+    assert left > 50

@@ -6,8 +6,9 @@ detector is intersected with the terrain and the ground texture is sampled there
 intersected with the DEM by *safe stepping*: at a height ``dh`` above the terrain a ray that
 descends ``c`` metres per metre and moves ``s`` metres horizontally cannot meet terrain of
 slope at most ``S`` before it has travelled ``dh / (c + s S)``; stepping by that much never
-jumps over a ridge, and it converges like Newton's method on gentle terrain. Iterations stop
-when the ray is within ``1e-4`` m of the terrain height. The steps follow each ray's geodetic
+jumps over a ridge. In the DEM cell under the ray the crossing with the bilinear surface is
+solved exactly (a quadratic), else the steps stop within ``1e-4`` m of the terrain height. The
+steps follow each ray's geodetic
 coordinates as quadratics in the distance along it, interpolated across the line between the
 exact models of every 32nd detector: the point found lies within a millimetre of the exact
 ray's (:func:`~carto.framework.geometry.linescan.terrain_intersection.trace_model`; measured

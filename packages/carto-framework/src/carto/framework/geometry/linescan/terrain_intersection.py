@@ -4,9 +4,11 @@
 Rays are intersected with the terrain by *safe stepping*: at a height ``dh`` above the
 terrain, a ray that descends ``c`` metres per metre and moves ``s`` metres horizontally cannot
 meet terrain of slope at most ``S`` before it has travelled ``dh / (c + s S)``; stepping by
-that much never jumps over a ridge and converges like Newton's method on gentle terrain. ``S``
-is the largest slope of the DEM's bilinear surface in the 3 x 3 cells around the ray where the
-step stays within one cell (:func:`local_slopes`), else that of the whole DEM. Between the
+that much never jumps over a ridge. ``S`` is the largest slope of the DEM's bilinear surface
+in the 3 x 3 cells around the ray where the step stays within one cell (:func:`local_slopes`),
+else that of the whole DEM. Along the ray the bilinear surface of the cell under it is a
+quadratic, so where the ray meets it there is solved exactly (:func:`_cell_crossing`); a ray
+that crosses the cell without meeting it steps at least to the cell's edge. Between the
 search heights the ray's geodetic coordinates are quadratics in the distance along it
 (:func:`ray_quadratic`), which makes the steps cheap; the last steps use the exact geodetic
 conversion and stop within ``1e-4`` m of the terrain height.
@@ -236,7 +238,8 @@ def _safe_steps(
     q: RayQuadratic, dem: DemGrid, tolerance_m: float, d_start: float
 ) -> tuple[float, float]:  # pragma: no cover - compiled
     """Safe steps along the quadratic model from ``d_start`` metres along the ray (at or
-    above the terrain) until the ray is within ``tolerance_m`` of the terrain: ``(d, c)``,
+    above the terrain) until the ray is within ``tolerance_m`` of the terrain, or meets it
+    in the cell it is over (:func:`_cell_crossing`): ``(d, c)``,
     the distance along the ray (m) and the height it loses per metre there; ``d`` NaN when
     the ray leaves the DEM, does not descend or takes :data:`MAX_STEPS` steps."""
     d = d_start
@@ -257,8 +260,63 @@ def _safe_steps(
             local = gap / (c + s * slope)
             if s * local <= dem.cell_m:
                 step = local
+            meets, t = _cell_crossing(q, dem, tau, lon, lat, c, gap)
+            step = t if meets else max(step, t)
         d += step
     return np.nan, np.nan
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _cell_crossing(
+    q: RayQuadratic, dem: DemGrid, tau: float, lon_deg: float, lat_deg: float, c: float, gap: float
+) -> tuple[bool, float]:  # pragma: no cover - compiled
+    """Where the ray, ``gap`` metres above the terrain at ``(lon_deg, lat_deg)`` (``tau`` on
+    its model) and descending ``c`` metres per metre, meets the bilinear surface of the cell
+    it is over: ``(True, distance along the ray to that point)``, or ``(False, distance to
+    where it leaves the cell)`` when it does not meet it there (m). Along a straight line the
+    bilinear surface is a quadratic in the distance; the ray is taken as its tangent line
+    (over a cell it departs from its model by micrometres)."""
+    fx = (lon_deg - dem.x0_deg) / dem.dx_deg - 0.5
+    fy = (lat_deg - dem.y0_deg) / dem.dy_deg - 0.5
+    j = math.floor(fx)
+    i = math.floor(fy)
+    grid = dem.heights
+    tx = fx - j
+    ty = fy - i
+    g00, g01 = grid[i, j], grid[i, j + 1]
+    g10, g11 = grid[i + 1, j], grid[i + 1, j + 1]
+    b = g01 - g00
+    e = g10 - g00
+    f = g11 - g01 - g10 + g00
+    p = (q.lon1 + 2.0 * tau * q.lon2) / (q.span_m * dem.dx_deg)  # cell fractions per metre
+    r = (q.lat1 + 2.0 * tau * q.lat2) / (q.span_m * dem.dy_deg)
+    exit_t = np.inf
+    if p > 0.0:
+        exit_t = (1.0 - tx) / p
+    elif p < 0.0:
+        exit_t = -tx / p
+    if r > 0.0:
+        exit_t = min(exit_t, (1.0 - ty) / r)
+    elif r < 0.0:
+        exit_t = min(exit_t, -ty / r)
+    # gap(t) = gap - lin t - quad t^2
+    lin = c + b * p + e * r + f * (tx * r + ty * p)
+    quad = f * p * r
+    disc = lin * lin + 4.0 * quad * gap
+    if disc >= 0.0:
+        root = np.inf
+        half = -0.5 * (lin + math.copysign(math.sqrt(disc), lin))
+        if half != 0.0:
+            t2 = -gap / half
+            if t2 >= 0.0:
+                root = t2
+        if quad != 0.0:
+            t1 = half / quad
+            if 0.0 <= t1 < root:
+                root = t1
+        if root <= exit_t:
+            return True, root
+    return False, exit_t
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
