@@ -11,8 +11,8 @@ the window, so the simulator never holds a whole-scene grid:
   lattice nodes from a hash of the node (the fine texture).
 * :func:`linear_matrix` and :func:`resample`: separable bilinear resampling of a grid by two
   sparse matrices (a user's DEM onto the terrain grid).
-* :class:`TileCache`: windows of such a grid assembled from a bounded cache of tiles, and
-  :func:`gaussian_blur`: the Gaussian filter of ``scipy.ndimage``, compiled (the texture).
+* :func:`gaussian_blur`: the Gaussian filter of ``scipy.ndimage``, compiled (the texture);
+  :mod:`carto.framework.simulation.tile_cache` assembles windows of such grids from tiles.
 
 The window kernels are compiled, on one thread for small windows and by chunks of rows on
 all threads for large ones (the same values either way).
@@ -22,8 +22,7 @@ from __future__ import annotations
 
 import functools
 import math
-from collections import OrderedDict
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from typing import Any
 
 import numba
@@ -421,64 +420,7 @@ def resample(grid: ArrayLike, row_matrix: Any, col_matrix: Any) -> FloatArray:
     return np.asarray(row_matrix @ (col_matrix @ np.asarray(grid, np.float64).T).T)
 
 
-# ----------------------------------------------------------------------------- tiles, blur
-class TileCache:
-    """Windows of a grid whose nodes have the same values whatever the window, assembled from
-    square tiles of ``tile`` nodes kept in a least-recently-used cache of at most
-    ``max_tiles`` tiles (memory bounded whatever the grid), so overlapping windows compute
-    their common nodes once. Missing tiles are computed by runs along a row of tiles; a
-    window larger than the cache is computed directly."""
-
-    def __init__(self, shape: tuple[int, int], *, tile: int = 256, max_tiles: int = 320) -> None:
-        self.shape = (int(shape[0]), int(shape[1]))
-        self.tile = int(tile)
-        self.max_tiles = int(max_tiles)
-        self._tiles: OrderedDict[tuple[int, int], tuple[NDArray, ...]] = OrderedDict()
-
-    def window(
-        self, compute: Callable[..., tuple[NDArray, ...]], r0: int, r1: int, c0: int, c1: int
-    ) -> tuple[NDArray, ...]:
-        """The arrays ``compute(r0, r1, c0, c1)`` returns, for nodes ``[r0, r1) x [c0, c1)``
-        inside the grid (fresh arrays)."""
-        t = self.tile
-        rows, cols = range(r0 // t, (r1 - 1) // t + 1), range(c0 // t, (c1 - 1) // t + 1)
-        if r1 <= r0 or c1 <= c0 or len(rows) * len(cols) > self.max_tiles:
-            return compute(r0, r1, c0, c1)
-        for key in ((i, j) for i in rows for j in cols):
-            if key in self._tiles:  # most recent: not evicted while this window is filled
-                self._tiles.move_to_end(key)
-        out: list[NDArray] = []
-        for i in rows:
-            self._fill(compute, i, cols)
-            a, b = max(r0, i * t), min(r1, (i + 1) * t)
-            for j in cols:
-                tiles = self._tiles[(i, j)]
-                if not out:
-                    out = [np.empty((r1 - r0, c1 - c0), v.dtype) for v in tiles]
-                c, d = max(c0, j * t), min(c1, (j + 1) * t)
-                inside = np.s_[a - i * t : b - i * t, c - j * t : d - j * t]
-                for o, v in zip(out, tiles, strict=True):
-                    o[a - r0 : b - r0, c - c0 : d - c0] = v[inside]
-        return tuple(out)
-
-    def _fill(self, compute: Callable[..., tuple[NDArray, ...]], i: int, cols: range) -> None:
-        """Compute the missing tiles of row ``i`` among ``cols``, by runs of adjacent tiles."""
-        t, (n_rows, n_cols) = self.tile, self.shape
-        missing = [j for j in cols if (i, j) not in self._tiles]
-        while missing:
-            run = 1
-            while run < len(missing) and missing[run] == missing[0] + run:
-                run += 1
-            j0 = missing[0]
-            arrays = compute(i * t, min((i + 1) * t, n_rows), j0 * t, min((j0 + run) * t, n_cols))
-            for j in range(j0, j0 + run):
-                s = np.s_[:, (j - j0) * t : (j - j0 + 1) * t]
-                self._tiles[(i, j)] = tuple(np.ascontiguousarray(v[s]) for v in arrays)
-            while len(self._tiles) > self.max_tiles:
-                self._tiles.popitem(last=False)
-            missing = missing[run:]
-
-
+# ----------------------------------------------------------------------------- blur
 @numba.njit(cache=True, nogil=True)
 def _gauss_rows(
     src: NDArray, out: NDArray, weights: NDArray, rows: tuple[int, int]

@@ -27,10 +27,12 @@ unchanged. The scene folder layout and file formats are in ``docs/formats.md``.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -593,18 +595,42 @@ def simulate_scene(
         )
     truth = attrs.evolve(truth, ground=_marked_ground(truth.ground, plan, options, targets))
 
-    # --- render, band by band
-    _render_all(run, scene, truth, streams.noise)
-
-    # --- products
-    with _Stage("ancillary, control, initial DEM and truth", quiet):
-        anc_files = _write_ancillary(run, ref.world, drawn, specs)
-        write_point_table(out / "gcps.csv", gcp_rows, precision=15)
-        write_point_table(out / "checkpoints.csv", check_rows, precision=15)
-        scene_tiles.write_init_dem(out / "init_dem.tif", terrain, streams.init)
-        models, ortho = _write_truth(run, scene, drawn, truth)
+    # --- render band by band, then the products (the texture computed once for all)
+    with _texture_spill(truth.ground):
+        _render_all(run, scene, truth, streams.noise)
+        with _Stage("ancillary, control, initial DEM and truth", quiet):
+            anc_files = _write_ancillary(run, ref.world, drawn, specs)
+            write_point_table(out / "gcps.csv", gcp_rows, precision=15)
+            write_point_table(out / "checkpoints.csv", check_rows, precision=15)
+            scene_tiles.write_init_dem(out / "init_dem.tif", terrain, streams.init)
+            models, ortho = _write_truth(run, scene, drawn, truth)
     manifest = _manifest(run, scene, _Written(anc_files, models, ortho))
     return write_json_atomic(out / "scene.json", manifest)
+
+
+@contextlib.contextmanager
+def _texture_spill(ground: Any) -> Iterator[None]:
+    """Within the block, ``ground``'s texture tiles are computed once and read back from a
+    scratch file in the system's temporary folder when needed again (every image and the
+    true ortho see the same ground); the file is removed after. Without room for the whole
+    texture grid twice over there, tiles are computed again as before."""
+    import shutil
+    import tempfile
+
+    from carto.framework.simulation.tile_cache import TileSpill
+
+    need = 2 * 5 * ground.shape[0] * ground.shape[1]  # float32 reflectance and a mask byte
+    if shutil.disk_usage(tempfile.gettempdir()).free < need:
+        yield
+        return
+    with tempfile.TemporaryDirectory(prefix="carto-texture-") as tmp:
+        spill = TileSpill(Path(tmp) / "tiles.bin")
+        ground.spill_tiles(spill)
+        try:
+            yield
+        finally:
+            ground.spill_tiles(None)
+            spill.close()
 
 
 def _terrain_range(name: str, dem_path: Path | None) -> tuple[float, float]:

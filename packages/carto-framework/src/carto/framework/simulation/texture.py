@@ -53,9 +53,11 @@ The table was measured with the former whole-grid synthesis; the tests bound the
 statistics. Memory and speed (2 cores): about 0.01 microseconds per texture pixel (compiled
 kernels); a window is computed in strips of 2e6 pixels (about 30 MB of intermediates) besides
 its result, from tiles of 256 x 256 pixels of which the last 320 used are kept (about 100 MB,
-:class:`~carto.framework.simulation.fields.TileCache`: overlapping windows, such as successive
-bands of an image, compute their common pixels once), and the fields' lattices take at most
-~2 x 16 MB + 2 x 4 MB whatever the area.
+:class:`~carto.framework.simulation.tile_cache.TileCache`: overlapping windows, such as successive
+bands of an image, compute their common pixels once; while a scene is simulated every tile
+is also written to a scratch file and read back rather than computed again, since every
+image and the true ortho see the same ground: :meth:`GroundTexture.spill_tiles`), and the
+fields' lattices take at most ~2 x 16 MB + 2 x 4 MB whatever the area.
 """
 
 from __future__ import annotations
@@ -74,7 +76,7 @@ from carto.framework.errors import InputError
 from carto.framework.raster.dem import DEM, to_affine
 from carto.framework.raster.grid_sampling import bilinear_sample
 from carto.framework.simulation.cover import Parcels, make_roads, paint_roads
-from carto.framework.simulation.fields import LatticeField, TileCache, gaussian_blur, pyramid_noise
+from carto.framework.simulation.fields import LatticeField, gaussian_blur, pyramid_noise
 from carto.framework.simulation.grid_windows import centre_bounds
 from carto.framework.simulation.terrain import (
     MAX_GRID_PX,
@@ -88,6 +90,7 @@ from carto.framework.simulation.terrain import (
     is_north_up_lonlat,
     radii_m,
 )
+from carto.framework.simulation.tile_cache import TileCache, TileSpill
 
 if TYPE_CHECKING:
     import pyproj
@@ -411,6 +414,12 @@ class GroundTexture:
         other = copy.copy(self)
         other.blur_sigma_px = float(sigma_px)
         return other
+
+    def spill_tiles(self, spill: TileSpill | None) -> None:
+        """From now on write the tiles computed to ``spill`` and read evicted ones back from
+        it, rather than computing them again (None: stop); shared with the copies
+        (:meth:`with_targets`, :meth:`blurred`), which share the tiles."""
+        self._tiles.spill = spill
 
     # ------------------------------------------------------------------ windows
     def window(self, r0: int, r1: int, c0: int, c1: int) -> tuple[Float32Array, BoolArray]:
