@@ -57,7 +57,6 @@ from carto.framework.geometry.linescan.scanner import LineScanner
 from carto.framework.geometry.linescan.terrain_intersection import (
     interpolated_quadratic,
     ray_quadratic,
-    read_only,
     trace_model,
     trace_quadratic,
 )
@@ -207,6 +206,15 @@ def _stagger_tan(sensor: LineScanner, stagger: bool) -> float:
     return -tan if sensor.camera.array == "even" else tan
 
 
+def _texture_values(values: NDArray) -> NDArray[np.float32]:
+    """A texture's values as the kernel reads them: C-contiguous float32 flagged read-only,
+    a view of the simulator's float32 texture (copied only to convert; the kernel reads
+    them in float64)."""
+    view = np.ascontiguousarray(values, dtype=np.float32).view()
+    view.flags.writeable = False
+    return view
+
+
 def _check_supersample(supersample: int) -> None:
     """InputError unless at least one sub-pixel ray per pixel side."""
     if supersample < 1:
@@ -228,7 +236,7 @@ def render_reflectance(
         dem: terrain with ellipsoidal heights on a geographic grid (``heights``,
             ``transform``, ``crs``).
         texture: reflectance on a geographic grid (attributes ``reflectance`` or ``values``,
-            ``transform``, ``crs``).
+            ``transform``, ``crs``), read as float32.
         supersample: sub-pixel rays per pixel side (the detector footprint and the motion
             during the line time are integrated as a box).
         stagger: render odd-indexed detectors from the even array (raw Cartosat data).
@@ -240,7 +248,8 @@ def render_reflectance(
     tex_values = getattr(texture, "reflectance", None)
     if tex_values is None:
         tex_values = texture.values
-    tex = geo_grid(tex_values, texture.transform, getattr(texture, "crs", "EPSG:4326"), "texture")
+    grid = geo_grid(tex_values, texture.transform, getattr(texture, "crs", "EPSG:4326"), "texture")
+    tex = grid._replace(values=_texture_values(grid.values))
     cam = camera_states(sensor)
     n_lines, n_cols = sensor.image_shape
     window = _RenderWindow(
@@ -272,7 +281,9 @@ def render_band(
     _check_supersample(supersample)
     dem_search = dem_grid(dem, h_range, max_slope)
     t = texture.transform
-    tex = GeoGrid(read_only(texture.reflectance), float(t.c), float(t.a), float(t.f), float(t.e))
+    tex = GeoGrid(
+        _texture_values(texture.reflectance), float(t.c), float(t.a), float(t.f), float(t.e)
+    )
     cam = camera_states(sensor)
     first, last = lines
     s0, s1 = samples or (0, sensor.image_shape[1])
