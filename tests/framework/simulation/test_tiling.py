@@ -127,9 +127,14 @@ def test_texture_tiles_with_targets_and_blur_equal_one_piece():
     rows, cols = np.array([300.4, 900.7, 1400.1]), np.array([420.2, 1300.9, 700.5])
     lon, lat = t.c + t.a * (cols + 0.5), t.f + t.e * (rows + 0.5)
     painted = ground.with_targets(lon, lat, 6.0, 0.8).blurred(0.8)
-    whole, mask = painted.window(0, n_rows, 0, n_cols)
+    # in one piece, outside the texture's cache of tiles (which windows are assembled from)
+    whole, mask = painted._marked(0, n_rows, 0, n_cols)
     tiled = _tiled(lambda *w: painted.window(*w)[0], 0, n_rows, 0, n_cols, (211, 389))
     assert np.array_equal(tiled, whole)
+    again = ground.with_targets(lon, lat, 6.0, 0.8).blurred(0.8)  # another order of windows
+    assert np.array_equal(
+        _tiled(lambda *w: again.window(*w)[0], 0, n_rows, 0, n_cols, (97, 530)), whole
+    )
     assert np.array_equal(
         _tiled(lambda *w: painted.window(*w)[1], 0, n_rows, 0, n_cols, (500, 700)), mask
     )

@@ -53,11 +53,13 @@ The table was measured with the former whole-grid synthesis; the tests bound the
 statistics. Memory and speed (2 cores): about 0.01 microseconds per texture pixel (compiled
 kernels); a window is computed in strips of 2e6 pixels (about 30 MB of intermediates) besides
 its result, from tiles of 256 x 256 pixels of which the last 320 used are kept (about 100 MB,
-:class:`~carto.framework.simulation.tile_cache.TileCache`: overlapping windows, such as successive
-bands of an image, compute their common pixels once; while a scene is simulated every tile
-is also written to a scratch file and read back rather than computed again, since every
-image and the true ortho see the same ground: :meth:`GroundTexture.spill_tiles`), and the
-fields' lattices take at most ~2 x 16 MB + 2 x 4 MB whatever the area.
+:class:`~carto.framework.simulation.tile_cache.TileCache`: overlapping windows, such as
+successive bands of an image, compute their common pixels once). A texture with targets or
+blur keeps as many tiles of its own values, so it paints and blurs them once too. While a
+scene is simulated every tile is also written to a scratch file and read back rather than
+computed again, since every image and the true ortho see the same ground
+(:meth:`GroundTexture.spill_tiles`). The fields' lattices take at most ~2 x 16 MB + 2 x 4 MB
+whatever the area.
 """
 
 from __future__ import annotations
@@ -394,6 +396,7 @@ class GroundTexture:
         self._roads = make_roads(np.random.default_rng([int(seed), 7]), self.shape, posting)
         self._noise_key = int(rng.integers(2**62))
         self._tiles = TileCache(self.shape, tile=_TILE, max_tiles=_CACHED_TILES)
+        self._finals: TileCache | None = None  # with targets or blur: their tiles
         self.targets: tuple[FloatArray, FloatArray] | None = None
         self.target_radius_m = 0.0
         self.target_contrast = 0.0
@@ -407,19 +410,22 @@ class GroundTexture:
         lon, lat = as_float_arrays(lon_deg, lat_deg)
         other.targets = (lon.ravel(), lat.ravel())
         other.target_radius_m, other.target_contrast = float(radius_m), float(contrast)
+        other._finals = TileCache(self.shape, tile=_TILE, max_tiles=_CACHED_TILES)
         return other
 
     def blurred(self, sigma_px: float) -> GroundTexture:
         """This texture convolved with a Gaussian of ``sigma_px`` texture pixels."""
         other = copy.copy(self)
         other.blur_sigma_px = float(sigma_px)
+        other._finals = TileCache(self.shape, tile=_TILE, max_tiles=_CACHED_TILES)
         return other
 
     def spill_tiles(self, spill: TileSpill | None) -> None:
         """From now on write the tiles computed to ``spill`` and read evicted ones back from
-        it, rather than computing them again (None: stop); shared with the copies
-        (:meth:`with_targets`, :meth:`blurred`), which share the tiles."""
-        self._tiles.spill = spill
+        it, rather than computing them again (None: stop): the tiles of this texture's
+        values (with its targets and blur), or of the texture shared with its copies when it
+        has neither."""
+        (self._tiles if self._finals is None else self._finals).spill = spill
 
     # ------------------------------------------------------------------ windows
     def window(self, r0: int, r1: int, c0: int, c1: int) -> tuple[Float32Array, BoolArray]:
@@ -427,6 +433,15 @@ class GroundTexture:
         (clipped to the grid)."""
         n_rows, n_cols = self.shape
         r0, r1, c0, c1 = max(r0, 0), min(r1, n_rows), max(c0, 0), min(c1, n_cols)
+        if self._finals is None:
+            return self._base(r0, r1, c0, c1)
+        values, mask = self._finals.window(self._marked, r0, r1, c0, c1)
+        return values, mask
+
+    def _marked(self, r0: int, r1: int, c0: int, c1: int) -> tuple[Float32Array, BoolArray]:
+        """:meth:`window` computed: the texture around the window, its targets painted and
+        the blur applied there (the same values whatever the window)."""
+        n_rows, n_cols = self.shape
         blur_r = math.ceil(4.0 * self.blur_sigma_px) + 1 if self.blur_sigma_px > 0 else 0
         halo, chosen = blur_r, None
         if self.targets is not None and self.targets[0].size:
