@@ -85,8 +85,9 @@ class _SublineScratch(NamedTuple):
     """Per-row scratch space of :func:`_render_kernel`: the camera state of the sub-line
     (:data:`STATE_SIZE`), one ray (:data:`RAY_SIZE`), the quadratic models of the node rays
     of the even and the odd detectors (:func:`quadratic_table`) and the highest terrain
-    under the rays between consecutive nodes (:func:`segment_tops`), and the sums and counts
-    of texture values per window column."""
+    under the rays between consecutive nodes (:func:`segment_tops`), the sums and counts
+    of texture values per window column, and the rays to trace exactly (detector sample,
+    window column; :func:`_add_exact_rays`)."""
 
     state: NDArray
     ray: NDArray
@@ -96,32 +97,40 @@ class _SublineScratch(NamedTuple):
     top_odd: NDArray
     acc: NDArray
     count: NDArray
+    exact_s: NDArray
+    exact_j: NDArray
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
-def _ray_of(
-    s: float,
-    stagger: float,
-    table: NDArray,
-    tops: NDArray,
-    first: float,
+# grid_bilinear inlined in the renderer's loop (a call per ray there)
+_texture_value = numba.njit(cache=True, nogil=True, inline="always")(grid_bilinear.py_func)
+
+
+# Not inlined, and called after the sub-line's loop: the rare rays next to a node ray that
+# misses. Any call inside the loop, even one never taken, made the loop a fifth slower.
+@numba.njit(cache=True, nogil=True)
+def _add_exact_rays(
+    window: _RenderWindow,
     cam: CameraStates,
     dem: DemGrid,
+    tex: GeoGrid,
     w: _SublineScratch,
-) -> tuple[float, float, float]:  # pragma: no cover - compiled
-    """Ground point of the ray of detector sample ``s``: where its quadratic model,
-    interpolated from the sub-line's ``table``, meets the DEM (:func:`trace_model`, from just
-    above the highest terrain under its segment, ``tops``); next to a node ray that misses,
-    the exact ray's."""
-    n_nodes = table.shape[0]
-    q = interpolated_quadratic(table, n_nodes, first, s)
-    if np.isnan(q.d0_m + q.span_m + q.lon2 + q.lat2 + q.h2):
-        state_ray(s, stagger, cam, w.state, w.ray)
+    n_exact: int,
+) -> None:  # pragma: no cover - compiled
+    """Add the texture values of the sub-line's rays listed in ``w.exact_s`` /
+    ``w.exact_j`` (detector sample, window column), each traced on its exact ray
+    (:func:`trace_quadratic` on its own quadratic model), to ``w.acc`` and ``w.count``."""
+    for p in range(n_exact):
+        s, j = w.exact_s[p], w.exact_j[p]
+        odd = ((window.first_sample + j) % 2) == 1
+        state_ray(s, window.stagger_tan if odd else 0.0, cam, w.state, w.ray)
         ray = (w.ray[0], w.ray[1], w.ray[2], w.ray[3], w.ray[4], w.ray[5])
         q = ray_quadratic(ray, cam.omega_c, dem.h_top_m, dem.h_bottom_m)
-        return trace_quadratic(ray, cam.omega_c, q, dem)
-    segment = min(max(math.floor((s - first) / QUADRATIC_STEP), 0), n_nodes - 2)
-    return trace_model(q, dem, tops[segment])
+        lon, lat, _h = trace_quadratic(ray, cam.omega_c, q, dem)
+        if np.isfinite(lon):
+            v = grid_bilinear(tex.values, tex.x0_deg, tex.dx_deg, tex.y0_deg, tex.dy_deg, lon, lat)
+            if np.isfinite(v):
+                w.acc[j] += v
+                w.count[j] += 1
 
 
 # Not inlined: numba 0.68's parallel loop then loses the writes to arrays passed in a tuple.
@@ -137,7 +146,10 @@ def _render_subline(
 ) -> None:  # pragma: no cover - compiled
     """Add the texture values of one sub-line's rays (camera state ``w.state``,
     :func:`line_state`) to ``w.acc`` and their number to ``w.count``, per window column:
-    ``supersample`` rays per pixel across; rays that miss the DEM or the texture add
+    ``supersample`` rays per pixel across, each where its quadratic model, interpolated
+    from the sub-line's exact node models, meets the DEM (:func:`trace_model`, from just
+    above the highest terrain under its segment); next to a node ray that misses, where the
+    exact ray meets it (:func:`_add_exact_rays`). Rays that miss the DEM or the texture add
     nothing. ``blocks``: the DEM's :func:`block_maxima`."""
     supersample = window.supersample
     inv = 1.0 / supersample
@@ -147,20 +159,28 @@ def _render_subline(
     quadratic_table(first, n_nodes, window.stagger_tan, cam, dem, w.state, w.ray, w.odd)
     segment_tops(w.even, n_nodes, dem, blocks, BLOCK_CELLS, w.top_even)
     segment_tops(w.odd, n_nodes, dem, blocks, BLOCK_CELLS, w.top_odd)
+    n_exact = 0
     for j in range(window.n_cols):
         k = window.first_sample + j
-        odd = (k % 2) == 1
-        stagger = window.stagger_tan if odd else 0.0
-        table, tops = (w.odd, w.top_odd) if odd else (w.even, w.top_even)
+        table, tops = (w.odd, w.top_odd) if (k % 2) == 1 else (w.even, w.top_even)
         for b in range(supersample):
             s = k + (b + 0.5) * inv
-            lon, lat, _h = _ray_of(s, stagger, table, tops, first, cam, dem, w)
+            q = interpolated_quadratic(table, n_nodes, first, s)
+            if np.isnan(q.d0_m + q.span_m + q.lon2 + q.lat2 + q.h2):
+                w.exact_s[n_exact] = s
+                w.exact_j[n_exact] = j
+                n_exact += 1
+                continue
+            segment = min(max(math.floor((s - first) / QUADRATIC_STEP), 0), n_nodes - 2)
+            lon, lat, _h = trace_model(q, dem, tops[segment])
             if not np.isfinite(lon):
                 continue
-            v = grid_bilinear(tex.values, tex.x0_deg, tex.dx_deg, tex.y0_deg, tex.dy_deg, lon, lat)
+            v = _texture_value(tex.values, tex.x0_deg, tex.dx_deg, tex.y0_deg, tex.dy_deg, lon, lat)
             if np.isfinite(v):
                 w.acc[j] += v
                 w.count[j] += 1
+    if n_exact:
+        _add_exact_rays(window, cam, dem, tex, w, n_exact)
 
 
 @numba.njit(parallel=True, cache=True, nogil=True)
@@ -184,11 +204,15 @@ def _render_kernel(
         top_odd = np.empty(n_nodes)
         acc = np.zeros(window.n_cols)
         count = np.zeros(window.n_cols, np.int64)
+        exact_s = np.empty(window.n_cols * supersample)
+        exact_j = np.empty(window.n_cols * supersample, np.int64)
         for a in range(supersample):
             line = window.line0 + i + (a + 0.5) * inv
             t = interp_time(line, cam.line_nodes, cam.t_nodes)
             if line_state(t, cam, state):
-                scratch = _SublineScratch(state, ray, even, odd, top_even, top_odd, acc, count)
+                scratch = _SublineScratch(
+                    state, ray, even, odd, top_even, top_odd, acc, count, exact_s, exact_j
+                )
                 _render_subline(window, cam, dem, tex, blocks, scratch)
         for j in range(window.n_cols):
             if count[j] == supersample * supersample:
