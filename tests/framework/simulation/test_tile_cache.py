@@ -65,6 +65,7 @@ def test_with_a_spill_each_tile_is_computed_once(tmp_path):
         for r0, r1, c0, c1 in bands:
             values, _ = cache.window(grid, r0, r1, c0, c1)
             np.testing.assert_array_equal(values, grid.values[r0:r1, c0:c1])
+            assert len(cache) <= 6  # tiles read back from the spill are evicted too
     assert grid.nodes == _SHAPE[0] * _SHAPE[1]
     # without the spill the evicted tiles are computed again
     again = _Grid()

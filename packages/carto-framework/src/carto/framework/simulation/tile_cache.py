@@ -113,6 +113,7 @@ class TileCache:
         if spill is not None:
             for j in [j for j in missing if (i, j) in spill]:
                 self._tiles[(i, j)] = spill.load((i, j))
+            self._evict()
             missing = [j for j in missing if (i, j) not in self._tiles]
         while missing:
             run = 1
@@ -125,6 +126,14 @@ class TileCache:
                 self._tiles[(i, j)] = tuple(np.ascontiguousarray(v[s]) for v in arrays)
                 if spill is not None:
                     spill.store((i, j), self._tiles[(i, j)])
-            while len(self._tiles) > self.max_tiles:
-                self._tiles.popitem(last=False)
+            self._evict()
             missing = missing[run:]
+
+    def _evict(self) -> None:
+        """Drop the least recently used tiles beyond :attr:`max_tiles`."""
+        while len(self._tiles) > self.max_tiles:
+            self._tiles.popitem(last=False)
+
+    def __len__(self) -> int:
+        """Tiles held in memory."""
+        return len(self._tiles)
