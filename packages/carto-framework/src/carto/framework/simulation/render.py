@@ -7,12 +7,12 @@ intersected with the DEM by *safe stepping*: at a height ``dh`` above the terrai
 descends ``c`` metres per metre and moves ``s`` metres horizontally cannot meet terrain of
 slope at most ``S`` before it has travelled ``dh / (c + s S)``; stepping by that much never
 jumps over a ridge. In the DEM cell under the ray the crossing with the bilinear surface is
-solved exactly (a quadratic), else the steps stop within ``1e-4`` m of the terrain height. The
-steps follow each ray's geodetic
-coordinates as quadratics in the distance along it, interpolated across the line between the
-exact models of every 32nd detector: the point found lies within a millimetre of the exact
-ray's (:func:`~carto.framework.geometry.linescan.terrain_intersection.trace_model`; measured
-under 0.2 mm), a thousandth of the texture's finest detail.
+solved exactly (a quadratic), else the steps stop within ``1e-4`` m of the terrain height.
+The steps follow each ray's geodetic coordinates as quadratics in the distance along it,
+interpolated across the line between the exact models of every 32nd detector: the point
+found lies within a millimetre of the exact ray's
+(:func:`~carto.framework.geometry.linescan.terrain_intersection.trace_model`; measured under
+0.2 mm), a thousandth of the texture's finest detail.
 
 The camera state comes from the sensor's exact interpolation table (see
 :mod:`carto.framework.geometry.linescan.scanner`); with ``stagger=True`` detectors with odd
