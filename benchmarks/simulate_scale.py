@@ -214,12 +214,12 @@ def main() -> int:
             if args.work is None:
                 shutil.rmtree(work, ignore_errors=True)
         document = json.loads(args.out.read_text()) if args.out.exists() else {}
-        kept = [
-            r
-            for r in document.get("against", [])
-            if (r["preset"], r["size"], r["commit"])
-            not in {(x["preset"], x["size"], x["commit"]) for x in rows}
-        ]
+
+        def key(r: dict) -> tuple:
+            return r["preset"], tuple(r["size"]), r["commit"]
+
+        new_keys = {key(r) for r in rows}
+        kept = [r for r in document.get("against", []) if key(r) not in new_keys]
         document["against"] = kept + rows
         args.out.write_text(json.dumps(document, indent=2) + "\n")
         print(json.dumps(document["against"], indent=2))

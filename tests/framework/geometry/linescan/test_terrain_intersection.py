@@ -17,6 +17,7 @@ from carto.framework.geometry.linescan.terrain_intersection import (
     MODEL_ERROR_M,
     RayQuadratic,
     _cell_crossing,
+    _cell_of,
     dem_grid,
     grid_bilinear,
     local_slopes,
@@ -170,7 +171,7 @@ def test_the_cell_crossing_is_the_first_root_in_the_cell():
         ground = float(terrain([lat, lon])[0])
         gap = rng.uniform(1e-3, 8.0)
         q = RayQuadratic(0.0, 1.0, lon, a, 0.0, lat, b, 0.0, ground + gap, -c, 0.0)
-        meets, t = _cell_crossing(q, grid, 0.0, lon, lat, c, gap)
+        meets, t = _cell_crossing(q, grid, 0.0, _cell_of(grid, lon, lat), c, gap)
         march = np.arange(0.0, 40.0, 1e-3)
         lo, la = lon + a * march, lat + b * march
         inside = (np.floor((lo - _X0) / _STEP_DEG - 0.5) == j) & (

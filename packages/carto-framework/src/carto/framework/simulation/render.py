@@ -101,10 +101,6 @@ class _SublineScratch(NamedTuple):
     exact_j: NDArray
 
 
-# grid_bilinear inlined in the renderer's loop (a call per ray there)
-_texture_value = numba.njit(cache=True, nogil=True, inline="always")(grid_bilinear.py_func)
-
-
 # Not inlined, and called after the sub-line's loop: the rare rays next to a node ray that
 # misses. Any call inside the loop, even one never taken, made the loop a fifth slower.
 @numba.njit(cache=True, nogil=True)
@@ -175,7 +171,7 @@ def _render_subline(
             lon, lat, _h = trace_model(q, dem, tops[segment])
             if not np.isfinite(lon):
                 continue
-            v = _texture_value(tex.values, tex.x0_deg, tex.dx_deg, tex.y0_deg, tex.dy_deg, lon, lat)
+            v = grid_bilinear(tex.values, tex.x0_deg, tex.dx_deg, tex.y0_deg, tex.dy_deg, lon, lat)
             if np.isfinite(v):
                 w.acc[j] += v
                 w.count[j] += 1

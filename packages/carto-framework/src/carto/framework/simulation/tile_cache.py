@@ -43,7 +43,7 @@ class TileSpill:
         entries = []
         for a in arrays:
             data = np.ascontiguousarray(a)
-            written = os.pwrite(self._fd, data.tobytes(), self._end)
+            written = os.pwrite(self._fd, data.reshape(-1).view(np.uint8), self._end)
             if written != data.nbytes:
                 raise OSError(f"{self.path}: wrote {written} of {data.nbytes} bytes")
             entries.append((self._end, data.shape, data.dtype))
@@ -54,11 +54,11 @@ class TileSpill:
         """The arrays of tile ``key`` as stored (fresh, writable)."""
         out = []
         for offset, shape, dtype in self._index[key]:
-            size = int(np.prod(shape)) * dtype.itemsize
-            data = os.pread(self._fd, size, offset)
-            if len(data) != size:
-                raise OSError(f"{self.path}: read {len(data)} of {size} bytes at {offset}")
-            out.append(np.frombuffer(bytearray(data), dtype).reshape(shape))
+            data = np.empty(shape, dtype)
+            read = os.preadv(self._fd, [data.reshape(-1).view(np.uint8)], offset)
+            if read != data.nbytes:
+                raise OSError(f"{self.path}: read {read} of {data.nbytes} bytes at {offset}")
+            out.append(data)
         return tuple(out)
 
     def close(self) -> None:

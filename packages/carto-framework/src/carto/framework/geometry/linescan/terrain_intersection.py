@@ -60,7 +60,7 @@ def geodetic(x: float, y: float, z: float) -> tuple[float, float, float]:  # pra
     return math.degrees(lon), math.degrees(lat), h
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, inline="always")
 def grid_bilinear(
     grid: NDArray, x0: float, dx: float, y0: float, dy: float, x: float, y: float
 ) -> float:  # pragma: no cover - compiled
@@ -245,7 +245,8 @@ def _safe_steps(
     d = d_start
     for _ in range(MAX_STEPS):
         tau, lon, lat, h = _quadratic_at(q, d)
-        ground, slope = _height_and_slope(dem, lon, lat)
+        cell = _cell_of(dem, lon, lat)
+        ground, slope = _height_and_slope(dem, cell)
         if not np.isfinite(ground):
             return np.nan, np.nan
         gap = h - ground
@@ -260,7 +261,7 @@ def _safe_steps(
             local = gap / (c + s * slope)
             if s * local <= dem.cell_m:
                 step = local
-            meets, t = _cell_crossing(q, dem, tau, lon, lat, c, gap)
+            meets, t = _cell_crossing(q, dem, tau, cell, c, gap)
             step = t if meets else max(step, t)
         d += step
     return np.nan, np.nan
@@ -268,21 +269,21 @@ def _safe_steps(
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def _cell_crossing(
-    q: RayQuadratic, dem: DemGrid, tau: float, lon_deg: float, lat_deg: float, c: float, gap: float
+    q: RayQuadratic,
+    dem: DemGrid,
+    tau: float,
+    cell: tuple[int, int, float, float],
+    c: float,
+    gap: float,
 ) -> tuple[bool, float]:  # pragma: no cover - compiled
-    """Where the ray, ``gap`` metres above the terrain at ``(lon_deg, lat_deg)`` (``tau`` on
-    its model) and descending ``c`` metres per metre, meets the bilinear surface of the cell
-    it is over: ``(True, distance along the ray to that point)``, or ``(False, distance to
-    where it leaves the cell)`` when it does not meet it there (m). Along a straight line the
-    bilinear surface is a quadratic in the distance; the ray is taken as its tangent line
-    (over a cell it departs from its model by micrometres)."""
-    fx = (lon_deg - dem.x0_deg) / dem.dx_deg - 0.5
-    fy = (lat_deg - dem.y0_deg) / dem.dy_deg - 0.5
-    j = math.floor(fx)
-    i = math.floor(fy)
+    """Where the ray, ``gap`` metres above the terrain at a point of the DEM's bilinear
+    ``cell`` (:func:`_cell_of`; ``tau`` on its model) and descending ``c`` metres per metre,
+    meets the cell's surface: ``(True, distance along the ray to that point)``, or ``(False,
+    distance to where it leaves the cell)`` when it does not meet it there (m). Along a
+    straight line the bilinear surface is a quadratic in the distance; the ray is taken as
+    its tangent line (over a cell it departs from its model by micrometres)."""
+    i, j, tx, ty = cell
     grid = dem.heights
-    tx = fx - j
-    ty = fy - i
     g00, g01 = grid[i, j], grid[i, j + 1]
     g10, g11 = grid[i + 1, j], grid[i + 1, j + 1]
     b = g01 - g00
@@ -320,21 +321,29 @@ def _cell_crossing(
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _height_and_slope(
+def _cell_of(
     dem: DemGrid, lon_deg: float, lat_deg: float
-) -> tuple[float, float]:  # pragma: no cover - compiled
-    """:func:`grid_bilinear` of the DEM's heights (m, NaN outside) and ``dem.slopes`` of the
-    bilinear cell under ``(lon_deg, lat_deg)`` (the cell :func:`grid_bilinear` reads;
-    infinite where there is none)."""
+) -> tuple[int, int, float, float]:  # pragma: no cover - compiled
+    """``(i, j, tx, ty)``: the bilinear cell under ``(lon_deg, lat_deg)`` (between the
+    node centres ``(i, j)`` and ``(i + 1, j + 1)``, the cell :func:`grid_bilinear` reads;
+    possibly outside the grid) and the point's fractions across it."""
     fx = (lon_deg - dem.x0_deg) / dem.dx_deg - 0.5
     fy = (lat_deg - dem.y0_deg) / dem.dy_deg - 0.5
     j = math.floor(fx)
     i = math.floor(fy)
+    return i, j, fx - j, fy - i
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _height_and_slope(
+    dem: DemGrid, cell: tuple[int, int, float, float]
+) -> tuple[float, float]:  # pragma: no cover - compiled
+    """:func:`grid_bilinear` of the DEM's heights (m, NaN outside) at a point of ``cell``
+    (:func:`_cell_of`) and ``dem.slopes`` of that cell (infinite where there is none)."""
+    i, j, tx, ty = cell
     grid = dem.heights
     if i < 0 or j < 0 or i + 1 >= grid.shape[0] or j + 1 >= grid.shape[1]:
         return np.nan, np.inf
-    tx = fx - j
-    ty = fy - i
     h = (1.0 - ty) * ((1.0 - tx) * grid[i, j] + tx * grid[i, j + 1]) + ty * (
         (1.0 - tx) * grid[i + 1, j] + tx * grid[i + 1, j + 1]
     )
