@@ -77,3 +77,27 @@ def test_the_60_line_bias_is_recovered_with_the_srtm_height_constraint(tmp_path,
     assert _line_offset(free)[1] > 10 * sigma_b
     # the corrected RPC is written for GDAL
     assert (tmp_path / "b" / "right_RPC.TXT").is_file()
+
+
+@pytest.mark.realdata
+def test_without_gcps_the_defaults_recover_the_bias_against_the_first_image(tmp_path, shared_data):
+    """Defaults (no ``fixed``, SRTM heights as the datum): the first image stays as it is and
+    the right one is corrected relative to it, its a-priori sigma both products' put together
+    and none along the base (the DEM holds that). Left to the priors of both images the
+    block moved by half the bias and the DEM's slope under it turned that into 1.8 lines of
+    along-base error (61.78 lines found)."""
+    runs = {
+        label: adjust_product(_config(tmp_path, shared_data, right), tmp_path / label, quiet=True)[
+            "adjustment"
+        ]["parameters"]
+        for label, right in (("b", "right_image_bias.geom"), ("c", "right_image.geom"))
+    }
+    for parameters in runs.values():
+        assert not any(k.startswith("left.") for k in parameters)
+        assert "prior_sigma" not in parameters["right.rpc.line.c0"]  # the DEM's, along the base
+    recovered = runs["c"]["right.rpc.line.c0"]["value"] - runs["b"]["right.rpc.line.c0"]["value"]
+    # the clean pair's own relative error cancels in the difference; the rest is the two
+    # runs' different tie points (benchmarks/rpc_pair_adjust.py: 0.2 line asked)
+    assert abs(recovered - 60.0) < 0.5
+    sample = runs["c"]["right.rpc.sample.c0"]["value"] - runs["b"]["right.rpc.sample.c0"]["value"]
+    assert abs(sample) < 0.5

@@ -149,7 +149,7 @@ def test_what_adjust_writes_goes_back_into_adjust_and_dem(pair, run_carto, tmp_p
             [
                 "dem", "--left", str(rasters[names[0]]), "--right", str(rasters[names[1]]),
                 "--left-model", str(used[names[0]]), "--right-model", str(used[names[1]]),
-                "--sensor", "rpc", *start, "--max-iterations", "1", "--out", str(out), "--quiet",
+                "--sensor", "rpc", *start, "--max-iterations", "2", "--out", str(out), "--quiet",
             ]
         )  # fmt: skip
         assert proc.returncode == 0, proc.stderr

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from typing import Any
 
 import attrs
 import numpy as np
+from numpy.typing import NDArray
 
 from carto.framework.adjustment.adjuster_settings import BundleSettings
 from carto.framework.adjustment.base import Adjuster, AdjustmentResult
@@ -37,15 +39,21 @@ class RPCBiasAdjuster(Adjuster):
     the stereo base looks like a height change) tie the images together. ``fixed`` images keep
     their RPC as it is (the reference of a relative adjustment).
 
-    A purely relative block (no GCP, no height constraint) gets minimal constraints: unless
-    ``fixed`` names images, the first image stays as it is (as ``carto dem``'s relative
-    orientation keeps the left one) and the others' offsets do not move along the stereo
-    base. Tie points fix only the relative pointing across the base; the rest (a common
-    shift, and a shift along the base, which is a height) is the datum, and the priors alone
-    spread it between the images: on the Reunion pair that moved the DEM 0.8 m up and
-    0.05 m worse in NMAD against the products' own; with the first image fixed, the other's
-    smallest correction still had an along-base part (0.27 px, the DEM 0.48 m up)
-    (:func:`relative_fixed`, :func:`along_base_held`).
+    A block without GCPs gets minimal constraints: unless ``fixed`` names images, the first
+    image stays as it is (as ``carto dem``'s relative orientation keeps the left one) and
+    the others are corrected relative to it, their a-priori sigmas both products' put
+    together (:func:`relative_priors`). Tie points fix the relative pointing across the
+    base; along the base an offset is a height. Without height constraints it is held at
+    zero: the priors alone had spread the datum between the images (on the Reunion pair the
+    DEM 0.8 m up and 0.05 m worse in NMAD against the products' own; with the first image
+    fixed, the other's smallest correction still had an along-base part: 0.27 px, the DEM
+    0.48 m up). With DEM heights the DEM holds it, and nothing else
+    (:func:`relative_datum`): the block's place on the ground then stays the first
+    product's. Left to the priors of all images, the block moved with a relative error (half
+    of it), and the DEM's slope under the moved tie points turned that into an along-base
+    error: the Ventoux pair's +60-line bias was found 61.78 lines, 59.67 with the first
+    image fixed but the prior along the base, 59.83 with neither (benchmarks/results,
+    session 59).
     """
 
     name = "rpc-bias"
@@ -72,20 +80,45 @@ class RPCBiasAdjuster(Adjuster):
                 for p in s.parameters
             }
             prepared[name] = s.with_parameters(free=free)
-        constraints = ()
+        constraints: tuple[ParameterConstraint, ...] = ()
+        if not observations.control_id.size:
+            prepared = relative_priors(prepared, fixed)
         if relative and not settings.fixed:
-            constraints = along_base_held(prepared, observations, relative)
+            prepared, constraints = relative_datum(prepared, observations, relative)
         return adjust_bundle(
             prepared, observations, constraints=constraints, **settings.bundle_options()
         )
 
 
 def relative_fixed(sensors: Mapping[str, Sensor], observations: Observations) -> set[str]:
-    """The image a purely relative block keeps as it is (see :class:`RPCBiasAdjuster`): the
-    first; none when GCPs or height constraints hold the datum, or for a single image."""
-    if observations.control_id.size or observations.height_id.size or len(sensors) < 2:
+    """The image a block without GCPs keeps as it is (see :class:`RPCBiasAdjuster`): the
+    first; none when GCPs hold the datum, or for a single image."""
+    if observations.control_id.size or len(sensors) < 2:
         return set()
     return {next(iter(sensors))}
+
+
+def relative_priors(sensors: Mapping[str, Sensor], fixed: set[str]) -> dict[str, Sensor]:
+    """Without GCPs, the free images' corrections are relative to the ``fixed`` images, whose
+    own errors stay in them: each free parameter's a-priori sigma is its product's and the
+    fixed products' largest of the same term put together (``hypot``)."""
+    held: dict[str, float] = {}
+    for name in fixed:
+        for p in sensors[name].parameters:
+            term = p.name[len(name) + 1 :]
+            held[term] = max(held.get(term, 0.0), p.sigma)
+    return {
+        name: s
+        if name in fixed
+        else s.with_parameters(
+            sigmas={
+                p.name: math.hypot(p.sigma, held.get(p.name[len(name) + 1 :], 0.0))
+                for p in s.parameters
+                if p.free
+            }
+        )
+        for name, s in sensors.items()
+    }
 
 
 ALONG_BASE_SIGMA_PX = 1e-4
@@ -93,29 +126,53 @@ ALONG_BASE_SIGMA_PX = 1e-4
 (a datum condition: as good as exact)."""
 
 
-def along_base_held(
+def relative_datum(
     sensors: Mapping[str, Sensor], observations: Observations, fixed: set[str]
-) -> tuple[ParameterConstraint, ...]:
-    """For each image but the ``fixed`` one of a relative block: its offset ``(line, sample)``
-    has no part along the direction in which a point of the fixed image moves in it when
-    the point's height changes (the epipolar direction at the tie points' centre)."""
+) -> tuple[dict[str, Sensor], tuple[ParameterConstraint, ...]]:
+    """The datum of a block without GCPs whose first image is ``fixed``, as conditions on the
+    other images' offsets, split along and across the stereo base (:func:`base_directions`).
+    Across the base, tie points measure the offset; its a-priori sigma stays. Along the base
+    the offset is a height: without height constraints it is held at zero
+    (:data:`ALONG_BASE_SIGMA_PX`); with DEM heights the DEM is the datum there and the
+    product's prior is not applied (a second, weaker height datum that would pull the DEM
+    towards the products' own heights: on the Ventoux pair it kept 0.17 line of the +60-line
+    bias of ``right_image_bias.geom``)."""
+    held = bool(observations.height_id.size)
+    out, constraints = dict(sensors), []
+    for name, d in base_directions(sensors, observations, fixed).items():
+        line, sample = f"{name}.rpc.line.c0", f"{name}.rpc.sample.c0"
+        if not held:
+            constraints.append(ParameterConstraint({line: d[0], sample: d[1]}, ALONG_BASE_SIGMA_PX))
+            continue
+        sigma = next(p.sigma for p in sensors[name].parameters if p.name == line)
+        out[name] = sensors[name].with_parameters(sigmas={line: math.inf, sample: math.inf})
+        constraints.append(ParameterConstraint({line: -d[1], sample: d[0]}, sigma))
+    return out, tuple(constraints)
+
+
+def base_directions(
+    sensors: Mapping[str, Sensor], observations: Observations, fixed: set[str]
+) -> dict[str, NDArray[np.float64]]:
+    """For each image but the ``fixed`` one: the unit direction ``(line, sample)`` in which a
+    point of the fixed image moves in it when the point's height changes (the epipolar
+    direction at the tie points' centre, at their DEM heights' median or the middle of the
+    rays' heights); images where it is not defined are left out."""
     (reference,) = fixed
     ref = sensors[reference]
     rows = observations.image == reference
     line = float(np.mean(observations.line[rows])) if rows.any() else ref.image_shape[0] / 2
     sample = float(np.mean(observations.sample[rows])) if rows.any() else ref.image_shape[1] / 2
     low, high = ref.ray_heights_m
-    h = np.array([0.5 * (low + high) - 50.0, 0.5 * (low + high) + 50.0])
+    held = observations.height_m
+    middle = float(np.median(held)) if held.size else 0.5 * (low + high)
+    h = np.array([middle - 50.0, middle + 50.0])
     lon, lat = ref.image_to_ground(np.full(2, line), np.full(2, sample), h)
-    out = []
+    out = {}
     for name, sensor in sensors.items():
         if name == reference:
             continue
         lines, samples = sensor.ground_to_image(lon, lat, h)
         d = np.array([lines[1] - lines[0], samples[1] - samples[0]])
-        if not np.all(np.isfinite(d)) or not np.any(d):
-            continue
-        d /= np.linalg.norm(d)
-        coefficients = {f"{name}.rpc.line.c0": float(d[0]), f"{name}.rpc.sample.c0": float(d[1])}
-        out.append(ParameterConstraint(coefficients, ALONG_BASE_SIGMA_PX))
-    return tuple(out)
+        if np.all(np.isfinite(d)) and np.any(d):
+            out[name] = d / np.linalg.norm(d)
+    return out
