@@ -315,9 +315,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--strip-size", type=int, default=1000)
     parser.add_argument("--strip-posting", type=float, default=10.0)
     parser.add_argument("--out", type=Path, default=RESULT)
+    parser.add_argument(
+        "--work",
+        type=Path,
+        default=None,
+        help="keep the scenes and DEMs here (default: a temporary folder, removed)",
+    )
     args = parser.parse_args(argv)
     results = {}
-    with tempfile.TemporaryDirectory(prefix="carto-mv-") as tmp:
+    with tempfile.TemporaryDirectory(prefix="carto-mv-") as scratch:
+        tmp = str(args.work or scratch)
         for terrain in args.terrains:
             for seed in args.seeds:
                 key = f"{terrain}-{seed}"
