@@ -19,17 +19,21 @@ T_LEFT = (0.31, 0.02)  # horizontal displacement of each line of sight per metre
 T_RIGHT = (-0.29, -0.01)
 
 
-def test_block_quantiles_equal_numpy():
+@pytest.mark.parametrize("k", [K, 1])  # 1: ortho-images at the posting, no sort
+def test_block_quantiles_equal_numpy(k):
     rng = np.random.default_rng(0)
-    values = rng.normal(size=(3 * K, 5 * K))
+    values = rng.normal(size=(3 * k, 5 * k))
     values[rng.random(values.shape) < 0.4] = np.nan
-    values[:K, :K] = np.nan  # a block without a value
-    values[K : 2 * K, :K] = np.nan
-    values[K, 0] = 1.5  # a block of one value
-    count, (q25, q50, q90) = block_quantiles(values, K, (0.25, 0.5, 0.9))
+    values[:k, :k] = np.nan  # a block without a value
+    values[k : 2 * k, :k] = np.nan
+    values[k, 0] = 1.5  # a block of one value
+    values[-1, -1] = np.inf  # not a value
+    count, (q25, q50, q90) = block_quantiles(values, k, (0.25, 0.5, 0.9))
+    for q in (q25, q50, q90):
+        assert q.dtype == np.float64 and q.shape == (3, 5)
     for i in range(3):
         for j in range(5):
-            v = values[i * K : (i + 1) * K, j * K : (j + 1) * K]
+            v = values[i * k : (i + 1) * k, j * k : (j + 1) * k]
             v = v[np.isfinite(v)]
             assert count[i, j] == v.size
             if v.size == 0:

@@ -50,7 +50,13 @@ def block_quantiles(
 ) -> tuple[NDArray[np.int32], list[FloatArray]]:
     """Counts of the finite values of each ``k x k`` block of ``values`` (rows and columns
     multiples of ``k``) and their quantiles (linear interpolation between order statistics,
-    as ``numpy.nanquantile``); NaN for a block without a value."""
+    as ``numpy.nanquantile``); NaN for a block without a value. One pixel a block (``k`` 1:
+    ortho-images at the DEM's posting) is the values themselves, without the sort."""
+    if k == 1:
+        finite = np.isfinite(values)
+        return finite.astype(np.int32), [
+            np.where(finite, np.asarray(values, np.float64), np.nan) for _ in quantiles
+        ]
     n_r, n_c = values.shape[0] // k, values.shape[1] // k
     blocks = values.reshape(n_r, k, n_c, k).transpose(0, 2, 1, 3).reshape(n_r, n_c, k * k)
     blocks = np.sort(blocks, axis=-1)  # NaN last
