@@ -8,10 +8,12 @@ import numpy as np
 import pyproj
 import pytest
 from affine import Affine
+from scipy import ndimage
 
+import carto.ior.node_heights as node_heights_module
 from carto.framework.imaging.ortho_grid import OrthoGrid
-from carto.ior.node_heights import block_quantiles, node_heights
-from carto.ior.rays import RayField
+from carto.ior.node_heights import NodeHeights, block_quantiles, node_heights
+from carto.ior.rays import RayField, intersect_offsets
 
 K = 4
 RES_M = 10.0
@@ -30,7 +32,8 @@ def test_block_quantiles_equal_numpy(k):
     values[-1, -1] = np.inf  # not a value
     count, (q25, q50, q90) = block_quantiles(values, k, (0.25, 0.5, 0.9))
     for q in (q25, q50, q90):
-        assert q.dtype == np.float64 and q.shape == (3, 5)
+        assert q.dtype == np.float64
+        assert q.shape == (3, 5)
     for i in range(3):
         for j in range(5):
             v = values[i * k : (i + 1) * k, j * k : (j + 1) * k]
@@ -126,3 +129,98 @@ def test_points_far_beyond_the_height_range_are_dropped():
     assert out.count[0, 0] == 0
     assert np.isnan(out.height_m[0, 0])
     assert out.height_m[1, 1] == pytest.approx(99.0, abs=1e-9)
+
+
+@pytest.mark.parametrize("k", [K, 1])
+def test_the_compiled_points_equal_numpy_band_by_band(k, monkeypatch):
+    """Relief, slopes, offsets of several pixels, invalid matches, rays turning across the
+    tile, points beyond the height range and bands smaller than the tile: the compiled
+    kernel against the same computation in numpy (scipy's bilinear interpolation, the ray
+    field's gathers)."""
+    import carto.ior.node_heights as module
+
+    rng = np.random.default_rng(7)
+    shape = (23, 19)
+    grid = OrthoGrid(
+        pyproj.CRS.from_epsg(32643), Affine(RES_M, 0, 500_000, 0, -RES_M, 2_000_000), shape
+    )
+    t = np.empty((2, 2, 3, 3))
+    for i, (tx, ty) in enumerate((T_LEFT, T_RIGHT)):
+        t[i, 0] = tx + rng.normal(0, 0.01, (3, 3))
+        t[i, 1] = ty + rng.normal(0, 0.01, (3, 3))
+    rays = RayField(grid, np.array([0, 11, 22]), np.array([0, 9, 18]), t)
+    yy, xx = np.mgrid[: shape[0], : shape[1]]
+    surface = 400.0 + 30.0 * np.sin(xx / 4.0) + 2.0 * yy + rng.normal(0, 1.0, shape)
+    pixels = (shape[0] * k, shape[1] * k)
+    d_row = rng.normal(0, 2.0, pixels)
+    d_col = rng.normal(0, 3.0, pixels)
+    valid = rng.random(pixels) > 0.2
+    d_row[rng.random(pixels) < 0.01] = np.nan
+    d_col[:k, -k:] = 500.0  # far beyond the height range
+    score = rng.uniform(0.3, 1.0, pixels)
+    monkeypatch.setattr(module, "BAND_PIXELS", 5 * shape[1] * k * k)  # bands of 5 node rows
+    args = (d_row, d_col, valid, score, surface, grid, k, rays, (380.0, 460.0))
+    got, want = module.node_heights(*args), _numpy_node_heights(*args)
+    assert np.isfinite(want.height_m).sum() > 0.8 * want.height_m.size
+    assert np.isnan(want.height_m).any()
+    np.testing.assert_array_equal(got.count, want.count)
+    for name in ("height_m", "spread_m", "score"):
+        np.testing.assert_allclose(
+            getattr(got, name), getattr(want, name), rtol=0, atol=1e-9, equal_nan=True
+        )
+
+
+def _numpy_node_heights(d_row_px, d_col_px, valid, score, surface_m, grid, k, rays, h_range):
+    """node_heights as numpy arrays band by band: the independent implementation the
+    compiled one is checked against (the module's code before session 59)."""
+    n_r, n_c = grid.shape
+    surface = np.asarray(surface_m, np.float64)
+    g_row, g_col = np.gradient(surface) if min(surface.shape) > 1 else (surface * 0, surface * 0)
+    px, py = grid.resolution
+    slope_x, slope_y = g_col / px, -g_row / py
+    height = np.full((n_r, n_c), np.nan)
+    count = np.zeros((n_r, n_c), np.int32)
+    spread = np.full((n_r, n_c), np.nan, np.float32)
+    node_score = np.full((n_r, n_c), np.nan, np.float32)
+    band = max(1, node_heights_module.BAND_PIXELS // max(n_c * k * k, 1))
+    ok_all = valid & np.isfinite(d_row_px) & np.isfinite(d_col_px)
+    for a in range(0, n_r, band):
+        b = min(n_r, a + band)
+        ok = ok_all[a * k : b * k]
+        pr, pc = np.nonzero(ok)
+        if pr.size == 0:
+            continue
+        pr = pr + a * k
+        dr = np.asarray(d_row_px, np.float64)[pr, pc]
+        dc = np.asarray(d_col_px, np.float64)[pr, pc]
+        # the pixel as a fractional node index, and its match
+        fr, fc = (pr + 0.5) / k - 0.5, (pc + 0.5) / k - 0.5
+        mr, mc = (pr + dr + 0.5) / k - 0.5, (pc + dc + 0.5) / k - 0.5
+        h_pix = ndimage.map_coordinates(surface, [fr, fc], order=1, mode="nearest")
+        h_match = ndimage.map_coordinates(surface, [mr, mc], order=1, mode="nearest")
+        x_m, y_m = grid.xy(mr, mc)
+        # the rays' directions of the node a pixel lies in (they turn by micro-radians
+        # across a node)
+        nr, nc = pr // k, pc // k
+        at_nodes = rays.on_nodes(slice(a, b), slice(0, n_c))
+        directions = at_nodes[:, :, nr - a, nc]
+        x_p, y_p, h_p = intersect_offsets(
+            rays, fr, fc, h_pix, x_m, y_m, h_match, directions=directions
+        )
+        # to the centre of the node the pixel lies in, along the current surface
+        x_n, y_n = grid.xy(nr, nc)
+        h_n = h_p - slope_x[nr, nc] * (x_p - x_n) - slope_y[nr, nc] * (y_p - y_n)
+        keep = (h_n >= h_range[0] - 500.0) & (h_n <= h_range[1] + 500.0)
+        # the points back on their ortho pixels: a node's points are its k x k block
+        points = np.full(((b - a) * k, n_c * k), np.nan)
+        points[pr[keep] - a * k, pc[keep]] = h_n[keep]
+        cnt, (q25, q50, q75) = block_quantiles(points, k, (0.25, 0.5, 0.75))
+        scores = np.full(points.shape, np.nan)
+        scores[pr[keep] - a * k, pc[keep]] = np.asarray(score, np.float64)[pr, pc][keep]
+        height[a:b] = q50
+        count[a:b] = cnt
+        with np.errstate(invalid="ignore", divide="ignore"):
+            spread[a:b] = np.where(cnt >= 3, (q75 - q25) * node_heights_module.IQR_TO_SIGMA, np.nan)
+            total = np.nansum(scores.reshape(b - a, k, n_c, k), axis=(1, 3))
+            node_score[a:b] = np.where(cnt > 0, total / np.maximum(cnt, 1), np.nan)
+    return NodeHeights(height, count, spread, node_score)

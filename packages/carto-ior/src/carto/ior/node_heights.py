@@ -15,13 +15,13 @@ The work runs by bands of node rows so that the temporary point arrays of a tile
 from __future__ import annotations
 
 import attrs
+import numba
 import numpy as np
 from numpy.typing import NDArray
-from scipy import ndimage
 
 from carto.framework.sdk.common import FloatArray
 from carto.framework.sdk.dem import OrthoGrid
-from carto.ior.rays import RayField, intersect_offsets
+from carto.ior.rays import RayField
 
 __all__ = ["NodeHeights", "block_quantiles", "node_heights"]
 
@@ -90,7 +90,7 @@ def node_heights(
     per node; ``valid`` matches only): see the module docstring. An intersection more than
     500 m beyond ``h_range`` is no point."""
     n_r, n_c = grid.shape
-    surface = np.asarray(surface_m, np.float64)
+    surface = np.ascontiguousarray(surface_m, np.float64)
     g_row, g_col = np.gradient(surface) if min(surface.shape) > 1 else (surface * 0, surface * 0)
     px, py = grid.resolution
     slope_x, slope_y = g_col / px, -g_row / py
@@ -100,39 +100,28 @@ def node_heights(
     node_score = np.full((n_r, n_c), np.nan, np.float32)
     band = max(1, BAND_PIXELS // max(n_c * k * k, 1))
     ok_all = valid & np.isfinite(d_row_px) & np.isfinite(d_col_px)
+    t = grid.transform
+    frame = np.array([t.a, t.c, t.e, t.f, h_range[0] - 500.0, h_range[1] + 500.0])
     for a in range(0, n_r, band):
         b = min(n_r, a + band)
-        ok = ok_all[a * k : b * k]
-        pr, pc = np.nonzero(ok)
-        if pr.size == 0:
+        rows = slice(a * k, b * k)
+        if not ok_all[rows].any():
             continue
-        pr = pr + a * k
-        dr = np.asarray(d_row_px, np.float64)[pr, pc]
-        dc = np.asarray(d_col_px, np.float64)[pr, pc]
-        # the pixel as a fractional node index, and its match
-        fr, fc = (pr + 0.5) / k - 0.5, (pc + 0.5) / k - 0.5
-        mr, mc = (pr + dr + 0.5) / k - 0.5, (pc + dc + 0.5) / k - 0.5
-        h_pix = ndimage.map_coordinates(surface, [fr, fc], order=1, mode="nearest")
-        h_match = ndimage.map_coordinates(surface, [mr, mc], order=1, mode="nearest")
-        x_m, y_m = grid.xy(mr, mc)
-        # the rays' directions of the node a pixel lies in (they turn by micro-radians
-        # across a node)
-        nr, nc = pr // k, pc // k
-        at_nodes = rays.on_nodes(slice(a, b), slice(0, n_c))
-        directions = at_nodes[:, :, nr - a, nc]
-        x_p, y_p, h_p = intersect_offsets(
-            rays, fr, fc, h_pix, x_m, y_m, h_match, directions=directions
-        )
-        # to the centre of the node the pixel lies in, along the current surface
-        x_n, y_n = grid.xy(nr, nc)
-        h_n = h_p - slope_x[nr, nc] * (x_p - x_n) - slope_y[nr, nc] * (y_p - y_n)
-        keep = (h_n >= h_range[0] - 500.0) & (h_n <= h_range[1] + 500.0)
         # the points back on their ortho pixels: a node's points are its k x k block
-        points = np.full(((b - a) * k, n_c * k), np.nan)
-        points[pr[keep] - a * k, pc[keep]] = h_n[keep]
+        points, scores = _pixel_heights(
+            np.ascontiguousarray(d_row_px[rows], np.float64),
+            np.ascontiguousarray(d_col_px[rows], np.float64),
+            np.ascontiguousarray(ok_all[rows]),
+            np.ascontiguousarray(score[rows], np.float64),
+            a * k,
+            surface,
+            np.ascontiguousarray(slope_x),
+            np.ascontiguousarray(slope_y),
+            np.ascontiguousarray(rays.on_nodes(slice(a, b), slice(0, n_c))),
+            frame,
+            k,
+        )
         cnt, (q25, q50, q75) = block_quantiles(points, k, (0.25, 0.5, 0.75))
-        scores = np.full(points.shape, np.nan)
-        scores[pr[keep] - a * k, pc[keep]] = np.asarray(score, np.float64)[pr, pc][keep]
         height[a:b] = q50
         count[a:b] = cnt
         with np.errstate(invalid="ignore", divide="ignore"):
@@ -140,3 +129,76 @@ def node_heights(
             total = np.nansum(scores.reshape(b - a, k, n_c, k), axis=(1, 3))
             node_score[a:b] = np.where(cnt > 0, total / np.maximum(cnt, 1), np.nan)
     return NodeHeights(height, count, spread, node_score)
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _pixel_heights(
+    d_row: NDArray,
+    d_col: NDArray,
+    ok: NDArray,
+    score: NDArray,
+    row0: int,
+    surface: NDArray,
+    slope_x: NDArray,
+    slope_y: NDArray,
+    t_nodes: NDArray,
+    frame: NDArray,
+    k: int,
+) -> tuple[NDArray, NDArray]:  # pragma: no cover - compiled
+    """One band of :func:`node_heights`, ortho rows ``row0`` on (``d_row`` ... ``score``:
+    the band's rows): each valid match intersected (:func:`carto.ior.rays.intersect_offsets`,
+    the rays of the node a pixel lies in, ``t_nodes``: the band's
+    :meth:`~carto.ior.rays.RayField.on_nodes`), carried to its node's centre along the
+    surface's slope; ``(heights, scores)`` on the band's pixels, NaN where no point or beyond
+    ``frame[4:6]`` (``frame``: the grid transform's ``a, c, e, f``, then those bounds)."""
+    n_rows, n_cols = d_row.shape
+    a_x, c_x, e_y, f_y, low, high = frame[0], frame[1], frame[2], frame[3], frame[4], frame[5]
+    heights = np.full((n_rows, n_cols), np.nan)
+    scores = np.full((n_rows, n_cols), np.nan)
+    node0 = row0 // k
+    for i in numba.prange(n_rows):
+        pr = row0 + i
+        for pc in range(n_cols):
+            if not ok[i, pc]:
+                continue
+            fr, fc = (pr + 0.5) / k - 0.5, (pc + 0.5) / k - 0.5
+            mr = (pr + d_row[i, pc] + 0.5) / k - 0.5
+            mc = (pc + d_col[i, pc] + 0.5) / k - 0.5
+            h_pix = _bilinear_nearest(surface, fr, fc)
+            h_match = _bilinear_nearest(surface, mr, mc)
+            x_m, y_m = c_x + a_x * (mc + 0.5), f_y + e_y * (mr + 0.5)
+            x_n, y_n = c_x + a_x * (fc + 0.5), f_y + e_y * (fr + 0.5)
+            nr, nc = pr // k, pc // k
+            lx, ly = t_nodes[0, 0, nr - node0, nc], t_nodes[0, 1, nr - node0, nc]
+            rx, ry = t_nodes[1, 0, nr - node0, nc], t_nodes[1, 1, nr - node0, nc]
+            bx, by = lx - rx, ly - ry
+            rhs_x = x_m - x_n + lx * h_pix - rx * h_match
+            rhs_y = y_m - y_n + ly * h_pix - ry * h_match
+            norm2 = bx**2 + by**2
+            if not norm2 > 1e-12:
+                continue
+            h = (bx * rhs_x + by * rhs_y) / norm2
+            x = 0.5 * (x_n + lx * (h - h_pix) + x_m + rx * (h - h_match))
+            y = 0.5 * (y_n + ly * (h - h_pix) + y_m + ry * (h - h_match))
+            x_c, y_c = c_x + a_x * (nc + 0.5), f_y + e_y * (nr + 0.5)
+            h_n = h - slope_x[nr, nc] * (x - x_c) - slope_y[nr, nc] * (y - y_c)
+            if h_n >= low and h_n <= high:
+                heights[i, pc] = h_n
+                scores[i, pc] = score[i, pc]
+    return heights, scores
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _bilinear_nearest(values: NDArray, row: float, col: float) -> float:  # pragma: no cover
+    """``values`` at a fractional ``(row, col)``, bilinear, the edge values beyond the edges
+    (``scipy.ndimage.map_coordinates(order=1, mode="nearest")``)."""
+    n_r, n_c = values.shape
+    r = min(max(row, 0.0), n_r - 1.0)
+    c = min(max(col, 0.0), n_c - 1.0)
+    i = min(int(np.floor(r)), max(n_r - 2, 0))
+    j = min(int(np.floor(c)), max(n_c - 2, 0))
+    i1, j1 = min(i + 1, n_r - 1), min(j + 1, n_c - 1)
+    u, v = r - i, c - j
+    top = values[i, j] * (1.0 - v) + values[i, j1] * v
+    bottom = values[i1, j] * (1.0 - v) + values[i1, j1] * v
+    return top * (1.0 - u) + bottom * u
