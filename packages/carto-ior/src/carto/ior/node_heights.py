@@ -87,8 +87,8 @@ def node_heights(
 ) -> NodeHeights:
     """The heights of the nodes of ``grid`` (a tile window of the DEM grid, heights
     ``surface_m``) from the offsets right minus left of the ortho grid (``k`` ortho pixels
-    per node; ``valid`` matches only): see the module docstring. An intersection more than
-    500 m beyond ``h_range`` is no point."""
+    per node; ``valid`` matches only; ``rays`` sampled on ``grid``): see the module
+    docstring. An intersection more than 500 m beyond ``h_range`` is no point."""
     n_r, n_c = grid.shape
     surface = np.ascontiguousarray(surface_m, np.float64)
     g_row, g_col = np.gradient(surface) if min(surface.shape) > 1 else (surface * 0, surface * 0)
