@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 
 from carto.framework.sdk.common import FloatArray
 from carto.framework.sdk.dem import OrthoGrid
-from carto.ior.rays import RayField
+from carto.ior.rays import RayField, closest_point
 
 __all__ = ["NodeHeights", "block_quantiles", "node_heights"]
 
@@ -93,7 +93,8 @@ def node_heights(
     surface = np.ascontiguousarray(surface_m, np.float64)
     g_row, g_col = np.gradient(surface) if min(surface.shape) > 1 else (surface * 0, surface * 0)
     px, py = grid.resolution
-    slope_x, slope_y = g_col / px, -g_row / py
+    slope_x = np.ascontiguousarray(g_col / px)
+    slope_y = np.ascontiguousarray(-g_row / py)
     height = np.full((n_r, n_c), np.nan)
     count = np.zeros((n_r, n_c), np.int32)
     spread = np.full((n_r, n_c), np.nan, np.float32)
@@ -115,8 +116,8 @@ def node_heights(
             np.ascontiguousarray(score[rows], np.float64),
             a * k,
             surface,
-            np.ascontiguousarray(slope_x),
-            np.ascontiguousarray(slope_y),
+            slope_x,
+            slope_y,
             np.ascontiguousarray(rays.on_nodes(slice(a, b), slice(0, n_c))),
             frame,
             k,
@@ -146,7 +147,7 @@ def _pixel_heights(
     k: int,
 ) -> tuple[NDArray, NDArray]:  # pragma: no cover - compiled
     """One band of :func:`node_heights`, ortho rows ``row0`` on (``d_row`` ... ``score``:
-    the band's rows): each valid match intersected (:func:`carto.ior.rays.intersect_offsets`,
+    the band's rows): each valid match intersected (:func:`carto.ior.rays.closest_point`,
     the rays of the node a pixel lies in, ``t_nodes``: the band's
     :meth:`~carto.ior.rays.RayField.on_nodes`), carried to its node's centre along the
     surface's slope; ``(heights, scores)`` on the band's pixels, NaN where no point or beyond
@@ -171,18 +172,10 @@ def _pixel_heights(
             nr, nc = pr // k, pc // k
             lx, ly = t_nodes[0, 0, nr - node0, nc], t_nodes[0, 1, nr - node0, nc]
             rx, ry = t_nodes[1, 0, nr - node0, nc], t_nodes[1, 1, nr - node0, nc]
-            bx, by = lx - rx, ly - ry
-            rhs_x = x_m - x_n + lx * h_pix - rx * h_match
-            rhs_y = y_m - y_n + ly * h_pix - ry * h_match
-            norm2 = bx**2 + by**2
-            if not norm2 > 1e-12:
-                continue
-            h = (bx * rhs_x + by * rhs_y) / norm2
-            x = 0.5 * (x_n + lx * (h - h_pix) + x_m + rx * (h - h_match))
-            y = 0.5 * (y_n + ly * (h - h_pix) + y_m + ry * (h - h_match))
+            x, y, h = closest_point(lx, ly, rx, ry, x_n, y_n, h_pix, x_m, y_m, h_match)
             x_c, y_c = c_x + a_x * (nc + 0.5), f_y + e_y * (nr + 0.5)
             h_n = h - slope_x[nr, nc] * (x - x_c) - slope_y[nr, nc] * (y - y_c)
-            if h_n >= low and h_n <= high:
+            if h_n >= low and h_n <= high:  # False where the rays are parallel (NaN)
                 heights[i, pc] = h_n
                 scores[i, pc] = score[i, pc]
     return heights, scores

@@ -27,6 +27,7 @@ and the ground point the midpoint of ``X_L(h)`` and ``X_R(h)``.
 from __future__ import annotations
 
 import attrs
+import numba
 import numpy as np
 from numpy.typing import NDArray
 
@@ -34,7 +35,7 @@ from carto.framework.sdk.common import FloatArray
 from carto.framework.sdk.dem import OrthoGrid
 from carto.framework.sdk.sensors import Sensor
 
-__all__ = ["LATTICE_NODES", "RayField", "intersect_offsets"]
+__all__ = ["LATTICE_NODES", "RayField", "closest_point", "intersect_offsets"]
 
 
 LATTICE_NODES = 32
@@ -159,19 +160,68 @@ def intersect_offsets(
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Intersect the left ray through each node (its map position at ``h_node_m``) with the
     right ray through its match (map ``match_x, match_y`` at ``h_match_m``), see the module
-    docstring. ``directions``: the rays' directions at the points, ``(n_sensors, 2, n)``
-    (default: :meth:`RayField.at` the points). Returns ``(x, y, h)`` of the ground points
-    (map units, metres); NaN where a ray direction is unknown or the two rays are
-    parallel."""
+    docstring (:func:`closest_point`). ``directions``: the rays' directions at the points,
+    ``(n_sensors, 2, n)`` (default: :meth:`RayField.at` the points). Returns ``(x, y, h)``
+    of the ground points (map units, metres); NaN where a ray direction is unknown or the
+    two rays are parallel."""
     t = rays.at(node_row, node_col) if directions is None else directions
-    t_l, t_r = t[0], t[1]
     x_n, y_n = rays.grid.xy(node_row, node_col)
-    base = t_l - t_r
-    rhs_x = match_x - x_n + t_l[0] * h_node_m - t_r[0] * h_match_m
-    rhs_y = match_y - y_n + t_l[1] * h_node_m - t_r[1] * h_match_m
-    norm2 = base[0] ** 2 + base[1] ** 2
-    with np.errstate(invalid="ignore", divide="ignore"):
-        h = np.where(norm2 > 1e-12, (base[0] * rhs_x + base[1] * rhs_y) / norm2, np.nan)
-    x = 0.5 * (x_n + t_l[0] * (h - h_node_m) + match_x + t_r[0] * (h - h_match_m))
-    y = 0.5 * (y_n + t_l[1] * (h - h_node_m) + match_y + t_r[1] * (h - h_match_m))
+    arrays = np.broadcast_arrays(
+        t[0][0], t[0][1], t[1][0], t[1][1], x_n, y_n, h_node_m, match_x, match_y, h_match_m
+    )
+    flat = [np.ascontiguousarray(a, np.float64).ravel() for a in arrays]
+    x, y, h = _closest_points(*flat)
+    shape = arrays[0].shape
+    return x.reshape(shape), y.reshape(shape), h.reshape(shape)
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def closest_point(
+    lx: float,
+    ly: float,
+    rx: float,
+    ry: float,
+    x_n: float,
+    y_n: float,
+    h_n: float,
+    x_m: float,
+    y_m: float,
+    h_m: float,
+) -> tuple[float, float, float]:  # pragma: no cover - compiled
+    """The module docstring's intersection of one node's rays: the left ray through the
+    node ``(x_n, y_n)`` at ``h_n`` (direction ``(lx, ly)`` per metre), the right one through
+    its match ``(x_m, y_m)`` at ``h_m`` (``(rx, ry)``): ``(x, y, h)`` of the ground point,
+    NaN where the rays are parallel."""
+    bx, by = lx - rx, ly - ry
+    norm2 = bx**2 + by**2
+    if not norm2 > 1e-12:
+        return np.nan, np.nan, np.nan
+    rhs_x = x_m - x_n + lx * h_n - rx * h_m
+    rhs_y = y_m - y_n + ly * h_n - ry * h_m
+    h = (bx * rhs_x + by * rhs_y) / norm2
+    x = 0.5 * (x_n + lx * (h - h_n) + x_m + rx * (h - h_m))
+    y = 0.5 * (y_n + ly * (h - h_n) + y_m + ry * (h - h_m))
+    return x, y, h
+
+
+@numba.njit(cache=True, nogil=True)
+def _closest_points(
+    lx: NDArray,
+    ly: NDArray,
+    rx: NDArray,
+    ry: NDArray,
+    x_n: NDArray,
+    y_n: NDArray,
+    h_n: NDArray,
+    x_m: NDArray,
+    y_m: NDArray,
+    h_m: NDArray,
+) -> tuple[NDArray, NDArray, NDArray]:  # pragma: no cover - compiled
+    """:func:`closest_point` of every point (flat arrays)."""  # fmt: skip
+    n = lx.size
+    x, y, h = np.empty(n), np.empty(n), np.empty(n)
+    for i in range(n):
+        x[i], y[i], h[i] = closest_point(
+            lx[i], ly[i], rx[i], ry[i], x_n[i], y_n[i], h_n[i], x_m[i], y_m[i], h_m[i]
+        )
     return x, y, h
