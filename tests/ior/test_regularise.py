@@ -54,7 +54,8 @@ def test_bands_and_fill_tiles_give_the_whole_grid_update(grids, band_rows, fill_
     expected, expected_inlier = _whole_grid(heights, new, settings)
     out, inlier = regularise(heights, new, settings, band_rows=band_rows, fill_tile=fill_tile)
     np.testing.assert_array_equal(inlier, expected_inlier)
-    np.testing.assert_allclose(out, expected, rtol=0, atol=1e-9)
+    # the wide fills run in float32: some micrometres where they filled
+    np.testing.assert_allclose(out, expected, rtol=0, atol=1e-5)
     assert (~inlier & np.isfinite(new)).sum() > 100  # the wild matches were found
     assert np.abs(out[60:100, 50:70] - heights[60:100, 50:70] - 1.5).max() < 0.2  # hole filled
 

@@ -59,3 +59,18 @@ def test_gaussian_refuses_bad_arguments():
         gaussian_nearest(np.zeros(5), 1.0)
     with pytest.raises(InputError, match="sigma"):
         gaussian_nearest(np.zeros((5, 5)), 0.0)
+
+
+@pytest.mark.parametrize("sigma", [1.0, 27.0])
+def test_gaussian_in_float32_equals_scipy_to_its_precision(sigma):
+    from scipy import ndimage
+
+    from carto.framework.raster.focal import gaussian_nearest
+
+    values = 100.0 + np.random.default_rng(6).normal(size=(80, 70))
+    expected = ndimage.gaussian_filter(values, sigma, mode="nearest")
+    got = gaussian_nearest(values, sigma, np.float32)
+    assert got.dtype == np.float32
+    np.testing.assert_allclose(got, expected, rtol=2e-6, atol=0)
+    with pytest.raises(InputError, match="dtype"):
+        gaussian_nearest(values, sigma, np.int32)

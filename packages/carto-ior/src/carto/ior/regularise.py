@@ -14,11 +14,14 @@ from carto.framework.sdk.common import FloatArray
 from carto.framework.sdk.dem import focal_nanmedian, gaussian_nearest, gaussian_nearest_at
 from carto.ior.settings import IORSettings
 
-__all__ = ["BAND_ROWS", "FILL_TILE", "regularise"]
+__all__ = ["BAND_NODES", "BAND_ROWS", "FILL_TILE", "regularise"]
 
 
 BAND_ROWS = 512
-"""DEM rows per band."""
+"""DEM rows per band, at least."""
+BAND_NODES = 1 << 21
+"""DEM nodes per band, at most, where more than :data:`BAND_ROWS` rows fit: a narrow grid in
+one band does not filter its halo of rows (a few hundred) twice."""
 FILL_TILE = 512
 """Side (nodes) of the tiles on which the wider Gaussians that fill holes run: only those
 holding a hole, each with the filter's reach around it (``gaussian_nearest_at``)."""
@@ -45,17 +48,20 @@ def regularise(
     heights: FloatArray,
     new_height: FloatArray,
     settings: IORSettings,
-    band_rows: int = BAND_ROWS,
+    band_rows: int | None = None,
     fill_tile: int = FILL_TILE,
 ) -> tuple[FloatArray, NDArray[np.bool_]]:
     """The DEM update: height changes ``new - heights`` at matched nodes, outliers against
     the 5 x 5 local median removed (more than ``max(outlier_m, 4 NMAD)`` from it, the NMAD of
     all the residuals), then a normalised Gaussian convolution (sigma ``smoothing_nodes``)
     that smooths the noise and fills the holes from their neighbours, with wider Gaussians
-    (3 and 9 sigma) where the narrow one has no support (nodes far from any match keep their
-    height). Returns the new heights and the inliers. ``band_rows`` and ``fill_tile``
-    (:data:`FILL_TILE`) change the work's layout, not its result."""
-    n_rows = heights.shape[0]
+    (3 and 9 sigma, in float32: they only fill holes) where the narrow one has no support
+    (nodes far from any match keep their height). Returns the new heights and the inliers.
+    ``band_rows`` (by default :data:`BAND_ROWS`, or more up to :data:`BAND_NODES`) and
+    ``fill_tile`` (:data:`FILL_TILE`) change the work's layout, not its result."""
+    n_rows, n_cols = heights.shape
+    if band_rows is None:
+        band_rows = max(BAND_ROWS, BAND_NODES // max(n_cols, 1))
     valid_any = False
     # pass 1: residuals against the local median (float32: the outlier test needs no more)
     resid = np.empty(heights.shape, np.float32)
@@ -85,8 +91,8 @@ def regularise(
             if not missing.any():
                 break
             wider = factor * sigma
-            num = gaussian_nearest_at(num, missing, wider, fill_tile)
-            den = gaussian_nearest_at(den, missing, wider, fill_tile)
+            num = gaussian_nearest_at(num, missing, wider, fill_tile, np.float32)
+            den = gaussian_nearest_at(den, missing, wider, fill_tile, np.float32)
         with np.errstate(invalid="ignore", divide="ignore"):
             update = np.where(den > 1e-3, num / den, 0.0)
         out[rows] = heights[rows] + update[inner]

@@ -11,7 +11,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from carto.framework.sdk.common import FloatArray, InputError
-from carto.framework.sdk.dem import DEM, OrthoGrid, cubic_sample, dem_pixel_size_m, fill_voids
+from carto.framework.sdk.dem import (
+    DEM,
+    OrthoGrid,
+    bilinear_sample,
+    cubic_sample,
+    dem_pixel_size_m,
+    fill_voids,
+)
 from carto.framework.sdk.sensors import Sensor
 
 __all__ = [
@@ -71,6 +78,18 @@ _FOOTPRINT_SAMPLES = 250_000  # nodes at most on which the footprint and coverag
 _BLOCK_ROWS = 256  # grid rows located at once
 
 
+def _dem_pixels(
+    dem: DEM, grid: OrthoGrid, rows: FloatArray, cols: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """The DEM's fractional centre indices of the grid's nodes: the two affine maps composed
+    when both are in one projected CRS, through WGS84 lon/lat otherwise."""
+    if dem.crs.is_projected and dem.crs == grid.crs:
+        x, y = grid.xy(rows, cols)
+        inv = ~dem.transform
+        return inv.d * x + inv.e * y + inv.f - 0.5, inv.a * x + inv.b * y + inv.c - 0.5
+    return dem.lonlat_to_pixel(*grid.lonlat(rows, cols))
+
+
 def values_on_grid(dem: DEM, grid: OrthoGrid, *, smooth: bool = True) -> FloatArray:
     """The DEM's heights at every node of ``grid`` (NaN off the DEM), block by block of rows
     (memory of the result only): bilinear, or from a DEM more than twice as coarse as the
@@ -86,10 +105,10 @@ def values_on_grid(dem: DEM, grid: OrthoGrid, *, smooth: bool = True) -> FloatAr
     out = np.empty((n_r, n_c))
     for r0 in range(0, n_r, _BLOCK_ROWS):
         rows, cols = np.mgrid[r0 : min(n_r, r0 + _BLOCK_ROWS), 0:n_c]
-        lon, lat = grid.lonlat(rows, cols)
-        block = dem.height(lon, lat)
+        at = _dem_pixels(dem, grid, rows, cols)
+        block = bilinear_sample(dem.heights, *at)  # DEM.height
         if cubic:
-            smooth = cubic_sample(dem.heights, *dem.lonlat_to_pixel(lon, lat))
+            smooth = cubic_sample(dem.heights, *at)
             with np.errstate(invalid="ignore", over="ignore"):
                 keep = np.isfinite(smooth) & (np.abs(smooth - block) < 1e4)
             block = np.where(keep, smooth, block)

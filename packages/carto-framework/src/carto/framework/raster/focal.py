@@ -64,13 +64,19 @@ def focal_nanmedian(values: ArrayLike, radius: int = 2) -> NDArray[np.float64]:
     return out
 
 
-def gaussian_nearest(values: ArrayLike, sigma: float) -> NDArray[np.float64]:
+def gaussian_nearest(
+    values: ArrayLike, sigma: float, dtype: type[np.floating] = np.float64
+) -> NDArray[np.floating]:
     """``scipy.ndimage.gaussian_filter(values, sigma, mode="nearest")`` (truncated at 4
     sigma, the edge pixels repeated beyond the raster) by OpenCV's separable filter, which
-    runs on every core: the same kernel, equal to rounding (float64)."""
+    runs on every core: the same kernel, equal to rounding in ``dtype`` (float64, or float32
+    at about three times the speed of a wide kernel and a relative precision of 1e-6)."""
     import cv2
 
-    array = np.ascontiguousarray(values, dtype=np.float64)
+    dtype = np.dtype(dtype)
+    if dtype not in (np.float32, np.float64):
+        raise InputError(f"gaussian filter: dtype must be float32 or float64, got {dtype}")
+    array = np.ascontiguousarray(values, dtype=dtype)
     if array.ndim != 2:
         raise InputError(f"gaussian filter: values must be 2-D, got shape {array.shape}")
     if not sigma > 0:
@@ -78,18 +84,24 @@ def gaussian_nearest(values: ArrayLike, sigma: float) -> NDArray[np.float64]:
     radius = int(4.0 * float(sigma) + 0.5)
     x = np.arange(-radius, radius + 1, dtype=np.float64)
     kernel = np.exp(-0.5 * (x / float(sigma)) ** 2)
-    kernel /= kernel.sum()
+    kernel = (kernel / kernel.sum()).astype(dtype)
     if array.size == 0:
         return array.copy()
-    return cv2.sepFilter2D(
-        array, cv2.CV_64F, kernel, kernel, borderType=cv2.BORDER_REPLICATE
-    ).reshape(array.shape)
+    depth = cv2.CV_32F if dtype == np.float32 else cv2.CV_64F
+    return cv2.sepFilter2D(array, depth, kernel, kernel, borderType=cv2.BORDER_REPLICATE).reshape(
+        array.shape
+    )
 
 
 def gaussian_nearest_at(
-    values: ArrayLike, where: NDArray[np.bool_], sigma: float, tile: int = 512
+    values: ArrayLike,
+    where: NDArray[np.bool_],
+    sigma: float,
+    tile: int = 512,
+    dtype: type[np.floating] = np.float64,
 ) -> NDArray[np.float64]:
-    """``values`` with :func:`gaussian_nearest` at the nodes ``where``: the filter run only on
+    """``values`` with :func:`gaussian_nearest` (computed in ``dtype``) at the nodes
+    ``where``: the filter run only on
     the tiles of ``tile`` nodes holding such a node, each with the filter's reach (4 sigma)
     around it, so every node sees the neighbourhood (the grid's edges repeated beyond it) the
     whole grid's filter gives it; on the whole grid when those cut-outs would cover more."""
@@ -102,9 +114,9 @@ def gaussian_nearest_at(
         if where[t.slices].any()
     ]
     if sum(o.n_rows * o.n_cols for _, o in cuts) >= array.size:
-        return np.where(where, gaussian_nearest(array, sigma), array)
+        return np.where(where, gaussian_nearest(array, sigma, dtype), array)
     out = array.copy()
     for inner, outer in cuts:
-        blurred = gaussian_nearest(array[outer.slices], sigma)[inner.inner(outer)]
+        blurred = gaussian_nearest(array[outer.slices], sigma, dtype)[inner.inner(outer)]
         out[inner.slices] = np.where(where[inner.slices], blurred, array[inner.slices])
     return out

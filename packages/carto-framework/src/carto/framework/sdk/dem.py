@@ -18,7 +18,7 @@ from carto.framework.imaging.ortho_grid import (
 from carto.framework.raster.dem import DEM, ELLIPSOID, MIN_DEM_POSTS
 from carto.framework.raster.dem_measures import dem_pixel_size_m, fill_voids
 from carto.framework.raster.focal import focal_nanmedian, gaussian_nearest, gaussian_nearest_at
-from carto.framework.raster.grid_sampling import cubic_sample
+from carto.framework.raster.grid_sampling import bilinear_sample, cubic_sample
 from carto.framework.raster.image_source import (
     DecimatedImage,
     ImageSource,
@@ -44,6 +44,7 @@ __all__ = [
     "TilePiece",
     "TiledLayer",
     "as_image_source",
+    "bilinear_sample",
     "check_grid_size",
     "check_image_source",
     "cubic_sample",
