@@ -74,3 +74,15 @@ def test_gaussian_in_float32_equals_scipy_to_its_precision(sigma):
     np.testing.assert_allclose(got, expected, rtol=2e-6, atol=0)
     with pytest.raises(InputError, match="dtype"):
         gaussian_nearest(values, sigma, np.int32)
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 9, 24, 25, 49])
+def test_sorting_network_sorts(n):
+    from carto.framework.raster.focal import sorting_network
+
+    rng = np.random.default_rng(n)
+    values = rng.integers(0, 4, size=(200, n)).astype(float)  # ties too
+    for i, j in sorting_network(n):
+        lo, hi = np.minimum(values[:, i], values[:, j]), np.maximum(values[:, i], values[:, j])
+        values[:, i], values[:, j] = lo, hi
+    assert (np.diff(values, axis=1) >= 0).all()

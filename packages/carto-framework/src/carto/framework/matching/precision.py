@@ -65,31 +65,35 @@ def window_ncc(
 
 
 def resample_at_offsets(image: NDArray, d_row: NDArray, d_col: NDArray) -> FloatArray:
-    """``image[row + d_row, col + d_col]`` (bilinear; NaN outside the image, at a NaN of the
+    """``image[row + d_row, col + d_col]`` (Lanczos; NaN outside the image, at a NaN of the
     image or where the offset is NaN)."""
     import cv2
 
     rows, cols = np.asarray(d_row).shape
-    grid_r, grid_c = np.mgrid[0:rows, 0:cols].astype(np.float32)
     src = np.asarray(image, np.float32)
     hole = ~np.isfinite(src)
-    map_c = (grid_c + np.asarray(d_col, np.float32)).astype(np.float32)
-    map_r = (grid_r + np.asarray(d_row, np.float32)).astype(np.float32)
+    map_c = np.add(np.asarray(d_col, np.float32), np.arange(cols, dtype=np.float32)[None, :])
+    map_r = np.add(np.asarray(d_row, np.float32), np.arange(rows, dtype=np.float32)[:, None])
     with np.errstate(invalid="ignore"):
-        inside = (map_c >= 0) & (map_c <= cols - 1) & (map_r >= 0) & (map_r <= rows - 1)
-    map_c[~inside] = 0.0
-    map_r[~inside] = 0.0
+        outside = ~((map_c >= 0) & (map_c <= cols - 1) & (map_r >= 0) & (map_r <= rows - 1))
+    map_c[outside] = 0.0
+    map_r[outside] = 0.0
+    any_hole = bool(hole.any())
     out = cv2.remap(
-        np.where(hole, 0.0, src).astype(np.float32),
+        np.where(hole, np.float32(0.0), src) if any_hole else src,
         map_c,
         map_r,
         cv2.INTER_LANCZOS4,
         borderMode=cv2.BORDER_REPLICATE,
     )
-    out[~inside] = np.nan
-    if hole.any():
+    out[outside] = np.nan
+    if any_hole:
         reach = cv2.remap(
-            hole.astype(np.float32), map_c, map_r, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE
+            hole.astype(np.float32),
+            map_c,
+            map_r,
+            cv2.INTER_LINEAR,
+            borderMode=cv2.BORDER_REPLICATE,
         )
         out[reach > 0] = np.nan
     return out
@@ -133,13 +137,16 @@ def window_offsets(
     """The offsets at which each pixel's window is resampled: the mean offset of the valid
     (``ok``) pixels of its ``window`` x ``window`` neighbourhood (warping every pixel by its own
     offset would mix the neighbours' noise into the window; NaN where no pixel is valid)."""
-    okf = np.asarray(ok, np.float32)
-    support = _box(okf, window)
+    ok = np.asarray(ok, bool)
+    support = _box(ok.astype(np.float32), window)
+    zero = np.float32(0.0)
+    has = support > 0
     out = []
     for d in (d_row, d_col):
-        total = _box(np.where(ok, d, 0.0).astype(np.float32), window)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            out.append(np.where(support > 0, total / support, np.nan).astype(np.float32))
+        total = _box(np.where(ok, np.asarray(d, np.float32), zero), window)
+        mean = np.full(total.shape, np.nan, np.float32)
+        np.divide(total, support, out=mean, where=has)
+        out.append(mean)
     return out[0], out[1]
 
 
@@ -166,25 +173,25 @@ def refine_along_base(
     out_c = np.array(field.d_col, np.float32)
     ok = _usable(field)
     f_hole = ~np.isfinite(f)
-    f0 = np.where(f_hole, 0.0, f).astype(np.float32)
+    zero = np.float32(0.0)
+    f0 = np.where(f_hole, zero, f)
     mean_f = _box(f0, window)
-    std_f = np.sqrt(np.maximum(_box(f0 * f0, window) - mean_f * mean_f, 0.0))
+    std_f = np.sqrt(np.maximum(_box(f0 * f0, window) - mean_f * mean_f, zero))
     for _ in range(max(0, int(iterations))):
         # each window is resampled at one offset along the base: its valid pixels' mean
         # (warping by every pixel's own offset would mix the neighbours' noise in)
         mean_r, mean_c = window_offsets(out_r, out_c, ok, window)
-        shift = np.where(ok, (mean_r - out_r) * u_r + (mean_c - out_c) * u_c, 0.0)
-        shift = shift.astype(np.float32)
+        shift = np.where(ok, (mean_r - out_r) * u_r + (mean_c - out_c) * u_c, zero)
         at_r, at_c = out_r + shift * u_r, out_c + shift * u_c
         g = resample_at_offsets(right, at_r, at_c)
         hole = f_hole | ~np.isfinite(g)
-        g0 = np.where(hole, 0.0, g).astype(np.float32)
+        g0 = np.where(hole, zero, g)
         mean_g = _box(g0, window)
-        std_g = np.sqrt(np.maximum(_box(g0 * g0, window) - mean_g * mean_g, 0.0))
-        with np.errstate(invalid="ignore", divide="ignore"):
-            gain = np.where(std_g > 0, std_f / std_g, 0.0).astype(np.float32)
+        std_g = np.sqrt(np.maximum(_box(g0 * g0, window) - mean_g * mean_g, zero))
+        gain = np.zeros(std_g.shape, np.float32)
+        np.divide(std_f, std_g, out=gain, where=std_g > 0)
         grad_r, grad_c = np.gradient(g0)
-        slope = (grad_r * u_r + grad_c * u_c).astype(np.float32)
+        slope = grad_r * u_r + grad_c * u_c
         # window means of the centred products
         mean_s = _box(slope, window)
         cov = _box(slope * g0, window) - mean_s * mean_g
@@ -195,9 +202,9 @@ def refine_along_base(
             step = (cov_f - gain * cov) / (gain * var_s)
         touched = _box(hole.astype(np.float32), window) > 0
         move = ok & ~touched & np.isfinite(step) & (var_s > 0)
-        step = np.clip(np.where(move, step, 0.0), -max_step_px, max_step_px)
-        out_r = np.where(move, at_r + step * u_r, out_r).astype(np.float32)
-        out_c = np.where(move, at_c + step * u_c, out_c).astype(np.float32)
+        step = np.clip(np.where(move, step, zero), -max_step_px, max_step_px)
+        out_r = np.where(move, at_r + step * u_r, out_r)
+        out_c = np.where(move, at_c + step * u_c, out_c)
     return attrs.evolve(field, d_row=out_r, d_col=out_c)
 
 

@@ -1,10 +1,13 @@
 """Focal (moving-window) filters of rasters: a Gaussian (:func:`gaussian_nearest`, and at
-chosen nodes only: :func:`gaussian_nearest_at`) and
-statistics of rasters with voids, compiled: work proportional to the
-pixels, memory of the output only (a ``sliding_window_view`` with ``numpy.nanmedian`` makes a
-copy of ``window`` values per pixel)."""
+chosen nodes only: :func:`gaussian_nearest_at`) and the median of rasters with voids
+(:func:`focal_nanmedian`), compiled, by a sorting network (branch-free, vectorised): work
+proportional to the pixels, memory of the output and one row's windows (a
+``sliding_window_view`` with ``numpy.nanmedian`` makes a copy of ``window`` values per
+pixel)."""
 
 from __future__ import annotations
+
+import functools
 
 import numba
 import numpy as np
@@ -16,33 +19,69 @@ from carto.framework.raster.grid_window import GridWindow
 __all__ = ["focal_nanmedian", "gaussian_nearest", "gaussian_nearest_at"]
 
 
+@functools.lru_cache(maxsize=8)
+def sorting_network(n_items: int) -> NDArray[np.intp]:
+    """The compare-exchange pairs ``(i, j)``, ``i < j``, of Batcher's odd-even merge sort of
+    ``n_items`` values: applied in order (the smaller value to ``i``), they sort any
+    values. Built for the next power of two, without the pairs that reach beyond
+    ``n_items`` (values there would be +inf: those pairs never exchange)."""
+    n = 1
+    while n < n_items:
+        n *= 2
+    pairs = []
+    p = 1
+    while p < n:
+        k = p
+        while k >= 1:
+            for j in range(k % p, n - k, 2 * k):
+                for i in range(min(k, n - j - k)):
+                    a, b = i + j, i + j + k
+                    if a // (2 * p) == b // (2 * p) and b < n_items:
+                        pairs.append((a, b))
+            k //= 2
+        p *= 2
+    return np.array(pairs, np.intp).reshape(-1, 2)
+
+
 @numba.njit(parallel=True, cache=True, nogil=True)
-def _nanmedian_kernel(values: NDArray, radius: int, out: NDArray) -> None:  # pragma: no cover
+def _nanmedian_kernel(
+    values: NDArray, radius: int, pairs: NDArray, out: NDArray
+) -> None:  # pragma: no cover
+    # Row by row: the window's values of every column in a (side², columns) buffer, a NaN
+    # made +inf and -inf in turn (so the middle of the sorted window stays the valid
+    # values' middle: their upper middle when the count of voids is odd), the buffer sorted
+    # by the network, a column at a time in the inner loop (branch-free, vectorised).
     n_r, n_c = values.shape
     side = 2 * radius + 1
+    size = side * side
+    mid = size // 2
     for r in numba.prange(n_r):
-        buf = np.empty(side * side, np.float64)
+        buf = np.empty((size, n_c), np.float64)
+        voids = np.zeros(n_c, np.int64)
+        k = 0
+        for dr in range(-radius, radius + 1):
+            rr = min(max(r + dr, 0), n_r - 1)  # edge values repeated
+            for dc in range(-radius, radius + 1):
+                for c in range(n_c):
+                    v = values[rr, min(max(c + dc, 0), n_c - 1)]
+                    if v != v:  # NaN (an inf is a value)
+                        v = np.inf if voids[c] % 2 == 0 else -np.inf
+                        voids[c] += 1
+                    buf[k, c] = v
+                k += 1
+        for p in range(pairs.shape[0]):
+            i, j = pairs[p, 0], pairs[p, 1]
+            for c in range(n_c):
+                a, b = buf[i, c], buf[j, c]
+                buf[i, c] = min(a, b)
+                buf[j, c] = max(a, b)
         for c in range(n_c):
-            n = 0
-            for dr in range(-radius, radius + 1):
-                rr = min(max(r + dr, 0), n_r - 1)  # edge values repeated
-                for dc in range(-radius, radius + 1):
-                    cc = min(max(c + dc, 0), n_c - 1)
-                    v = values[rr, cc]
-                    if v == v:  # finite or inf, not NaN
-                        # insertion into the sorted buffer
-                        k = n
-                        while k > 0 and buf[k - 1] > v:
-                            buf[k] = buf[k - 1]
-                            k -= 1
-                        buf[k] = v
-                        n += 1
-            if n == 0:
+            if voids[c] == size:
                 out[r, c] = np.nan
-            elif n % 2 == 1:
-                out[r, c] = buf[n // 2]
+            elif voids[c] % 2 == 1:  # an even count of values: the mean of the middle two
+                out[r, c] = 0.5 * (buf[mid - 1, c] + buf[mid, c])
             else:
-                out[r, c] = 0.5 * (buf[n // 2 - 1] + buf[n // 2])
+                out[r, c] = buf[mid, c]
 
 
 def focal_nanmedian(values: ArrayLike, radius: int = 2) -> NDArray[np.float64]:
@@ -60,7 +99,8 @@ def focal_nanmedian(values: ArrayLike, radius: int = 2) -> NDArray[np.float64]:
         raise InputError(f"focal median: radius must be an integer >= 0, got {radius!r}")
     out = np.empty_like(array)
     if array.size:
-        _nanmedian_kernel(array, int(radius), out)
+        side = 2 * int(radius) + 1
+        _nanmedian_kernel(array, int(radius), sorting_network(side * side), out)
     return out
 
 
