@@ -16,6 +16,7 @@ from carto.framework.matching.precision import (
     offset_sigma_px,
     refine_along_base,
     resample_at_offsets,
+    window_moments,
     window_ncc,
 )
 
@@ -98,6 +99,13 @@ def test_resampling_and_window_correlation_against_numpy():
     np.testing.assert_allclose(ncc[5:-5, 5:-5], 1.0, atol=1e-3)
     win = img[10 - 3 : 10 + 4, 12 - 3 : 12 + 4]
     assert std[10, 12] == pytest.approx(float(win.std()), rel=1e-3)
+    other = np.roll(img, 1, axis=1) + rng.normal(0.0, 0.1, img.shape).astype(np.float32)
+    mean, var = window_moments(img, 7)
+    assert mean[10, 12] == pytest.approx(float(win.mean()), rel=1e-5)
+    assert var[10, 12] == pytest.approx(float(win.var()), rel=1e-3)
+    given, alone = window_ncc(img, other, 7, (mean, var)), window_ncc(img, other, 7)
+    for got, expected in zip(given, alone, strict=True):
+        np.testing.assert_array_equal(got, expected)  # the left's moments given, or computed
 
 
 def test_least_squares_refinement_beats_the_parabola_and_stays_on_the_base():

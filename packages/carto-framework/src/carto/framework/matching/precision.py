@@ -37,6 +37,7 @@ __all__ = [
     "offset_sigma_px",
     "refine_along_base",
     "resample_at_offsets",
+    "window_moments",
     "window_ncc",
     "window_offsets",
 ]
@@ -50,15 +51,25 @@ def _box(image: NDArray, window: int, normalize: bool = True) -> FloatArray:
     return cv2.boxFilter(image, cv2.CV_32F, (window, window), normalize=normalize)
 
 
+def window_moments(image: FloatArray, window: int) -> tuple[FloatArray, FloatArray]:
+    """The mean and the variance (never below 0) of each pixel's ``window`` x ``window``
+    neighbourhood (no NaN)."""
+    mean = _box(image, window)
+    return mean, np.maximum(_box(image * image, window) - mean * mean, 0.0)
+
+
 def window_ncc(
-    left: FloatArray, right_at_match: FloatArray, window: int
+    left: FloatArray,
+    right_at_match: FloatArray,
+    window: int,
+    left_moments: tuple[FloatArray, FloatArray] | None = None,
 ) -> tuple[FloatArray, FloatArray]:
     """The normalised cross-correlation of each pixel's ``window`` x ``window`` neighbourhood in
     ``left`` and in ``right_at_match`` (the right image already resampled at the matches; no
-    NaN), and the left window's standard deviation."""
-    mean_l, mean_r = _box(left, window), _box(right_at_match, window)
-    var_l = np.maximum(_box(left * left, window) - mean_l * mean_l, 0.0)
-    var_r = np.maximum(_box(right_at_match * right_at_match, window) - mean_r * mean_r, 0.0)
+    NaN), and the left window's standard deviation. ``left_moments``: the left's
+    :func:`window_moments`, when several right images are scored against one left."""
+    mean_l, var_l = left_moments if left_moments is not None else window_moments(left, window)
+    mean_r, var_r = window_moments(right_at_match, window)
     with np.errstate(invalid="ignore", divide="ignore"):
         ncc = (_box(left * right_at_match, window) - mean_l * mean_r) / np.sqrt(var_l * var_r)
     return ncc.astype(np.float32), np.sqrt(var_l).astype(np.float32)

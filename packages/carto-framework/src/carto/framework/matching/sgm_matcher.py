@@ -43,7 +43,7 @@ from carto.framework.matching.base import (
     MatchSettings,
     OffsetField,
 )
-from carto.framework.matching.precision import window_ncc
+from carto.framework.matching.precision import window_moments, window_ncc
 
 __all__ = ["SGMMatcher"]
 
@@ -95,12 +95,15 @@ def _refine_along_rows(
     vertex of the parabola through them."""
     import cv2
 
+    rows, cols = left.shape
     d0 = np.where(found, np.round(disparity), 0.0).astype(np.float32)
-    yy, xx = np.mgrid[0 : left.shape[0], 0 : left.shape[1]].astype(np.float32)
+    x_at = np.arange(cols, dtype=np.float32)[None, :] - d0
+    yy = np.repeat(np.arange(rows, dtype=np.float32)[:, None], cols, axis=1)
+    moments = window_moments(left, window)
     scores = []
     for step in (-1.0, 0.0, 1.0):
-        shifted = cv2.remap(right, xx - d0 - step, yy, cv2.INTER_NEAREST, borderValue=0.0)
-        scores.append(window_ncc(left, shifted, window)[0])
+        shifted = cv2.remap(right, x_at - step, yy, cv2.INTER_NEAREST, borderValue=0.0)
+        scores.append(window_ncc(left, shifted, window, moments)[0])
     lo, mid, hi = scores
     with np.errstate(invalid="ignore", divide="ignore"):
         den = lo - 2.0 * mid + hi
