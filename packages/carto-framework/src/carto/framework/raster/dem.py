@@ -525,9 +525,9 @@ class DEM:
             )
         return self
 
-    @property
+    @functools.cached_property
     def height_range(self) -> tuple[float, float]:
-        """``(min, max)`` of the valid heights; InputError when there is none."""
+        """``(min, max)`` of the valid heights (once: they are read-only); InputError when none."""
         valid = self.heights[np.isfinite(self.heights)]
         if valid.size == 0:
             raise InputError(f"DEM {self.name}: no valid height (all nodata)")
