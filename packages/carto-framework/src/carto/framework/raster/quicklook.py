@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import os
+import threading
 from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -82,9 +83,34 @@ def _decimate(grid: FloatArray) -> FloatArray:
     return grid[::step, ::step]
 
 
+_warming: list[threading.Thread] = []  # the thread of prepare_figures, once per process
+
+
+def _warm() -> None:
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(1.0, 1.0), dpi=20)
+    FigureCanvasAgg(fig)
+    fig.add_subplot(1, 1, 1).set_title("carto", fontsize=10)
+    fig.canvas.draw()  # the fonts loaded and cached
+
+
+def prepare_figures() -> None:
+    """Import matplotlib and load its fonts in a background thread (about a second), for a
+    command that will draw a figure after long work of compiled code: the next figure waits
+    for it, and nothing else does."""
+    if not _warming:
+        thread = threading.Thread(target=_warm, name="carto-figures", daemon=True)
+        _warming.append(thread)
+        thread.start()
+
+
 def _new_figure(
     shape: tuple[int, int], extra_width_in: float = 0.0, aspect: float = 1.0
 ) -> tuple[Any, Any]:
+    for thread in _warming:
+        thread.join()
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 

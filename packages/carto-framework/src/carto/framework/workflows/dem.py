@@ -346,6 +346,9 @@ def _dem_into(out: Path, run: _DemRun, *, quiet: bool, engine: Any, work: Path) 
     """:func:`dem_product` writing into ``out`` (its staging folder), tiles on ``engine``,
     intermediate files in ``work``."""
     t0 = time.perf_counter()
+    from carto.framework.raster.quicklook import prepare_figures
+
+    prepare_figures()  # for the hillshade, meanwhile
     inputs = run.inputs
     pair = open_pair(inputs)
     generator = choose_dem_generator(run.generator, pair.types)
