@@ -16,7 +16,7 @@ from numpy.typing import ArrayLike, NDArray
 from carto.framework.errors import InputError
 from carto.framework.raster.grid_window import GridWindow
 
-__all__ = ["focal_nanmedian", "gaussian_nearest", "gaussian_nearest_at"]
+__all__ = ["focal_nanmedian", "gaussian_nearest", "gaussian_nearest_at", "sorting_network"]
 
 
 @functools.lru_cache(maxsize=8)
@@ -40,7 +40,9 @@ def sorting_network(n_items: int) -> NDArray[np.intp]:
                         pairs.append((a, b))
             k //= 2
         p *= 2
-    return np.array(pairs, np.intp).reshape(-1, 2)
+    out = np.array(pairs, np.intp).reshape(-1, 2)
+    out.flags.writeable = False  # shared by every caller (cached)
+    return out
 
 
 @numba.njit(parallel=True, cache=True, nogil=True)

@@ -87,13 +87,16 @@ _warming: list[threading.Thread] = []  # the thread of prepare_figures, once per
 
 
 def _warm() -> None:
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
+    try:
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(1.0, 1.0), dpi=20)
-    FigureCanvasAgg(fig)
-    fig.add_subplot(1, 1, 1).set_title("carto", fontsize=10)
-    fig.canvas.draw()  # the fonts loaded and cached
+        fig = Figure(figsize=(1.0, 1.0), dpi=20)
+        FigureCanvasAgg(fig)
+        fig.add_subplot(1, 1, 1).set_title("carto", fontsize=10)
+        fig.canvas.draw()  # the fonts loaded and cached
+    except Exception:  # noqa: BLE001 (the figure itself reports what is wrong)
+        return
 
 
 def prepare_figures() -> None:
