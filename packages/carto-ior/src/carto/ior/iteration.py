@@ -26,7 +26,6 @@ from carto.ior.regularise import regularise
 from carto.ior.settings import IORSettings
 from carto.ior.start import seen_by_both
 from carto.ior.tiles import (
-    NODE_LAYERS,
     NODE_QUALITY,
     ORTHO_LAYERS,
     TileJob,
@@ -422,6 +421,10 @@ class _Measured:
     matched_percent: float
 
 
+_MEASURED_LAYERS = ("new_height", "d_row_px", "d_col_px", "covered")
+"""The node layers of the tiles' files an iteration's measurement reads."""
+
+
 def _measured(stage: _Stage, outcomes: list[Any]) -> _Measured:
     """The tiles' node layers assembled on the DEM grid, and their mismatch."""
     shape = stage.work.dem_grid.shape
@@ -434,7 +437,7 @@ def _measured(stage: _Stage, outcomes: list[Any]) -> _Measured:
     for (rows, cols), outcome in zip(stage.plan.tiles, outcomes, strict=True):
         if isinstance(outcome, TaskFailure):
             continue
-        arrays = tile_arrays(outcome, NODE_LAYERS)
+        arrays = tile_arrays(outcome, _MEASURED_LAYERS)
         new[rows, cols] = arrays["new_height"]
         d_row[rows, cols] = arrays["d_row_px"]
         d_col[rows, cols] = arrays["d_col_px"]
