@@ -34,6 +34,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from carto.framework.errors import InputError
 from carto.framework.matching.base import OffsetField
+from carto.framework.matching.precision import box_mean, window_moments
 
 FloatArray = NDArray[np.float32]
 
@@ -85,12 +86,6 @@ def _warp(image: FloatArray, d_row: FloatArray, d_col: FloatArray) -> FloatArray
     )
 
 
-def _box(image: FloatArray, window: int) -> FloatArray:
-    import cv2
-
-    return cv2.boxFilter(image, cv2.CV_32F, (window, window), normalize=True)
-
-
 @numba.njit(parallel=True, cache=True, nogil=True)
 def _score_shift(  # pragma: no cover (compiled)
     cov: NDArray,
@@ -132,9 +127,8 @@ def _window_stats(image: FloatArray, window: int) -> tuple[FloatArray, FloatArra
     image)``."""
     bad = ~np.isfinite(image)
     filled = np.where(bad, 0.0, image).astype(np.float32)
-    mean = _box(filled, window)
-    var = np.maximum(_box(filled * filled, window) - mean**2, 0.0)
-    hole = _box(bad.astype(np.float32), window) > 0
+    mean, var = window_moments(filled, window)
+    hole = box_mean(bad.astype(np.float32), window) > 0
     # windows that reach beyond the image (the box filter reflects the border)
     half = window // 2
     hole[:half] = hole[-half:] = True
@@ -165,7 +159,7 @@ def _search(
             c0, c1 = max(0, -dc), min(cols, cols - dc)
             if r0 < r1 and c0 < c1:
                 shifted[r0:r1, c0:c1] = rf[r0 + dr : r1 + dr, c0 + dc : c1 + dc]
-            cov = _box(lf * shifted, window)
+            cov = box_mean(lf * shifted, window)
             _score_shift(
                 cov, mean_l, var_l, hole_l, mean_r, var_r, hole_r, dr, dc, i * n + j,
                 scores[i * n + j], best, best_index,
@@ -376,7 +370,7 @@ def dense_offsets(
     lr = np.hypot(d_row + back_r, d_col + back_c).astype(np.float32)
     lo, hi = np.nanpercentile(a, [2, 98]) if np.isfinite(a).any() else (0.0, 1.0)
     af, _ = _filled(a)
-    std = np.sqrt(np.maximum(_box(af * af, window) - _box(af, window) ** 2, 0.0))
+    std = np.sqrt(window_moments(af, window)[1])
     valid = (
         np.isfinite(d_row)
         & np.isfinite(score)

@@ -143,10 +143,10 @@ def gaussian_nearest_at(
     dtype: type[np.floating] = np.float64,
 ) -> NDArray[np.float64]:
     """``values`` with :func:`gaussian_nearest` (computed in ``dtype``) at the nodes
-    ``where``: the filter run only on
-    the tiles of ``tile`` nodes holding such a node, each with the filter's reach (4 sigma)
-    around it, so every node sees the neighbourhood (the grid's edges repeated beyond it) the
-    whole grid's filter gives it; on the whole grid when those cut-outs would cover more."""
+    ``where``: the filter run only on the tiles of ``tile`` nodes holding such a node, each
+    with the filter's reach (4 sigma) around it, so every node sees the neighbourhood (the
+    grid's edges repeated beyond it) the whole grid's filter gives it; on the whole grid when
+    those cut-outs would cover more."""
     array = np.asarray(values, dtype=np.float64)
     height, width = array.shape
     reach = int(4.0 * float(sigma) + 0.5)
