@@ -183,11 +183,16 @@ def _simulated_run(
 
 
 def _multiview(
-    scene: Path, models: Path, out: Path, posting_m: float, orientation: str = "none"
+    scene: Path,
+    models: Path,
+    out: Path,
+    posting_m: float,
+    orientation: str = "none",
+    view_jitter: str = "auto",
 ) -> tuple[dict[str, Any], float]:
     from carto.framework.workflows.multiview_dem import MultiViewRequest, multiview_dem_product
 
-    request = MultiViewRequest(out, scene, models=models, keep_pairs=True)
+    request = MultiViewRequest(out, scene, models=models, keep_pairs=True, view_jitter=view_jitter)
     started = time.perf_counter()
     report = multiview_dem_product(
         request,
@@ -217,16 +222,29 @@ def run_adjusted(
     truth = scene / "truth" / "dem.tif"
     true_fused = evaluate(folder / "dem", truth, true_report)["by_dem"]["fused"]
     result: dict[str, Any] = {"true_models": true_fused}
-    for orientation in ("none", "auto"):  # auto: carto dem's default relative orientation
-        out = folder / f"dem-adjusted-{orientation}"
-        report, _ = _multiview(scene, folder / "adjusted", out, posting_m, orientation)
+    out = folder / "dem-true-no-view-jitter"
+    report, _ = _multiview(scene, scene / "truth", out, posting_m, view_jitter="none")
+    result["true_models_view_jitter_none"] = evaluate(out, truth, report)["by_dem"]["fused"]
+    # auto: carto dem's defaults (the views' along-track errors fitted, each pair's
+    # relative orientation a shift); none: no relative orientation of the pairs;
+    # view_jitter_none: the pairs' line-varying relative orientation, no view fit (the
+    # default before session 61)
+    variants = {
+        "none": ("none", "auto"),
+        "auto": ("auto", "auto"),
+        "view_jitter_none": ("auto", "none"),
+    }
+    for label, (orientation, view_jitter) in variants.items():
+        out = folder / f"dem-adjusted-{label}"
+        report, _ = _multiview(scene, folder / "adjusted", out, posting_m, orientation, view_jitter)
         adjusted = evaluate(out, truth, report)
-        result[f"adjusted_ro_{orientation}"] = {
+        result[f"adjusted_ro_{label}"] = {
             "fused": adjusted["by_dem"]["fused"],
             "pairs": {k: v for k, v in adjusted["by_dem"].items() if k != "fused"},
             "over_true_nmad": round(
                 adjusted["by_dem"]["fused"]["nmad_m"] / true_fused["nmad_m"], 3
             ),
+            "view_jitter": report.get("view_jitter"),
         }
     return result
 
@@ -369,7 +387,7 @@ def main(argv: list[str] | None = None) -> int:
     if adjusted:
         summary["adjusted_over_true_nmad"] = {
             ro: [a[f"adjusted_ro_{ro}"]["over_true_nmad"] for a in adjusted.values()]
-            for ro in ("none", "auto")
+            for ro in ("none", "auto", "view_jitter_none")
         }
     if strip:
         summary["strip_median_abs_seam_step_m"] = [

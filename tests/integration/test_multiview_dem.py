@@ -89,10 +89,16 @@ def test_a_triplet_makes_three_pairs_and_fuses_them(fused):
     ]
     assert all(p["status"] == "done" for p in report["pairs"])
     assert report["format"] == "carto-dem-report"
-    # the pairs aligned on the widest one (true models: steps of millimetres)
-    assert report["pair_offsets_m"]["fore/aft"] == 0.0
-    assert max(abs(v) for v in report["pair_offsets_m"].values()) < 0.05
-    assert all(abs(s["median_step_after_m"]) < 0.01 for s in report["seams"])
+    # line scanners: every view's along-track error fitted to the pairs' heights, which
+    # then need no offset (true models: the views' errors and the pairs' steps are small)
+    jitter = report["view_jitter"]
+    assert jitter["applied"]
+    assert jitter["nodes"] > 1000
+    agreement = jitter["pairs_disagreement_nmad_m"]
+    assert agreement["after"] <= agreement["before"] < 0.3
+    assert set(report["pair_offsets_m"].values()) == {0.0}
+    assert all(abs(s["median_step_m"]) < 0.05 for s in report["seams"])
+    assert all(s["median_step_after_m"] is None for s in report["seams"])
     assert report["accuracy"]["nmad_m"] < 0.5
     errors = {
         p["folder"]: _errors_on(out / "dem.tif", out / p["folder"] / "dem.tif", truth)
@@ -255,6 +261,7 @@ def test_the_command_line_refuses_mixed_choices(triplet, tmp_path, run_carto):
         (["--pair", "fore", "aft", "--images", "fore", "aft"], "--pair excluded"),
         (["--pairs", "fore"], "not two images joined"),
         (["--pair", "fore", "aft", "--keep-pairs"], "--keep-pairs is for three"),
+        (["--pair", "fore", "aft", "--view-jitter", "none"], "--view-jitter is for three"),
     ):
         done = run_carto(["dem", str(triplet.root), *args, "--out", out], with_test_plugins=False)
         assert done.returncode == 2, (args, done.stderr)
@@ -290,3 +297,58 @@ def test_a_third_party_generator_that_only_does_pairs_is_paired_and_fused(
     has = np.isfinite(fused) & np.isfinite(start)
     assert has.sum() > 100
     assert np.abs(fused[has] - start[has]).max() < 0.5
+
+
+def _models_with_pitch_errors(triplet, out):
+    """The triplet's true models, the fore view's with a 67 Hz pitch jitter of 1.5 urad and
+    the aft view's pitched by 2 urad (about 2 and 3 lines), which the images do not have:
+    a ``carto adjust`` output as the block adjustment would leave it."""
+    import attrs
+
+    from carto.framework.adjustment.attitude_terms import line_scanner_of
+    from carto.framework.files.staging import staged_folder
+    from carto.framework.sdk.sensors import save_line_scanner
+
+    errors = {  # aft: a 0.5 Hz cosine, over the image's 0.24 s a bias of 1.9-2 urad
+        "fore": ((67.0,), [[0, 0], [1.2e-6, 0.9e-6], [0, 0]]),
+        "aft": ((0.5,), [[0, 0], [0, 2e-6], [0, 0]]),
+    }
+    with staged_folder(out, "adjust") as stage:
+        for name, sensor in triplet.truth_sensors().items():
+            scanner = line_scanner_of(sensor)
+            trajectory = scanner.trajectory
+            if name in errors:
+                trajectory = trajectory.with_attitude_periodic(*errors[name])
+            save_line_scanner(attrs.evolve(scanner, trajectory=trajectory), stage, name, (0, 3000))
+    return out
+
+
+def test_the_views_along_track_errors_are_taken_out_of_the_fused_dem(triplet, tmp_path):
+    """Models with along-track errors the images do not have: the fused DEM against the
+    simulator's truth DEM, with and without every view's error fitted to the pairs'
+    heights (and with the true models)."""
+    models = _models_with_pitch_errors(triplet, tmp_path / "models")
+    truth = triplet.root / "truth"
+    nmad = {}
+    for label, source, view_jitter in (
+        ("true", truth, "none"),
+        ("off", models, "none"),
+        ("on", models, "auto"),
+    ):
+        out = tmp_path / label
+        request = MultiViewRequest(out, triplet.root, models=source, view_jitter=view_jitter)
+        report = multiview_dem_product(request, **OPTIONS)
+        nmad[label] = _nmad(
+            _finite(_errors_on(out / "dem.tif", out / "dem.tif", truth / "dem.tif"))
+        )
+    assert report["view_jitter"]["applied"]
+    fore = report["view_jitter"]["views"]["fore"]
+    assert fore["frequencies_hz"] == [67.0]
+    assert nmad["off"] > 3 * nmad["true"], nmad
+    # at 5 m posts the 67 Hz jitter (24 m a cycle) is barely sampled: 0.80 -> 0.13 m,
+    # against 0.03 m from the true models
+    assert nmad["on"] < 0.25 * nmad["off"], nmad
+
+
+def _finite(x):
+    return x[np.isfinite(x)]

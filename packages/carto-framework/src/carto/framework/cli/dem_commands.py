@@ -213,6 +213,8 @@ def cmd_dem(args: argparse.Namespace) -> int:
         return _cmd_multiview_dem(args, options)
     if args.keep_pairs:
         raise UsageError("--keep-pairs is for three or more images (--images, --pairs)")
+    if args.view_jitter != "auto":
+        raise UsageError("--view-jitter is for three or more images (--images, --pairs)")
     report = dem_product(
         args.out,
         StereoInputs(
@@ -275,6 +277,7 @@ def _cmd_multiview_dem(args: argparse.Namespace, options: dict[str, object]) -> 
         images=tuple(args.images) if args.images else None,
         pairs=parse_pairs(args.pairs) if args.pairs else None,
         keep_pairs=args.keep_pairs,
+        view_jitter=args.view_jitter,
     )
     report = multiview_dem_product(request, **_dem_options(args, options))
     for pair in report["pairs"]:
@@ -436,6 +439,15 @@ def _add_dem_inputs(p: argparse.ArgumentParser) -> None:
     p.add_argument("--pairs", metavar="A:B,B:C", help="explicit pairs of a scene's images to fuse")
     p.add_argument(
         "--keep-pairs", action="store_true", help="keep each pair's DEM folder under pairs/"
+    )
+    p.add_argument(
+        "--view-jitter",
+        choices=("auto", "none"),
+        default="auto",
+        help="three or more line-scanner views: fit every view's along-track error (pitch "
+        "jitter at its model's frequencies, bias, drift) to where the pairs' heights "
+        "disagree, and correct the heights before the fusion (default auto; the pairs' "
+        "relative orientation auto is then a shift); none: off",
     )
     p.add_argument("--init-dem", metavar="FILE", help="starting DEM (GeoTIFF, SRTM .hgt)")
     p.add_argument(

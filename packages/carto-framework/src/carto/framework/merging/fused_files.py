@@ -32,7 +32,12 @@ from carto.framework.merging.grid import GridWindow, MosaicGrid, read_window, un
 from carto.framework.merging.mosaic import feather_weights
 from carto.framework.merging.sources import RasterSource, check_together, open_sources
 
-__all__ = ["DEFAULT_SIGMA_M", "PairLayers", "fuse_dem_folders", "pair_layers"]
+__all__ = ["DEFAULT_SIGMA_M", "HeightCorrection", "PairLayers", "fuse_dem_folders", "pair_layers"]
+
+HeightCorrection = Callable[[MosaicGrid, GridWindow, np.ndarray], np.ndarray]
+"""A pair's height error on a window of the fusion's grid, from its heights there (m; the
+fusion subtracts it), e.g. its views' along-track errors
+(:class:`~carto.framework.workflows.view_jitter.PairHeightCorrection`)."""
 
 DEFAULT_SIGMA_M = 1.0
 """The sigma of a pair's heights when its generator gives none (equal weights)."""
@@ -91,10 +96,14 @@ def _window_stack(
     window: GridWindow,
     feather_posts: int,
     offsets_m: np.ndarray,
+    corrections: Sequence[HeightCorrection | None],
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     heights, sigmas, measured = [], [], []
-    for pair, offset in zip(pairs, offsets_m, strict=True):
-        h = read_window(pair.dem, grid, window) + offset
+    for pair, offset, correction in zip(pairs, offsets_m, corrections, strict=True):
+        h = read_window(pair.dem, grid, window)
+        if correction is not None:
+            h = h - correction(grid, window, h)
+        h = h + offset
         if pair.sigma is not None:
             s = read_window(pair.sigma[0], grid, window, band=pair.sigma[1])
         else:
@@ -157,11 +166,14 @@ def fuse_dem_folders(
     *,
     tile_px: int = 1024,
     offsets_m: Sequence[float] | None = None,
+    corrections: Sequence[HeightCorrection | None] | None = None,
     advance: Callable[[], None] | None = None,
 ) -> dict[str, Any]:
     """Fuse the pairs' DEM folders into ``out`` (see the module docstring), each pair's
-    heights plus its ``offsets_m`` (default 0: see :func:`pair_offsets`); returns the fused
-    DEM's figures for the report (grid size, share of nodes by number of pairs)."""
+    heights less its correction (``corrections``: per pair, None or a
+    :data:`HeightCorrection`) plus its ``offsets_m`` (default 0: see :func:`pair_offsets`);
+    returns the fused DEM's figures for the report (grid size, share of nodes by number of
+    pairs)."""
     import contextlib
 
     pairs = [pair_layers(Path(f)) for f in folders]
@@ -169,12 +181,13 @@ def fuse_dem_folders(
     grid = union_grid([p.dem for p in pairs])
     vertical = pairs[0].dem.vertical
     offsets = np.zeros(len(pairs)) if offsets_m is None else np.asarray(offsets_m, float)
+    fixes = [None] * len(pairs) if corrections is None else list(corrections)
     tally = np.zeros(len(pairs) + 2, np.int64)  # nodes by pairs kept; last: filled
     with contextlib.ExitStack() as stack:
         writers = _Writers.opened(stack, out, grid, vertical)
         for window in grid.windows(tile_px):
             outer = window.grown(settings.feather_posts, grid.height, grid.width)
-            stack = _window_stack(pairs, grid, outer, settings.feather_posts, offsets)
+            stack = _window_stack(pairs, grid, outer, settings.feather_posts, offsets, fixes)
             fused = _cropped(fuse_heights(*stack, settings), window.inner(outer))
             writers.write(window, fused)
             _count(tally, fused)

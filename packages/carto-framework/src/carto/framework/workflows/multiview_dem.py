@@ -241,6 +241,8 @@ class MultiViewRequest:
         keep_pairs: keep each pair's DEM folder under ``pairs/``.
         fusion: how the pairs' heights are fused.
         tile_px: side of the fusion's tiles, DEM posts.
+        view_jitter: ``auto``: every view's along-track error fitted to the pairs' heights
+            before the fusion (:mod:`carto.framework.workflows.view_jitter`); ``none``: off.
     """
 
     out_dir: Path = attrs.field(converter=Path)
@@ -252,8 +254,11 @@ class MultiViewRequest:
     keep_pairs: bool = False
     fusion: FusionSettings = attrs.field(factory=FusionSettings)
     tile_px: int = 1024
+    view_jitter: str = "auto"
 
     def __attrs_post_init__(self) -> None:
+        if self.view_jitter not in ("auto", "none"):
+            raise UsageError(f"--view-jitter: expected auto or none, got {self.view_jitter!r}")
         if self.images is not None and self.pairs is not None:
             raise UsageError("--images and --pairs exclude each other: give one")
 
@@ -329,6 +334,7 @@ def multiview_dem_product(request: MultiViewRequest, **dem_options: Any) -> dict
     are those of :func:`~carto.framework.workflows.dem.dem_product` (each pair gets them)."""
     from carto.framework.files.staging import staged_folder
     from carto.framework.workflows.run_record import record_run, utc_now
+    from carto.framework.workflows.view_jitter import pair_relative_orientation, view_jitter_reason
 
     quiet = bool(dem_options.get("quiet", False))
     views = _scene_views(request)
@@ -338,6 +344,14 @@ def multiview_dem_product(request: MultiViewRequest, **dem_options: Any) -> dict
         views.sensors, images=request.images, pairs=request.pairs, h_m=h_m
     )
     dem_options = _on_one_crs(dem_options, views, [views.sensors[n] for n in _images_of(pairs)])
+    reason = view_jitter_reason(
+        request.view_jitter, views.sensors, [(p.left, p.right) for p in pairs]
+    )
+    ro = dem_options.get("relative_orientation", "auto")
+    dem_options = {
+        **dem_options,
+        "relative_orientation": pair_relative_orientation(ro, reason is None),
+    }
     started = utc_now()
     inputs = [
         request.source,
@@ -348,7 +362,9 @@ def multiview_dem_product(request: MultiViewRequest, **dem_options: Any) -> dict
     ]
     with staged_folder(request.out_dir, "dem", inputs=[p for p in inputs if p]) as stage:
         records, done = _run_pairs(stage, request, pairs, dem_options, quiet)
-        report = _fused_into(stage, request, views, done, dem_options, quiet)
+        fitted, corrections = _view_jitter(views, done, dem_options, reason, quiet)
+        report = _fused_into(stage, request, views, done, dem_options, quiet, corrections)
+        report["view_jitter"] = fitted
         report["pairs"] = records
         report["pairs_left_out"] = [p.as_dict() for p in left_out]
         if not request.keep_pairs:
@@ -357,6 +373,34 @@ def multiview_dem_product(request: MultiViewRequest, **dem_options: Any) -> dict
             shutil.rmtree(stage / "pairs", ignore_errors=True)
         report = record_run(stage / "report.json", report, [p for p in inputs if p], started, "dem")
     return report
+
+
+def _view_jitter(
+    views: _SceneViews,
+    done: Sequence[tuple[PairChoice, Path]],
+    dem_options: Mapping[str, Any],
+    reason: str | None,
+    quiet: bool,
+) -> tuple[dict[str, Any], list[Any] | None]:
+    """The views' along-track errors fitted to the pairs' heights (the report's
+    ``view_jitter``) and each pair's height correction (None: not fitted, and why)."""
+    from carto.framework.adjustment.view_jitter import ViewJitterSettings
+    from carto.framework.raster.dem import Geoid
+    from carto.framework.workflows.reporting import progress
+    from carto.framework.workflows.view_jitter import view_jitter_of_pairs
+
+    if reason is None and len(done) < 2:
+        reason = "one pair was made: nothing to compare its heights with"
+    if reason is not None:
+        return {"applied": False, "reason": reason}, None
+    progress("dem", "fitting every view's along-track error to the pairs' heights", quiet)
+    geoid = Geoid.open(dem_options["geoid"]) if dem_options.get("geoid") else None
+    folders = [(p.left, p.right, folder) for p, folder in done]
+    fit, corrections = view_jitter_of_pairs(folders, views.sensors, geoid)
+    if fit is None:
+        least = ViewJitterSettings().min_nodes
+        return {"applied": False, "reason": f"fewer than {least} nodes measured by two pairs"}, None
+    return {"applied": True, **fit.as_dict()}, corrections
 
 
 def _images_of(pairs: Sequence[PairChoice]) -> list[str]:
@@ -486,6 +530,31 @@ def _pair_offsets(
     return step_offsets(steps, len(done), held=best)
 
 
+_QUALITY_LAYERS: dict[str, dict[str, str]] = {
+    "sigma_m": {
+        "file": "quality.tif",
+        "kind": "measure",
+        "description": "predicted standard deviation of the fused height, m",
+    },
+    "spread_m": {
+        "file": "quality.tif",
+        "kind": "measure",
+        "description": "max - min of the pairs' heights kept, m",
+    },
+    "pairs": {
+        "file": "quality_counts.tif",
+        "kind": "count",
+        "description": "pairs whose measured height was kept",
+    },
+    "filled": {
+        "file": "quality_flags.tif",
+        "kind": "flag",
+        "description": "1: no pair measured the node, 0: measured",
+    },
+}
+"""The fused DEM's quality layers, as ``report.json`` describes them."""
+
+
 def _fused_into(
     stage: Path,
     request: MultiViewRequest,
@@ -493,17 +562,25 @@ def _fused_into(
     done: Sequence[tuple[PairChoice, Path]],
     dem_options: Mapping[str, Any],
     quiet: bool,
+    corrections: Sequence[Any] | None = None,
 ) -> dict[str, Any]:
+    """Fuse the pairs' DEMs (less ``corrections``, each pair's height correction, when
+    given; then the views' fit holds each view's bias and no offset aligns the pairs)."""
     from carto.framework.merging.fused_files import fuse_dem_folders
     from carto.framework.workflows.fused_orthos import engine_options, orthos_on_fused
     from carto.framework.workflows.reporting import progress
 
     folders = [folder for _, folder in done]
     steps = _pair_steps(done)
-    offsets = _pair_offsets(request, done, steps)
+    offsets = _pair_offsets(request, done, steps) if corrections is None else np.zeros(len(done))
     progress("dem", f"fusing {len(folders)} pair DEM(s)", quiet)
     fusion = fuse_dem_folders(
-        folders, stage, request.fusion, tile_px=request.tile_px, offsets_m=offsets
+        folders,
+        stage,
+        request.fusion,
+        tile_px=request.tile_px,
+        offsets_m=offsets,
+        corrections=corrections,
     )
     files = {
         "dem": "dem.tif",
@@ -524,28 +601,7 @@ def _fused_into(
         "generator": "fusion",
         "images": images,
         "fusion": {**attrs.asdict(request.fusion), **fusion},
-        "quality_layers": {
-            "sigma_m": {
-                "file": "quality.tif",
-                "kind": "measure",
-                "description": "predicted standard deviation of the fused height, m",
-            },
-            "spread_m": {
-                "file": "quality.tif",
-                "kind": "measure",
-                "description": "max - min of the pairs' heights kept, m",
-            },
-            "pairs": {
-                "file": "quality_counts.tif",
-                "kind": "count",
-                "description": "pairs whose measured height was kept",
-            },
-            "filled": {
-                "file": "quality_flags.tif",
-                "kind": "flag",
-                "description": "1: no pair measured the node, 0: measured",
-            },
-        },
+        "quality_layers": _QUALITY_LAYERS,
         "vertical_reference": fusion["vertical_reference"],
     }
     names = [f"{pair.left}/{pair.right}" for pair, _ in done]
@@ -557,9 +613,9 @@ def _fused_into(
             "median_step_m": round(step.median_m, 4),
             "nmad_m": round(step.nmad_m, 4),
             "nodes": step.pixels,
-            "median_step_after_m": round(
-                step.median_m + offsets[step.second] - offsets[step.first], 4
-            ),
+            "median_step_after_m": None
+            if corrections is not None  # see view_jitter's pairs_disagreement_nmad_m
+            else round(step.median_m + offsets[step.second] - offsets[step.first], 4),
         }
         for step in steps
     ]
