@@ -225,13 +225,13 @@ def run_adjusted(
     out = folder / "dem-true-no-view-jitter"
     report, _ = _multiview(scene, scene / "truth", out, posting_m, view_jitter="none")
     result["true_models_view_jitter_none"] = evaluate(out, truth, report)["by_dem"]["fused"]
-    # auto: carto dem's defaults (the views' along-track errors fitted, each pair's
-    # relative orientation a shift); none: no relative orientation of the pairs;
+    # auto: carto dem's defaults (the views' along-track errors fitted, the pairs' relative
+    # orientation then off); shift: the same with each pair's right image shifted first;
     # view_jitter_none: the pairs' line-varying relative orientation, no view fit (the
     # default before session 61)
     variants = {
-        "none": ("none", "auto"),
         "auto": ("auto", "auto"),
+        "shift": ("shift", "auto"),
         "view_jitter_none": ("auto", "none"),
     }
     for label, (orientation, view_jitter) in variants.items():
@@ -387,7 +387,7 @@ def main(argv: list[str] | None = None) -> int:
     if adjusted:
         summary["adjusted_over_true_nmad"] = {
             ro: [a[f"adjusted_ro_{ro}"]["over_true_nmad"] for a in adjusted.values()]
-            for ro in ("none", "auto", "view_jitter_none")
+            for ro in ("auto", "shift", "view_jitter_none")
         }
     if strip:
         summary["strip_median_abs_seam_step_m"] = [

@@ -34,8 +34,8 @@ def test_views_without_imaging_times_are_not(scanners):
     assert "line scanner" in view_jitter_reason("auto", views, pairs)
 
 
-def test_the_pairs_relative_orientation_becomes_a_shift_only_when_fitted():
-    assert pair_relative_orientation("auto", True) == "shift"
+def test_the_pairs_relative_orientation_is_off_only_when_fitted():
+    assert pair_relative_orientation("auto", True) == "none"
     assert pair_relative_orientation("auto", False) == "auto"
     assert pair_relative_orientation("line", True) == "line"
     assert pair_relative_orientation({"mode": "line"}, True) == {"mode": "line"}

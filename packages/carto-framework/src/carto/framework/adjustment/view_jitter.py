@@ -246,9 +246,13 @@ def _solve(
 ) -> tuple[FloatArray, FloatArray]:
     """The coefficients and each pair's residual, ``weights`` zero where not measured."""
     r, g = _eliminated(heights, design, weights)
-    normal = np.einsum("pn,pni,pnj->ij", weights, g, g)
-    normal[np.diag_indices_from(normal)] += 1.0 / prior**2
-    x = np.linalg.solve(normal, np.einsum("pn,pni,pn->i", weights, g, r))
+    normal = np.eye(g.shape[-1]) / prior**2
+    rhs = np.zeros(g.shape[-1])
+    for p in range(g.shape[0]):
+        weighted = g[p] * weights[p][:, None]
+        normal += weighted.T @ g[p]
+        rhs += weighted.T @ r[p]
+    x = np.linalg.solve(normal, rhs)
     return x, r - g @ x
 
 

@@ -447,7 +447,8 @@ def _add_dem_inputs(p: argparse.ArgumentParser) -> None:
         help="three or more line-scanner views: fit every view's along-track error (pitch "
         "jitter at its model's frequencies, bias, drift) to where the pairs' heights "
         "disagree, and correct the heights before the fusion (default auto; the pairs' "
-        "relative orientation auto is then a shift); none: off",
+        "relative orientation auto is then off: the fit is the views' relative orientation "
+        "along track); none: off",
     )
     p.add_argument("--init-dem", metavar="FILE", help="starting DEM (GeoTIFF, SRTM .hgt)")
     p.add_argument(

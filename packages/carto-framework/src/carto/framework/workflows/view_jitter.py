@@ -4,9 +4,13 @@ DEM folders and located in every view, the fit
 correction for the fusion (:class:`PairHeightCorrection`).
 
 Used when every view is a line scanner (its imaging time per line) and a view is in two
-pairs or more; ``carto dem --view-jitter none`` turns it off. The pairs' own relative orientation
-is then a shift (``auto`` becomes ``shift``): a line-varying correction of each pair's right
-image would give the same view a different error in every pair, which the fit cannot carry.
+pairs or more; ``carto dem --view-jitter none`` turns it off. The pairs' own relative
+orientation is then off (``auto`` becomes ``none``): the fit is the views' relative
+orientation along track. A correction of each pair's right image would give the same view a
+different error in every pair, which the fit cannot carry; even a constant shift per pair
+breaks the closure of the pairs' heights (three pairs' offsets, one node's height and three
+views' biases leave one combination that only the views' biases explain). On two simulated
+triplets the shift took the fused DEM's NMAD from 0.240 / 0.345 m to 0.282 / 0.378 m.
 """
 
 from __future__ import annotations
@@ -67,9 +71,9 @@ def view_jitter_reason(
 
 
 def pair_relative_orientation(relative_orientation: Any, fitted: bool) -> Any:
-    """The pairs' relative orientation: ``auto`` becomes ``shift`` when the views' errors are
+    """The pairs' relative orientation: ``auto`` becomes ``none`` when the views' errors are
     fitted (see the module docstring); anything else as given."""
-    return "shift" if fitted and relative_orientation == "auto" else relative_orientation
+    return "none" if fitted and relative_orientation == "auto" else relative_orientation
 
 
 def _times(sensor: Sensor, line: FloatArray) -> FloatArray:
