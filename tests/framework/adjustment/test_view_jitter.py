@@ -18,7 +18,7 @@ from carto.framework.adjustment.view_jitter import (
 )
 
 LINE_S = 0.4e-3
-PER_M = {"nadir": 0.0, "fore": 0.7, "aft": -0.7}  # lines per metre of height
+PER_M = {"nadir": 0.0, "fore": 0.6, "aft": -0.6}  # along-track displacement per metre of height
 FREQUENCIES = (29.0, 67.0, 97.0, 11.9)
 PAIRS = (("nadir", "fore"), ("nadir", "aft"), ("fore", "aft"))
 
@@ -28,7 +28,7 @@ def _nmad(x):
 
 
 def _truth_errors(rng):
-    """Each view's true along-track error: sinusoids of 0.3-1 line, a bias and a drift."""
+    """Each view's true along-track error: sinusoids of 0.3-1 m, a bias and a drift."""
     errors = {}
     for name in PER_M:
         c = [a * v for a in rng.uniform(0.3, 1.0, len(FREQUENCIES)) for v in rng.normal(size=2)]
@@ -77,7 +77,7 @@ def test_the_views_errors_come_back_from_the_pairs_disagreement():
 
 
 def test_a_correction_is_the_pairs_parallax_of_the_two_views_errors():
-    left = AlongTrackError(0.0, 1.0, (10.0,), 0, (0.0, 0.5, 0.25))  # 0.5 cos + 0.25 lines
+    left = AlongTrackError(0.0, 1.0, (10.0,), 0, (0.0, 0.5, 0.25))  # 0.5 cos + 0.25 m
     right = AlongTrackError(0.0, 1.0, (), 1, (1.0, 0.0))
     t = np.array([0.0, 0.025])  # cos(0) = 1, cos(pi / 2) = 0
     e = pair_height_error_m(left, right, t, t, np.zeros(2), np.full(2, 0.5))

@@ -62,3 +62,45 @@ def test_the_pairs_relative_orientation_is_off_only_when_fitted():
     assert pair_relative_orientation("auto", False) == "auto"
     assert pair_relative_orientation("line", True) == "line"
     assert pair_relative_orientation({"mode": "line"}, True) == {"mode": "line"}
+
+
+def test_a_pairs_correction_is_the_height_error_rigorous_intersection_finds(cartosat1_pair):
+    """A fore model pitched by 3 urad at 3 Hz that the image does not have: the heights the
+    pair intersects from the true image points (flat ground at 500 m) less the correction
+    made from that pitch's along-track shift are the true heights."""
+    from carto.framework.adjustment.view_jitter import AlongTrackError
+    from carto.framework.geometry.intersection import intersect_sensors
+    from carto.framework.workflows.view_jitter import PairHeightCorrection
+
+    fore, aft = cartosat1_pair["fore"], cartosat1_pair["aft"]
+    pitched = attrs.evolve(
+        fore, trajectory=fore.trajectory.with_attitude_periodic((3.0,), [[0, 0], [3e-6, 0], [0, 0]])
+    )
+    # where both images see the ground (this fixture's aft sees the fore's first 2000 samples)
+    line, sample = np.meshgrid(np.linspace(500, 6000, 41), np.linspace(300, 1800, 5))
+    lon, lat = fore.image_to_ground(line.ravel(), sample.ravel(), np.full(line.size, 500.0))
+    h = np.full(lon.size, 500.0)
+    true_lines = {n: s.ground_to_image(lon, lat, h) for n, s in (("fore", fore), ("aft", aft))}
+    found = intersect_sensors(
+        [pitched, aft],
+        np.stack([true_lines["fore"][0], true_lines["aft"][0]]),
+        np.stack([true_lines["fore"][1], true_lines["aft"][1]]),
+    )
+    error_m = found.h_m - h
+    assert np.ptp(error_m) > 2.0  # metres of height error, varying along track
+    # the fore view's along-track error: its true line less the pitched model's, in metres
+    # along the ground (lines per metre from a 1 m step north and east)
+    step = np.array([1.0 / 111_320.0, 1.0 / (111_320.0 * np.cos(np.radians(lat[0])))])
+    l0 = fore.ground_to_image(lon[:1], lat[:1], h[:1])[0]
+    north = fore.ground_to_image(lon[:1], lat[:1] + step[0], h[:1])[0] - l0
+    east = fore.ground_to_image(lon[:1] + step[1], lat[:1], h[:1])[0] - l0
+    rate = float(np.hypot(north, east)[0])
+    shift_m = (true_lines["fore"][0] - pitched.ground_to_image(lon, lat, h)[0]) / rate
+    t_s = fore.timing.time(true_lines["fore"][0])
+    error = AlongTrackError(float(t_s.mean()), float(np.ptp(t_s)) / 2, (3.0,), 1, (), rate)
+    coefficients = np.linalg.lstsq(error.basis(t_s), shift_m, rcond=None)[0]
+    error = attrs.evolve(error, coefficients=tuple(coefficients))
+    still = AlongTrackError(0.0, 1.0, (), 0, (0.0,), rate)
+    correction = PairHeightCorrection(pitched, aft, error, still)
+    corrected = found.h_m - correction.at(found.lon_deg, found.lat_deg, found.h_m)
+    assert np.max(np.abs(corrected - h)) < 0.01 * np.max(np.abs(error_m)) + 0.01  # 1.1 cm

@@ -1,14 +1,17 @@
 """Each view's along-track error from the disagreement of a multi-view set's pair DEMs.
 
 A line scanner's pitch jitter and slow attitude error move its image lines along track as a
-function of its own imaging time, ``delta(t)`` lines. A pair (left ``l``, right ``r``) measures
-a node's height where the two images' lines agree, so that error becomes a height error
+function of its own imaging time: ``delta(t)``, in metres along the ground (the lines' shift
+over the view's lines per metre along track, ``a``). A pair (left ``l``, right ``r``) measures a
+node's height where its two ortho-images agree along the base, so that error becomes a height
+error
 
-    e = (delta_r(t_r) - delta_l(t_l)) / (s_r - s_l)
+    e = (delta_r(t_r) - delta_l(t_l)) / (k_r - k_l)
 
-with ``t`` each image's imaging time of the node and ``s = d line / d h`` (lines per metre, the
-pair's parallax rate). One pair cannot tell it from the terrain: a free height per node takes
-it all. Three views can: where two or more pairs measured a node, their heights differ by the
+with ``t`` each view's imaging time of the node and ``k = (d line / d h) / a`` its
+along-track displacement per metre of height (``k_r - k_l`` is the pair's base-to-height
+ratio, signed). One pair cannot tell it from the terrain: a free height per node takes it all.
+Three views can: where two or more pairs measured a node, their heights differ by the
 errors alone, and those differences are functions of each image's own time. Where the terrain's
 relief changes the lines at which the views see a node (tens of lines over hilly ground), even
 the combination that moves all the pairs' heights alike becomes visible at the jitter's high
@@ -24,8 +27,11 @@ alike). The nodes of one grid row share the unmodelled errors along the line (th
 window, the surface's smoothing), so each row counts as one measure of sigma
 :attr:`ViewJitterSettings.row_sigma_m` whatever its number of nodes.
 
-On simulated Cartosat-2 triplets under ``--errors full`` (``benchmarks/dem_multiview.py``)
-this takes the fused DEM from 12-13 times the true models' NMAD to 2-4 times.
+On simulated Cartosat-2 triplets under ``--errors full`` adjusted with 2 GCPs
+(``benchmarks/dem_multiview.py``, our simulator: a best case) this took the fused DEM's NMAD
+from 12 times the true models' to 2.2 and 3.5 times on the two blocks whose adjustment found
+five of the platform's frequencies. Where it found fewer the fit is not used
+(:data:`~carto.framework.workflows.view_jitter.MIN_FREQUENCIES`).
 """
 
 from __future__ import annotations
@@ -50,6 +56,9 @@ __all__ = [
 
 TUKEY_C = 3.0
 """Tukey's biweight cut-off, in robust sigmas of the residuals."""
+MIN_BASE_TO_HEIGHT = 1e-3
+"""A pair's node is not used where its views' along-track displacements per metre of height
+differ by less (no parallax: the height error would be unbounded)."""
 
 
 @attrs.frozen
@@ -59,7 +68,8 @@ class ViewJitterSettings:
     Attributes:
         degree: the polynomial in time of each view's error (0: a bias; 2: bias, drift and
             curvature).
-        prior_lines: a-priori sigma of every coefficient, lines.
+        prior_m: a-priori sigma of every coefficient, m along track (about a line of
+            Cartosat-2).
         row_sigma_m: sigma of one grid row's share of a pair's height, m (each row's nodes
             weigh together as one measure of it). Chosen on two simulated triplets
             (0.2-0.8 m within 0.1 m of the best NMAD).
@@ -70,7 +80,7 @@ class ViewJitterSettings:
     """
 
     degree: int = attrs.field(default=2, validator=attrs.validators.in_(range(0, 4)))
-    prior_lines: float = attrs.field(default=1.0, validator=attrs.validators.gt(0.0))
+    prior_m: float = attrs.field(default=0.8, validator=attrs.validators.gt(0.0))
     row_sigma_m: float = attrs.field(default=0.4, validator=attrs.validators.gt(0.0))
     min_cycles: float = attrs.field(default=1.0, validator=attrs.validators.ge(0.0))
     robust_iterations: int = attrs.field(default=4, validator=attrs.validators.ge(0))
@@ -79,15 +89,18 @@ class ViewJitterSettings:
 
 @attrs.frozen
 class AlongTrackError:
-    """One view's along-track error ``delta(t)`` in lines: for each of ``frequencies_hz`` a
-    sine and a cosine coefficient of ``2 pi f (t - t_ref_s)``, then the polynomial's
-    coefficients of ``((t - t_ref_s) / t_scale_s) ** k``, ``k = 0..degree``."""
+    """One view's along-track error ``delta(t)``, m along the ground: for each of
+    ``frequencies_hz`` a sine and a cosine coefficient of ``2 pi f (t - t_ref_s)``, then the
+    polynomial's coefficients of ``x ** k``, ``k = 0..degree``, ``x = (t - t_ref_s) /
+    t_scale_s`` held within [-1, 1] (the times the fit saw: no extrapolated curvature).
+    ``lines_per_m`` is the view's line rate along the ground (for the report)."""
 
     t_ref_s: float
     t_scale_s: float
     frequencies_hz: tuple[float, ...]
     degree: int
     coefficients: tuple[float, ...] = ()
+    lines_per_m: float = 1.0
 
     @property
     def n_terms(self) -> int:
@@ -100,12 +113,12 @@ class AlongTrackError:
         for f in self.frequencies_hz:
             phase = 2.0 * np.pi * f * dt
             columns += [np.sin(phase), np.cos(phase)]
-        x = dt / self.t_scale_s
+        x = np.clip(dt / self.t_scale_s, -1.0, 1.0)
         columns += [x**k for k in range(self.degree + 1)]
         return np.stack(columns, axis=-1)
 
-    def lines(self, t_s: FloatArray) -> FloatArray:
-        """The error at ``t_s``, lines."""
+    def metres(self, t_s: FloatArray) -> FloatArray:
+        """The error at ``t_s``, m along the ground."""
         return self.basis(t_s) @ np.asarray(self.coefficients, dtype=np.float64)
 
     def as_dict(self) -> dict[str, object]:
@@ -114,9 +127,10 @@ class AlongTrackError:
         return {
             "t_ref_s": self.t_ref_s,
             "t_scale_s": self.t_scale_s,
+            "lines_per_m": round(self.lines_per_m, 5),
             "frequencies_hz": [round(f, 4) for f in self.frequencies_hz],
-            "amplitude_lines": [round(float(np.hypot(*c[2 * k : 2 * k + 2])), 4) for k in range(n)],
-            "polynomial_lines": [round(float(v), 4) for v in c[2 * n :]],
+            "amplitude_m": [round(float(np.hypot(*c[2 * k : 2 * k + 2])), 4) for k in range(n)],
+            "polynomial_m": [round(float(v), 4) for v in c[2 * n :]],
         }
 
 
@@ -130,7 +144,7 @@ def pair_height_error_m(
 ) -> FloatArray:
     """The height error the two views' along-track errors give a pair's node, m (subtract
     it from the pair's height)."""
-    return (right.lines(t_right_s) - left.lines(t_left_s)) / (per_m_right - per_m_left)
+    return (right.metres(t_right_s) - left.metres(t_left_s)) / (per_m_right - per_m_left)
 
 
 @attrs.frozen(eq=False)
@@ -141,10 +155,12 @@ class NodeSamples:
         images: the views' names.
         pairs: each pair as (left, right) indices into ``images``.
         t_s: ``(n_images, n)`` each view's imaging time of the node (NaN: not seen).
-        per_m: ``(n_images, n)`` each view's line rate with height at the node, lines/m.
+        per_m: ``(n_images, n)`` each view's along-track displacement per metre of height at
+            the node (its line rate with height over its line rate along the ground).
         heights_m: ``(n_pairs, n)`` each pair's measured height (NaN: not measured).
         weights: ``(n_pairs, n)`` each pair's weight ``1 / sigma^2`` there.
         row: ``(n,)`` the node's grid row.
+        lines_per_m: each view's line rate along the ground (``per_m`` is divided by it).
     """
 
     images: tuple[str, ...]
@@ -154,6 +170,7 @@ class NodeSamples:
     heights_m: FloatArray
     weights: FloatArray
     row: NDArray[np.int64]
+    lines_per_m: tuple[float, ...] = ()
 
 
 @attrs.frozen
@@ -201,7 +218,8 @@ def _empty_errors(
         lo, hi = (float(t.min()), float(t.max())) if t.size else (0.0, 1.0)
         span = max(hi - lo, 1e-9)
         freqs = kept_frequencies(frequencies_hz.get(name, ()), span, s.min_cycles)
-        errors[name] = AlongTrackError(0.5 * (lo + hi), 0.5 * span, freqs, s.degree)
+        rate = samples.lines_per_m[k] if samples.lines_per_m else 1.0
+        errors[name] = AlongTrackError(0.5 * (lo + hi), 0.5 * span, freqs, s.degree, (), rate)
     return errors
 
 
@@ -275,7 +293,8 @@ def fit_view_jitter(
     seen = np.isfinite(samples.t_s) & np.isfinite(samples.per_m)
     measured = np.isfinite(samples.heights_m) & (samples.weights > 0)
     for p, (i, j) in enumerate(samples.pairs):
-        measured[p] &= seen[i] & seen[j]
+        base_to_height = np.abs(samples.per_m[j] - samples.per_m[i])
+        measured[p] &= seen[i] & seen[j] & (np.nan_to_num(base_to_height) > MIN_BASE_TO_HEIGHT)
     shared = measured.sum(axis=0) >= 2
     if int(shared.sum()) < s.min_nodes:
         return None
@@ -285,19 +304,17 @@ def fit_view_jitter(
     design = np.where(measured[..., None], _design(sub, errors), 0.0)
     heights = np.where(measured, sub.heights_m, 0.0)
     base = _row_normalised(np.where(measured, sub.weights, 0.0), sub.row, s.row_sigma_m)
-    x, residual = _solve(heights, design, base, s.prior_lines)
-    before = _eliminated(heights, design, base)[0]
+    x, residual = _solve(heights, design, base, s.prior_m)
     for _ in range(s.robust_iterations):
         sigma = max(_nmad(residual[measured]), 1e-6)
         z = np.abs(residual) / (TUKEY_C * sigma)
-        x, residual = _solve(
-            heights, design, base * np.clip(1.0 - z**2, 0.0, None) ** 2, s.prior_lines
-        )
+        x, residual = _solve(heights, design, base * np.clip(1.0 - z**2, 0.0, None) ** 2, s.prior_m)
+    before, g = _eliminated(heights, design, base)  # both measured with the same weights
     return ViewJitter(
         _with_coefficients(errors, sub.images, x),
         int(shared.sum()),
         _nmad(np.where(measured, before, np.nan)),
-        _nmad(np.where(measured, residual, np.nan)),
+        _nmad(np.where(measured, before - g @ x, np.nan)),
     )
 
 
@@ -310,6 +327,7 @@ def _subset(samples: NodeSamples, keep: NDArray[np.bool_]) -> NodeSamples:
         samples.heights_m[:, keep],
         samples.weights[:, keep],
         samples.row[keep],
+        samples.lines_per_m,
     )
 
 

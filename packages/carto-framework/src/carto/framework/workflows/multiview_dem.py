@@ -53,6 +53,8 @@ __all__ = [
     "parse_pairs",
 ]
 
+VIEW_JITTER_MODES = ("auto", "none")
+"""``MultiViewRequest.view_jitter`` (``carto dem --view-jitter``)."""
 MIN_B_OVER_H = 0.05
 """Pairs with a smaller base-to-height ratio are not used (their height error is more than
 ten times their matching error in pixels of the ground sampling)."""
@@ -257,7 +259,7 @@ class MultiViewRequest:
     view_jitter: str = "auto"
 
     def __attrs_post_init__(self) -> None:
-        if self.view_jitter not in ("auto", "none"):
+        if self.view_jitter not in VIEW_JITTER_MODES:
             raise UsageError(f"--view-jitter: expected auto or none, got {self.view_jitter!r}")
         if self.images is not None and self.pairs is not None:
             raise UsageError("--images and --pairs exclude each other: give one")
@@ -383,24 +385,28 @@ def _view_jitter(
     quiet: bool,
 ) -> tuple[dict[str, Any], list[Any] | None]:
     """The views' along-track errors fitted to the pairs' heights (the report's
-    ``view_jitter``) and each pair's height correction (None: not fitted, and why)."""
+    ``view_jitter``, with the pairs' relative orientation) and each pair's height correction
+    (None: not fitted, and why)."""
     from carto.framework.adjustment.view_jitter import ViewJitterSettings
     from carto.framework.raster.dem import Geoid
     from carto.framework.workflows.reporting import progress
     from carto.framework.workflows.view_jitter import view_jitter_of_pairs
 
+    used = {"pairs_relative_orientation": dem_options.get("relative_orientation", "auto")}
     if reason is None and len(done) < 2:
         reason = "one pair was made: nothing to compare its heights with"
     if reason is not None:
-        return {"applied": False, "reason": reason}, None
+        return {"applied": False, "reason": reason, **used}, None
     progress("dem", "fitting every view's along-track error to the pairs' heights", quiet)
     geoid = Geoid.open(dem_options["geoid"]) if dem_options.get("geoid") else None
     folders = [(p.left, p.right, folder) for p, folder in done]
-    fit, corrections = view_jitter_of_pairs(folders, views.sensors, geoid)
+    widest = max(range(len(done)), key=lambda k: done[k][0].b_over_h)
+    fit, corrections, held = view_jitter_of_pairs(folders, views.sensors, geoid, widest)
     if fit is None:
         least = ViewJitterSettings().min_nodes
-        return {"applied": False, "reason": f"fewer than {least} nodes measured by two pairs"}, None
-    return {"applied": True, **fit.as_dict()}, corrections
+        cause = f"fewer than {least} nodes measured by two pairs"
+        return {"applied": False, "reason": cause, **used}, None
+    return {"applied": True, **used, **held, **fit.as_dict()}, corrections
 
 
 def _images_of(pairs: Sequence[PairChoice]) -> list[str]:
@@ -601,7 +607,7 @@ def _fused_into(
         "generator": "fusion",
         "images": images,
         "fusion": {**attrs.asdict(request.fusion), **fusion},
-        "quality_layers": _QUALITY_LAYERS,
+        "quality_layers": {name: dict(layer) for name, layer in _QUALITY_LAYERS.items()},
         "vertical_reference": fusion["vertical_reference"],
     }
     names = [f"{pair.left}/{pair.right}" for pair, _ in done]
