@@ -26,7 +26,15 @@ from carto.framework.errors import InputError
 from carto.framework.merging.sources import RasterSource
 from carto.framework.raster.grid_window import GridWindow
 
-__all__ = ["GridWindow", "MosaicGrid", "bounds_in", "read_window", "same_crs", "union_grid"]
+__all__ = [
+    "GridWindow",
+    "MosaicGrid",
+    "bounds_in",
+    "node_lon_lat",
+    "read_window",
+    "same_crs",
+    "union_grid",
+]
 
 
 MAX_MOSAIC_PIXELS = 2**34
@@ -207,11 +215,18 @@ def _read_warped(
     return out
 
 
-def _undulation(grid: MosaicGrid, window: GridWindow, geoid: Any) -> FloatArray:
-    """The geoid undulation at the window's pixel centres, m."""
+def node_lon_lat(grid: MosaicGrid, rows: Any, cols: Any) -> tuple[FloatArray, FloatArray]:
+    """WGS84 longitude and latitude (degrees) of the centres of ``grid``'s nodes at ``rows``,
+    ``cols`` (the CRS's transformer cached)."""
     from carto.framework.imaging.ortho_grid import lonlat_transformer
 
-    rows, cols = np.mgrid[0 : window.n_rows, 0 : window.n_cols]
-    x, y = grid.transform @ (cols + window.col0 + 0.5, rows + window.row0 + 0.5)
+    x, y = grid.transform @ (np.asarray(cols) + 0.5, np.asarray(rows) + 0.5)
     lon, lat = lonlat_transformer(grid.crs_wkt).transform(x, y)
+    return np.asarray(lon, np.float64), np.asarray(lat, np.float64)
+
+
+def _undulation(grid: MosaicGrid, window: GridWindow, geoid: Any) -> FloatArray:
+    """The geoid undulation at the window's pixel centres, m."""
+    rows, cols = np.mgrid[0 : window.n_rows, 0 : window.n_cols]
+    lon, lat = node_lon_lat(grid, rows + window.row0, cols + window.col0)
     return np.asarray(geoid.undulation(lon, lat), np.float64)

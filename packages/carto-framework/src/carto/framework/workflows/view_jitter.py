@@ -34,13 +34,8 @@ from carto.framework.adjustment.view_jitter import (
     pair_height_error_m,
 )
 from carto.framework.geometry.sensor import Sensor
-from carto.framework.merging.grid import GridWindow, MosaicGrid
-from carto.framework.workflows.view_nodes import (
-    MAX_DESIGN_VALUES,
-    grid_lon_lat,
-    locate_in_view,
-    sample_nodes,
-)
+from carto.framework.merging.grid import GridWindow, MosaicGrid, node_lon_lat
+from carto.framework.workflows.view_nodes import MAX_DESIGN_VALUES, locate_in_view, sample_nodes
 
 FloatArray = NDArray[np.float64]
 
@@ -95,7 +90,7 @@ def _platform_frequencies(sensors: Sequence[Sensor]) -> tuple[float, ...]:
         assert scanner is not None
         ends = scanner.timing.time(np.array([0.0, float(scanner.n_lines)]))
         spans.append(abs(float(ends[1] - ends[0])))
-        frequencies += [f for f in scanner.trajectory.attitude_periodic_hz if f not in frequencies]
+        frequencies += [f for f in _frequencies(sensor) if f not in frequencies]
     return kept_frequencies(frequencies, min(spans), 1.0)
 
 
@@ -132,7 +127,7 @@ class PairHeightCorrection:
         if not has.any():
             return out
         rows, cols = np.nonzero(has)
-        lon, lat = grid_lon_lat(grid, rows + float(window.row0), cols + float(window.col0))
+        lon, lat = node_lon_lat(grid, rows + window.row0, cols + window.col0)
         h = heights_m[has] + (0.0 if self.geoid is None else self.geoid.undulation(lon, lat))
         e = self.at(lon, lat, h)
         out[has] = np.where(np.isfinite(e), e, 0.0)
@@ -169,16 +164,20 @@ def view_jitter_of_pairs(
     fit = fit_view_jitter(samples, frequencies, settings)
     if fit is None:
         return None, None, {}
-    geoids = [
-        None if pair_layers(f).dem.vertical in (None, "ellipsoid") else geoid for _, _, f in folders
-    ]
+    held %= len(folders)
+    offset = _held_median(samples, fit, held)
     corrections = [
-        PairHeightCorrection(sensors[a], sensors[b], fit.errors[a], fit.errors[b], g)
-        for (a, b, _), g in zip(folders, geoids, strict=True)
+        PairHeightCorrection(
+            sensors[a],
+            sensors[b],
+            fit.errors[a],
+            fit.errors[b],
+            None if pair_layers(folder).dem.vertical in (None, "ellipsoid") else geoid,
+            offset,
+        )
+        for a, b, folder in folders
     ]
-    offset = _held_median(samples, fit, held % len(folders))
-    corrections = [attrs.evolve(c, offset_m=offset) for c in corrections]
-    left, right, _ = folders[held % len(folders)]
+    left, right, _ = folders[held]
     return fit, corrections, {"held_pair": f"{left}/{right}", "held_offset_m": round(offset, 4)}
 
 

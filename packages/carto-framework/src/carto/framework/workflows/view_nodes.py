@@ -17,12 +17,13 @@ from numpy.typing import NDArray
 from carto.framework.adjustment.attitude_terms import line_scanner_of
 from carto.framework.adjustment.view_jitter import NodeSamples
 from carto.framework.geometry.sensor import Sensor
+from carto.framework.imaging.ortho_grid import lonlat_transformer
 from carto.framework.merging.fused_files import DEFAULT_SIGMA_M, PairLayers, pair_layers
 from carto.framework.merging.grid import GridWindow, MosaicGrid, read_window, union_grid
 
 FloatArray = NDArray[np.float64]
 
-__all__ = ["MAX_DESIGN_VALUES", "grid_lon_lat", "locate_in_view", "sample_nodes"]
+__all__ = ["MAX_DESIGN_VALUES", "locate_in_view", "sample_nodes"]
 
 MAX_DESIGN_VALUES = 6_000_000
 """The fit's design (pairs x nodes x coefficients) holds at most this many values (48 MB):
@@ -33,25 +34,9 @@ RATE_STRIDE = 25
 """Every this-many-th sampled node measures the views' line rate along the ground."""
 
 
-def grid_lon_lat(
-    grid: MosaicGrid, rows: FloatArray, cols: FloatArray
-) -> tuple[FloatArray, FloatArray]:
-    """WGS84 longitude and latitude (degrees) of the centres of ``grid``'s nodes."""
-    return _to_lon_lat(grid, *_map_xy(grid, rows, cols))
-
-
-def _map_xy(grid: MosaicGrid, rows: FloatArray, cols: FloatArray) -> tuple[FloatArray, FloatArray]:
-    t = grid.transform
-    x = t.c + (cols + 0.5) * t.a + (rows + 0.5) * t.b
-    y = t.f + (cols + 0.5) * t.d + (rows + 0.5) * t.e
-    return x, y
-
-
 def _to_lon_lat(grid: MosaicGrid, x: FloatArray, y: FloatArray) -> tuple[FloatArray, FloatArray]:
-    from pyproj import Transformer
-
-    to_geographic = Transformer.from_crs(grid.crs_wkt, "EPSG:4326", always_xy=True)
-    lon, lat = to_geographic.transform(x, y)
+    """Map coordinates of ``grid``'s CRS to WGS84 longitude and latitude (degrees)."""
+    lon, lat = lonlat_transformer(grid.crs_wkt).transform(x, y)
     return np.asarray(lon, dtype=np.float64), np.asarray(lat, dtype=np.float64)
 
 
@@ -166,7 +151,7 @@ def _located(
     total = weights.sum(axis=0)
     keep = total > 0
     h = (weights * np.nan_to_num(heights)).sum(axis=0)[keep] / total[keep]
-    x, y = _map_xy(grid, rows.ravel()[keep].astype(float), cols.ravel()[keep].astype(float))
+    x, y = grid.transform @ (cols.ravel()[keep] + 0.5, rows.ravel()[keep] + 0.5)
     lon, lat = _to_lon_lat(grid, x, y)
     located = [locate_in_view(sensors[n], lon, lat, h) for n in images]
     t_s = np.stack([t for t, _ in located])
