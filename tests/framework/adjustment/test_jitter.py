@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 
+import attrs
 import numpy as np
 import pytest
 
@@ -220,3 +221,89 @@ def test_folded_jitter_is_carried_by_the_delivered_model(fore, tmp_path):
                 "attitude_periodic": {"frequencies_hz": [1.0], "coefficients_rad": [0.0]},
             }
         )
+
+
+def _own_jitter(scanner, frequencies_hz, sigma_rad, rng):
+    """``scanner`` with roll and pitch jitter at ``frequencies_hz`` (random coefficients of
+    RMS ``sigma_rad``) that an adjustment's starting model lacks."""
+    coefficients = np.zeros((3, 2 * len(frequencies_hz)))
+    coefficients[:2] = rng.normal(0.0, sigma_rad, (2, coefficients.shape[1]))
+    trajectory = scanner.trajectory.with_attitude_periodic(frequencies_hz, coefficients)
+    return attrs.evolve(scanner, trajectory=trajectory)
+
+
+def test_an_adjustment_again_starts_from_the_jitter_it_found(cartosat1_pair):
+    """``carto adjust`` adjusts again with the tie points' sigma its first run measured (and
+    with the GCP transfer's offsets). With ``start`` the search begins from the frequencies
+    that run found. Begun afresh, its first solution without jitter judged the now tight tie
+    points against a misfit of about a pixel, rejected most of them and found no frequency
+    (two of five simulated 800-line triplets lost their jitter so). Truth: ties and GCPs
+    projected through two independent views with 29 and 67 Hz jitter; 0.05 px of noise."""
+    from carto.framework.adjustment.jitter import adjust_with_jitter
+    from carto.framework.adjustment.observations import Observations
+    from carto.framework.adjustment.priors import line_scanner_corrections
+    from carto.framework.workflows.adjust import estimated_tie_sigma
+
+    rng = np.random.default_rng(2)
+    views, truth = {}, {}
+    for name, scanner in cartosat1_pair.items():
+        # each view on its own trajectory, timed from the middle of its tie points' lines
+        trajectory = attrs.evolve(scanner.trajectory, t_mid_s=float(scanner.timing.time(1800.0)))
+        views[name] = attrs.evolve(scanner, trajectory=trajectory)
+        truth[name] = _own_jitter(views[name], (29.0, 67.0), 1.2e-6, rng)
+    line, sample = rng.uniform(300.0, 3300.0, 480), rng.uniform(300.0, 1800.0, 480)
+    h = rng.uniform(450.0, 550.0, line.size)
+    lon, lat = truth["fore"].image_to_ground(line, sample, h)
+    rows: dict[str, list] = {k: [] for k in ("id", "image", "line", "sample")}
+    gcps: dict[str, list] = {k: [] for k in ("id", "image", "line", "sample", "lon_deg")}
+    gcps |= {"lat_deg": [], "h_m": []}
+    g = np.array([10, 250, 470])
+    for name, model in truth.items():
+        lines, samples, _ = model.project(lon, lat, h)
+        rows["id"] += [f"T{i}" for i in range(lon.size)]
+        rows["image"] += [name] * lon.size
+        rows["line"] += list(lines + rng.normal(0.0, 0.05, lon.size))
+        rows["sample"] += list(samples + rng.normal(0.0, 0.05, lon.size))
+        gcps["id"] += [f"G{i}" for i in g]
+        gcps["image"] += [name] * g.size
+        for column, values in zip(
+            ("line", "sample", "lon_deg", "lat_deg", "h_m"),
+            (lines[g], samples[g], lon[g], lat[g], h[g]),
+            strict=True,
+        ):
+            gcps[column] += list(values)
+    obs = Observations.from_tables(
+        {k: np.asarray(v) for k, v in gcps.items()}, {k: np.asarray(v) for k, v in rows.items()}
+    )
+    sensors = {
+        n: line_scanner_corrections(
+            n, s, "test", attitude_order=1, estimate_position=False, independent=True
+        )
+        for n, s in views.items()
+    }
+    first = adjust_with_jitter(sensors, obs, "auto", 2e-6)
+    found = first.products["jitter"]["frequencies_hz"]
+    for f in (29.0, 67.0):  # the resolution over 1 s of lines is 1 Hz
+        assert min(abs(np.array(found) - f)) < 0.1
+    tight = estimated_tie_sigma(obs, first)
+    assert tight is not None
+    assert tight.estimated_px < 0.1
+    again = adjust_with_jitter(sensors, tight.observations, "auto", 2e-6, start=first)
+    jitter = again.products["jitter"]
+    assert len(again.outliers) <= 5
+    assert again.sigma0 < 1.5
+    for f in (29.0, 67.0):
+        assert min(abs(np.array(jitter.get("frequencies_hz", [np.inf])) - f)) < 0.1
+    assert jitter["detection"]["started_from_hz"] == pytest.approx(found)
+    # where the views put points the ties did not measure: as the first run did (what the
+    # ties cannot see, a height wave of both views, stays the first run's)
+    c_line, c_sample = np.meshgrid(np.linspace(400.0, 3200.0, 30), np.linspace(400.0, 1700.0, 3))
+    c_h = np.full(c_line.size, 480.0)
+    c_lon, c_lat = truth["fore"].image_to_ground(c_line.ravel(), c_sample.ravel(), c_h)
+    for name, model in truth.items():
+        expected = np.array(model.project(c_lon, c_lat, c_h)[:2])
+        rms = []
+        for result in (first, again):
+            got = np.array(result.sensors[name].project(c_lon, c_lat, c_h)[:2])
+            rms.append(np.sqrt(np.mean(np.sum((expected - got) ** 2, axis=0))))
+        assert rms[1] < rms[0] + 0.1, (name, rms)

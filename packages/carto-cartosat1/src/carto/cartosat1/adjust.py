@@ -307,7 +307,7 @@ class Cartosat1Adjuster(Adjuster):
         if s.jitter_hz:
             amplitude = math.radians(s.jitter_amplitude_deg)
             result = adjust_with_jitter(
-                prepared, observations, s.jitter_hz, amplitude, **s.bundle_options()
+                prepared, observations, s.jitter_hz, amplitude, start=start, **s.bundle_options()
             )
         else:
             result = adjust_bundle(prepared, observations, start=start, **s.bundle_options())

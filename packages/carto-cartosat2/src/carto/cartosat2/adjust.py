@@ -129,6 +129,7 @@ class Cartosat2BlockAdjuster(Adjuster):
     name = "cartosat2-bba"
     description = "Cartosat-2 bundle block adjustment: per-image attitude polynomials, ties"
     Settings = Cartosat2Settings
+    warm_start = True
 
     def settings(self, options: Mapping[str, Any]) -> Cartosat2Settings:
         if "mode" in options:  # a user's --mode must not be dropped unseen
@@ -139,7 +140,12 @@ class Cartosat2BlockAdjuster(Adjuster):
         return super().settings(options)
 
     def adjust(
-        self, sensors: Mapping[str, Sensor], observations: Observations, **options: Any
+        self,
+        sensors: Mapping[str, Sensor],
+        observations: Observations,
+        *,
+        start: AdjustmentResult | None = None,
+        **options: Any,
     ) -> AdjustmentResult:
         """Options (:class:`Cartosat2Settings`): ``attitude_order`` (0-3, default 3),
         ``estimate_position``, the a-priori sigmas ``bias_sigma_deg``, ``drift_sigma_deg_s``,
@@ -148,7 +154,8 @@ class Cartosat2BlockAdjuster(Adjuster):
         terms) and their a-priori RMS amplitude ``jitter_amplitude_deg`` (default
         :data:`constants.ATTITUDE_JITTER_AMPLITUDE_DEG`), ``self_calibration`` (as the
         Cartosat-1 adjuster's, off by default), and those of
-        :func:`~carto.framework.adjustment.bundle.adjust_bundle`."""
+        :func:`~carto.framework.adjustment.bundle.adjust_bundle`. ``start``: an earlier result
+        of this adjuster on these images, with the jitter frequencies it found."""
         s = self.settings(options)
         prior = AncillaryPrior.from_degrees(
             s.bias_sigma_deg, s.drift_sigma_deg_s, s.smooth_sigma_deg
@@ -157,5 +164,5 @@ class Cartosat2BlockAdjuster(Adjuster):
         prepared = with_self_calibration(prepared, s.self_calibration, self.name)
         amplitude = math.radians(s.jitter_amplitude_deg)
         return adjust_with_jitter(
-            prepared, observations, s.jitter_hz, amplitude, **s.bundle_options()
+            prepared, observations, s.jitter_hz, amplitude, start=start, **s.bundle_options()
         )
