@@ -63,6 +63,21 @@ def _nmad(v: np.ndarray) -> float:
     return float(1.4826 * np.median(np.abs(v - np.median(v)))) if v.size else float("nan")
 
 
+def _nmad_less_quadratic(errors: np.ndarray, mask: np.ndarray) -> float:
+    """NMAD of ``errors`` (DEM less truth on the DEM grid) at ``mask`` once the least-squares
+    quadratic surface in the grid's rows and columns is taken out: what a DEM carries beyond
+    a height shape common to all its pairs (bias, tilt, bowl), which the pairs' disagreement
+    cannot see and two GCPs do not hold. A diagnostic of the truth, not a product figure."""
+    rows, cols = np.nonzero(mask)
+    if rows.size < 10:
+        return float("nan")
+    x, y = (cols - cols.mean()) / 200.0, (rows - rows.mean()) / 200.0
+    design = np.stack([np.ones_like(x), x, y, x * x, x * y, y * y], axis=1)
+    values = errors[rows, cols]
+    coefficients, *_ = np.linalg.lstsq(design, values, rcond=None)
+    return _nmad(values - design @ coefficients)
+
+
 def _on_grid(grid_path: Path, path: Path, resampling: str) -> np.ndarray:
     import rasterio
     from rasterio.warp import Resampling, reproject
@@ -111,6 +126,10 @@ def evaluate(out: Path, truth: Path, report: dict[str, Any]) -> dict[str, Any]:
             "nmad_common_m": round(_nmad(e[common]), 4),
             "completeness": round(float(m.sum() / domain.sum()), 4),
         }
+    fused_mask = measured["fused"] & domain
+    figures["fused"]["nmad_less_quadratic_m"] = round(
+        _nmad_less_quadratic(errors["fused"], fused_mask), 4
+    )
     pairs = [v for k, v in figures.items() if k != "fused"]
     best = min(p["nmad_common_m"] for p in pairs)
     return {
@@ -204,6 +223,17 @@ def _multiview(
     return report, time.perf_counter() - started
 
 
+# auto: carto dem's defaults (the views' along-track errors fitted, the pairs' relative
+# orientation then off); shift: the same with each pair's right image shifted first;
+# view_jitter_none: the pairs' line-varying relative orientation, no view fit (the default
+# before session 61)
+ADJUSTED_VARIANTS = {
+    "auto": ("auto", "auto"),
+    "shift": ("shift", "auto"),
+    "view_jitter_none": ("auto", "none"),
+}
+
+
 def run_adjusted(
     terrain: str, seed: int, size: int, posting_m: float, work: Path
 ) -> dict[str, Any]:
@@ -213,31 +243,38 @@ def run_adjusted(
     from carto.framework.workflows.adjust import adjust_product
 
     folder = work / f"full-{terrain}-{seed}"
-    scene, true_report, _ = _simulated_run(
+    scene, _, _ = _simulated_run(
         "cartosat2-triplet", terrain, seed, size, posting_m, folder, errors="full"
     )
     # --errors full draws some errors beyond the products' stated a-priori sigmas, which
     # carto adjust flags (issue 31): the DEM is what is measured here
     adjust_product(scene, folder / "adjusted", n_gcps=2, quiet=True, allow_poor=True)
-    truth = scene / "truth" / "dem.tif"
-    true_fused = evaluate(folder / "dem", truth, true_report)["by_dem"]["fused"]
-    result: dict[str, Any] = {"true_models": true_fused}
-    out = folder / "dem-true-no-view-jitter"
-    report, _ = _multiview(scene, scene / "truth", out, posting_m, view_jitter="none")
-    result["true_models_view_jitter_none"] = evaluate(out, truth, report)["by_dem"]["fused"]
-    # auto: carto dem's defaults (the views' along-track errors fitted, the pairs' relative
-    # orientation then off); shift: the same with each pair's right image shifted first;
-    # view_jitter_none: the pairs' line-varying relative orientation, no view fit (the
-    # default before session 61)
-    variants = {
-        "auto": ("auto", "auto"),
-        "shift": ("shift", "auto"),
-        "view_jitter_none": ("auto", "none"),
-    }
-    for label, (orientation, view_jitter) in variants.items():
+    _multiview(
+        scene, scene / "truth", folder / "dem-true-no-view-jitter", posting_m, view_jitter="none"
+    )
+    for label, (orientation, view_jitter) in ADJUSTED_VARIANTS.items():
         out = folder / f"dem-adjusted-{label}"
-        report, _ = _multiview(scene, folder / "adjusted", out, posting_m, orientation, view_jitter)
-        adjusted = evaluate(out, truth, report)
+        _multiview(scene, folder / "adjusted", out, posting_m, orientation, view_jitter)
+    return evaluate_adjusted(folder)
+
+
+def evaluate_adjusted(folder: Path) -> dict[str, Any]:
+    """The figures of :func:`run_adjusted` from its folder (``--evaluate-work`` reads a kept
+    ``--work`` again without running anything)."""
+
+    def fused_of(name: str) -> tuple[dict[str, Any], dict[str, Any]]:
+        report = json.loads((folder / name / "report.json").read_text())
+        return evaluate(folder / name, truth, report), report
+
+    truth = folder / "scene" / "truth" / "dem.tif"
+    true_fused = fused_of("dem")[0]["by_dem"]["fused"]
+    result: dict[str, Any] = {
+        "true_models": true_fused,
+        "true_models_view_jitter_none": fused_of("dem-true-no-view-jitter")[0]["by_dem"]["fused"],
+        "adjustment": adjustment_summary(folder / "adjusted"),
+    }
+    for label in ADJUSTED_VARIANTS:
+        adjusted, report = fused_of(f"dem-adjusted-{label}")
         result[f"adjusted_ro_{label}"] = {
             "fused": adjusted["by_dem"]["fused"],
             "pairs": {k: v for k, v in adjusted["by_dem"].items() if k != "fused"},
@@ -247,6 +284,26 @@ def run_adjusted(
             "view_jitter": report.get("view_jitter"),
         }
     return result
+
+
+def adjustment_summary(adjusted: Path) -> dict[str, Any]:
+    """What the block adjustment found and how well: its jitter frequencies, convergence,
+    sigma0, outliers and checkpoints (from its report.json and jitter.json)."""
+    report = json.loads((adjusted / "report.json").read_text())
+    jitter = json.loads((adjusted / "jitter.json").read_text())
+    checkpoints = report.get("checkpoints") or {}
+    return {
+        "jitter_hz": [round(f, 3) for f in jitter.get("frequencies_hz", [])],
+        "detection": jitter.get("detection"),
+        "converged": report.get("converged"),
+        "iterations": report.get("iterations"),
+        "sigma0_px": report.get("sigma0_px"),
+        "tie_points": report.get("tie_points"),
+        "outliers": len(report.get("outliers") or ()),
+        "checkpoints": {
+            k: round(v, 3) for k, v in checkpoints.items() if k.startswith(("rmse", "predicted"))
+        },
+    }
 
 
 def run_case(terrain: str, seed: int, size: int, posting_m: float, work: Path) -> dict[str, Any]:
@@ -330,6 +387,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--strip-seeds", type=int, nargs="*", default=[])
     parser.add_argument("--adjusted-seeds", type=int, nargs="*", default=[])
     parser.add_argument("--adjusted-terrains", nargs="+", default=["hilly"])
+    parser.add_argument(
+        "--evaluate-work",
+        action="store_true",
+        help="evaluate the adjusted cases kept in --work again, without running anything",
+    )
     parser.add_argument("--strip-size", type=int, default=1000)
     parser.add_argument("--strip-posting", type=float, default=10.0)
     parser.add_argument("--out", type=Path, default=RESULT)
@@ -340,6 +402,8 @@ def main(argv: list[str] | None = None) -> int:
         help="keep the scenes and DEMs here (default: a temporary folder, removed)",
     )
     args = parser.parse_args(argv)
+    if args.evaluate_work and args.work is None:
+        parser.error("--evaluate-work reads the folders of --work: give --work")
     results = {}
     with tempfile.TemporaryDirectory(prefix="carto-mv-") as scratch:
         tmp = str(args.work or scratch)
@@ -353,8 +417,10 @@ def main(argv: list[str] | None = None) -> int:
             for seed in args.paintbrush_seeds
         }
         adjusted = {
-            f"full-{terrain}-{seed}": run_adjusted(
-                terrain, seed, args.size, args.posting, Path(tmp)
+            f"full-{terrain}-{seed}": (
+                evaluate_adjusted(Path(tmp) / f"full-{terrain}-{seed}")
+                if args.evaluate_work
+                else run_adjusted(terrain, seed, args.size, args.posting, Path(tmp))
             )
             for terrain in args.adjusted_terrains
             for seed in args.adjusted_seeds
@@ -387,6 +453,17 @@ def main(argv: list[str] | None = None) -> int:
     if adjusted:
         summary["adjusted_over_true_nmad"] = {
             ro: [a[f"adjusted_ro_{ro}"]["over_true_nmad"] for a in adjusted.values()]
+            for ro in ("auto", "shift", "view_jitter_none")
+        }
+        summary["adjusted_nmad_less_quadratic_over_true_nmad"] = {
+            ro: [
+                round(
+                    a[f"adjusted_ro_{ro}"]["fused"]["nmad_less_quadratic_m"]
+                    / a["true_models"]["nmad_m"],
+                    3,
+                )
+                for a in adjusted.values()
+            ]
             for ro in ("auto", "shift", "view_jitter_none")
         }
     if strip:

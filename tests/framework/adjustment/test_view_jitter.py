@@ -100,3 +100,22 @@ def test_too_few_shared_nodes_fit_nothing():
 )
 def test_frequencies_the_nodes_cannot_tell_apart_are_left_out(frequencies, kept):
     assert kept_frequencies(frequencies, 0.32, 1.0) == kept
+
+
+def test_a_common_surface_is_the_least_squares_quadratic_of_the_values():
+    """:func:`common_surface` against the quadratic the values were made from (exact without
+    noise, NaN left out); with too few nodes, their median, flat."""
+    from carto.framework.adjustment.view_jitter import common_surface
+
+    rng = np.random.default_rng(4)
+    rows, cols = rng.uniform(0, 900, 500), rng.uniform(0, 1200, 500)
+    x, y = (cols - 300.0) / 1000.0, (rows - 450.0) / 1000.0
+    values = 0.4 - 1.2 * x + 0.7 * y + 2.0 * x * x - 0.5 * x * y + 1.5 * y * y
+    values[::7] = np.nan
+    surface = common_surface(rows, cols, values)
+    ok = np.isfinite(values)
+    np.testing.assert_allclose(surface.at(rows[ok], cols[ok]), values[ok], atol=1e-9)
+    np.testing.assert_allclose(surface.at([450.0], [300.0]), [0.4], atol=1e-9)
+    few = common_surface(rows[:9], cols[:9], values[:9])
+    assert few.at([0.0, 900.0], [0.0, 1200.0]) == pytest.approx([np.nanmedian(values[:9])] * 2)
+    assert common_surface(rows[:3], cols[:3], [np.nan] * 3).at([1.0], [1.0]) == [0.0]

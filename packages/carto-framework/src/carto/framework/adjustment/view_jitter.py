@@ -40,7 +40,7 @@ from collections.abc import Mapping, Sequence
 
 import attrs
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 FloatArray = NDArray[np.float64]
 
@@ -49,6 +49,7 @@ __all__ = [
     "NodeSamples",
     "ViewJitter",
     "ViewJitterSettings",
+    "common_surface",
     "fit_view_jitter",
     "kept_frequencies",
     "pair_height_error_m",
@@ -161,6 +162,7 @@ class NodeSamples:
         weights: ``(n_pairs, n)`` each pair's weight ``1 / sigma^2`` there.
         row: ``(n,)`` the node's grid row.
         lines_per_m: each view's line rate along the ground (``per_m`` is divided by it).
+        col: ``(n,)`` the node's grid column (None: not given).
     """
 
     images: tuple[str, ...]
@@ -171,6 +173,7 @@ class NodeSamples:
     weights: FloatArray
     row: NDArray[np.int64]
     lines_per_m: tuple[float, ...] = ()
+    col: NDArray[np.int64] | None = None
 
 
 @attrs.frozen
@@ -193,6 +196,49 @@ class ViewJitter:
             },
             "views": {name: e.as_dict() for name, e in self.errors.items()},
         }
+
+
+SURFACE_SCALE_NODES = 1000.0
+"""The grid distance (nodes) that :class:`CommonSurface`'s coordinates count as one."""
+
+
+@attrs.frozen
+class CommonSurface:
+    """A height surface (m) quadratic in a grid's rows and columns, from ``(row0, col0)`` in
+    units of :data:`SURFACE_SCALE_NODES`: coefficients of 1, x, y, x^2, xy, y^2 (x the
+    column, y the row)."""
+
+    row0: float
+    col0: float
+    coefficients: tuple[float, ...]
+
+    def at(self, rows: ArrayLike, cols: ArrayLike) -> FloatArray:
+        """The surface at grid ``rows``, ``cols`` (node indices), m."""
+        return _surface_design(self, rows, cols) @ np.asarray(self.coefficients)
+
+
+def _surface_design(surface: CommonSurface, rows: ArrayLike, cols: ArrayLike) -> FloatArray:
+    y = (np.asarray(rows, np.float64).ravel() - surface.row0) / SURFACE_SCALE_NODES
+    x = (np.asarray(cols, np.float64).ravel() - surface.col0) / SURFACE_SCALE_NODES
+    return np.stack([np.ones_like(x), x, y, x * x, x * y, y * y], axis=1)
+
+
+def common_surface(
+    rows: ArrayLike, cols: ArrayLike, values_m: ArrayLike, min_nodes: int = 50
+) -> CommonSurface:
+    """The least-squares :class:`CommonSurface` of ``values_m`` at grid nodes (NaN values
+    left out; fewer than ``min_nodes`` left: their median, flat)."""
+    r, c = np.asarray(rows, np.float64).ravel(), np.asarray(cols, np.float64).ravel()
+    v = np.asarray(values_m, np.float64).ravel()
+    ok = np.isfinite(v)
+    if not ok.any():
+        return CommonSurface(0.0, 0.0, (0.0,) * 6)
+    surface = CommonSurface(float(np.mean(r[ok])), float(np.mean(c[ok])), (0.0,) * 6)
+    if ok.sum() < min_nodes:
+        return attrs.evolve(surface, coefficients=(float(np.median(v[ok])),) + (0.0,) * 5)
+    design = _surface_design(surface, r[ok], c[ok])
+    coefficients = np.linalg.lstsq(design, v[ok], rcond=None)[0]
+    return attrs.evolve(surface, coefficients=tuple(map(float, coefficients)))
 
 
 def kept_frequencies(
@@ -328,6 +374,7 @@ def _subset(samples: NodeSamples, keep: NDArray[np.bool_]) -> NodeSamples:
         samples.weights[:, keep],
         samples.row[keep],
         samples.lines_per_m,
+        None if samples.col is None else samples.col[keep],
     )
 
 

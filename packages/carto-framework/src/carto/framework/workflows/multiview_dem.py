@@ -400,13 +400,12 @@ def _view_jitter(
     progress("dem", "fitting every view's along-track error to the pairs' heights", quiet)
     geoid = Geoid.open(dem_options["geoid"]) if dem_options.get("geoid") else None
     folders = [(p.left, p.right, folder) for p, folder in done]
-    widest = max(range(len(done)), key=lambda k: done[k][0].b_over_h)
-    fit, corrections, held = view_jitter_of_pairs(folders, views.sensors, geoid, widest)
+    fit, corrections, kept = view_jitter_of_pairs(folders, views.sensors, geoid)
     if fit is None:
         least = ViewJitterSettings().min_nodes
         cause = f"fewer than {least} nodes measured by two pairs"
         return {"applied": False, "reason": cause, **used}, None
-    return {"applied": True, **used, **held, **fit.as_dict()}, corrections
+    return {"applied": True, **used, **kept, **fit.as_dict()}, corrections
 
 
 def _images_of(pairs: Sequence[PairChoice]) -> list[str]:

@@ -124,9 +124,9 @@ def sample_nodes(
         parts = [
             (np.zeros((len(images), 0)),) * 2
             + (np.zeros((len(layers), 0)),) * 2
-            + (np.zeros(0),) * 4
+            + (np.zeros(0),) * 5
         ]
-    t_s, per_m, h, w, row, x, y, mean_h = (
+    t_s, per_m, h, w, row, col, x, y, mean_h = (
         np.concatenate(v, axis=-1) for v in zip(*parts, strict=True)
     )
     few = slice(None, None, RATE_STRIDE)
@@ -134,7 +134,9 @@ def sample_nodes(
     index = {n: k for k, n in enumerate(images)}
     pairs = tuple((index[left], index[right]) for left, right, _ in folders)
     per_m = per_m / np.asarray(rates)[:, None]
-    return NodeSamples(images, pairs, t_s, per_m, h, w, row.astype(np.int64), tuple(rates))
+    return NodeSamples(
+        images, pairs, t_s, per_m, h, w, row.astype(np.int64), tuple(rates), col.astype(np.int64)
+    )
 
 
 def _located(
@@ -156,4 +158,5 @@ def _located(
     located = [locate_in_view(sensors[n], lon, lat, h) for n in images]
     t_s = np.stack([t for t, _ in located])
     per_m = np.stack([s for _, s in located])
-    return t_s, per_m, heights[:, keep], weights[:, keep], rows.ravel()[keep], x, y, h
+    rc = (rows.ravel()[keep], cols.ravel()[keep])
+    return t_s, per_m, heights[:, keep], weights[:, keep], *rc, x, y, h
