@@ -162,9 +162,10 @@ def view_jitter_of_pairs(
     the quadratic surface (in the grid's rows and columns) of their mean over the pairs:
     the fused DEM keeps the low-order shape of the pairs' own heights, the block
     adjustment's. Holding only the widest pair's median, as first done, let the priors
-    choose the rest: on five simulated triplets the fused NMAD ranged from 2.0 to 40 times the
-    true models' (1.98, 3.42, 21.9, 24.5, 40.2), a quadratic surface making most of it on
-    three; kept, 6.3, 3.3, 14.5, 14.8 and 7.4 times.
+    choose the rest: on five simulated triplets (``benchmarks/dem_multiview.py``) the fused
+    NMAD was 2.0, 3.4, 21.9, 24.5 and 40.2 times the true models', a quadratic surface making
+    most of it on the last three; with the pairs' shape kept, 6.2, 5.7, 13.9, 14.4 and 7.1
+    times (12.0 times, the median, without the fit).
     ``(None, None, {})`` when too few nodes were measured by two pairs."""
     from carto.framework.merging.fused_files import pair_layers
 
