@@ -48,6 +48,7 @@ FloatArray = NDArray[np.float64]
 
 __all__ = [
     "AlongTrackError",
+    "CommonSurface",
     "NodeSamples",
     "ViewJitter",
     "ViewJitterSettings",
