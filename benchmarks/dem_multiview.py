@@ -453,7 +453,7 @@ def main(argv: list[str] | None = None) -> int:
     if adjusted:
         summary["adjusted_over_true_nmad"] = {
             ro: [a[f"adjusted_ro_{ro}"]["over_true_nmad"] for a in adjusted.values()]
-            for ro in ("auto", "shift", "view_jitter_none")
+            for ro in ADJUSTED_VARIANTS
         }
         summary["adjusted_nmad_less_quadratic_over_true_nmad"] = {
             ro: [
@@ -464,7 +464,7 @@ def main(argv: list[str] | None = None) -> int:
                 )
                 for a in adjusted.values()
             ]
-            for ro in ("auto", "shift", "view_jitter_none")
+            for ro in ADJUSTED_VARIANTS
         }
     if strip:
         summary["strip_median_abs_seam_step_m"] = [

@@ -52,7 +52,9 @@ def _samples(rng, truth, noise_m=0.1, rows=800, cols=60):
         heights.append(h.ravel() + e + rng.normal(0, noise_m, h.size))
     pairs = tuple((index[a], index[b]) for a, b in PAIRS)
     weights = np.full((3, h.size), 1.0 / noise_m**2)
-    return NodeSamples(images, pairs, t, per_m, np.stack(heights), weights, r.ravel()), h.ravel()
+    return NodeSamples(
+        images, pairs, t, per_m, np.stack(heights), weights, r.ravel(), c.ravel()
+    ), h.ravel()
 
 
 def test_the_views_errors_come_back_from_the_pairs_disagreement():

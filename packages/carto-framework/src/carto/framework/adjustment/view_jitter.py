@@ -164,8 +164,8 @@ class NodeSamples:
         heights_m: ``(n_pairs, n)`` each pair's measured height (NaN: not measured).
         weights: ``(n_pairs, n)`` each pair's weight ``1 / sigma^2`` there.
         row: ``(n,)`` the node's grid row.
+        col: ``(n,)`` the node's grid column.
         lines_per_m: each view's line rate along the ground (``per_m`` is divided by it).
-        col: ``(n,)`` the node's grid column (None: not given).
     """
 
     images: tuple[str, ...]
@@ -175,8 +175,8 @@ class NodeSamples:
     heights_m: FloatArray
     weights: FloatArray
     row: NDArray[np.int64]
+    col: NDArray[np.int64]
     lines_per_m: tuple[float, ...] = ()
-    col: NDArray[np.int64] | None = None
 
 
 @attrs.frozen
@@ -376,8 +376,8 @@ def _subset(samples: NodeSamples, keep: NDArray[np.bool_]) -> NodeSamples:
         samples.heights_m[:, keep],
         samples.weights[:, keep],
         samples.row[keep],
+        samples.col[keep],
         samples.lines_per_m,
-        None if samples.col is None else samples.col[keep],
     )
 
 

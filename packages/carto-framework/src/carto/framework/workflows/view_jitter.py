@@ -217,5 +217,4 @@ def _common_of_pairs(samples: NodeSamples, fit: ViewJitter) -> CommonSurface:
         total += w * np.where(ok, e, 0.0)
         weight += w
     mean = np.where(weight > 0, total / np.where(weight > 0, weight, 1.0), np.nan)
-    assert samples.col is not None  # sample_nodes gives the columns
     return common_surface(samples.row, samples.col, mean)

@@ -135,7 +135,7 @@ def sample_nodes(
     pairs = tuple((index[left], index[right]) for left, right, _ in folders)
     per_m = per_m / np.asarray(rates)[:, None]
     return NodeSamples(
-        images, pairs, t_s, per_m, h, w, row.astype(np.int64), tuple(rates), col.astype(np.int64)
+        images, pairs, t_s, per_m, h, w, row.astype(np.int64), col.astype(np.int64), tuple(rates)
     )
 
 
